@@ -1,0 +1,32 @@
+# Two commands set everything up on a fresh machine:
+#   make run   - build the FMUs and run the KAVZ-685 scene (plots + summary in results/kavz685/)
+#   make test  - run the test suite
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt 2>/dev/null | cksum | cut -d' ' -f1)
+
+.PHONY: run test fmus bench clean distclean
+
+$(STAMP): pyproject.toml constraints.txt
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test]'
+	rm -f $(VENV)/.installed-*
+	touch $@
+
+fmus: $(STAMP)
+	$(BIN)/lever build
+
+run: $(STAMP)
+	$(BIN)/lever run
+
+test: $(STAMP)
+	$(BIN)/lever build
+	$(BIN)/python -m pytest -q
+
+clean:
+	rm -rf results build/fmus build/tmp
+
+distclean: clean
+	rm -rf $(VENV)

@@ -1,0 +1,57 @@
+"""``LeverCoupling`` FMU: the compliant element, ``phi1, w1, phi2, w2 -> tau1, tau2``
+(Modelica's GenerationOfFMUs causality), with direct feedthrough and no state."""
+from __future__ import annotations
+
+from ..physics import catalogue
+from ..physics.catalogue import COUPLING, MISALIGNMENT
+from ..physics.parameters import Parameter
+from .base import LeverSlave, Output
+
+_BIG = 1e12
+
+
+class LeverCoupling(LeverSlave):
+    DESCRIPTION = ("Lever-articulated (harness-lever) drive-shaft coupling with elastic elements: "
+                   "theta = phi1 - Phi(phi2), T = T_el(theta) + b*(w1 - U12*w2), tau1 = -T, tau2 = U12*T")
+    PARAMETERS = COUPLING
+    INPUTS = (
+        Parameter("phi1", 0.0, "rad", "angle of the drive shaft flange", -_BIG, _BIG, fixed=False),
+        Parameter("w1", 0.0, "rad/s", "speed of the drive shaft flange", -_BIG, _BIG, fixed=False),
+        Parameter("phi2", 0.0, "rad", "angle of the driven shaft flange", -_BIG, _BIG, fixed=False),
+        Parameter("w2", 0.0, "rad/s", "speed of the driven shaft flange", -_BIG, _BIG, fixed=False),
+        MISALIGNMENT,
+    )
+    OUTPUTS = (
+        Output("tau1", "N.m", "torque the coupling applies to the drive shaft (= -T)"),
+        Output("tau2", "N.m", "torque the coupling applies to the driven shaft (= U12*T)"),
+        Output("U12", "1", "transfer function U12 = dPhi/dphi2 at the driven angle"),
+        Output("theta", "rad", "elastic deflection theta = phi1 - Phi(phi2)"),
+        Output("elastic_energy", "J", "potential energy stored in the elastic elements"),
+        Output("dissipated_power", "W", "power dissipated in the elastic elements, b*thetadot^2"),
+    )
+    FEEDTHROUGH = True
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._couplings = {}   # misalignment -> LeverCoupling (the input may vary in time)
+
+    def _build(self):
+        self._couplings = {}
+        self._coupling_for(self.misalignment)
+
+    def _coupling_for(self, alpha):
+        coupling = self._couplings.get(alpha)
+        if coupling is None:
+            if len(self._couplings) > 256:
+                self._couplings.clear()
+            coupling = catalogue.coupling_from(self._values(), misalignment=alpha)
+            self._couplings[alpha] = coupling
+        return coupling
+
+    def _compute_outputs(self):
+        r = self._coupling_for(self.misalignment).evaluate(self.phi1, self.w1, self.phi2, self.w2)
+        self.tau1, self.tau2, self.U12, self.theta = r.tau1, r.tau2, r.ratio, r.deflection
+        self.elastic_energy, self.dissipated_power = r.energy, r.dissipation
+
+    def _advance(self, t, h):
+        return None  # no state: the outputs follow the inputs

@@ -1,0 +1,78 @@
+"""``EngineShaft`` and ``LoadShaft`` FMUs: inertia elements, ``tau -> phi, w, a``
+(Modelica's GenerationOfFMUs causality), no feedthrough.  Each integrates its own shaft
+inside ``do_step`` with the coupling torque held over the step (exactly where the
+physics has a closed form)."""
+from __future__ import annotations
+
+from ..physics import catalogue
+from ..physics.parameters import Parameter
+from .base import LeverSlave, Output
+
+
+class _ShaftSlave(LeverSlave):
+    INPUTS = (Parameter("tau", 0.0, "N.m", "torque the coupling applies to this shaft", -1e12, 1e12, fixed=False),)
+    #: name of the output carrying the external torque and its work, set by subclasses
+    TORQUE_OUTPUT = WORK_OUTPUT = ""
+    SIGN = 1.0   # external torque on the shaft = SIGN * (reported torque)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._shaft = None
+
+    def _make_shaft(self):
+        raise NotImplementedError
+
+    def _build(self):
+        self._shaft = self._make_shaft()
+        self.phi, self.w = float(self.phi_start), float(self.w_start)
+        setattr(self, self.WORK_OUTPUT, 0.0)
+
+    def _compute_outputs(self):
+        external = self._shaft.external.torque(self._time, self.phi, self.w)
+        self.a = (external + self.tau) / self._shaft.inertia
+        setattr(self, self.TORQUE_OUTPUT, self.SIGN * external)
+
+    def _advance(self, t, h):
+        phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h)
+        if not (abs(phi) < 1e15 and abs(w) < 1e12):
+            return (f"the shaft state became non-finite or unbounded (phi = {phi:.6g} rad, w = {w:.6g} rad/s) "
+                    f"with input tau = {self.tau:.6g} N.m; the state was not updated")
+        self.phi, self.w = phi, w
+        setattr(self, self.WORK_OUTPUT, getattr(self, self.WORK_OUTPUT) + self.SIGN * work)
+        return None
+
+    def _internal_state(self):
+        return {}  # phi, w, work are registered outputs: saved with the variables
+
+
+_SHAFT_OUTPUTS = (
+    Output("phi", "rad", "shaft angle"),
+    Output("w", "rad/s", "shaft speed"),
+    Output("a", "rad/s2", "shaft acceleration (with the current input torque)"),
+)
+
+
+class EngineShaft(_ShaftSlave):
+    DESCRIPTION = "Drive shaft with the engine's static characteristic: I1*a = Mg(w) + tau"
+    PARAMETERS = catalogue.ENGINE
+    OUTPUTS = _SHAFT_OUTPUTS + (
+        Output("engine_torque", "N.m", "torque Mg(w) the engine applies to the drive shaft"),
+        Output("engine_work", "J", "work done by the engine since the start, integral of Mg*w dt"),
+    )
+    TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "engine_torque", "engine_work", 1.0
+
+    def _make_shaft(self):
+        return catalogue.engine_from(self._values())
+
+
+class LoadShaft(_ShaftSlave):
+    DESCRIPTION = "Driven shaft with the technological load: I2*a = tau - Mc(t, phi, w)"
+    PARAMETERS = catalogue.LOAD
+    OUTPUTS = _SHAFT_OUTPUTS + (
+        Output("load_torque", "N.m", "technological resistance Mc (positive when it opposes positive rotation)"),
+        Output("load_work", "J", "work absorbed by the load since the start, integral of Mc*w dt"),
+    )
+    TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "load_torque", "load_work", -1.0
+
+    def _make_shaft(self):
+        return catalogue.load_from(self._values())

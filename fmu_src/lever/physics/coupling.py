@@ -1,0 +1,74 @@
+"""The coupling as a compliant two-flange element (MODEL.md section 3).
+
+    theta    = phi1 - Phi(phi2)                 elastic deflection
+    thetadot = w1 - U12(phi2) * w2
+    T        = T_el(theta) + b * thetadot       torque in the elastic element
+    tau1     = -T                               torque on the drive shaft
+    tau2     = U12 * T                          torque on the driven shaft
+
+so that ``tau1*w1 + tau2*w2 = -(dV/dt + b*thetadot^2)``: the power the shafts give the
+coupling is stored in the rubber or dissipated in it, exactly.  (The monograph's
+potential (3.18) multiplies the periodic U12 by the growing angle phi2 and is not used.)
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from .elastic import LinearElasticLaw, TabulatedElasticLaw, elastic_law
+from .kinematics import TransferFunction
+from .parameters import ParameterError
+
+
+class CouplingResult(NamedTuple):
+    tau1: float          # torque on the drive shaft [N.m]
+    tau2: float          # torque on the driven shaft [N.m]
+    ratio: float         # U12 [1]
+    deflection: float    # theta [rad]
+    deflection_rate: float  # thetadot [rad/s]
+    torque: float        # T, torque in the elastic element [N.m]
+    energy: float        # V(theta), elastic energy [J]
+    dissipation: float   # b*thetadot^2, dissipated power [W]
+
+
+class LeverCoupling:
+    """Transfer function + elastic law + linear damping."""
+
+    def __init__(self, transfer: TransferFunction, law, damping: float):
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise ParameterError("b", f"parameter 'b' = {damping} is outside its allowed range [0, inf) N.m.s/rad")
+        self.transfer = transfer
+        self.law = law
+        self.damping = float(damping)
+
+    def evaluate(self, phi1, w1, phi2, w2) -> CouplingResult:
+        position, ratio = self.transfer.evaluate(phi2)
+        theta = phi1 - position
+        theta_dot = w1 - ratio * w2
+        torque = self.law.torque(theta) + self.damping * theta_dot
+        return CouplingResult(-torque, ratio * torque, ratio, theta, theta_dot, torque,
+                              self.law.energy(theta), self.damping * theta_dot * theta_dot)
+
+    def torques(self, phi1, w1, phi2, w2) -> tuple[float, float]:
+        """Just ``(tau1, tau2)``: the hot path of the reference solver."""
+        position, ratio = self.transfer.evaluate(phi2)
+        torque = self.law.torque(phi1 - position) + self.damping * (w1 - ratio * w2)
+        return -torque, ratio * torque
+
+    def eigen_estimate(self, inertia_drive: float, inertia_driven: float) -> tuple[float, float]:
+        """Undamped eigenfrequency [rad/s] and damping ratio of the two-inertia chain
+        about U12 = 1, from the nominal stiffness: for step-size and stability advice."""
+        stiffness = self.law.nominal_stiffness
+        reduced = inertia_drive * inertia_driven / (inertia_drive + inertia_driven)
+        omega = math.sqrt(stiffness / reduced)
+        return omega, self.damping / (2.0 * math.sqrt(stiffness * reduced))
+
+
+def build_coupling(transfer_mode: str, alpha: float, support_deformation: float, hinge_deformation: float,
+                   c: float, b: float, elastic_table: str = "") -> LeverCoupling:
+    """The one constructor the FMU, the reference solver and the tests share."""
+    transfer = TransferFunction(transfer_mode, alpha, support_deformation, hinge_deformation)
+    return LeverCoupling(transfer, elastic_law(c, elastic_table), b)
+
+
+__all__ = ["LeverCoupling", "CouplingResult", "build_coupling", "LinearElasticLaw", "TabulatedElasticLaw"]

@@ -1,0 +1,191 @@
+"""Kinematics of the lever-articulated coupling: the transfer function ``U12`` and the
+position function ``Phi`` (MODEL.md section 2).
+
+``Phi(phi2)`` is the drive-side angle that a rigid coupling would hold for driven angle
+``phi2``; ``U12 = dPhi/dphi2``.  Both are represented by one truncated Fourier series,
+
+    U12(phi) = 1 + Re sum_k C_k e^{i k phi},      Phi(phi) = phi + Re sum_k C_k/(i k) (e^{i k phi} - 1),
+
+so ``U12`` has unit mean and ``Phi(phi + 2 pi) = Phi(phi) + 2 pi`` hold by construction
+(no constant term), ``Phi(0) = 0``, and evaluation is one Horner pass in complex
+arithmetic that works for floats and numpy arrays alike.
+
+The printed driven-half formula (3.14) and transfer function (3.16) are garbled (see
+MODEL.md); they are not used.  The kinematic mode builds ``U12`` from the Cardan-like
+half-coupling function ``g`` instead, as the brief prescribes.
+"""
+from __future__ import annotations
+
+import cmath
+import math
+
+import numpy as np
+
+from .parameters import ParameterError
+
+#: ``g`` is defined for misalignment angles below 45 deg (its denominator vanishes there).
+KINEMATIC_LIMIT = math.pi / 4
+#: The coupling's geometric working range (monograph section 2.3; dead position at 90 deg).
+GEOMETRIC_LIMIT = math.radians(75.0)
+
+MODES = ("synchronous", "kinematic", "scaled")
+
+# Amplitudes dU12 = (max - min)/2 that the monograph reports from its own (defective)
+# formula, Fig. 3.7 / MODEL.md section 2: (alpha [deg], D2s/l2, D2h/lc2, dU12).  Where
+# the text does not say the other deformation, it is taken as 0.03 (the figure's
+# alpha curves are drawn at 0.03): a stated assumption.
+MONOGRAPH_AMPLITUDES = (
+    (5.0, 0.03, 0.03, 0.065),
+    (30.0, 0.05, 0.03, 0.34),
+    (20.0, 0.02, 0.03, 0.139),
+    (20.0, 0.09, 0.03, 0.264),
+    (20.0, 0.03, 0.02, 0.136),
+    (20.0, 0.03, 0.09, 0.231),
+)
+
+
+def _fit_reported_amplitude() -> tuple[float, float, float, float]:
+    """Least-squares fit of ``dU = k sin(alpha)^p (D2s/l2)^q (D2h/lc2)^r`` in logs to the
+    reported points.  A power law vanishes at alpha = 0 and at zero deformation, as the
+    amplitude must, and varies smoothly between the few printed points."""
+    a = np.array([[1.0, math.log(math.sin(math.radians(al))), math.log(ds), math.log(dh)]
+                  for al, ds, dh, _ in MONOGRAPH_AMPLITUDES])
+    y = np.array([math.log(du) for *_, du in MONOGRAPH_AMPLITUDES])
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return math.exp(coef[0]), float(coef[1]), float(coef[2]), float(coef[3])
+
+
+_REPORTED_FIT = _fit_reported_amplitude()
+
+
+def reported_amplitude(alpha: float, support_deformation: float, hinge_deformation: float) -> float:
+    """The monograph's reported dU12 (Fig. 3.7), interpolated by a power law in
+    sin(alpha) and the two relative deformations.  Zero when either deformation or
+    alpha is zero (the coupling is then synchronous)."""
+    if alpha <= 0.0 or support_deformation <= 0.0 or hinge_deformation <= 0.0:
+        return 0.0
+    k, p, q, r = _REPORTED_FIT
+    return k * math.sin(alpha) ** p * support_deformation ** q * hinge_deformation ** r
+
+
+def half_coupling_ratio(phi, alpha):
+    """Speed ratio of a half-coupling's earring to its shaft, ``w_c / w``, (3.14, first
+    line).  Cardan-like, period pi in ``phi``, defined for ``alpha < 45 deg``."""
+    s2 = np.sin(alpha) ** 2
+    return np.sqrt((1.0 - 2.0 * s2 * np.cos(2.0 * phi)) / (1.0 - 2.0 * s2 * np.cos(phi) ** 2))
+
+
+class TransferFunction:
+    """``U12(phi2)`` and ``Phi(phi2)`` for one misalignment and deformation state.
+
+    ``mode``:
+      * ``synchronous``: ``U12 = 1`` (no misalignment effect), alpha in [0, 75) deg;
+      * ``kinematic``: ``U12 ~ g(phi + d_phi, alpha + d_alpha) / g(phi, alpha)``,
+        renormalised to unit mean, with ``d_alpha = asin(D2s/l2)`` (tilt of the driven
+        shaft on its elastic support) and ``d_phi = asin(D2h/lc2)`` (phase shift in the
+        elastic hinge), (3.13); needs ``alpha + d_alpha < 45 deg``;
+      * ``scaled``: the kinematic shape with its amplitude scaled to the monograph's
+        reported amplitude (``reported_amplitude``).
+    """
+
+    #: Fourier coefficients below this (relative to 1) are dropped.
+    TRUNCATION = 1e-13
+
+    def __init__(self, mode: str, alpha: float, support_deformation: float = 0.0,
+                 hinge_deformation: float = 0.0):
+        if mode not in MODES:
+            raise ParameterError("transfer_mode", f"parameter 'transfer_mode' = {mode!r} is not allowed: "
+                                 f"it must be one of {', '.join(MODES)}")
+        for name, value, high in (("alpha", alpha, GEOMETRIC_LIMIT),
+                                  ("support_deformation", support_deformation, 0.5),
+                                  ("hinge_deformation", hinge_deformation, 0.5)):
+            if not (math.isfinite(value) and 0.0 <= value < high):
+                raise ParameterError(name, f"parameter '{name}' = {value} is outside its allowed range "
+                                     f"[0, {high:.6g})" + (" rad (75 deg)" if name == "alpha" else ""))
+        self.mode = mode
+        self.alpha = float(alpha)
+        self.support_deformation = float(support_deformation)
+        self.hinge_deformation = float(hinge_deformation)
+        self.tilt = math.asin(self.support_deformation)          # d_alpha
+        self.phase_shift = math.asin(self.hinge_deformation)     # d_phi
+        coefficients = np.zeros(0, dtype=complex)
+        if mode != "synchronous" and self.alpha > 0.0 and (self.tilt > 0.0 or self.phase_shift > 0.0):
+            coefficients = self._kinematic_coefficients()
+            if mode == "scaled" and coefficients.size:
+                target = reported_amplitude(self.alpha, self.support_deformation, self.hinge_deformation)
+                coefficients = coefficients * (target / self._amplitude_of(coefficients))
+        self.coefficients = coefficients
+        k = np.arange(1, coefficients.size + 1)
+        self._position_coefficients = coefficients / (1j * k) if coefficients.size else coefficients
+        self._position_offset = float(np.sum(self._position_coefficients).real)
+        # Plain Python complex lists: the scalar Horner loop is several times faster on them.
+        self._c = [complex(c) for c in coefficients[::-1]]
+        self._d = [complex(d) for d in self._position_coefficients[::-1]]
+        self.amplitude = self._amplitude_of(coefficients) if coefficients.size else 0.0
+        if coefficients.size and self.minimum_ratio() <= 0.05:
+            raise ParameterError("alpha", f"parameter 'alpha' = {math.degrees(alpha):.4g} deg gives a transfer "
+                                 f"function amplitude {self.amplitude:.3g} in mode {mode!r}: U12 would "
+                                 "approach zero (the coupling would lock); reduce alpha or the deformations")
+
+    # -- construction -------------------------------------------------------------------
+    def _kinematic_coefficients(self) -> np.ndarray:
+        if self.alpha + self.tilt >= KINEMATIC_LIMIT:
+            raise ParameterError("alpha", (
+                f"parameter 'alpha' = {math.degrees(self.alpha):.4g} deg plus the support tilt "
+                f"asin(support_deformation) = {math.degrees(self.tilt):.4g} deg reaches 45 deg, where the "
+                f"half-coupling function is undefined; mode {self.mode!r} needs alpha + tilt < 45 deg "
+                "(use transfer_mode='synchronous' up to 75 deg)"))
+        n = 256
+        while n <= 1 << 16:
+            phi = 2.0 * np.pi * np.arange(n) / n
+            ratio = half_coupling_ratio(phi + self.phase_shift, self.alpha + self.tilt) / \
+                half_coupling_ratio(phi, self.alpha)
+            spectrum = np.fft.rfft(ratio) / n
+            mean = spectrum[0].real
+            coefficients = 2.0 * spectrum[1:n // 2] / mean  # e^{ik phi} coefficients, k >= 1
+            tail = np.abs(coefficients[n // 4:]).max()
+            if tail < self.TRUNCATION:
+                keep = np.nonzero(np.abs(coefficients) >= self.TRUNCATION)[0]
+                return coefficients[: keep[-1] + 1] if keep.size else coefficients[:0]
+            n *= 2
+        raise ParameterError("alpha", f"parameter 'alpha' = {math.degrees(self.alpha):.4g} deg is too close "
+                             "to the 45 deg singularity of the half-coupling function to be represented")
+
+    @staticmethod
+    def _amplitude_of(coefficients: np.ndarray) -> float:
+        k = np.arange(1, coefficients.size + 1)
+        phi = 2.0 * np.pi * np.arange(4096) / 4096
+        ratio = (coefficients[None, :] * np.exp(1j * np.outer(phi, k))).sum(axis=1).real
+        return float((ratio.max() - ratio.min()) / 2.0)
+
+    # -- evaluation ---------------------------------------------------------------------
+    def evaluate(self, phi):
+        """Return ``(Phi(phi), U12(phi))`` for a float or a numpy array."""
+        if not self._c:
+            return phi, (1.0 if isinstance(phi, float) else np.ones_like(phi))
+        z = cmath.exp(1j * phi) if isinstance(phi, float) else np.exp(1j * np.asarray(phi))
+        ratio = 0j
+        position = 0j
+        for c, d in zip(self._c, self._d):
+            ratio = ratio * z + c
+            position = position * z + d
+        ratio = ratio * z
+        position = position * z
+        return phi + position.real - self._position_offset, 1.0 + ratio.real
+
+    def ratio(self, phi):
+        """``U12(phi2) = w1/w2`` of a rigid coupling."""
+        return self.evaluate(phi)[1]
+
+    def position(self, phi):
+        """``Phi(phi2)``: the drive angle a rigid coupling holds for driven angle ``phi2``."""
+        return self.evaluate(phi)[0]
+
+    def minimum_ratio(self) -> float:
+        phi = 2.0 * np.pi * np.arange(4096) / 4096
+        return float(np.min(self.ratio(phi)))
+
+    def __repr__(self) -> str:
+        return (f"TransferFunction(mode={self.mode!r}, alpha={math.degrees(self.alpha):.3g} deg, "
+                f"support_deformation={self.support_deformation}, hinge_deformation={self.hinge_deformation}, "
+                f"amplitude={self.amplitude:.4g}, harmonics={len(self._c)})")

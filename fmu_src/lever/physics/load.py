@@ -1,0 +1,230 @@
+"""Technological load on the driven shaft (MODEL.md section 5): ``I2 * a2 = tau2 - Mc``.
+
+Each load gives its resistance ``Mc`` (positive when it opposes positive rotation) and,
+as a shaft's external torque model, ``torque = -Mc``.  Loads that depend on time only
+(constant, random, tabulated) integrate in closed form over a step, so the load shaft is
+exact for them; the angle-periodic measured load is integrated numerically.
+
+The random part is a deterministic function of time for a given seed, the same whatever
+the step or the master, so every master, every engine and the monolithic reference see
+exactly the same load.
+"""
+from __future__ import annotations
+
+import bisect
+import cmath
+import csv
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .parameters import ParameterError, parse_table
+
+LOAD_KINDS = ("constant", "random", "fourier", "table")
+
+
+def _sinc(y: float) -> float:
+    return 1.0 - y * y / 6.0 + y ** 4 / 120.0 if abs(y) < 1e-3 else math.sin(y) / y
+
+
+def _one_minus_sinc_over_y(y: float) -> float:
+    """(1 - sin(y)/y) / y without cancellation."""
+    if abs(y) < 1e-2:
+        y2 = y * y
+        return y * (1.0 / 6.0 - y2 / 120.0 + y2 * y2 / 5040.0)
+    return (y - math.sin(y)) / (y * y)
+
+
+class _TimeLoad:
+    """A load that depends on time only: exact shaft steps from its first and second
+    time integrals over the step."""
+
+    def torque(self, t, phi, w):
+        return -self.resistance(t, phi, w)
+
+    def advance(self, inertia, t, phi, w, tau, h):
+        impulse, second = self.integrals(t, h)
+        return (phi + w * h + (0.5 * tau * h * h - second) / inertia,
+                w + (tau * h - impulse) / inertia)
+
+
+class ConstantLoad(_TimeLoad):
+    def __init__(self, mean: float):
+        self.mean = float(mean)
+
+    def resistance(self, t, phi, w):
+        return self.mean
+
+    def integrals(self, t, h):
+        return self.mean * h, 0.5 * self.mean * h * h
+
+
+class RandomLoad(_TimeLoad):
+    """``Mc = Mm + dM * sum_k a_k sin(w_k t + psi_k)``, a seeded band-limited multisine.
+
+    ``tones`` frequencies are drawn log-uniformly in ``[band_low, band_high]`` rad/s with
+    random phases and weights; the weights are normalised to ``sum |a_k| = 1`` so that
+    ``|Mc - Mm| <= dM`` always holds: ``dM`` is the bound the monograph writes as
+    ``Mm +- dM``.  The default band (2...450 rad/s) spans the shaft rotation frequency and
+    the 415-425 rad/s component of the monograph's oscillograms.
+    """
+
+    def __init__(self, mean: float, amplitude: float, seed: int = 1, tones: int = 6,
+                 band_low: float = 2.0, band_high: float = 450.0):
+        if not 0.0 < band_low <= band_high:
+            raise ParameterError("load_band_low", f"parameter 'load_band_low' = {band_low} must be > 0 and "
+                                 f"<= load_band_high = {band_high} rad/s")
+        self.mean = float(mean)
+        self.amplitude = float(amplitude)
+        rng = np.random.default_rng(int(seed))
+        self.frequencies = np.exp(rng.uniform(math.log(band_low), math.log(band_high), int(tones))).tolist()
+        self.phases = rng.uniform(0.0, 2.0 * math.pi, int(tones)).tolist()
+        weights = rng.uniform(0.5, 1.0, int(tones))
+        self.weights = (self.amplitude * weights / weights.sum()).tolist()
+        self._tones = list(zip(self.weights, self.frequencies, self.phases))
+
+    def resistance(self, t, phi, w):
+        if isinstance(t, np.ndarray):
+            return self.mean + sum(a * np.sin(f * t + p) for a, f, p in self._tones)
+        return self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._tones)
+
+    def integrals(self, t, h):
+        impulse = self.mean * h
+        second = 0.5 * self.mean * h * h
+        for a, f, p in self._tones:
+            x = f * h
+            start = f * t + p
+            impulse += a * h * math.sin(start + 0.5 * x) * _sinc(0.5 * x)
+            second += 0.5 * a * h * h * (math.sin(start + 0.25 * x) * _sinc(0.25 * x)
+                                         + math.cos(start + 0.5 * x) * _one_minus_sinc_over_y(0.5 * x))
+        return impulse, second
+
+
+class TabulatedLoad(_TimeLoad):
+    """Resistance from a time series (time, torque): linear between points, the end
+    values held outside."""
+
+    def __init__(self, points: Sequence[tuple[float, float]], name: str = "load_table"):
+        pts = [(float(t), float(m)) for t, m in points]
+        if len(pts) < 2:
+            raise ParameterError(name, f"parameter '{name}' needs at least 2 (time, torque) points, got {len(pts)}")
+        if any(b[0] <= a[0] for a, b in zip(pts, pts[1:])):
+            raise ParameterError(name, f"parameter '{name}': times must be strictly increasing")
+        self._t = [p[0] for p in pts]
+        self._m = [p[1] for p in pts]
+        self.mean = sum(self._m) / len(self._m)
+
+    @classmethod
+    def parse(cls, text: str, name: str = "load_table") -> "TabulatedLoad":
+        return cls(parse_table(text, name), name)
+
+    def resistance(self, t, phi, w):
+        if isinstance(t, np.ndarray):
+            return np.interp(t, self._t, self._m)
+        ts, ms = self._t, self._m
+        if t <= ts[0]:
+            return ms[0]
+        if t >= ts[-1]:
+            return ms[-1]
+        k = bisect.bisect_right(ts, t) - 1
+        return ms[k] + (ms[k + 1] - ms[k]) * (t - ts[k]) / (ts[k + 1] - ts[k])
+
+    def integrals(self, t, h):
+        """Exact integrals of the piecewise-linear function: ``int M`` and
+        ``int (t1 - u) M(u) du`` over [t, t + h], walking the pieces."""
+        t1 = t + h
+        breaks = [t] + [x for x in self._t if t < x < t1] + [t1]
+        impulse = second = 0.0
+        for a, b in zip(breaks, breaks[1:]):
+            ma, mb = self.resistance(a, 0.0, 0.0), self.resistance(b, 0.0, 0.0)
+            d = b - a
+            impulse += 0.5 * (ma + mb) * d
+            # int_a^b (t1 - u) M(u) du with M linear: exact by Simpson (cubic integrand... quadratic here)
+            mid = 0.5 * (a + b)
+            second += d / 6.0 * ((t1 - a) * ma + 4.0 * (t1 - mid) * 0.5 * (ma + mb) + (t1 - b) * mb)
+        return impulse, second
+
+
+class FourierLoad:
+    """Angle-periodic measured resistance (Table 4.13, series (4.4)):
+    ``Mc(phi2) = M_mean + sum_n a_n cos(n phi2) + b_n sin(n phi2)``."""
+
+    def __init__(self, mean: float, cosines: Sequence[float], sines: Sequence[float]):
+        n = max(len(cosines), len(sines))
+        a = list(cosines) + [0.0] * (n - len(cosines))
+        b = list(sines) + [0.0] * (n - len(sines))
+        self.mean = float(mean)
+        self.cosines, self.sines = a, b
+        # a cos + b sin = Re((a - i b) e^{i n phi}); Horner from the highest harmonic.
+        self._c = [complex(ak, -bk) for ak, bk in zip(a, b)][::-1]
+
+    @classmethod
+    def parse(cls, text: str, name: str = "load_fourier") -> "FourierLoad":
+        """``"M_mean; a1:b1; a2:b2; ..."``: the mean, then one (cos, sin) pair a harmonic."""
+        rows = [r.strip() for r in text.replace("\n", ";").split(";") if r.strip()]
+        if len(rows) < 2:
+            raise ParameterError(name, f"parameter '{name}' needs the mean and at least one harmonic 'a:b'")
+        try:
+            mean = float(rows[0])
+        except ValueError:
+            raise ParameterError(name, f"parameter '{name}': the first entry {rows[0]!r} must be the mean torque") from None
+        pairs = parse_table(";".join(rows[1:]), name)
+        return cls(mean, [p[0] for p in pairs], [p[1] for p in pairs])
+
+    def to_text(self) -> str:
+        return "; ".join([repr(self.mean)] + [f"{a!r}:{b!r}" for a, b in zip(self.cosines, self.sines)])
+
+    def resistance(self, t, phi, w):
+        z = cmath.exp(1j * phi) if not isinstance(phi, np.ndarray) else np.exp(1j * phi)
+        acc = 0j
+        for c in self._c:
+            acc = acc * z + c
+        return self.mean + (acc * z).real
+
+    def torque(self, t, phi, w):
+        return -self.resistance(t, phi, w)
+
+    def advance(self, inertia, t, phi, w, tau, h):
+        return None  # depends on the angle: the shaft integrates numerically
+
+
+def read_harmonics(path: Path | str, cycle: str | int = "mean") -> FourierLoad:
+    """Fourier coefficients from a table in the monograph's format (Tables 4.12/4.13:
+    columns cycle, M_mean, a_1..a_n, b_1..b_m).  ``cycle`` is a cycle number or "mean"
+    (the average of all cycles' coefficients)."""
+    rows = []
+    with open(path, newline="") as f:
+        lines = [line for line in f if not line.lstrip().startswith("#")]
+    for row in csv.DictReader(lines):
+        rows.append({k.strip(): float(v) for k, v in row.items() if v not in (None, "")})
+    if not rows:
+        raise ParameterError("load_fourier", f"{path}: no rows")
+    if cycle != "mean":
+        rows = [r for r in rows if int(r["cycle"]) == int(cycle)]
+        if not rows:
+            raise ParameterError("load_fourier", f"{path}: no cycle {cycle}")
+    n_cos = len([k for k in rows[0] if k.startswith("a_")])
+    n_sin = len([k for k in rows[0] if k.startswith("b_")])
+
+    def avg(key):
+        return sum(r.get(key, 0.0) for r in rows) / len(rows)
+
+    return FourierLoad(avg("M_mean"), [avg(f"a_{n}") for n in range(1, n_cos + 1)],
+                       [avg(f"b_{n}") for n in range(1, n_sin + 1)])
+
+
+def load_model(kind: str, Mm: float, dM: float = 0.0, seed: int = 1, tones: int = 6,
+               band_low: float = 2.0, band_high: float = 450.0, fourier: str = "", table: str = ""):
+    """The one constructor of a load, shared by the FMU, the reference solver and the tests."""
+    if kind == "constant":
+        return ConstantLoad(Mm)
+    if kind == "random":
+        return RandomLoad(Mm, dM, seed, tones, band_low, band_high)
+    if kind == "fourier":
+        return FourierLoad.parse(fourier)
+    if kind == "table":
+        return TabulatedLoad.parse(table)
+    raise ParameterError("load_kind", f"parameter 'load_kind' = {kind!r} is not allowed: it must be one of "
+                         + ", ".join(LOAD_KINDS))

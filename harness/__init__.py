@@ -1,0 +1,2 @@
+"""The co-simulation harness on fmpy: scenes, masters, the monolithic reference, reports,
+and the ``lever`` command line."""

@@ -1,0 +1,133 @@
+"""The ``lever`` command line."""
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import click
+
+from . import scene as scenes
+from .paths import BUILD, FMUS, RESULTS, SCENES
+
+
+class UserError(click.ClickException):
+    """A problem with the user's input: shown as a message, exit code 2, no traceback."""
+
+    exit_code = 2
+
+
+def _build_module():
+    spec = importlib.util.spec_from_file_location("_lever_build_fmus", BUILD / "fmus.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):
+    """Build the FMUs when they are missing or older than their sources."""
+    build = _build_module()
+    if force or not build.is_current(fmu_dir):
+        build.build(fmu_dir, force=force, log=(lambda *_: None) if quiet else click.echo)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main():
+    """Co-simulation of lever-articulated drive-shaft couplings (FMI 2.0, fmpy)."""
+
+
+@main.command()
+@click.option("--force", is_flag=True, help="Rebuild even when the sources did not change.")
+@click.option("--out", type=click.Path(path_type=Path), default=FMUS, show_default=True)
+def build(force, out):
+    """Build the FMUs (LeverCoupling, EngineShaft, LoadShaft) into build/fmus."""
+    try:
+        ensure_fmus(out, force)
+    except RuntimeError as error:
+        raise click.ClickException(str(error)) from None
+
+
+@main.command("scenes")
+def list_scenes():
+    """List the scenes in resources/scenes."""
+    for path in sorted(SCENES.glob("*.toml")):
+        try:
+            click.echo(f"{path.stem:24s} {scenes.load(path).description}")
+        except scenes.SceneError as error:
+            click.echo(f"{path.stem:24s} (invalid: {error})")
+
+
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter: component.parameter=value (e.g. coupling.stiffness=900, "
+                   "coupling.misalignment='20 deg') or experiment.stop=5.")
+@click.option("--master", type=str, default=None, help="Co-simulation master (default: the scene's).")
+@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/<scene>).")
+@click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+def run(scene, assignments, master, step, out, no_reference, progress):
+    """Run SCENE (a name in resources/scenes or a .toml path) and write traces, plots,
+    summary.json and report.md."""
+    from . import masters as family
+    from . import reference as references
+    from . import report
+    from .run import simulate
+    from .system import SceneInvalid
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    if master is not None and master not in family.MASTERS:
+        raise UserError(f"--master {master}: unknown master (known: {', '.join(family.MASTERS)})")
+    if step is not None and not (math.isfinite(step) and step > 0):
+        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    try:
+        ensure_fmus(quiet=True)
+    except RuntimeError as error:
+        raise click.ClickException(f"building the FMUs failed: {error}") from None
+    show_progress = sys.stderr.isatty() if progress is None else progress
+    try:
+        result = simulate(spec, master, step, progress=show_progress)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    reference = None
+    if "reference" in spec.features and not no_reference and result.ok:
+        try:
+            reference = references.solve(spec, result.times)
+        except references.ReferenceUnavailable as error:
+            click.echo(f"note: no reference for this scene: {error}", err=True)
+    out = out or RESULTS / spec.name
+    summary = report.write(out, result, reference)
+    _print_summary(summary, out)
+    if not result.ok:
+        click.echo(f"error: {result.failure}", err=True)
+        click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
+        sys.exit(1)
+
+
+def _print_summary(summary: dict, out: Path):
+    click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
+               f"wall time {summary['wall_time_s']:.2f} s")
+    stats = summary.get("statistics") or {}
+    for short in ("w1", "w2", "tau1", "tau2"):
+        s = stats.get(short)
+        if s:
+            extra = f", unevenness {s['unevenness']:.4f}" if "unevenness" in s else ""
+            click.echo(f"  {short:5s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
+    errs = summary.get("error_vs_reference") or {}
+    if errs:
+        click.echo("  error vs reference (RMS, relative): " + ", ".join(
+            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
+    eb = summary.get("energy_balance")
+    if eb:
+        click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+"""What a run is judged by: statistics of the motion (means, amplitudes
+``A = (max - min)/2``, unevenness ``(w_max - w_min)/w_mean``), errors against the
+reference, and the energy balance.  Pure functions of traces."""
+from __future__ import annotations
+
+import numpy as np
+
+from lever.physics import catalogue
+from lever.physics.parameters import check_all
+
+from . import scene as scenes
+
+
+def _trapezoid(y, x):
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x))) if len(x) > 1 else 0.0
+
+
+def roles(scene: scenes.Scene) -> tuple[str | None, str | None, str | None]:
+    return tuple(scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
+
+
+def energy_variables(scene: scenes.Scene) -> list[str]:
+    engine, coupling, load = roles(scene)
+    if not (engine and coupling and load):
+        return []
+    return [f"{engine}.w", f"{engine}.engine_work", f"{load}.w", f"{load}.load_work",
+            f"{coupling}.elastic_energy", f"{coupling}.dissipated_power"]
+
+
+def inertias(scene: scenes.Scene) -> tuple[float, float]:
+    engine, _, load = roles(scene)
+
+    def inertia(name, declared):
+        params = {k: scenes.quantity(v) for k, v in scene.components[name].parameters.items()}
+        return check_all(declared, params)["inertia"]
+
+    return inertia(engine, catalogue.ENGINE), inertia(load, catalogue.LOAD)
+
+
+def energy_balance(scene: scenes.Scene, times: np.ndarray, traces: dict, dissipated: np.ndarray | None = None) -> dict:
+    """Work in - work out - stored - dissipated, over the whole run, in J and relative to
+    the work in.  ``dissipated`` (cumulative, J) is used when given (the reference
+    integrates it exactly); otherwise the dissipated power is integrated by trapezoids."""
+    engine, coupling, load = roles(scene)
+    i1, i2 = inertias(scene)
+    w1, w2 = traces[f"{engine}.w"], traces[f"{load}.w"]
+    work_in = float(traces[f"{engine}.engine_work"][-1] - traces[f"{engine}.engine_work"][0])
+    work_out = float(traces[f"{load}.load_work"][-1] - traces[f"{load}.load_work"][0])
+    kinetic = 0.5 * i1 * (w1[-1] ** 2 - w1[0] ** 2) + 0.5 * i2 * (w2[-1] ** 2 - w2[0] ** 2)
+    elastic = float(traces[f"{coupling}.elastic_energy"][-1] - traces[f"{coupling}.elastic_energy"][0])
+    if dissipated is None:
+        lost = _trapezoid(traces[f"{coupling}.dissipated_power"], times)
+    else:
+        lost = float(dissipated[-1] - dissipated[0])
+    residual = work_in - work_out - kinetic - elastic - lost
+    return {"work_in_J": work_in, "work_out_J": work_out, "kinetic_change_J": float(kinetic),
+            "elastic_change_J": elastic, "dissipated_J": lost, "residual_J": float(residual),
+            "residual_relative": float(abs(residual) / abs(work_in)) if work_in else float("nan")}
+
+
+def statistics(times: np.ndarray, traces: dict, names: list[str], transient: float) -> dict:
+    """Mean and amplitude of each signal after the start-up transient; unevenness for
+    speeds (names ending in ``.w``)."""
+    keep = times >= times[0] + transient
+    out = {}
+    for name in names:
+        if name not in traces:
+            continue
+        y = traces[name][keep]
+        if y.size == 0:
+            continue
+        mean = float(np.mean(y))
+        stats = {"mean": mean, "min": float(np.min(y)), "max": float(np.max(y)),
+                 "amplitude": float((np.max(y) - np.min(y)) / 2.0)}
+        if name.endswith(".w") and mean != 0.0:
+            stats["unevenness"] = float((np.max(y) - np.min(y)) / mean)
+        out[name] = stats
+    return out
+
+
+def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, reference: dict, names: list[str],
+           scales: dict[str, float]) -> dict:
+    """RMS and max error of each signal against the reference, absolute and relative to
+    ``scales[name]`` (the scene's mean torque for torques, mean speed for speeds)."""
+    out = {}
+    n = min(len(times), len(reference_times))
+    if n == 0:
+        return out
+    if not np.allclose(times[:n], reference_times[:n], rtol=0, atol=1e-9):
+        raise ValueError("co-simulation and reference are not on the same time grid")
+    for name in names:
+        if name not in traces or name not in reference:
+            continue
+        diff = traces[name][:n] - reference[name][:n]
+        rms = float(np.sqrt(np.mean(diff ** 2)))
+        peak = float(np.max(np.abs(diff)))
+        scale = scales.get(name, 1.0)
+        out[name] = {"rms": rms, "max": peak, "rms_relative": rms / scale, "max_relative": peak / scale,
+                     "scale": scale}
+    return out
+
+
+def error_scales(scene: scenes.Scene, reference: dict) -> dict[str, float]:
+    """Torques are judged relative to the mean transmitted torque, speeds relative to
+    the mean speed (both from the reference)."""
+    engine, coupling, load = roles(scene)
+    torque = float(abs(np.mean(reference[f"{coupling}.tau2"])))
+    speed = float(abs(np.mean(reference[f"{engine}.w"])))
+    return {f"{coupling}.tau1": torque, f"{coupling}.tau2": torque, f"{engine}.w": speed, f"{load}.w": speed,
+            f"{engine}.a": speed, f"{load}.a": speed}

@@ -1,0 +1,143 @@
+"""The monolithic reference: the scene's equations solved unsplit with scipy at tight
+tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue``).
+
+For the driveline (engine shaft - lever coupling - load shaft) the state is
+``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
+energy dissipated in the coupling, so the reference's own energy balance is exact up to
+the integrator's tolerance.  Results are cached by a hash of everything they depend on.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time as clock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from lever.physics import catalogue
+
+from . import scene as scenes
+from .paths import RESULTS
+
+RTOL = 1e-10
+ATOL = 1e-10
+CACHE = RESULTS / ".cache"
+
+
+class ReferenceUnavailable(ValueError):
+    pass
+
+
+@dataclass
+class Reference:
+    times: np.ndarray
+    traces: dict[str, np.ndarray]
+    wall_time: float
+    n_rhs: int
+    method: str
+    status: str = "ok"
+    info: dict = field(default_factory=dict)
+
+
+def _params(scene: scenes.Scene, name: str | None) -> dict:
+    if name is None:
+        return {}
+    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
+
+
+def _roles(scene: scenes.Scene):
+    engine, coupling, load = (scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
+    if not (engine and coupling and load):
+        raise ReferenceUnavailable(f"scene '{scene.name}': the monolithic reference covers the engine - coupling - "
+                                   "load driveline (EngineShaft, LeverCoupling, LoadShaft)")
+    return engine, coupling, load
+
+
+def _vectorized(f, t, phi, w):
+    try:
+        out = f(t, phi, w)
+        if np.shape(out) == np.shape(t):
+            return np.asarray(out, dtype=float)
+    except TypeError:
+        pass
+    return np.array([f(a, b, c) for a, b, c in zip(t, phi, w)])
+
+
+def cache_key(scene: scenes.Scene, times: np.ndarray) -> str:
+    payload = {
+        "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in sorted(scene.components.items())},
+        "grid": [float(times[0]), float(times[-1]), len(times)],
+        "rtol": RTOL, "atol": ATOL,
+        "physics": _physics_hash(),
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _physics_hash() -> str:
+    root = Path(catalogue.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.glob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Reference:
+    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...)."""
+    engine_name, coupling_name, load_name = _roles(scene)
+    key = cache_key(scene, times)
+    path = CACHE / f"reference-{scene.name}-{key}.npz"
+    if use_cache and path.exists():
+        data = np.load(path, allow_pickle=False)
+        meta = json.loads(str(data["meta"]))
+        traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
+        return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"], info={"cached": True})
+
+    engine = catalogue.engine_from(_params(scene, engine_name))
+    load = catalogue.load_from(_params(scene, load_name))
+    coupling_params = _params(scene, coupling_name)
+    coupling = catalogue.coupling_from(coupling_params)
+    phi1, w1 = catalogue.start_state(_params(scene, engine_name), catalogue.ENGINE)
+    phi2, w2 = catalogue.start_state(_params(scene, load_name), catalogue.LOAD)
+    inertia1, inertia2 = engine.inertia, load.inertia
+    drive_torque, load_torque = engine.external.torque, load.external.torque
+    evaluate = coupling.evaluate
+
+    def rhs(t, y):
+        p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
+        r = evaluate(p1, v1, p2, v2)
+        m1 = drive_torque(t, p1, v1)
+        m2 = load_torque(t, p2, v2)
+        return [v1, (m1 + r.tau1) / inertia1, v2, (m2 + r.tau2) / inertia2, m1 * v1, -m2 * v2, r.dissipation]
+
+    started = clock.perf_counter()
+    omega, _ = coupling.eigen_estimate(inertia1, inertia2)
+    solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), [phi1, w1, phi2, w2, 0.0, 0.0, 0.0],
+                         method="DOP853", t_eval=times, rtol=RTOL, atol=ATOL,
+                         first_step=min(1e-4, 0.1 / omega))
+    wall = clock.perf_counter() - started
+    if not solution.success:
+        raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
+    p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
+    t = solution.t
+    r = evaluate(p1, v1, p2, v2)
+    m1 = _vectorized(drive_torque, t, p1, v1)
+    m2 = _vectorized(load_torque, t, p2, v2)
+    e, c, l = engine_name, coupling_name, load_name
+    traces = {
+        f"{e}.phi": p1, f"{e}.w": v1, f"{e}.a": (m1 + r.tau1) / inertia1, f"{e}.engine_torque": m1,
+        f"{e}.engine_work": work_in,
+        f"{l}.phi": p2, f"{l}.w": v2, f"{l}.a": (m2 + r.tau2) / inertia2, f"{l}.load_torque": -m2,
+        f"{l}.load_work": work_out,
+        f"{c}.tau1": np.asarray(r.tau1), f"{c}.tau2": np.asarray(r.tau2), f"{c}.U12": np.asarray(r.ratio),
+        f"{c}.theta": np.asarray(r.deflection), f"{c}.elastic_energy": np.asarray(r.energy),
+        f"{c}.dissipated_power": np.asarray(r.dissipation), f"{c}.dissipated_energy": dissipated,
+    }
+    reference = Reference(t, traces, wall, int(solution.nfev), f"DOP853 rtol={RTOL:g} atol={ATOL:g}")
+    if use_cache:
+        CACHE.mkdir(parents=True, exist_ok=True)
+        meta = json.dumps({"wall_time": wall, "n_rhs": reference.n_rhs, "method": reference.method})
+        np.savez_compressed(path, times=t, meta=np.array(meta), **traces)
+    return reference

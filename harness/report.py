@@ -1,0 +1,197 @@
+"""Writing a run's results: traces (CSV), plots (PNG), ``summary.json`` and ``report.md``
+in ``results/<scene>/``."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from . import metrics
+from .run import RunResult
+
+MAIN_SIGNALS = ("w", "a", "tau1", "tau2")
+
+
+def _names(result: RunResult):
+    engine, coupling, load = metrics.roles(result.scene)
+    return {
+        "w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
+        "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12",
+    }
+
+
+def write_traces(path: Path, times: np.ndarray, traces: dict):
+    names = list(traces)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["time"] + names)
+        columns = [traces[n] for n in names]
+        for i, t in enumerate(times):
+            writer.writerow([repr(float(t))] + [repr(float(c[i])) for c in columns])
+
+
+def summarize(result: RunResult, reference=None) -> dict:
+    scene = result.scene
+    names = _names(result)
+    summary = {
+        "scene": scene.name,
+        "description": scene.description,
+        "master": result.master,
+        "step_s": result.step,
+        "stop_s": scene.experiment.stop,
+        "transient_s": scene.experiment.transient,
+        "ok": result.ok,
+        "failure": result.failure,
+        "wall_time_s": result.wall_time,
+        "counters": result.counters,
+        "python": platform.python_version(),
+    }
+    if len(result.times) > 1:
+        summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
+                                                           scene.experiment.transient).get(full)
+                                 for short, full in names.items() if full in result.traces}
+    if "energy_balance" in scene.features and result.ok:
+        summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
+    if reference is not None and len(result.times):
+        scales = metrics.error_scales(scene, reference.traces)
+        errs = metrics.errors(result.times, result.traces, reference.times, reference.traces,
+                              [names[k] for k in ("w1", "w2", "tau1", "tau2")], scales)
+        summary["error_vs_reference"] = {short: errs[full] for short, full in names.items() if full in errs}
+        summary["reference"] = {"method": reference.method, "wall_time_s": reference.wall_time,
+                                "rhs_evaluations": reference.n_rhs,
+                                "energy_balance": metrics.energy_balance(
+                                    scene, reference.times, reference.traces,
+                                    reference.traces[f"{metrics.roles(scene)[1]}.dissipated_energy"])}
+    return summary
+
+
+def _fmt(x, digits=4):
+    if x is None:
+        return "-"
+    if isinstance(x, float) and (abs(x) >= 1e4 or (0 < abs(x) < 1e-3)):
+        return f"{x:.{digits - 1}e}"
+    return f"{x:.{digits}g}"
+
+
+def write_report(path: Path, summary: dict):
+    lines = [f"# {summary['scene']}: {summary['description']}", ""]
+    lines.append(f"Master **{summary['master']}**, communication step {summary['step_s']:g} s, "
+                 f"0 ... {summary['stop_s']:g} s; wall time {summary['wall_time_s']:.2f} s "
+                 f"({summary['counters'].get('fmu_calls', 0)} FMI calls).")
+    if summary["failure"]:
+        lines += ["", f"**The run failed:** {summary['failure']}", "",
+                  "The traces up to the failure are in traces.csv."]
+    stats = summary.get("statistics")
+    if stats:
+        lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", "",
+                  "| signal | mean | amplitude A = (max-min)/2 | unevenness (w_max-w_min)/w_mean |",
+                  "|---|---|---|---|"]
+        for short, s in stats.items():
+            if s:
+                lines.append(f"| {short} | {_fmt(s['mean'])} | {_fmt(s['amplitude'])} | "
+                             f"{_fmt(s.get('unevenness'))} |")
+        lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
+                  "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
+    errs = summary.get("error_vs_reference")
+    if errs:
+        ref = summary["reference"]
+        lines += ["", "## Error against the monolithic reference", "",
+                  f"Reference: {ref['method']} ({ref['rhs_evaluations']} right-hand-side evaluations, "
+                  f"{ref['wall_time_s']:.2f} s; its own energy residual "
+                  f"{ref['energy_balance']['residual_relative']:.1e}).", "",
+                  "| signal | RMS error | max error | RMS / scale | max / scale | scale |", "|---|---|---|---|---|---|"]
+        for short, e in errs.items():
+            lines.append(f"| {short} | {_fmt(e['rms'])} | {_fmt(e['max'])} | {100 * e['rms_relative']:.3g} % | "
+                         f"{100 * e['max_relative']:.3g} % | {_fmt(e['scale'])} |")
+        lines += ["", "Scales: torques relative to the mean transmitted torque, speeds to the mean speed."]
+    eb = summary.get("energy_balance")
+    if eb:
+        lines += ["", "## Energy balance", "",
+                  f"work in {eb['work_in_J']:.6g} J - work out {eb['work_out_J']:.6g} J - kinetic change "
+                  f"{eb['kinetic_change_J']:.4g} J - elastic change {eb['elastic_change_J']:.4g} J - dissipated "
+                  f"{eb['dissipated_J']:.4g} J = residual {eb['residual_J']:.4g} J "
+                  f"(**{100 * eb['residual_relative']:.2g} %** of the work in)."]
+    lines += ["", "Plots: speeds.png, torques.png, accelerations.png, transfer_function.png, "
+              "vs_reference.png.  Traces: traces.csv (and reference.csv)."]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def plot(out: Path, result: RunResult, reference=None):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = _names(result)
+    t = result.times
+    tr = result.traces
+
+    def figure(filename, panels, title):
+        fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels)), sharex=True, squeeze=False)
+        for ax, (label, series) in zip(axes[:, 0], panels):
+            for name, legend, style, *sign in series:
+                if name in tr:
+                    ax.plot(t, (sign[0] if sign else 1.0) * tr[name], style, lw=0.8, label=legend)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)
+        axes[-1, 0].set_xlabel("time [s]")
+        fig.suptitle(title)
+        fig.tight_layout()
+        fig.savefig(out / filename, dpi=110)
+        plt.close(fig)
+
+    title = f"{result.scene.name} - {result.master}, h = {result.step:g} s"
+    figure("speeds.png", [("speed [rad/s]", [(names["w1"], "w1 drive", "-"), (names["w2"], "w2 driven", "-")])], title)
+    # The drive side is plotted as the torque it transmits, -tau1, so both curves share a sign.
+    figure("torques.png", [("torque [N*m]", [(names["tau1"], "-tau1 (drive)", "-", -1.0),
+                                             (names["tau2"], "tau2 (driven)", "-")])], title)
+    figure("accelerations.png", [("acceleration [rad/s^2]", [(names["a1"], "a1 drive", "-"),
+                                                             (names["a2"], "a2 driven", "-")])], title)
+    figure("transfer_function.png", [("U12 [1]", [(names["U12"], "U12", "-")])], title)
+    if reference is not None:
+        fig, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
+        n = min(len(t), len(reference.times))
+        for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
+            name = names[key]
+            ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
+            ax.plot(t[:n], tr[name][:n], "C1--", lw=0.8, label=f"co-simulation ({result.master})")
+            ax.set_ylabel(f"{key} [{unit}]")
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)
+        for key, style in (("w1", "C0-"), ("w2", "C2-")):
+            name = names[key]
+            axes[3].plot(t[:n], tr[name][:n] - reference.traces[name][:n], style, lw=0.7, label=f"error {key}")
+        axes[3].set_ylabel("error [rad/s]")
+        axes[3].set_xlabel("time [s]")
+        axes[3].grid(alpha=0.3)
+        axes[3].legend(loc="upper right", fontsize=8)
+        fig.suptitle(f"{title}: co-simulation vs reference")
+        fig.tight_layout()
+        fig.savefig(out / "vs_reference.png", dpi=110)
+        plt.close(fig)
+
+
+def write(out: Path, result: RunResult, reference=None) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    write_traces(out / "traces.csv", result.times, result.traces)
+    if reference is not None:
+        write_traces(out / "reference.csv", reference.times, reference.traces)
+    summary = summarize(result, reference)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    write_report(out / "report.md", summary)
+    if "plots" in result.scene.features and len(result.times) > 1:
+        plot(out, result, reference)
+    return summary
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return str(x)

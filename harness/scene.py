@@ -1,0 +1,238 @@
+"""Scenes: declarative descriptions of a co-simulation (``resources/scenes/*.toml``).
+
+A scene names its components (which FMU, which parameter values), its connections
+(``"engine.phi -> coupling.phi1"``), the experiment (start, stop, step, master), what to
+record, and the features it wants (``reference``: solve the same equations unsplit;
+``energy_balance``: account for every joule).  Only what a scene declares is
+instantiated, computed and recorded.
+
+Values may carry a unit, ``"15 deg"`` or ``"374.8 rpm"``; they are converted to SI.
+``validate`` is a pure function returning findings (empty when the scene is sound).
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from lever.physics.parameters import UNITS
+
+from .paths import SCENES
+
+FEATURES = ("reference", "energy_balance", "plots")
+
+
+class SceneError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class Connection:
+    source: str
+    output: str
+    target: str
+    input: str
+
+    def __str__(self):
+        return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+
+
+@dataclass
+class ComponentSpec:
+    fmu: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Experiment:
+    stop: float = 10.0
+    step: float = 1e-3
+    start: float = 0.0
+    master: str = "gauss-seidel"
+    transient: float = 2.0    # start-up time left out of amplitude statistics [s]
+
+
+@dataclass
+class Scene:
+    name: str
+    description: str
+    components: dict[str, ComponentSpec]
+    connections: list[Connection]
+    experiment: Experiment
+    record: list[str]
+    features: set[str]
+    path: Path | None = None
+    notes: str = ""
+
+    def component_of(self, fmu: str) -> str | None:
+        """Name of the (first) component built from FMU ``fmu``."""
+        return next((n for n, c in self.components.items() if c.fmu == fmu), None)
+
+    def with_overrides(self, assignments: list[str]) -> "Scene":
+        """Apply ``component.parameter=value`` (or ``parameter=value`` when exactly one
+        component has it) and ``experiment.field=value`` assignments."""
+        components = {n: ComponentSpec(c.fmu, dict(c.parameters)) for n, c in self.components.items()}
+        experiment = replace(self.experiment)
+        for assignment in assignments:
+            if "=" not in assignment:
+                raise SceneError(f"--set {assignment!r}: expected name=value")
+            key, raw = (s.strip() for s in assignment.split("=", 1))
+            value = _coerce(raw)
+            if key.startswith("experiment."):
+                attr = key.split(".", 1)[1]
+                if not hasattr(experiment, attr):
+                    raise SceneError(f"--set {key}: the experiment has no field '{attr}'")
+                setattr(experiment, attr, value if attr == "master" else float(quantity(value, key)))
+                continue
+            if "." in key:
+                comp, param = key.split(".", 1)
+                if comp not in components:
+                    raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name} "
+                                     f"(components: {', '.join(components)})")
+                components[comp].parameters[param] = value
+            else:
+                components_with = [n for n, c in components.items() if key in c.parameters]
+                if len(components_with) != 1:
+                    raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
+                                     f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
+                components[components_with[0]].parameters[key] = value
+        return replace(self, components=components, experiment=experiment)
+
+
+def _coerce(raw: str):
+    try:
+        return int(raw)
+    except ValueError:
+        pass
+    try:
+        return float(raw)
+    except ValueError:
+        return raw.strip("'\"")
+
+
+_QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/.0-9]+)\s*$")
+
+
+def quantity(value, name: str = "value"):
+    """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is."""
+    if isinstance(value, str):
+        m = _QUANTITY.match(value)
+        if m and m.group(2) in UNITS:
+            try:
+                return float(m.group(1)) * UNITS[m.group(2)][1]
+            except ValueError:
+                raise SceneError(f"{name}: {value!r} is not a number with a unit") from None
+    return value
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    path = Path(name_or_path)
+    if path.suffix == ".toml" and path.exists():
+        return path
+    candidate = SCENES / f"{name_or_path}.toml"
+    if candidate.exists():
+        return candidate
+    known = ", ".join(sorted(p.stem for p in SCENES.glob("*.toml")))
+    raise SceneError(f"no scene '{name_or_path}' (a .toml path or one of: {known})")
+
+
+def load(name_or_path: str | Path) -> Scene:
+    path = resolve(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path}: {error}") from None
+    try:
+        components = {name: ComponentSpec(spec["fmu"], dict(spec.get("parameters", {})))
+                      for name, spec in data["components"].items()}
+        connections = [parse_connection(text) for text in data.get("connections", [])]
+        experiment = Experiment(**{k: (v if k == "master" else float(quantity(v, k)))
+                                   for k, v in data.get("experiment", {}).items()})
+    except (KeyError, TypeError) as error:
+        raise SceneError(f"{path}: malformed scene ({error})") from None
+    return Scene(name=data.get("name", path.stem), description=data.get("description", ""),
+                 components=components, connections=connections, experiment=experiment,
+                 record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
+                 notes=data.get("notes", ""))
+
+
+def parse_connection(text: str) -> Connection:
+    try:
+        left, right = (s.strip() for s in text.split("->"))
+        source, output = left.split(".", 1)
+        target, input_ = right.split(".", 1)
+    except ValueError:
+        raise SceneError(f"connection {text!r}: expected 'component.output -> component.input'") from None
+    return Connection(source, output, target, input_)
+
+
+def validate(scene: Scene, descriptions: dict) -> list[str]:
+    """Findings about ``scene`` given the model descriptions of its FMUs (by FMU name).
+    Empty when the scene can run."""
+    findings = []
+    variables = {}
+    for name, spec in scene.components.items():
+        md = descriptions.get(spec.fmu)
+        if md is None:
+            findings.append(f"component '{name}': unknown FMU '{spec.fmu}' (known: {', '.join(descriptions)})")
+            continue
+        variables[name] = {v.name: v for v in md.modelVariables}
+        for param, value in spec.parameters.items():
+            var = variables[name].get(param)
+            if var is None:
+                findings.append(f"component '{name}': {spec.fmu} has no variable '{param}'")
+            elif var.causality not in ("parameter", "input"):
+                findings.append(f"component '{name}': '{param}' is an {var.causality}, not a parameter or input")
+            else:
+                findings += _check_value(f"{name}.{param}", var, quantity(value, f"{name}.{param}"))
+    driven = {}
+    for c in scene.connections:
+        for comp, var, causality in ((c.source, c.output, "output"), (c.target, c.input, "input")):
+            if comp not in scene.components:
+                findings.append(f"connection '{c}': no component '{comp}'")
+            elif comp in variables and var not in variables[comp]:
+                findings.append(f"connection '{c}': {comp} has no variable '{var}'")
+            elif comp in variables and variables[comp][var].causality != causality:
+                findings.append(f"connection '{c}': {comp}.{var} is an {variables[comp][var].causality}, "
+                                f"expected an {causality}")
+        key = (c.target, c.input)
+        if key in driven:
+            findings.append(f"connection '{c}': {c.target}.{c.input} is already driven by '{driven[key]}'")
+        driven[key] = c
+    for item in scene.record:
+        comp, _, var = item.partition(".")
+        if comp not in scene.components:
+            findings.append(f"record '{item}': no component '{comp}'")
+        elif comp in variables and var not in variables[comp]:
+            findings.append(f"record '{item}': {comp} has no variable '{var}'")
+    e = scene.experiment
+    if not (math.isfinite(e.step) and e.step > 0):
+        findings.append(f"experiment.step = {e.step} must be > 0 s")
+    if not (math.isfinite(e.stop) and e.stop > e.start):
+        findings.append(f"experiment.stop = {e.stop} must be > experiment.start = {e.start} s")
+    elif e.step > e.stop - e.start:
+        findings.append(f"experiment.step = {e.step} s is longer than the experiment ({e.stop - e.start} s)")
+    if not 0.0 <= e.transient < e.stop - e.start:
+        findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
+    for feature in scene.features - set(FEATURES):
+        findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
+    return findings
+
+
+def _check_value(label: str, var, value) -> list[str]:
+    if var.type == "String":
+        return [] if isinstance(value, str) else [f"{label}: expected a string, got {value!r}"]
+    if isinstance(value, str):
+        return [f"{label}: expected a number (optionally with a unit, e.g. '15 deg'), got {value!r}"]
+    if not math.isfinite(float(value)):
+        return [f"{label} = {value} is not finite"]
+    low = float(var.min) if var.min is not None else -math.inf
+    high = float(var.max) if var.max is not None else math.inf
+    if not low <= float(value) <= high:
+        unit = f" {var.unit}" if var.unit else ""
+        return [f"{label} = {value:.6g}{unit} is outside its allowed range [{low:.6g}, {high:.6g}]{unit} "
+                f"({var.description})"]
+    return []

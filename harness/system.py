@@ -1,0 +1,157 @@
+"""A scene's FMUs instantiated and wired: the object masters step.
+
+Values flow along the scene's connections by *propagation*: components are visited in
+an order where every component with direct feedthrough (its outputs depend on its
+inputs, as its model description declares) comes after the components feeding it; each
+visited component's outputs are read in one call and written to its targets in one call
+per target.  ``propagate(sources)`` re-propagates only downstream of the given
+components (what a Gauss-Seidel master needs after stepping one shaft).
+
+Only the scene's components are instantiated, and only the outputs that are connected
+or recorded are ever read.
+"""
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+from fmpy import read_model_description
+
+from . import scene as scenes
+from .component import Component
+from .paths import FMUS
+
+
+class SceneInvalid(ValueError):
+    def __init__(self, scene_name: str, findings: list[str]):
+        self.findings = findings
+        super().__init__(f"scene '{scene_name}' is not valid:\n  - " + "\n  - ".join(findings))
+
+
+def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
+    return Path(fmu_dir) / f"{fmu}.fmu"
+
+
+def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
+    out = {}
+    for spec in scene.components.values():
+        path = fmu_path(spec.fmu, fmu_dir)
+        if spec.fmu not in out and path.exists():
+            out[spec.fmu] = read_model_description(str(path))
+    return out
+
+
+class System:
+    def __init__(self, scene: scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
+                 record: list[str] | None = None):
+        self.scene = scene
+        self.record = list(scene.record if record is None else record)
+        findings = scenes.validate(scene, descriptions_for(scene, fmu_dir))
+        if findings:
+            raise SceneInvalid(scene.name, findings)
+        self.components: dict[str, Component] = {}
+        try:
+            for name, spec in scene.components.items():
+                self.components[name] = Component(name, fmu_path(spec.fmu, fmu_dir), logging_on)
+        except Exception:
+            self.free()
+            raise
+        self.feedthrough = {name for name, c in self.components.items()
+                            if any(u.dependencies for u in c.description.outputs)}
+        # Stateful components in scene order: the order a Gauss-Seidel master steps them.
+        self.stateful = [n for n in scene.components if n not in self.feedthrough]
+        self._plan()
+
+    # -- wiring --------------------------------------------------------------------------------
+    def _plan(self):
+        scene = self.scene
+        exposed = {name: [] for name in self.components}
+        for c in scene.connections:
+            if c.output not in exposed[c.source]:
+                exposed[c.source].append(c.output)
+        for item in self.record:
+            comp, _, var = item.partition(".")
+            if var not in exposed[comp] and self.components[comp].variable(var).causality == "output":
+                exposed[comp].append(var)
+        self.exposed = exposed
+        self.buffers = {name: self.components[name].real_buffer(names) for name, names in exposed.items()}
+        self.index = {(name, var): i for name, names in exposed.items() for i, var in enumerate(names)}
+
+        # Topological order: feedthrough components after their sources.
+        order = [n for n in self.components if n not in self.feedthrough]
+        pending = [n for n in self.components if n in self.feedthrough]
+        while pending:
+            ready = [n for n in pending
+                     if all(c.source in order or c.source not in self.feedthrough
+                            for c in scene.connections if c.target == n)]
+            if not ready:
+                raise SceneInvalid(scene.name, [f"algebraic loop between direct-feedthrough components "
+                                                f"{', '.join(pending)}"])
+            order += ready
+            pending = [n for n in pending if n not in ready]
+        self.order = order
+
+        # For each source: the writes to each target (target buffer and the copy map).
+        self.writes = {}
+        for name in order:
+            groups = {}
+            for c in scene.connections:
+                if c.source == name:
+                    groups.setdefault(c.target, []).append(c)
+            writes = []
+            for target, conns in groups.items():
+                vrs, values = self.components[target].real_buffer([c.input for c in conns])
+                writes.append((self.components[target], vrs, values,
+                               [self.index[(name, c.output)] for c in conns]))
+            self.writes[name] = writes
+        # Components downstream of each one (itself included), in propagation order.
+        self.downstream = {}
+        for name in order:
+            reach = {name}
+            for n in order:
+                if n in self.feedthrough and any(c.source in reach and c.target == n for c in scene.connections):
+                    reach.add(n)
+            self.downstream[name] = [n for n in order if n in reach]
+
+    def propagate(self, sources=None):
+        """Read outputs and write them to connected inputs, in dependency order."""
+        names = self.order if sources is None else self._downstream_of(sources)
+        for name in names:
+            vrs, values = self.buffers[name]
+            if len(vrs):
+                self.components[name].read(vrs, values)
+            for target, t_vrs, t_values, positions in self.writes[name]:
+                for k, i in enumerate(positions):
+                    t_values[k] = values[i]
+                target.write(t_vrs, t_values)
+
+    def _downstream_of(self, sources):
+        if len(sources) == 1:
+            return self.downstream[sources[0]]
+        reach = set().union(*(self.downstream[s] for s in sources))
+        return [n for n in self.order if n in reach]
+
+    def value(self, component: str, output: str) -> float:
+        vrs, values = self.buffers[component]
+        return values[self.index[(component, output)]]
+
+    # -- life cycle ------------------------------------------------------------------------------
+    def initialize(self):
+        e = self.scene.experiment
+        for name, spec in self.scene.components.items():
+            params = {k: scenes.quantity(v, f"{name}.{k}") for k, v in spec.parameters.items()}
+            self.components[name].set_parameters(params)
+        for c in self.components.values():
+            c.initialize(e.start, e.stop)
+        self.propagate()
+        for c in self.components.values():
+            c.exit_initialization()
+        self.propagate()
+
+    @property
+    def fmu_calls(self) -> int:
+        return sum(c.calls for c in self.components.values())
+
+    def free(self):
+        for c in self.components.values():
+            c.free()
