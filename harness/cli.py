@@ -129,5 +129,17 @@ def _print_summary(summary: dict, out: Path):
     click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
 
 
+@main.command()
+@click.argument("name", type=click.Choice(["transfer-modes"]))
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "studies", show_default=True)
+def study(name, out):
+    """Recompute the numbers behind a documented decision (docs/decisions.md)."""
+    from . import studies
+
+    ensure_fmus(quiet=True)
+    click.echo(studies.transfer_modes(out))
+    click.echo(f"written to {out / 'transfer_modes.md'}")
+
+
 if __name__ == "__main__":
     main()

@@ -20,7 +20,7 @@ from typing import Any
 
 from lever.physics.parameters import UNITS
 
-from .paths import SCENES
+from .paths import DATA, SCENES
 
 FEATURES = ("reference", "energy_balance", "plots")
 
@@ -117,7 +117,15 @@ _QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/.0-9]+)\s*$")
 
 
 def quantity(value, name: str = "value"):
-    """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is."""
+    """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is.
+    A table ``{harmonics = "monograph/harmonics_driven.csv", cycle = "mean"}`` becomes
+    the load's Fourier series text (file relative to resources/data)."""
+    if isinstance(value, dict) and "harmonics" in value:
+        from lever.physics.load import read_harmonics
+        path = DATA / value["harmonics"]
+        if not path.exists():
+            raise SceneError(f"{name}: no harmonics file {path}")
+        return read_harmonics(path, value.get("cycle", "mean")).to_text()
     if isinstance(value, str):
         m = _QUANTITY.match(value)
         if m and m.group(2) in UNITS:

@@ -36,7 +36,8 @@ class LeverCoupling:
 
     def __init__(self, transfer: TransferFunction, law, damping: float):
         if not (math.isfinite(damping) and damping >= 0.0):
-            raise ParameterError("b", f"parameter 'b' = {damping} is outside its allowed range [0, inf) N.m.s/rad")
+            raise ParameterError("damping", f"parameter 'damping' (b) = {damping} is outside its allowed range "
+                                 "[0, inf) N.m.s/rad")
         self.transfer = transfer
         self.law = law
         self.damping = float(damping)

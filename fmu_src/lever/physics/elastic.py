@@ -23,7 +23,8 @@ class LinearElasticLaw:
 
     def __init__(self, stiffness: float):
         if not (math.isfinite(stiffness) and stiffness > 0.0):
-            raise ParameterError("c", f"parameter 'c' = {stiffness} is outside its allowed range (0, inf) N.m/rad")
+            raise ParameterError("stiffness", f"parameter 'stiffness' (c) = {stiffness} is outside its allowed range "
+                                 "(0, inf) N.m/rad")
         self.stiffness = float(stiffness)
 
     def torque(self, theta):

@@ -96,12 +96,12 @@ class TransferFunction:
         if mode not in MODES:
             raise ParameterError("transfer_mode", f"parameter 'transfer_mode' = {mode!r} is not allowed: "
                                  f"it must be one of {', '.join(MODES)}")
-        for name, value, high in (("alpha", alpha, GEOMETRIC_LIMIT),
+        for name, value, high in (("misalignment", alpha, GEOMETRIC_LIMIT),
                                   ("support_deformation", support_deformation, 0.5),
                                   ("hinge_deformation", hinge_deformation, 0.5)):
             if not (math.isfinite(value) and 0.0 <= value < high):
                 raise ParameterError(name, f"parameter '{name}' = {value} is outside its allowed range "
-                                     f"[0, {high:.6g})" + (" rad (75 deg)" if name == "alpha" else ""))
+                                     f"[0, {high:.6g})" + (" rad (75 deg), the coupling's geometric working range (alpha)" if name == "misalignment" else ""))
         self.mode = mode
         self.alpha = float(alpha)
         self.support_deformation = float(support_deformation)
@@ -123,15 +123,15 @@ class TransferFunction:
         self._d = [complex(d) for d in self._position_coefficients[::-1]]
         self.amplitude = self._amplitude_of(coefficients) if coefficients.size else 0.0
         if coefficients.size and self.minimum_ratio() <= 0.05:
-            raise ParameterError("alpha", f"parameter 'alpha' = {math.degrees(alpha):.4g} deg gives a transfer "
+            raise ParameterError("misalignment", f"parameter 'misalignment' (alpha) = {math.degrees(alpha):.4g} deg gives a transfer "
                                  f"function amplitude {self.amplitude:.3g} in mode {mode!r}: U12 would "
                                  "approach zero (the coupling would lock); reduce alpha or the deformations")
 
     # -- construction -------------------------------------------------------------------
     def _kinematic_coefficients(self) -> np.ndarray:
         if self.alpha + self.tilt >= KINEMATIC_LIMIT:
-            raise ParameterError("alpha", (
-                f"parameter 'alpha' = {math.degrees(self.alpha):.4g} deg plus the support tilt "
+            raise ParameterError("misalignment", (
+                f"parameter 'misalignment' (alpha) = {math.degrees(self.alpha):.4g} deg plus the support tilt "
                 f"asin(support_deformation) = {math.degrees(self.tilt):.4g} deg reaches 45 deg, where the "
                 f"half-coupling function is undefined; mode {self.mode!r} needs alpha + tilt < 45 deg "
                 "(use transfer_mode='synchronous' up to 75 deg)"))
@@ -148,7 +148,7 @@ class TransferFunction:
                 keep = np.nonzero(np.abs(coefficients) >= self.TRUNCATION)[0]
                 return coefficients[: keep[-1] + 1] if keep.size else coefficients[:0]
             n *= 2
-        raise ParameterError("alpha", f"parameter 'alpha' = {math.degrees(self.alpha):.4g} deg is too close "
+        raise ParameterError("misalignment", f"parameter 'misalignment' (alpha) = {math.degrees(self.alpha):.4g} deg is too close "
                              "to the 45 deg singularity of the half-coupling function to be represented")
 
     @staticmethod

@@ -74,8 +74,8 @@ class RandomLoad(_TimeLoad):
     def __init__(self, mean: float, amplitude: float, seed: int = 1, tones: int = 6,
                  band_low: float = 2.0, band_high: float = 450.0):
         if not 0.0 < band_low <= band_high:
-            raise ParameterError("load_band_low", f"parameter 'load_band_low' = {band_low} must be > 0 and "
-                                 f"<= load_band_high = {band_high} rad/s")
+            raise ParameterError("band_low", f"parameter 'band_low' = {band_low} must be > 0 and "
+                                 f"<= band_high = {band_high} rad/s")
         self.mean = float(mean)
         self.amplitude = float(amplitude)
         rng = np.random.default_rng(int(seed))
@@ -106,7 +106,7 @@ class TabulatedLoad(_TimeLoad):
     """Resistance from a time series (time, torque): linear between points, the end
     values held outside."""
 
-    def __init__(self, points: Sequence[tuple[float, float]], name: str = "load_table"):
+    def __init__(self, points: Sequence[tuple[float, float]], name: str = "table"):
         pts = [(float(t), float(m)) for t, m in points]
         if len(pts) < 2:
             raise ParameterError(name, f"parameter '{name}' needs at least 2 (time, torque) points, got {len(pts)}")
@@ -117,7 +117,7 @@ class TabulatedLoad(_TimeLoad):
         self.mean = sum(self._m) / len(self._m)
 
     @classmethod
-    def parse(cls, text: str, name: str = "load_table") -> "TabulatedLoad":
+    def parse(cls, text: str, name: str = "table") -> "TabulatedLoad":
         return cls(parse_table(text, name), name)
 
     def resistance(self, t, phi, w):
@@ -161,7 +161,7 @@ class FourierLoad:
         self._c = [complex(ak, -bk) for ak, bk in zip(a, b)][::-1]
 
     @classmethod
-    def parse(cls, text: str, name: str = "load_fourier") -> "FourierLoad":
+    def parse(cls, text: str, name: str = "fourier") -> "FourierLoad":
         """``"M_mean; a1:b1; a2:b2; ..."``: the mean, then one (cos, sin) pair a harmonic."""
         rows = [r.strip() for r in text.replace("\n", ";").split(";") if r.strip()]
         if len(rows) < 2:
@@ -200,11 +200,11 @@ def read_harmonics(path: Path | str, cycle: str | int = "mean") -> FourierLoad:
     for row in csv.DictReader(lines):
         rows.append({k.strip(): float(v) for k, v in row.items() if v not in (None, "")})
     if not rows:
-        raise ParameterError("load_fourier", f"{path}: no rows")
+        raise ParameterError("fourier", f"{path}: no rows")
     if cycle != "mean":
         rows = [r for r in rows if int(r["cycle"]) == int(cycle)]
         if not rows:
-            raise ParameterError("load_fourier", f"{path}: no cycle {cycle}")
+            raise ParameterError("fourier", f"{path}: no cycle {cycle}")
     n_cos = len([k for k in rows[0] if k.startswith("a_")])
     n_sin = len([k for k in rows[0] if k.startswith("b_")])
 
