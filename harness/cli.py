@@ -82,8 +82,9 @@ def run(scene, assignments, master, step, out, no_reference, progress):
         spec = scenes.load(scene).with_overrides(list(assignments))
     except scenes.SceneError as error:
         raise UserError(str(error)) from None
-    if master is not None and master not in family.MASTERS:
-        raise UserError(f"--master {master}: unknown master (known: {', '.join(family.MASTERS)})")
+    chosen = master or spec.experiment.master
+    if chosen not in family.MASTERS:
+        raise UserError(f"master '{chosen}' is unknown (known: {', '.join(family.MASTERS)})")
     if step is not None and not (math.isfinite(step) and step > 0):
         raise UserError(f"--step {step}: the communication step must be > 0 s")
     try:
@@ -106,6 +107,9 @@ def run(scene, assignments, master, step, out, no_reference, progress):
     _print_summary(summary, out)
     if not result.ok:
         click.echo(f"error: {result.failure}", err=True)
+        if result.failure_stage == "initialisation":
+            # Refused before the first step: the scene's values are at fault, not the run.
+            sys.exit(UserError.exit_code)
         click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
         sys.exit(1)
 

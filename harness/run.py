@@ -31,6 +31,8 @@ class RunResult:
     wall_time: float
     counters: dict = field(default_factory=dict)
     failure: str | None = None
+    #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
+    failure_stage: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -84,7 +86,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
-    failure = None
+    failure = stage = None
     started = clock.perf_counter()
     recorder = None
     driver = None
@@ -102,6 +104,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         if bar is not None:
             bar.close()
     except (FmuCallError, Diverged) as error:
+        stage = "stepping" if driver else "initialisation"
         failure = (f"{error} (master {master}, step {step:g} s"
                    + (f", after {driver.n_steps} steps" if driver else ", during initialisation") + ")")
     finally:
@@ -109,7 +112,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
-    return RunResult(scene, master, step, times, traces, wall, counters, failure)
+    return RunResult(scene, master, step, times, traces, wall, counters, failure, stage)
 
 
 def _progress(total: int, scene: str, master: str):

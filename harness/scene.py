@@ -85,7 +85,13 @@ class Scene:
                 attr = key.split(".", 1)[1]
                 if not hasattr(experiment, attr):
                     raise SceneError(f"--set {key}: the experiment has no field '{attr}'")
-                setattr(experiment, attr, value if attr == "master" else float(quantity(value, key)))
+                if attr == "master":
+                    setattr(experiment, attr, str(value))
+                    continue
+                try:
+                    setattr(experiment, attr, float(quantity(value, key)))
+                except (TypeError, ValueError):
+                    raise SceneError(f"--set {key}={raw}: expected a number (seconds)") from None
                 continue
             if "." in key:
                 comp, param = key.split(".", 1)

@@ -144,7 +144,9 @@ class LeverSlave(Fmi2Slave):
             self._error(f"fmi2EnterInitializationMode called in phase '{self._phase}'")
             return
         self._phase = "initialization"
-        self._try_build()
+        # Build for outputs read during initialisation, but judge the parameters only at
+        # exit: the importer may still correct them (FMI 2.0: fmi2Error is final).
+        self._try_build(report=False)
 
     @guarded()
     def exit_initialization_mode(self):
@@ -152,7 +154,7 @@ class LeverSlave(Fmi2Slave):
             self._error(f"fmi2ExitInitializationMode called in phase '{self._phase}' "
                         "(expected after fmi2EnterInitializationMode)")
             return
-        if self._model_stale:
+        if self._model_stale or self._build_error:
             self._try_build()
         if self._build_error:
             self._error(f"the model cannot be initialised: {self._build_error}")
@@ -230,13 +232,18 @@ class LeverSlave(Fmi2Slave):
     # -- model construction and outputs -----------------------------------------------------
     _model_stale = True
 
-    def _try_build(self):
+    def _try_build(self, report: bool = True, reset: bool = True):
+        """Build the physics from the parameters; ``reset`` also puts the state to its
+        start values (not when a saved state is being restored)."""
         try:
             self._build()
+            if reset:
+                self._reset_state()
             self._build_error = None
         except ParameterError as error:
             self._build_error = str(error)
-            self._error(str(error))
+            if report:
+                self._error(str(error))
         self._model_stale = False
         self._dirty = True
 
@@ -247,6 +254,9 @@ class LeverSlave(Fmi2Slave):
 
     def _build(self):
         raise NotImplementedError
+
+    def _reset_state(self):
+        """Put the model's state to its start values (stateless models: nothing)."""
 
     def _compute_outputs(self):
         raise NotImplementedError
@@ -282,7 +292,7 @@ class LeverSlave(Fmi2Slave):
         self._time = state["time"]
         self._phase = state["phase"]
         if parameters_changed:
-            self._try_build()
+            self._try_build(reset=False)
         self._restore_internal_state(state["internal"])
         self._dirty = True
 

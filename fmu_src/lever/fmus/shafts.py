@@ -24,6 +24,8 @@ class _ShaftSlave(LeverSlave):
 
     def _build(self):
         self._shaft = self._make_shaft()
+
+    def _reset_state(self):
         self.phi, self.w = float(self.phi_start), float(self.w_start)
         setattr(self, self.WORK_OUTPUT, 0.0)
 

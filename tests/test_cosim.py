@@ -1,0 +1,272 @@
+"""Co-simulation of scenes with the built FMUs: steady state, convergence to the monolithic
+reference, determinism, the KAVZ-685 acceptance numbers, and the ``lever run`` command."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness import metrics, reference, run, scene
+
+REPO = Path(__file__).resolve().parents[1]
+LEVER = REPO / ".venv" / "bin" / "lever"
+
+# Short, smooth runs: constant load, no start-up transient excluded from statistics.
+SHORT = ["experiment.stop=1", "experiment.transient=0"]
+SMOOTH = SHORT + ["load.load_kind=constant"]
+
+
+def kavz(*overrides: str) -> scene.Scene:
+    return scene.load("kavz685").with_overrides(list(overrides))
+
+
+@pytest.fixture(autouse=True)
+def _fmus(fmu_dir):
+    return fmu_dir
+
+
+# --------------------------------------------------------------------------------------
+# Physics of the whole driveline
+# --------------------------------------------------------------------------------------
+
+
+def test_synchronous_steady_state_is_the_analytic_one():
+    spec = kavz("coupling.transfer_mode=synchronous", "load.load_kind=constant", "experiment.stop=3",
+                "load.random_amplitude=0")
+    result = run.simulate(spec)
+    assert result.ok, result.failure
+    M1, K1, Mm = 623.0, 14.06, 107.5
+    w = (M1 - Mm) / K1
+    traces = result.traces
+    assert result.times[-1] == pytest.approx(3.0, abs=1e-12)
+    assert traces["engine.w"][-1] == pytest.approx(w, rel=1e-6)
+    assert traces["load.w"][-1] == pytest.approx(w, rel=1e-6)
+    assert traces["coupling.tau2"][-1] == pytest.approx(Mm, rel=1e-6)
+    assert traces["coupling.tau1"][-1] == pytest.approx(-Mm, rel=1e-6)
+    assert traces["engine.engine_torque"][-1] == pytest.approx(Mm, rel=1e-6)
+    assert abs(traces["engine.a"][-1]) < 1e-4 and abs(traces["load.a"][-1]) < 1e-4
+    # Static deflection of the linear spring carries the load.
+    assert traces["coupling.theta"][-1] == pytest.approx(Mm / 715.4, rel=1e-6)
+    assert np.all(traces["coupling.U12"] == 1.0)
+    # The reference reaches the same state.
+    ref = reference.solve(spec, result.times, use_cache=False)
+    assert ref.traces["engine.w"][-1] == pytest.approx(w, rel=1e-6)
+    assert ref.traces["coupling.tau2"][-1] == pytest.approx(Mm, rel=1e-6)
+
+
+@pytest.mark.parametrize("overrides", [SHORT + ["experiment.stop=2"], SMOOTH,
+                                       SHORT + ["coupling.transfer_mode=scaled", "coupling.misalignment=25 deg"],
+                                       SHORT + ["coupling.elastic_table=0.05:10; 0.1:16; 0.2:16.5; 0.3:26.5; 0.45:50",
+                                                "load.mean_torque=20", "load.random_amplitude=5"]])
+def test_reference_energy_balance_is_exact(overrides):
+    spec = kavz(*overrides)
+    times = np.linspace(spec.experiment.start, spec.experiment.stop, 1001)
+    ref = reference.solve(spec, times, use_cache=False)
+    assert np.array_equal(ref.times, times)
+    balance = metrics.energy_balance(spec, ref.times, ref.traces, ref.traces["coupling.dissipated_energy"])
+    assert balance["residual_relative"] < 1e-8, balance
+    assert balance["work_in_J"] > 100.0 and balance["dissipated_J"] > 0.0
+
+
+CONVERGENCE_STEPS = (2e-3, 1e-3, 5e-4)
+
+
+@pytest.mark.parametrize("master", ["jacobi", "gauss-seidel"])
+def test_masters_converge_to_the_reference_at_first_order(master):
+    spec = kavz(*SMOOTH)
+    names = ["engine.w", "coupling.tau2"]
+    errors = {name: [] for name in names}
+    for h in CONVERGENCE_STEPS:
+        result = run.simulate(spec, master=master, step=h)
+        assert result.ok, result.failure
+        assert result.master == master and result.step == h
+        ref = reference.solve(spec, result.times, use_cache=False)
+        found = metrics.errors(result.times, result.traces, ref.times, ref.traces, names,
+                               metrics.error_scales(spec, ref.traces))
+        for name in names:
+            errors[name].append(found[name]["rms"])
+    for name, e in errors.items():
+        assert e[0] > e[1] > e[2] > 0.0, (name, e)
+        orders = [math.log2(e[k] / e[k + 1]) for k in range(len(e) - 1)]
+        assert all(0.8 <= p <= 1.3 for p in orders), (name, orders)
+
+
+def test_reference_cache_returns_what_was_solved(tmp_path, monkeypatch):
+    monkeypatch.setattr(reference, "CACHE", tmp_path)
+    spec = kavz(*SHORT)
+    times = np.linspace(0.0, 1.0, 201)
+    fresh = reference.solve(spec, times, use_cache=False)
+    first = reference.solve(spec, times)
+    second = reference.solve(spec, times)
+    assert second.info.get("cached") and not first.info.get("cached")
+    for name, values in fresh.traces.items():
+        assert np.array_equal(first.traces[name], values) and np.array_equal(second.traces[name], values), name
+    # another scene, another entry
+    other = reference.solve(spec.with_overrides(["load.mean_torque=150"]), times)
+    assert not other.info.get("cached")
+
+
+def test_reference_cache_distinguishes_time_grids_of_the_same_length(tmp_path, monkeypatch):
+    monkeypatch.setattr(reference, "CACHE", tmp_path)
+    spec = kavz(*SHORT)
+    grid_a = np.array([0.0, 0.3, 0.6, 0.9, 1.0])   # what --step 0.3 records
+    grid_b = np.linspace(0.0, 1.0, 5)              # what --step 0.25 records
+    reference.solve(spec, grid_a)
+    again = reference.solve(spec, grid_b)
+    assert np.array_equal(again.times, grid_b)
+
+
+def test_same_seed_same_traces_other_seed_other_traces():
+    spec = kavz(*SHORT)
+    a = run.simulate(spec)
+    b = run.simulate(spec)
+    c = run.simulate(spec.with_overrides(["load.seed=2"]))
+    assert a.ok and b.ok and c.ok
+    assert np.array_equal(a.times, b.times)
+    assert set(a.traces) == set(b.traces)
+    for name in a.traces:
+        assert np.array_equal(a.traces[name], b.traces[name]), name
+    assert np.array_equal(a.times, c.times)
+    assert not np.array_equal(a.traces["load.load_torque"], c.traces["load.load_torque"])
+    assert not np.array_equal(a.traces["engine.w"], c.traces["engine.w"])
+
+
+def test_masters_step_the_same_system_differently():
+    # Jacobi and Gauss-Seidel are different schemes: same start, different traces.
+    spec = kavz(*SMOOTH)
+    j = run.simulate(spec, master="jacobi", step=1e-3)
+    g = run.simulate(spec, master="gauss-seidel", step=1e-3)
+    assert np.array_equal(j.times, g.times)
+    assert j.traces["engine.w"][0] == g.traces["engine.w"][0] == 39.0
+    assert not np.array_equal(j.traces["engine.w"], g.traces["engine.w"])
+
+
+def test_unknown_master_is_refused_by_simulate():
+    with pytest.raises(ValueError, match="master"):
+        run.simulate(kavz(*SHORT), master="newton")
+
+
+def test_kavz685_default_scene_meets_its_accuracy_targets():
+    spec = scene.load("kavz685")
+    result = run.simulate(spec)
+    assert result.ok, result.failure
+    assert result.master == spec.experiment.master
+    assert result.times[-1] == pytest.approx(spec.experiment.stop)
+    ref = reference.solve(spec, result.times, use_cache=False)
+    found = metrics.errors(result.times, result.traces, ref.times, ref.traces,
+                           ["coupling.tau1", "coupling.tau2", "engine.w", "load.w"],
+                           metrics.error_scales(spec, ref.traces))
+    scale = found["coupling.tau2"]["scale"]
+    assert scale == pytest.approx(107.5, rel=0.05)   # the mean transmitted torque
+    assert found["coupling.tau1"]["rms_relative"] <= 1e-3
+    assert found["coupling.tau2"]["rms_relative"] <= 1e-3
+    assert found["engine.w"]["rms_relative"] <= 1e-3 and found["load.w"]["rms_relative"] <= 1e-3
+    balance = metrics.energy_balance(spec, result.times, result.traces)
+    assert balance["residual_relative"] <= 1e-3, balance
+    reference_balance = metrics.energy_balance(spec, ref.times, ref.traces, ref.traces["coupling.dissipated_energy"])
+    assert reference_balance["residual_relative"] < 1e-8
+
+
+# --------------------------------------------------------------------------------------
+# The command line
+# --------------------------------------------------------------------------------------
+
+
+def lever(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([str(LEVER), *args], capture_output=True, text=True, timeout=timeout, cwd=REPO)
+
+
+def test_cli_bad_parameter_exits_2_with_a_message(tmp_path):
+    out = tmp_path / "out"
+    proc = lever("run", "--set", "engine.inertia=-1", "--no-reference", "--out", str(out))
+    assert proc.returncode == 2, proc.stderr
+    text = proc.stdout + proc.stderr
+    assert "inertia" in text
+    assert "Traceback" not in text
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args", [["--master", "newton"], ["--step", "-0.001"], ["--set", "nonsense"],
+                                  ["--set", "gearbox.ratio=3"], ["--set", "coupling.no_such_parameter=1"],
+                                  ["no_such_scene"]])
+def test_cli_user_errors_exit_2_without_traceback(tmp_path, args):
+    proc = lever("run", *args, "--no-reference", "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert proc.stderr.strip()
+    if args[0] == "--master":
+        assert "newton" in proc.stderr and "jacobi" in proc.stderr
+
+
+@pytest.mark.parametrize("assignment", ["experiment.master=newton", "experiment.stop=abc"])
+def test_cli_bad_experiment_override_exits_2(tmp_path, assignment):
+    proc = lever("run", "--set", assignment, "--no-reference", "--out", str(tmp_path / "out"))
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert proc.returncode == 2
+
+
+def test_cli_failing_run_exits_1_and_keeps_the_rows_before_the_failure(tmp_path):
+    out = tmp_path / "out"
+    proc = lever("run", "--set", "coupling.stiffness=1e9", "--set", "experiment.stop=1",
+                 "--set", "experiment.transient=0", "--step", "0.01", "--out", str(out))
+    assert proc.returncode == 1, (proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stdout + proc.stderr
+    assert "error:" in proc.stderr
+    assert " t = " in proc.stderr   # says when it failed
+    assert "traces.csv" in proc.stderr
+    rows = (out / "traces.csv").read_text().splitlines()
+    header, data = rows[0].split(","), [r.split(",") for r in rows[1:]]
+    assert header[0] == "time" and "engine.w" in header
+    assert 1 <= len(data) < 101           # some rows, not the whole run
+    times = [float(r[0]) for r in data]
+    assert times == pytest.approx([0.01 * k for k in range(len(data))])
+    assert all(math.isfinite(float(x)) for r in data for x in r)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ok"] is False and summary["failure"]
+    failed_at = float(summary["failure"].split(" t = ")[1].split()[0])
+    assert times[-1] < failed_at <= times[-1] + 0.01 + 1e-12
+    assert "failed" in (out / "report.md").read_text()
+
+
+def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from harness import cli
+
+    monkeypatch.setattr(reference, "CACHE", tmp_path / "cache")   # keep the repository clean
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli.main, ["run", "--set", "experiment.stop=0.5", "--set", "experiment.transient=0.1",
+                                           "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    for name in ("report.md", "summary.json", "traces.csv", "reference.csv", "speeds.png", "torques.png",
+                 "accelerations.png", "transfer_function.png", "vs_reference.png"):
+        path = out / name
+        assert path.exists() and path.stat().st_size > 0, name
+    for png in out.glob("*.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ok"] is True and summary["scene"] == "kavz685"
+    assert summary["error_vs_reference"]["tau2"]["rms_relative"] < 1e-2
+    assert abs(summary["energy_balance"]["residual_relative"]) < 1e-3
+    rows = (out / "traces.csv").read_text().splitlines()
+    assert len(rows) == 1 + 1001   # header + 0 ... 0.5 s at the scene's 5e-4 s
+    assert "report.md" in result.output
+    report = (out / "report.md").read_text()
+    assert "kavz685" in report and "Energy balance" in report
+
+
+def test_cli_no_reference_run(tmp_path):
+    out = tmp_path / "out"
+    proc = lever("run", "--set", "experiment.stop=0.2", "--set", "experiment.transient=0", "--master", "gauss-seidel",
+                 "--step", "1e-3", "--no-reference", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert {"report.md", "summary.json", "traces.csv", "speeds.png"} <= {p.name for p in out.iterdir()}
+    assert not (out / "reference.csv").exists()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["master"] == "gauss-seidel" and summary["step_s"] == 1e-3
+    assert "error_vs_reference" not in summary

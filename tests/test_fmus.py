@@ -1,0 +1,376 @@
+"""The built FMUs (build/fmus) through the FMI interface: model descriptions, refusal of bad
+values, life cycle, independence of instances, agreement with the physics package."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import fmpy
+import pytest
+from fmpy.validation import validate_fmu
+
+from harness.component import Component, FmuCallError
+from lever.physics import catalogue
+
+DEG = math.pi / 180.0
+FMI2_ERROR = 3
+FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
+DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12"}
+COUPLING_INPUTS = {"phi1", "w1", "phi2", "w2", "misalignment"}
+
+
+@pytest.fixture
+def components(fmu_dir):
+    """Factory of Components; everything it made is freed at the end of the test."""
+    made = []
+
+    def make(fmu: str, name: str = "x") -> Component:
+        c = Component(name, Path(fmu_dir) / f"{fmu}.fmu")
+        made.append(c)
+        return c
+
+    yield make
+    for c in made:
+        c.free()
+
+
+def start(c: Component, params: dict | None = None, stop: float = 1.0) -> Component:
+    if params:
+        c.set_parameters(params)
+    c.initialize(0.0, stop)
+    c.exit_initialization()
+    return c
+
+
+# --------------------------------------------------------------------------------------
+# Model descriptions
+# --------------------------------------------------------------------------------------
+
+
+def test_all_three_fmus_are_built(fmu_dir):
+    names = {p.stem for p in Path(fmu_dir).glob("*.fmu")}
+    assert set(FMU_NAMES) <= names
+
+
+def test_every_fmu_validates_without_findings(fmu_dir):
+    paths = sorted(Path(fmu_dir).glob("*.fmu"))
+    assert paths
+    for path in paths:
+        assert validate_fmu(str(path)) == [], path.name
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES)
+def test_units_and_descriptions(fmu_dir, fmu):
+    md = fmpy.read_model_description(str(Path(fmu_dir) / f"{fmu}.fmu"))
+    defined = {u.name for u in md.unitDefinitions}
+    assert md.description
+    for v in md.modelVariables:
+        assert v.description and v.description.strip(), v.name
+        if v.type != "Real" or v.causality not in ("parameter", "input", "output"):
+            continue
+        if v.name in DIMENSIONLESS:
+            assert v.unit in (None, "", "1"), v.name
+        else:
+            assert v.unit, f"{fmu}.{v.name} has no unit"
+            assert v.unit in defined, f"{fmu}.{v.name}: unit {v.unit} is not defined"
+
+
+def test_specific_units_and_ranges(fmu_dir):
+    def variables(fmu):
+        md = fmpy.read_model_description(str(Path(fmu_dir) / f"{fmu}.fmu"))
+        return {v.name: v for v in md.modelVariables}
+
+    coupling, engine, load = variables("LeverCoupling"), variables("EngineShaft"), variables("LoadShaft")
+    assert coupling["stiffness"].unit == "N.m/rad" and coupling["damping"].unit == "N.m.s/rad"
+    assert coupling["misalignment"].unit == "rad" and coupling["misalignment"].causality == "input"
+    assert float(coupling["misalignment"].max) == pytest.approx(75 * DEG)
+    assert coupling["tau1"].unit == coupling["tau2"].unit == "N.m"
+    assert coupling["elastic_energy"].unit == "J" and coupling["dissipated_power"].unit == "W"
+    for shaft in (engine, load):
+        assert shaft["inertia"].unit == "kg.m2" and float(shaft["inertia"].min) == 0.0
+        assert shaft["w"].unit == "rad/s" and shaft["phi"].unit == "rad" and shaft["a"].unit == "rad/s2"
+        assert shaft["tau"].unit == "N.m" and shaft["tau"].causality == "input"
+    assert engine["engine_work"].unit == "J" and load["load_work"].unit == "J"
+    # start values are the KAVZ-685 defaults of the catalogue
+    assert float(engine["inertia"].start) == 0.128 and float(load["inertia"].start) == 0.161
+    assert coupling["transfer_mode"].start == catalogue.DEFAULT_TRANSFER_MODE
+
+
+def test_output_dependencies(fmu_dir):
+    md = fmpy.read_model_description(str(Path(fmu_dir) / "LeverCoupling.fmu"))
+    assert {o.variable.name for o in md.outputs} >= {"tau1", "tau2", "U12", "theta"}
+    for output in md.outputs:
+        assert {d.name for d in output.dependencies} == COUPLING_INPUTS, output.variable.name
+    for fmu in ("EngineShaft", "LoadShaft"):
+        md = fmpy.read_model_description(str(Path(fmu_dir) / f"{fmu}.fmu"))
+        assert {o.variable.name for o in md.outputs} >= {"phi", "w", "a"}
+        for output in md.outputs:
+            assert list(output.dependencies) == [], (fmu, output.variable.name)
+
+
+# --------------------------------------------------------------------------------------
+# Refusing bad values
+# --------------------------------------------------------------------------------------
+
+BAD_VALUES = [
+    ("EngineShaft", "inertia", -1.0),
+    ("LoadShaft", "inertia", -0.161),
+    ("EngineShaft", "inertia", 0.0),
+    ("LeverCoupling", "stiffness", 0.0),
+    ("LeverCoupling", "stiffness", -715.4),
+    ("LeverCoupling", "damping", math.nan),
+    ("LeverCoupling", "damping", math.inf),
+    ("LeverCoupling", "misalignment", 80 * DEG),
+    ("LeverCoupling", "misalignment", -1 * DEG),
+    ("LeverCoupling", "transfer_mode", "cardan"),
+    ("LeverCoupling", "support_deformation", 0.5),
+    ("LoadShaft", "load_kind", "sometimes"),
+    ("LoadShaft", "tones", 0),
+    ("EngineShaft", "max_substep", 0.0),
+]
+
+
+@pytest.mark.parametrize("fmu,name,value", BAD_VALUES)
+def test_bad_value_is_refused_and_the_instance_survives(components, fmu, name, value):
+    c = components(fmu)
+    before = c.get([name]) if c.variable(name).type == "Real" else None
+    with pytest.raises(FmuCallError) as info:
+        c.set_parameters({name: value})
+    error = info.value
+    assert error.status == FMI2_ERROR
+    text = str(error)
+    assert f"'{name}'" in text
+    assert "range" in text or "allowed" in text
+    # The value was not applied, and the instance goes on working.
+    if before is not None:
+        assert c.get([name]) == before
+    start(c)
+    c.do_step(0.0, 1e-3)
+    c.do_step(1e-3, 1e-3)
+    assert all(math.isfinite(v) for v in c.get([c.description.outputs[0].variable.name]))
+    c.free()
+
+
+def test_do_step_before_initialisation_is_an_error(components):
+    for fmu in FMU_NAMES:
+        c = components(fmu)
+        with pytest.raises(FmuCallError) as info:
+            c.do_step(0.0, 1e-3)
+        assert info.value.status == FMI2_ERROR
+        assert "initialis" in str(info.value)
+        start(c)
+        c.do_step(0.0, 1e-3)
+
+
+@pytest.mark.parametrize("h", [-1e-3, 0.0, math.nan, math.inf])
+def test_bad_step_size_is_an_error(components, h):
+    c = start(components("LoadShaft"))
+    c.do_step(0.0, 1e-3)
+    state = c.get(["phi", "w"])
+    with pytest.raises(FmuCallError) as info:
+        c.do_step(1e-3, h)
+    assert info.value.status == FMI2_ERROR
+    assert "step size" in str(info.value)
+    assert c.get(["phi", "w"]) == state
+    c.do_step(1e-3, 1e-3)
+    assert c.get(["w"]) != [state[1]]
+
+
+def test_non_contiguous_step_is_an_error(components):
+    c = start(components("EngineShaft"))
+    c.do_step(0.0, 1e-3)
+    with pytest.raises(FmuCallError) as info:
+        c.do_step(0.5, 1e-3)
+    assert "contiguous" in str(info.value)
+    c.do_step(1e-3, 1e-3)
+
+
+def test_fixed_parameter_cannot_change_after_initialisation(components):
+    c = start(components("EngineShaft"), {"inertia": 0.2})
+    with pytest.raises(FmuCallError) as info:
+        c.set_parameters({"inertia": 0.3})
+    assert "inertia" in str(info.value) and "fixed" in str(info.value)
+    assert c.get(["inertia"]) == [0.2]
+
+
+def test_misalignment_beyond_the_kinematic_limit_fails_initialisation_naming_alpha(components):
+    c = components("LeverCoupling")
+    c.set_parameters({"transfer_mode": "kinematic", "misalignment": 44 * DEG, "support_deformation": 0.1})
+    messages = []
+    try:
+        c.initialize(0.0, 1.0)
+    except FmuCallError as error:  # the FMU may already refuse when it enters initialisation
+        messages.append(str(error))
+    with pytest.raises(FmuCallError) as info:
+        c.exit_initialization()
+    assert info.value.status == FMI2_ERROR
+    assert "alpha" in str(info.value)
+    assert all("alpha" in m for m in messages)
+    # No stepping with an uninitialised model.
+    with pytest.raises(FmuCallError):
+        c.do_step(0.0, 1e-3)
+    c.free()
+
+
+def test_misalignment_corrected_during_initialisation_is_accepted(components):
+    c = components("LeverCoupling")
+    c.set_parameters({"transfer_mode": "kinematic", "misalignment": 44 * DEG, "support_deformation": 0.1})
+    try:
+        c.initialize(0.0, 1.0)
+    except FmuCallError:
+        pass
+    c.set_parameters({"misalignment": 20 * DEG})   # an input: may be set in initialisation mode
+    c.exit_initialization()
+    c.do_step(0.0, 1e-3)
+    assert c.get(["misalignment"]) == [20 * DEG]
+
+
+# --------------------------------------------------------------------------------------
+# Instances
+# --------------------------------------------------------------------------------------
+
+
+def run_shaft(c: Component, tau: float, steps: int, h: float = 1e-3, t0: float = 0.0):
+    out = []
+    vrs, values = c.real_buffer(["tau"])
+    values[0] = tau
+    c.write(vrs, values)
+    for n in range(steps):
+        c.do_step(t0 + n * h, h)
+        out.append(tuple(c.get(["phi", "w", "a"])))
+    return out
+
+
+def test_two_instances_of_a_shaft_do_not_interfere(components):
+    slow = {"load_kind": "constant", "mean_torque": 300.0}
+    fast = {"load_kind": "constant", "mean_torque": 50.0, "inertia": 0.3}
+    alone_slow = run_shaft(start(components("LoadShaft", "alone_slow"), slow), 100.0, 60)
+    alone_fast = run_shaft(start(components("LoadShaft", "alone_fast"), fast), 100.0, 60)
+    a = start(components("LoadShaft", "a"), slow)
+    b = start(components("LoadShaft", "b"), fast)
+    together_a, together_b = [], []
+    for n in range(60):  # interleaved, step by step
+        together_a += run_shaft(a, 100.0, 1, t0=n * 1e-3)
+        together_b += run_shaft(b, 100.0, 1, t0=n * 1e-3)
+    assert together_a == alone_slow
+    assert together_b == alone_fast
+    assert alone_slow[-1][1] != alone_fast[-1][1]
+    # Analytic: constant torques, w = w0 + (tau - Mm) t / I.
+    assert alone_slow[-1][1] == pytest.approx(39.0 + (100.0 - 300.0) * 0.06 / 0.161, rel=1e-12)
+    assert alone_fast[-1][1] == pytest.approx(39.0 + (100.0 - 50.0) * 0.06 / 0.3, rel=1e-12)
+
+
+def test_two_random_loads_with_different_seeds_differ_and_repeat(components):
+    runs = {}
+    for name, seed in (("s1", 1), ("s2", 2), ("s1again", 1)):
+        runs[name] = run_shaft(start(components("LoadShaft", name), {"seed": seed}), 107.5, 40)
+    assert runs["s1"] == runs["s1again"]
+    assert runs["s1"] != runs["s2"]
+
+
+def test_all_fmus_in_one_process(components):
+    """Two engines, two couplings, two loads at once, interleaved; each pair must match
+    what one instance does alone."""
+    def engine_alone(params):
+        return run_shaft(start(components("EngineShaft", "e_alone"), params), -100.0, 30)
+
+    def coupling_values(c, inputs):
+        c.set_parameters(inputs)
+        return c.get(["tau1", "tau2", "U12", "theta"])
+
+    e1p, e2p = {"stall_torque": 623.0}, {"stall_torque": 400.0, "torque_slope": 5.0}
+    c1p = {"stiffness": 715.4, "misalignment": 15 * DEG}
+    c2p = {"stiffness": 1200.0, "misalignment": 25 * DEG, "transfer_mode": "scaled"}
+    inputs = {"phi1": 3.2, "w1": 39.5, "phi2": 3.0, "w2": 38.0}
+    expected_e1, expected_e2 = engine_alone(e1p), engine_alone(e2p)
+    expected_c1 = coupling_values(start(components("LeverCoupling", "c_alone"), c1p), inputs)
+    expected_c2 = coupling_values(start(components("LeverCoupling", "c_alone"), c2p), inputs)
+
+    e1, e2 = start(components("EngineShaft", "e1"), e1p), start(components("EngineShaft", "e2"), e2p)
+    c1, c2 = start(components("LeverCoupling", "c1"), c1p), start(components("LeverCoupling", "c2"), c2p)
+    l1, l2 = start(components("LoadShaft", "l1")), start(components("LoadShaft", "l2"), {"mean_torque": 10.0})
+    got_e1, got_e2 = [], []
+    for n in range(30):
+        got_e1 += run_shaft(e1, -100.0, 1, t0=n * 1e-3)
+        run_shaft(l1, 100.0, 1, t0=n * 1e-3)
+        c1.do_step(n * 1e-3, 1e-3)
+        got_e2 += run_shaft(e2, -100.0, 1, t0=n * 1e-3)
+        run_shaft(l2, 100.0, 1, t0=n * 1e-3)
+        c2.do_step(n * 1e-3, 1e-3)
+    assert got_e1 == expected_e1 and got_e2 == expected_e2
+    assert expected_e1 != expected_e2
+    assert coupling_values(c1, inputs) == expected_c1
+    assert coupling_values(c2, inputs) == expected_c2
+    assert expected_c1 != expected_c2
+    assert l1.get(["w"]) != l2.get(["w"])
+
+
+def test_state_save_and_restore_continues_bit_identically(components):
+    c = start(components("LoadShaft"), {"seed": 3})
+    run_shaft(c, 110.0, 20)
+    state = c.save_state()
+    first = run_shaft(c, 110.0, 20, t0=0.02)
+    c.restore_state(state, 0.02)
+    again = run_shaft(c, 110.0, 20, t0=0.02)
+    c.free_state(state)
+    assert again == first
+
+
+def test_state_restored_after_reset_keeps_the_shaft_state(components):
+    c = start(components("LoadShaft"), {"inertia": 0.2, "load_kind": "constant", "mean_torque": 50.0})
+    run_shaft(c, 0.0, 100)
+    saved = c.get(["phi", "w", "load_work"])
+    serialized = c.fmu.serializeFMUstate(c.save_state())
+    c.fmu.reset()   # back to the default parameters
+    c.fmu.setFMUstate(c.fmu.deSerializeFMUstate(serialized))
+    assert c.get(["inertia"]) == [0.2]
+    assert c.get(["phi", "w", "load_work"]) == saved
+
+
+# --------------------------------------------------------------------------------------
+# Agreement with the physics package
+# --------------------------------------------------------------------------------------
+
+COUPLING_CASES = [
+    {},
+    {"transfer_mode": "scaled", "misalignment": 20 * DEG},
+    {"transfer_mode": "synchronous", "misalignment": 60 * DEG},
+    {"transfer_mode": "kinematic", "misalignment": 30 * DEG, "support_deformation": 0.05, "hinge_deformation": 0.05,
+     "stiffness": 900.0, "damping": 8.5},
+    {"elastic_table": "0.05:10; 0.1:16; 0.2:16.5; 0.3:26.5; 0.45:50", "damping": 0.5},
+]
+INPUTS = [(0.0, 39.0, 0.0, 39.0), (12.3, 40.1, 12.15, 38.2), (-3.0, -20.0, -2.4, -21.0), (1000.5, 37.0, 1000.0, 36.5),
+          (5.0, 0.0, 4.4, 0.0)]
+OUTPUTS = ["tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"]
+
+
+@pytest.mark.parametrize("case", range(len(COUPLING_CASES)))
+def test_coupling_fmu_outputs_equal_the_physics(components, case):
+    params = COUPLING_CASES[case]
+    c = start(components("LeverCoupling"), params)
+    physics = catalogue.coupling_from(params)
+    for k, (phi1, w1, phi2, w2) in enumerate(INPUTS):
+        c.set_parameters({"phi1": phi1, "w1": w1, "phi2": phi2, "w2": w2})
+        r = physics.evaluate(phi1, w1, phi2, w2)
+        expected = [r.tau1, r.tau2, r.ratio, r.deflection, r.energy, r.dissipation]
+        assert c.get(OUTPUTS) == expected, (params, k)
+        c.do_step(k * 1e-3, 1e-3)   # stepping changes nothing: no state
+        assert c.get(OUTPUTS) == expected
+    # A time-varying misalignment input.
+    if params.get("transfer_mode", "kinematic") != "synchronous" and not params.get("elastic_table"):
+        alpha = 10 * DEG
+        c.set_parameters({"misalignment": alpha})
+        r = catalogue.coupling_from(params, misalignment=alpha).evaluate(*INPUTS[-1])
+        assert c.get(["tau1", "tau2", "U12", "theta"]) == [r.tau1, r.tau2, r.ratio, r.deflection]
+
+
+def test_shaft_fmus_step_like_the_physics(components):
+    for fmu, make, params in (("EngineShaft", catalogue.engine_from, {"stall_torque": 600.0, "w_start": 30.0}),
+                              ("LoadShaft", catalogue.load_from, {"seed": 5, "w_start": 35.0})):
+        c = start(components(fmu), params)
+        shaft = make(params)
+        phi, w = 0.0, params["w_start"]
+        for n, tau in enumerate((-120.0, -80.0, 95.0, 130.0)):
+            got = run_shaft(c, tau, 1, h=2e-3, t0=n * 2e-3)[-1]
+            phi, w, _ = shaft.advance(n * 2e-3, phi, w, tau, 2e-3)
+            assert got[:2] == (phi, w), fmu

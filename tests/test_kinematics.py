@@ -1,0 +1,285 @@
+"""The coupling's kinematics: transfer function U12 and position function Phi
+(MODEL.md section 2; lever.physics.kinematics)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from lever.physics.kinematics import MODES, TransferFunction, reported_amplitude
+from lever.physics.parameters import ParameterError
+
+DEG = math.pi / 180.0
+N_REV = 4096
+REVOLUTION = 2.0 * np.pi * np.arange(N_REV) / N_REV   # uniform points over one revolution
+# Angles off the uniform grid, several revolutions, both signs.
+ANGLES = np.linspace(-13.0, 29.0, 1777)
+
+ALPHAS_DEG = (0.0, 1.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0)
+DEFORMATIONS = (0.0, 0.02, 0.05, 0.09)
+
+
+def kinematically_defined(alpha_deg: float, support: float, margin_deg: float = 0.0) -> bool:
+    """alpha + asin(D2s/l2) below 45 deg (where the half-coupling function g exists)."""
+    return alpha_deg * DEG + math.asin(support) < (45.0 - margin_deg) * DEG
+
+
+def g(phi, alpha):
+    """The half-coupling function of MODEL.md section 2, written out independently."""
+    s2 = math.sin(alpha) ** 2
+    return np.sqrt((1.0 - 2.0 * s2 * np.cos(2.0 * phi)) / (1.0 - 2.0 * s2 * np.cos(phi) ** 2))
+
+
+# --------------------------------------------------------------------------------------
+# U12 = 1 identically where the coupling is synchronous
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_zero_misalignment_is_synchronous_in_every_mode(mode):
+    for support, hinge in ((0.03, 0.03), (0.09, 0.0), (0.0, 0.09), (0.49, 0.49)):
+        tf = TransferFunction(mode, 0.0, support, hinge)
+        position, ratio = tf.evaluate(ANGLES)
+        assert np.array_equal(ratio, np.ones_like(ANGLES))
+        assert np.array_equal(position, ANGLES)
+        assert tf.evaluate(1.25) == (1.25, 1.0)
+        assert tf.amplitude == 0.0
+
+
+@pytest.mark.parametrize("mode", ["kinematic", "scaled"])
+@pytest.mark.parametrize("alpha_deg", [5.0, 20.0, 44.0, 60.0, 74.9])
+def test_no_deformation_is_synchronous(mode, alpha_deg):
+    # Without elastic deformation both halves are mirror images: U12 = 1 at any alpha
+    # (even beyond 45 deg, where g is undefined, since g is then not needed).
+    tf = TransferFunction(mode, alpha_deg * DEG, 0.0, 0.0)
+    position, ratio = tf.evaluate(ANGLES)
+    assert np.array_equal(ratio, np.ones_like(ANGLES))
+    assert np.array_equal(position, ANGLES)
+    assert tf.ratio(0.7) == 1.0
+
+
+@pytest.mark.parametrize("alpha_deg", [0.0, 15.0, 40.0, 60.0, 74.99])
+def test_synchronous_mode_is_always_one(alpha_deg):
+    for support, hinge in ((0.0, 0.0), (0.03, 0.03), (0.3, 0.45)):
+        tf = TransferFunction("synchronous", alpha_deg * DEG, support, hinge)
+        position, ratio = tf.evaluate(ANGLES)
+        assert np.array_equal(ratio, np.ones_like(ANGLES))
+        assert np.array_equal(position, ANGLES)
+        assert tf.amplitude == 0.0
+
+
+def test_deformation_and_misalignment_give_a_non_constant_ratio():
+    # The counterpart of the tests above: otherwise "U12 == 1" would pass trivially.
+    for mode in ("kinematic", "scaled"):
+        for support, hinge in ((0.03, 0.03), (0.05, 0.0), (0.0, 0.05)):
+            tf = TransferFunction(mode, 15.0 * DEG, support, hinge)
+            ratio = tf.ratio(REVOLUTION)
+            if mode == "scaled" and (support == 0.0 or hinge == 0.0):
+                continue  # the reported-amplitude law vanishes with either deformation
+            assert ratio.max() - ratio.min() > 1e-3, (mode, support, hinge)
+
+
+# --------------------------------------------------------------------------------------
+# Unit mean, periodicity, Phi' = U12
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", ["kinematic", "scaled"])
+@pytest.mark.parametrize("alpha_deg", ALPHAS_DEG)
+def test_unit_mean_over_a_revolution(mode, alpha_deg):
+    checked = 0
+    for support in DEFORMATIONS:
+        for hinge in DEFORMATIONS:
+            if not kinematically_defined(alpha_deg, support):
+                continue
+            tf = TransferFunction(mode, alpha_deg * DEG, support, hinge)
+            # A uniform N-point mean is exact for harmonics below N (no aliasing).
+            assert tf.coefficients.size < N_REV
+            ratio = tf.ratio(REVOLUTION)
+            assert np.all(np.isfinite(ratio))
+            assert abs(np.mean(ratio) - 1.0) <= 1e-12, (support, hinge)
+            checked += 1
+    assert checked >= 12
+
+
+def _periodicity_and_derivative_cases():
+    for mode in ("kinematic", "scaled"):
+        for alpha_deg, support, hinge in ((5.0, 0.03, 0.03), (15.0, 0.03, 0.03), (30.0, 0.05, 0.05),
+                                          (20.0, 0.09, 0.0), (20.0, 0.0, 0.09), (38.0, 0.09, 0.09)):
+            yield mode, alpha_deg, support, hinge
+
+
+@pytest.mark.parametrize("mode,alpha_deg,support,hinge", list(_periodicity_and_derivative_cases()))
+def test_position_function_periodicity_and_origin(mode, alpha_deg, support, hinge):
+    tf = TransferFunction(mode, alpha_deg * DEG, support, hinge)
+    position = tf.position(ANGLES)
+    shifted = tf.position(ANGLES + 2.0 * np.pi)
+    np.testing.assert_allclose(shifted, position + 2.0 * np.pi, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(tf.position(ANGLES - 2.0 * np.pi), position - 2.0 * np.pi, rtol=0, atol=1e-9)
+    # Many revolutions away as well.
+    np.testing.assert_allclose(tf.position(ANGLES + 20.0 * np.pi), position + 20.0 * np.pi, rtol=0, atol=1e-9)
+    assert abs(tf.position(0.0)) <= 1e-14
+    assert abs(tf.position(2.0 * math.pi) - 2.0 * math.pi) <= 1e-12
+    # Phi - phi stays bounded (it is periodic): a rigid chain turns both shafts alike.
+    assert np.max(np.abs(position - ANGLES)) < 0.5
+
+
+@pytest.mark.parametrize("mode,alpha_deg,support,hinge", list(_periodicity_and_derivative_cases()))
+def test_position_derivative_is_the_transfer_function(mode, alpha_deg, support, hinge):
+    tf = TransferFunction(mode, alpha_deg * DEG, support, hinge)
+    e = 1e-5
+    derivative = (tf.position(ANGLES + e) - tf.position(ANGLES - e)) / (2.0 * e)
+    np.testing.assert_allclose(derivative, tf.ratio(ANGLES), rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["kinematic", "scaled"])
+def test_scalar_and_array_evaluation_agree(mode):
+    tf = TransferFunction(mode, 15.0 * DEG, 0.03, 0.03)
+    position, ratio = tf.evaluate(ANGLES)
+    for k in range(0, len(ANGLES), 97):
+        p, r = tf.evaluate(float(ANGLES[k]))
+        assert isinstance(p, float) and isinstance(r, float)
+        assert p == pytest.approx(position[k], abs=1e-12)
+        assert r == pytest.approx(ratio[k], abs=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# The shape and amplitude
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("alpha_deg,support,hinge", [(5.0, 0.03, 0.03), (15.0, 0.03, 0.03), (30.0, 0.05, 0.05),
+                                                     (20.0, 0.09, 0.02), (38.0, 0.0, 0.09)])
+def test_kinematic_mode_is_the_renormalised_half_coupling_ratio(alpha_deg, support, hinge):
+    # MODEL.md: U12 ~ g(phi + d_phi, alpha + d_alpha) / g(phi, alpha), renormalised to unit mean.
+    alpha = alpha_deg * DEG
+    phi = 2.0 * np.pi * np.arange(1 << 15) / (1 << 15)
+    raw = g(phi + math.asin(hinge), alpha + math.asin(support)) / g(phi, alpha)
+    expected = raw / np.mean(raw)
+    tf = TransferFunction("kinematic", alpha, support, hinge)
+    np.testing.assert_allclose(tf.ratio(phi), expected, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("alpha_deg,deformation,stated", [(5.0, 0.03, 0.003), (30.0, 0.05, 0.022)])
+def test_kinematic_amplitude_matches_the_brief(alpha_deg, deformation, stated):
+    # MODEL.md section 2: "about 0.003 at alpha = 5 deg, D/l = 0.03 and about 0.022 at 30 deg, 0.05".
+    tf = TransferFunction("kinematic", alpha_deg * DEG, deformation, deformation)
+    ratio = tf.ratio(np.linspace(0.0, 2.0 * np.pi, 20001))
+    measured = (ratio.max() - ratio.min()) / 2.0
+    assert measured == pytest.approx(stated, rel=0.1)
+    assert tf.amplitude == pytest.approx(measured, rel=1e-3)
+
+
+@pytest.mark.parametrize("alpha_deg,support,hinge", [(5.0, 0.03, 0.03), (30.0, 0.05, 0.03), (20.0, 0.02, 0.03),
+                                                     (20.0, 0.09, 0.03), (20.0, 0.03, 0.09), (12.0, 0.07, 0.04)])
+def test_scaled_amplitude_is_the_reported_amplitude(alpha_deg, support, hinge):
+    alpha = alpha_deg * DEG
+    target = reported_amplitude(alpha, support, hinge)
+    assert target > 0.0
+    scaled = TransferFunction("scaled", alpha, support, hinge)
+    kinematic = TransferFunction("kinematic", alpha, support, hinge)
+    ratio = scaled.ratio(np.linspace(0.0, 2.0 * np.pi, 20001))
+    assert (ratio.max() - ratio.min()) / 2.0 == pytest.approx(target, rel=1e-3)
+    assert scaled.amplitude == pytest.approx(target, rel=1e-12)
+    # Same shape as the kinematic mode: U12 - 1 is a scaled copy.
+    factor = target / kinematic.amplitude
+    np.testing.assert_allclose(scaled.ratio(ANGLES) - 1.0, factor * (kinematic.ratio(ANGLES) - 1.0),
+                               rtol=0, atol=1e-9 * factor)
+
+
+def test_reported_amplitude_vanishes_without_misalignment_or_deformation():
+    assert reported_amplitude(0.0, 0.03, 0.03) == 0.0
+    assert reported_amplitude(20 * DEG, 0.0, 0.03) == 0.0
+    assert reported_amplitude(20 * DEG, 0.03, 0.0) == 0.0
+    # and grows with alpha and with each deformation
+    assert reported_amplitude(10 * DEG, 0.03, 0.03) < reported_amplitude(20 * DEG, 0.03, 0.03)
+    assert reported_amplitude(20 * DEG, 0.02, 0.03) < reported_amplitude(20 * DEG, 0.09, 0.03)
+    assert reported_amplitude(20 * DEG, 0.03, 0.02) < reported_amplitude(20 * DEG, 0.03, 0.09)
+
+
+# --------------------------------------------------------------------------------------
+# Refusals
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("mode", ["kinematic", "scaled"])
+@pytest.mark.parametrize("alpha_deg,support", [(44.0, 0.1), (40.0, 0.09), (45.0, 0.03), (30.0, 0.3),
+                                               (50.0, 0.01), (44.99, 0.001)])
+def test_alpha_plus_support_tilt_at_45_deg_is_refused(mode, alpha_deg, support):
+    assert not kinematically_defined(alpha_deg, support)
+    with pytest.raises(ParameterError) as info:
+        TransferFunction(mode, alpha_deg * DEG, support, 0.03)
+    assert "alpha" in str(info.value)
+    assert info.value.name in ("alpha", "misalignment")
+    # Synchronous mode has no such limit below 75 deg.
+    assert TransferFunction("synchronous", alpha_deg * DEG, support, 0.03).ratio(1.0) == 1.0
+
+
+def test_just_below_the_kinematic_limit_is_accepted():
+    alpha = 45.0 * DEG - math.asin(0.1) - 0.5 * DEG
+    tf = TransferFunction("kinematic", alpha, 0.1, 0.03)
+    assert abs(np.mean(tf.ratio(REVOLUTION)) - 1.0) <= 1e-12
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("alpha_deg", [75.0, 80.0, 90.0, 180.0])
+def test_alpha_at_or_beyond_75_deg_is_refused_in_every_mode(mode, alpha_deg):
+    for support, hinge in ((0.0, 0.0), (0.03, 0.03)):
+        with pytest.raises(ParameterError) as info:
+            TransferFunction(mode, alpha_deg * DEG, support, hinge)
+        assert "alpha" in str(info.value) or "misalignment" in str(info.value)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("alpha", [math.nan, math.inf, -math.inf, -1e-9, -0.1])
+def test_non_finite_or_negative_alpha_is_refused(mode, alpha):
+    with pytest.raises(ParameterError) as info:
+        TransferFunction(mode, alpha, 0.03, 0.03)
+    assert info.value.name in ("alpha", "misalignment")
+
+
+@pytest.mark.parametrize("name,support,hinge", [("support_deformation", math.nan, 0.03),
+                                                ("support_deformation", -0.01, 0.03),
+                                                ("support_deformation", 0.5, 0.03),
+                                                ("hinge_deformation", 0.03, math.inf),
+                                                ("hinge_deformation", 0.03, -0.2),
+                                                ("hinge_deformation", 0.03, 0.7)])
+def test_bad_deformations_are_refused(name, support, hinge):
+    for mode in MODES:
+        with pytest.raises(ParameterError) as info:
+            TransferFunction(mode, 15.0 * DEG, support, hinge)
+        assert info.value.name == name
+        assert name in str(info.value)
+
+
+def test_unknown_mode_is_refused():
+    with pytest.raises(ParameterError) as info:
+        TransferFunction("cardan", 15.0 * DEG, 0.03, 0.03)
+    assert info.value.name == "transfer_mode"
+    for mode in MODES:
+        assert mode in str(info.value)
+
+
+# --------------------------------------------------------------------------------------
+# Properties over the whole studied domain
+# --------------------------------------------------------------------------------------
+
+
+@settings(max_examples=50, deadline=None, derandomize=True, database=None)
+@given(alpha_deg=st.floats(0.0, 40.0), support=st.floats(0.0, 0.09), hinge=st.floats(0.0, 0.09),
+       mode=st.sampled_from(["kinematic", "scaled"]))
+def test_unit_mean_and_periodicity_property(alpha_deg, support, hinge, mode):
+    # Keep half a degree from the 45 deg singularity, where the series needs thousands of
+    # harmonics (a uniform 4096-point mean would alias them).
+    assume(kinematically_defined(alpha_deg, support, margin_deg=0.5))
+    tf = TransferFunction(mode, alpha_deg * DEG, support, hinge)
+    position, ratio = tf.evaluate(REVOLUTION)
+    assert np.all(np.isfinite(ratio)) and np.all(ratio > 0.0)
+    assert abs(np.mean(ratio) - 1.0) <= 1e-12
+    shifted, shifted_ratio = tf.evaluate(REVOLUTION + 2.0 * np.pi)
+    np.testing.assert_allclose(shifted, position + 2.0 * np.pi, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(shifted_ratio, ratio, rtol=0, atol=1e-9)
+    assert abs(tf.position(0.0)) <= 1e-14

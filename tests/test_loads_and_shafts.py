@@ -1,0 +1,357 @@
+"""Loads, engine characteristics and the shaft integrator (MODEL.md sections 4-5;
+lever.physics.load, lever.physics.engine, lever.physics.shaft)."""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import quad, solve_ivp
+
+from lever.physics import catalogue
+from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
+from lever.physics.load import (ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad, load_model,
+                                read_harmonics)
+from lever.physics.parameters import ParameterError
+from lever.physics.shaft import Shaft
+
+REPO = Path(__file__).resolve().parents[1]
+HARMONICS = REPO / "resources" / "data" / "monograph" / "harmonics_driven.csv"
+
+STEPS = [(0.0, 1e-6), (0.3, 0.05), (1.7, 0.05), (2.345, 1e-6), (5.0, 1e-3), (2.0, 0.5), (9.99, 0.05)]
+
+
+def close(a: float, b: float, scale: float, tol: float = 1e-9) -> bool:
+    return abs(a - b) <= tol * max(abs(b), scale)
+
+
+def quad_integrals(resistance, t, h, points=None):
+    """int_t^{t+h} Mc(u) du and int_t^{t+h} (t + h - u) Mc(u) du by adaptive quadrature."""
+    kw = dict(epsabs=0.0, epsrel=1e-12, limit=400)
+    if points:
+        kw["points"] = points
+    first = quad(resistance, t, t + h, **kw)[0]
+    second = quad(lambda u: (t + h - u) * resistance(u), t, t + h, **kw)[0]
+    return first, second
+
+
+# --------------------------------------------------------------------------------------
+# Random load
+# --------------------------------------------------------------------------------------
+
+
+def test_random_load_is_reproducible_by_seed():
+    t = np.linspace(0.0, 10.0, 20001)
+    a, b = RandomLoad(107.5, 8.8, seed=7), RandomLoad(107.5, 8.8, seed=7)
+    assert np.array_equal(a.resistance(t, 0.0, 0.0), b.resistance(t, 0.0, 0.0))
+    assert a.frequencies == b.frequencies and a.phases == b.phases and a.weights == b.weights
+    assert a.integrals(1.0, 0.01) == b.integrals(1.0, 0.01)
+    c = RandomLoad(107.5, 8.8, seed=8)
+    assert not np.allclose(a.resistance(t, 0.0, 0.0), c.resistance(t, 0.0, 0.0))
+    # through the shared constructor, as the FMU and the reference build it
+    d = load_model("random", 107.5, 8.8, seed=7)
+    assert np.array_equal(a.resistance(t, 0.0, 0.0), d.resistance(t, 0.0, 0.0))
+
+
+def test_random_load_scalar_and_array_agree():
+    load = RandomLoad(107.5, 8.8, seed=3)
+    t = np.linspace(0.0, 3.0, 301)
+    values = load.resistance(t, 0.0, 0.0)
+    for k in range(0, len(t), 17):
+        assert load.resistance(float(t[k]), 0.0, 0.0) == pytest.approx(values[k], abs=1e-12)
+        assert load.torque(float(t[k]), 0.0, 0.0) == -load.resistance(float(t[k]), 0.0, 0.0)
+
+
+@pytest.mark.parametrize("seed,tones,band", [(1, 6, (2.0, 450.0)), (2, 6, (2.0, 450.0)), (99, 1, (5.0, 5.0)),
+                                             (5, 40, (1.0, 1000.0))])
+def test_random_load_stays_within_its_bound(seed, tones, band):
+    mean, bound = 107.5, 8.8
+    load = RandomLoad(mean, bound, seed=seed, tones=tones, band_low=band[0], band_high=band[1])
+    t = np.linspace(0.0, 30.0, 600001)
+    deviation = np.abs(load.resistance(t, 0.0, 0.0) - mean)
+    assert deviation.max() <= bound * (1.0 + 1e-12)
+    assert deviation.max() >= 0.3 * bound  # the random part is really there
+    assert sum(abs(w) for w in load.weights) == pytest.approx(bound, rel=1e-12)
+    assert all(band[0] * (1 - 1e-12) <= f <= band[1] * (1 + 1e-12) for f in load.frequencies)
+    assert len(load.frequencies) == tones
+
+
+def test_random_load_bad_band_is_refused():
+    with pytest.raises(ParameterError):
+        RandomLoad(100.0, 5.0, band_low=500.0, band_high=100.0)
+    with pytest.raises(ParameterError):
+        RandomLoad(100.0, 5.0, band_low=0.0)
+
+
+@pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")  # quad near its roundoff limit
+@pytest.mark.parametrize("seed", [1, 2, 7])
+@pytest.mark.parametrize("t,h", STEPS)
+def test_random_load_integrals_are_exact(seed, t, h):
+    # Mean 0: the oscillating part alone is compared (a mean would dominate both integrals).
+    load = RandomLoad(0.0, 8.8, seed=seed)
+    impulse, second = load.integrals(t, h)
+    q1, q2 = quad_integrals(lambda u: load.resistance(u, 0.0, 0.0), t, h)
+    assert close(impulse, q1, 8.8 * h), (impulse, q1)
+    assert close(second, q2, 8.8 * h * h / 2.0), (second, q2)
+    # and with the mean (the KAVZ-685 load)
+    full = RandomLoad(107.5, 8.8, seed=seed)
+    impulse, second = full.integrals(t, h)
+    q1, q2 = quad_integrals(lambda u: full.resistance(u, 0.0, 0.0), t, h)
+    assert impulse == pytest.approx(q1, rel=1e-9)
+    assert second == pytest.approx(q2, rel=1e-9)
+
+
+def test_constant_load_integrals():
+    load = ConstantLoad(107.5)
+    assert load.integrals(3.0, 0.01) == pytest.approx((1.075, 0.5 * 107.5 * 1e-4), rel=1e-15)
+    assert load.resistance(1.0, 2.0, 3.0) == 107.5 and load.torque(1.0, 2.0, 3.0) == -107.5
+
+
+# --------------------------------------------------------------------------------------
+# Tabulated load
+# --------------------------------------------------------------------------------------
+
+LOAD_POINTS = [(0.0, 100.0), (0.1, 120.0), (0.25, 90.0), (0.4, 130.0), (1.0, 130.0), (1.2, 60.0)]
+
+
+@pytest.mark.parametrize("t,h", [(-0.05, 0.1), (0.05, 0.3), (0.09, 0.02), (0.1, 0.15), (0.3, 0.5),
+                                 (0.5, 0.1), (-1.0, 3.0), (1.5, 0.2), (0.1, 1e-6), (0.2499999, 1e-6),
+                                 (0.95, 0.05), (0.0, 1.2)])
+def test_tabulated_load_integrals_across_breakpoints(t, h):
+    load = TabulatedLoad(LOAD_POINTS)
+    impulse, second = load.integrals(t, h)
+    knots = [p[0] for p in LOAD_POINTS if t < p[0] < t + h]
+    q1, q2 = quad_integrals(lambda u: load.resistance(u, 0.0, 0.0), t, h, knots)
+    assert impulse == pytest.approx(q1, rel=1e-9)
+    assert second == pytest.approx(q2, rel=1e-9)
+
+
+def test_tabulated_load_interpolates_and_holds_its_ends():
+    load = TabulatedLoad.parse("0:100; 0.1:120; 0.25:90; 0.4:130; 1.0:130; 1.2:60")
+    assert load.resistance(-5.0, 0.0, 0.0) == 100.0
+    assert load.resistance(7.0, 0.0, 0.0) == 60.0
+    assert load.resistance(0.05, 0.0, 0.0) == pytest.approx(110.0)
+    assert load.resistance(0.175, 0.0, 0.0) == pytest.approx(105.0)
+    t = np.linspace(-1.0, 2.0, 3001)
+    np.testing.assert_allclose(load.resistance(t, 0.0, 0.0),
+                               [load.resistance(float(x), 0.0, 0.0) for x in t], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("table", ["0:100", "0.1:100; 0.1:120", "0.2:100; 0.1:120", "0.1:abc; 0.2:3"])
+def test_bad_load_tables_are_refused(table):
+    with pytest.raises(ParameterError) as info:
+        TabulatedLoad.parse(table)
+    assert "table" in str(info.value)
+
+
+# --------------------------------------------------------------------------------------
+# Measured (Fourier) load
+# --------------------------------------------------------------------------------------
+
+
+def _harmonics_table():
+    with open(HARMONICS, newline="") as f:
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    return [{k: float(v) for k, v in row.items()} for row in rows]
+
+
+def _series(row, phi):
+    value = row["M_mean"]
+    n = 1
+    while f"a_{n}" in row or f"b_{n}" in row:
+        value += row.get(f"a_{n}", 0.0) * math.cos(n * phi) + row.get(f"b_{n}", 0.0) * math.sin(n * phi)
+        n += 1
+    return value
+
+
+ANGLES = [0.0, 0.3, 1.0, 2.0, math.pi, 4.5, -1.2, 100.0]
+
+
+def test_fourier_load_of_cycle_1_reproduces_the_series():
+    rows = _harmonics_table()
+    assert len(rows) == 6
+    row = next(r for r in rows if r["cycle"] == 1.0)
+    load = read_harmonics(HARMONICS, 1)
+    assert load.mean == 243.29
+    assert len(load.cosines) == 6 and len(load.sines) == 6 and load.sines[5] == 0.0
+    for phi in ANGLES:
+        assert load.resistance(0.0, phi, 39.0) == pytest.approx(_series(row, phi), rel=1e-12)
+        assert load.torque(0.0, phi, 39.0) == -load.resistance(0.0, phi, 39.0)
+    # cycle given as text works as well
+    assert read_harmonics(HARMONICS, "1").resistance(0.0, 1.0, 0.0) == load.resistance(0.0, 1.0, 0.0)
+
+
+def test_fourier_load_of_the_mean_cycle_reproduces_the_averaged_series():
+    rows = _harmonics_table()
+    keys = [k for k in rows[0] if k != "cycle"]
+    mean_row = {k: sum(r[k] for r in rows) / len(rows) for k in keys}
+    load = read_harmonics(HARMONICS, "mean")
+    assert load.mean == pytest.approx(mean_row["M_mean"], rel=1e-14)
+    for phi in ANGLES:
+        assert load.resistance(0.0, phi, 39.0) == pytest.approx(_series(mean_row, phi), rel=1e-12)
+    phi = np.array(ANGLES)
+    np.testing.assert_allclose(load.resistance(0.0, phi, 0.0), [_series(mean_row, p) for p in ANGLES], rtol=1e-12)
+    # Its mean over a revolution is M_mean.
+    grid = 2.0 * np.pi * np.arange(256) / 256
+    assert np.mean(load.resistance(0.0, grid, 0.0)) == pytest.approx(mean_row["M_mean"], rel=1e-12)
+
+
+def test_fourier_text_round_trip():
+    load = read_harmonics(HARMONICS, 3)
+    again = FourierLoad.parse(load.to_text())
+    phi = np.linspace(-7.0, 7.0, 141)
+    assert np.array_equal(again.resistance(0.0, phi, 0.0), load.resistance(0.0, phi, 0.0))
+    model = load_model("fourier", 0.0, fourier=load.to_text())
+    assert np.array_equal(model.resistance(0.0, phi, 0.0), load.resistance(0.0, phi, 0.0))
+
+
+def test_missing_cycle_is_refused():
+    with pytest.raises(ParameterError):
+        read_harmonics(HARMONICS, 9)
+
+
+# --------------------------------------------------------------------------------------
+# Shafts
+# --------------------------------------------------------------------------------------
+
+
+class Numerical:
+    """The same external torque model without its closed form: the shaft falls back to RK4."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def torque(self, t, phi, w):
+        return self.model.torque(t, phi, w)
+
+    def advance(self, *args):
+        return None
+
+
+def solve_tight(shaft: Shaft, t, phi, w, tau, h):
+    def rhs(s, y):
+        return [y[1], (shaft.external.torque(s, y[0], y[1]) + tau) / shaft.inertia]
+
+    sol = solve_ivp(rhs, (t, t + h), [phi, w], method="DOP853", rtol=1e-13, atol=1e-13)
+    return sol.y[0, -1], sol.y[1, -1]
+
+
+ENGINES = {
+    "linear": LinearCharacteristic(623.0, 14.06),
+    "flat": LinearCharacteristic(623.0, 0.0),
+    "steep": LinearCharacteristic(2000.0, 500.0),
+}
+
+
+@pytest.mark.parametrize("engine", list(ENGINES))
+@pytest.mark.parametrize("h", [1e-6, 1e-3, 0.05, 0.3])
+@pytest.mark.parametrize("tau", [-107.5, 0.0, 300.0])
+def test_exact_engine_step_matches_fine_rk4_and_solve_ivp(engine, h, tau):
+    exact = Shaft(0.128, ENGINES[engine])
+    fine = Shaft(0.128, Numerical(ENGINES[engine]), max_substep=min(h, 1e-5) / 4)
+    t, phi, w = 1.3, 12.0, 39.0
+    phi1, w1, _ = exact.advance(t, phi, w, tau, h)
+    phi_rk, w_rk, _ = fine.advance(t, phi, w, tau, h)
+    phi_ref, w_ref = solve_tight(exact, t, phi, w, tau, h)
+    for value, other in ((phi1, phi_rk), (phi1, phi_ref)):
+        assert value == pytest.approx(other, rel=1e-9, abs=1e-9)
+    for value, other in ((w1, w_rk), (w1, w_ref)):
+        assert value == pytest.approx(other, rel=1e-9, abs=1e-9)
+    assert (phi1, w1) != (phi, w)
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+@pytest.mark.parametrize("h", [1e-4, 0.01, 0.05])
+def test_exact_random_load_step_matches_solve_ivp(seed, h):
+    load = RandomLoad(107.5, 8.8, seed=seed, band_high=450.0)
+    shaft = Shaft(0.161, load)
+    t, phi, w, tau = 0.7, 3.0, 39.0, 110.0
+    phi1, w1, _ = shaft.advance(t, phi, w, tau, h)
+    phi_ref, w_ref = solve_tight(shaft, t, phi, w, tau, h)
+    assert phi1 == pytest.approx(phi_ref, rel=1e-10, abs=1e-10)
+    assert w1 == pytest.approx(w_ref, rel=1e-10, abs=1e-10)
+
+
+def test_tabulated_load_step_matches_solve_ivp():
+    load = TabulatedLoad(LOAD_POINTS)
+    shaft = Shaft(0.161, load)
+    for t, h in ((0.05, 0.3), (0.0, 1.2), (0.95, 0.1)):
+        phi1, w1, _ = shaft.advance(t, 0.0, 39.0, 50.0, h)
+        knots = sorted({t, t + h} | {p[0] for p in LOAD_POINTS if t < p[0] < t + h})
+        phi, w = 0.0, 39.0
+        for a, b in zip(knots, knots[1:]):  # integrate piece by piece: the load has kinks
+            phi, w = solve_tight(shaft, a, phi, w, 50.0, b - a)
+        assert phi1 == pytest.approx(phi, rel=1e-10)
+        assert w1 == pytest.approx(w, rel=1e-10)
+
+
+def test_fourier_load_shaft_uses_rk4_that_converges():
+    shaft = Shaft(0.161, read_harmonics(HARMONICS, "mean"))
+    phi1, w1, _ = shaft.advance(0.0, 0.0, 39.0, 240.0, 0.01)
+    phi_ref, w_ref = solve_tight(shaft, 0.0, 0.0, 39.0, 240.0, 0.01)
+    assert phi1 == pytest.approx(phi_ref, rel=1e-10)
+    assert w1 == pytest.approx(w_ref, rel=1e-10)
+
+
+def test_tabulated_engine_characteristic():
+    engine = TabulatedCharacteristic.parse("0:600; 20:650; 39.25:0")
+    assert engine.torque(0.0, 0.0, -3.0) == 600.0
+    assert engine.torque(0.0, 0.0, 10.0) == pytest.approx(625.0)
+    assert engine.torque(0.0, 0.0, 39.25) == pytest.approx(0.0, abs=1e-12)
+    assert engine.torque(0.0, 0.0, 40.0) < 0.0  # the falling branch is extended
+    shaft = Shaft(0.128, engine, max_substep=1e-4)
+    phi1, w1, _ = shaft.advance(0.0, 0.0, 30.0, -100.0, 0.02)
+    phi_ref, w_ref = solve_tight(shaft, 0.0, 0.0, 30.0, -100.0, 0.02)
+    assert w1 == pytest.approx(w_ref, rel=1e-8)
+    assert phi1 == pytest.approx(phi_ref, rel=1e-8)
+
+
+SHAFTS = {
+    "linear-engine": lambda: Shaft(0.128, LinearCharacteristic(623.0, 14.06)),
+    "flat-engine": lambda: Shaft(0.128, LinearCharacteristic(623.0, 0.0)),
+    "constant-load": lambda: Shaft(0.161, ConstantLoad(107.5)),
+    "random-load": lambda: Shaft(0.161, RandomLoad(107.5, 8.8, seed=1)),
+    "fourier-load": lambda: Shaft(0.161, read_harmonics(HARMONICS, "mean")),
+}
+
+
+@pytest.mark.parametrize("name", list(SHAFTS))
+@pytest.mark.parametrize("h", [1e-3, 0.05])
+def test_shaft_energy_identity(name, h):
+    shaft = SHAFTS[name]()
+    t, phi, w, tau = 0.4, 2.0, 39.0, -60.0 if "engine" in name else 120.0
+    phi1, w1, work = shaft.advance(t, phi, w, tau, h)
+    assert work == pytest.approx(0.5 * shaft.inertia * (w1 ** 2 - w ** 2) - tau * (phi1 - phi), rel=1e-12)
+    # Independently: the work is the integral of M_ext * w along the step's own motion.
+    def power(s):
+        if s == 0.0:
+            return shaft.external.torque(t, phi, w) * w
+        p, v, _ = shaft.advance(t, phi, w, tau, s)
+        return shaft.external.torque(t + s, p, v) * v
+
+    integral = quad(power, 0.0, h, epsabs=0.0, epsrel=1e-11, limit=200)[0]
+    assert work == pytest.approx(integral, rel=2e-8 if name == "fourier-load" else 1e-9)
+
+
+def test_constant_load_work_is_force_times_angle():
+    shaft = Shaft(0.161, ConstantLoad(107.5))
+    phi1, w1, work = shaft.advance(0.0, 1.0, 39.0, 100.0, 0.02)
+    assert work == pytest.approx(-107.5 * (phi1 - 1.0), rel=1e-10)
+
+
+def test_catalogue_shafts_use_the_scene_parameters():
+    engine = catalogue.engine_from({"inertia": 0.2, "stall_torque": 500.0, "torque_slope": 10.0})
+    assert engine.inertia == 0.2
+    assert engine.external.torque(0.0, 0.0, 30.0) == pytest.approx(200.0)
+    load = catalogue.load_from({"load_kind": "constant", "mean_torque": 55.0})
+    assert load.inertia == 0.161 and load.external.torque(0.0, 0.0, 0.0) == -55.0
+    with pytest.raises(ParameterError) as info:
+        catalogue.engine_from({"inertia": -1.0})
+    assert info.value.name == "inertia"
+    with pytest.raises(ParameterError) as info:
+        catalogue.load_from({"load_kind": "sometimes"})
+    assert info.value.name == "load_kind"
+    with pytest.raises(ParameterError):
+        catalogue.load_from({"no_such_parameter": 1.0})
