@@ -1,0 +1,52 @@
+"""The master family: each master converges to the monolithic reference at the order it
+promises, and the extrapolation weights are the ones the theory gives."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness import masters, metrics, reference, run, scene
+
+SMOOTH = ["experiment.stop=1", "experiment.transient=0", "load.load_kind=constant"]
+
+
+@pytest.fixture(autouse=True)
+def _fmus(fmu_dir):
+    return fmu_dir
+
+
+def test_extrapolation_weights_are_adams_bashforth_for_uniform_steps():
+    assert np.allclose(masters.extrapolation_weights([0.9, 1.0], 1.0, 0.1), [-0.5, 1.5])
+    assert np.allclose(masters.extrapolation_weights([0.8, 0.9, 1.0], 1.0, 0.1), np.array([5, -16, 23]) / 12)
+    # Exact for polynomials of the degree: the mean of t^2 over [1, 1.5] from three samples.
+    times = [0.2, 0.7, 1.0]
+    weights = masters.extrapolation_weights(times, 1.0, 0.5)
+    assert np.dot(weights, np.square(times)) == pytest.approx((1.5 ** 3 - 1.0) / 3 / 0.5, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(masters.MASTERS))
+def test_master_converges_at_its_promised_order(name):
+    spec = scene.load("kavz685").with_overrides(SMOOTH)
+    errors = []
+    for h in (2e-3, 1e-3, 5e-4):
+        result = run.simulate(spec, master=name, step=h)
+        assert result.ok, result.failure
+        ref = reference.solve(spec, result.times)
+        scales = metrics.error_scales(spec, ref.traces)
+        e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"], scales)
+        errors.append(e["coupling.tau2"]["rms"])
+    observed = [np.log2(a / b) for a, b in zip(errors, errors[1:])]
+    promised = masters.MASTERS[name].order
+    assert all(promised - 0.25 <= o <= promised + 0.35 for o in observed), (name, errors, observed)
+
+
+def test_linear_extrapolation_beats_zero_order_hold_on_kavz():
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=3"])
+    out = {}
+    for name in ("jacobi", "jacobi-linear"):
+        result = run.simulate(spec, master=name, step=2e-3)
+        ref = reference.solve(spec, result.times)
+        e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"],
+                           metrics.error_scales(spec, ref.traces))
+        out[name] = e["coupling.tau2"]["rms_relative"]
+    assert out["jacobi-linear"] < out["jacobi"] / 4, out
