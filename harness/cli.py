@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -145,5 +146,19 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+def entry():
+    """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
+    the process tears down, after all results are written; so flush and leave without
+    interpreter and library teardown, keeping the command's exit status."""
+    try:
+        main.main(standalone_mode=True)
+        status = 0
+    except SystemExit as done:
+        status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
+
+
 if __name__ == "__main__":
-    main()
+    entry()
