@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import ctypes
 import itertools
-import math
 import shutil
 import sys
 from collections import deque
@@ -211,6 +210,3 @@ class Component:
             _routes.pop(self.instance_name, None)
             shutil.rmtree(self._unzipped, ignore_errors=True)
 
-
-def finite(values) -> bool:
-    return all(math.isfinite(v) for v in values)

@@ -91,8 +91,9 @@ class GaussSeidelMaster(Master):
         for name in system.stateful:
             components[name].do_step(t, h)
             system.propagate([name])
-        for name in system.feedthrough:
-            components[name].do_step(t, h)
+        for name in system.order:
+            if name in system.feedthrough:
+                components[name].do_step(t, h)
 
 
 def extrapolation_weights(past_times, t: float, h: float) -> np.ndarray:

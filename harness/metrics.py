@@ -19,6 +19,13 @@ def roles(scene: scenes.Scene) -> tuple[str | None, str | None, str | None]:
     return tuple(scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
 
 
+def signals(scene: scenes.Scene) -> dict[str, str]:
+    """Short names of the driveline's main signals -> the scene's variable names."""
+    engine, coupling, load = roles(scene)
+    return {"w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
+            "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12"}
+
+
 def energy_variables(scene: scenes.Scene) -> list[str]:
     engine, coupling, load = roles(scene)
     if not (engine and coupling and load):
@@ -103,8 +110,7 @@ def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, referen
 def error_scales(scene: scenes.Scene, reference: dict) -> dict[str, float]:
     """Torques are judged relative to the mean transmitted torque, speeds relative to
     the mean speed (both from the reference)."""
-    engine, coupling, load = roles(scene)
-    torque = float(abs(np.mean(reference[f"{coupling}.tau2"])))
-    speed = float(abs(np.mean(reference[f"{engine}.w"])))
-    return {f"{coupling}.tau1": torque, f"{coupling}.tau2": torque, f"{engine}.w": speed, f"{load}.w": speed,
-            f"{engine}.a": speed, f"{load}.a": speed}
+    names = signals(scene)
+    torque = float(abs(np.mean(reference[names["tau2"]])))
+    speed = float(abs(np.mean(reference[names["w1"]])))
+    return {names["tau1"]: torque, names["tau2"]: torque, names["w1"]: speed, names["w2"]: speed}

@@ -56,14 +56,17 @@ def _roles(scene: scenes.Scene):
     return engine, coupling, load
 
 
-def _vectorized(f, t, phi, w):
+def _shaft_rates(shaft, t, phi, w, tau):
+    """``Shaft.rates`` over arrays; element by element where a torque model only takes
+    scalars (tabulated characteristics)."""
     try:
-        out = f(t, phi, w)
-        if np.shape(out) == np.shape(t):
-            return np.asarray(out, dtype=float)
+        a, external = shaft.rates(t, phi, w, tau)
+        if np.shape(a) == np.shape(t) and np.shape(external) == np.shape(t):
+            return np.asarray(a, dtype=float), np.asarray(external, dtype=float)
     except TypeError:
         pass
-    return np.array([f(a, b, c) for a, b, c in zip(t, phi, w)])
+    a, external = zip(*(shaft.rates(*row) for row in zip(t, phi, w, tau)))
+    return np.array(a), np.array(external)
 
 
 def cache_key(scene: scenes.Scene, times: np.ndarray) -> str:
@@ -101,19 +104,18 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Ref
     coupling = catalogue.coupling_from(coupling_params)
     phi1, w1 = catalogue.start_state(_params(scene, engine_name), catalogue.ENGINE)
     phi2, w2 = catalogue.start_state(_params(scene, load_name), catalogue.LOAD)
-    inertia1, inertia2 = engine.inertia, load.inertia
-    drive_torque, load_torque = engine.external.torque, load.external.torque
+    drive_rates, driven_rates = engine.rates, load.rates
     evaluate = coupling.evaluate
 
     def rhs(t, y):
         p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
         r = evaluate(p1, v1, p2, v2)
-        m1 = drive_torque(t, p1, v1)
-        m2 = load_torque(t, p2, v2)
-        return [v1, (m1 + r.tau1) / inertia1, v2, (m2 + r.tau2) / inertia2, m1 * v1, -m2 * v2, r.dissipation]
+        a1, m1 = drive_rates(t, p1, v1, r.tau1)
+        a2, m2 = driven_rates(t, p2, v2, r.tau2)
+        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation]
 
     started = clock.perf_counter()
-    omega, _ = coupling.eigen_estimate(inertia1, inertia2)
+    omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
     solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), [phi1, w1, phi2, w2, 0.0, 0.0, 0.0],
                          method="DOP853", t_eval=times, rtol=RTOL, atol=ATOL,
                          first_step=min(1e-4, 0.1 / omega))
@@ -123,13 +125,13 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Ref
     p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
     t = solution.t
     r = evaluate(p1, v1, p2, v2)
-    m1 = _vectorized(drive_torque, t, p1, v1)
-    m2 = _vectorized(load_torque, t, p2, v2)
+    a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
+    a2, m2 = _shaft_rates(load, t, p2, v2, np.asarray(r.tau2))
     e, c, l = engine_name, coupling_name, load_name
     traces = {
-        f"{e}.phi": p1, f"{e}.w": v1, f"{e}.a": (m1 + r.tau1) / inertia1, f"{e}.engine_torque": m1,
+        f"{e}.phi": p1, f"{e}.w": v1, f"{e}.a": a1, f"{e}.engine_torque": m1,
         f"{e}.engine_work": work_in,
-        f"{l}.phi": p2, f"{l}.w": v2, f"{l}.a": (m2 + r.tau2) / inertia2, f"{l}.load_torque": -m2,
+        f"{l}.phi": p2, f"{l}.w": v2, f"{l}.a": a2, f"{l}.load_torque": -m2,
         f"{l}.load_work": work_out,
         f"{c}.tau1": np.asarray(r.tau1), f"{c}.tau2": np.asarray(r.tau2), f"{c}.U12": np.asarray(r.ratio),
         f"{c}.theta": np.asarray(r.deflection), f"{c}.elastic_energy": np.asarray(r.energy),

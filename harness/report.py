@@ -13,17 +13,6 @@ import numpy as np
 from . import metrics
 from .run import RunResult
 
-MAIN_SIGNALS = ("w", "a", "tau1", "tau2")
-
-
-def _names(result: RunResult):
-    engine, coupling, load = metrics.roles(result.scene)
-    return {
-        "w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
-        "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12",
-    }
-
-
 def write_traces(path: Path, times: np.ndarray, traces: dict):
     names = list(traces)
     with open(path, "w", newline="") as f:
@@ -36,7 +25,7 @@ def write_traces(path: Path, times: np.ndarray, traces: dict):
 
 def summarize(result: RunResult, reference=None) -> dict:
     scene = result.scene
-    names = _names(result)
+    names = metrics.signals(result.scene)
     summary = {
         "scene": scene.name,
         "description": scene.description,
@@ -126,7 +115,7 @@ def plot(out: Path, result: RunResult, reference=None):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = _names(result)
+    names = metrics.signals(result.scene)
     t = result.times
     tr = result.traces
 

@@ -25,8 +25,7 @@ REPORTED = {
 MEASURED_NOTE = ("measured drive-torque amplitudes at about 220 N*m: 26.5 N*m (7IRP 13-48, quoted at 16 deg), "
                  "28-39 N*m from the mean curves of the three grades' tables")
 
-SIGNALS = {"w1": "engine.w", "w2": "load.w", "a1": "engine.a", "a2": "load.a",
-           "tau1": "coupling.tau1", "tau2": "coupling.tau2"}
+SIGNALS = ("w1", "w2", "a1", "a2", "tau1", "tau2")
 
 
 def transfer_modes(out: Path, modes=("kinematic", "scaled"), stop: float = 6.0) -> str:
@@ -37,12 +36,13 @@ def transfer_modes(out: Path, modes=("kinematic", "scaled"), stop: float = 6.0) 
                 f"coupling.transfer_mode={mode}", f"load.mean_torque={mean}", f"load.random_amplitude={bound}",
                 f"experiment.stop={stop}"])
             result = simulate(spec)
-            stats = metrics.statistics(result.times, result.traces, list(SIGNALS.values()), 2.0)
-            amplitude = {k: stats[v]["amplitude"] for k, v in SIGNALS.items()}
+            names = metrics.signals(spec)
+            stats = metrics.statistics(result.times, result.traces, [names[k] for k in SIGNALS], 2.0)
+            amplitude = {k: stats[names[k]]["amplitude"] for k in SIGNALS}
             cells = [f"{amplitude[k]:.3g}" + (f" ({reported[k]:g})" if k in reported else "") for k in SIGNALS]
             order = "yes" if amplitude["w1"] < amplitude["w2"] and amplitude["a1"] < amplitude["a2"] else "no"
             rows.append(f"| {mode} | {mean:g} +- {bound:g} | " + " | ".join(cells) +
-                        f" | {stats['engine.w']['mean']:.2f} | {order} |")
+                        f" | {stats[names['w1']]['mean']:.2f} | {order} |")
     table = "\n".join([
         "| mode | load [N*m] | A w1 | A w2 | A a1 | A a2 | A tau1 | A tau2 | mean w [rad/s] | drive < driven |",
         "|---|---|---|---|---|---|---|---|---|---|", *rows])

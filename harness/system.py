@@ -12,7 +12,6 @@ or recorded are ever read.
 """
 from __future__ import annotations
 
-import ctypes
 from pathlib import Path
 
 from fmpy import read_model_description

@@ -15,7 +15,7 @@ import functools
 import json
 import math
 import traceback
-from typing import Any, NamedTuple, Sequence
+from typing import NamedTuple, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import Fmi2Slave, Real, Integer, String, Fmi2Causality, Fmi2Variability, Fmi2Initial

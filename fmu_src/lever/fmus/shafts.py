@@ -30,8 +30,7 @@ class _ShaftSlave(LeverSlave):
         setattr(self, self.WORK_OUTPUT, 0.0)
 
     def _compute_outputs(self):
-        external = self._shaft.external.torque(self._time, self.phi, self.w)
-        self.a = (external + self.tau) / self._shaft.inertia
+        self.a, external = self._shaft.rates(self._time, self.phi, self.w, self.tau)
         setattr(self, self.TORQUE_OUTPUT, self.SIGN * external)
 
     def _advance(self, t, h):
@@ -42,9 +41,6 @@ class _ShaftSlave(LeverSlave):
         self.phi, self.w = phi, w
         setattr(self, self.WORK_OUTPUT, getattr(self, self.WORK_OUTPUT) + self.SIGN * work)
         return None
-
-    def _internal_state(self):
-        return {}  # phi, w, work are registered outputs: saved with the variables
 
 
 _SHAFT_OUTPUTS = (

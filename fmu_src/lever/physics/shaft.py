@@ -17,8 +17,14 @@ class Shaft:
         self.external = external
         self.max_substep = float(max_substep)
 
+    def rates(self, t, phi, w, tau):
+        """``(a, M_ext)``: the acceleration with coupling torque ``tau`` and the
+        external torque on the shaft (floats or numpy arrays alike)."""
+        external = self.external.torque(t, phi, w)
+        return (external + tau) / self.inertia, external
+
     def acceleration(self, t, phi, w, tau):
-        return (self.external.torque(t, phi, w) + tau) / self.inertia
+        return self.rates(t, phi, w, tau)[0]
 
     def advance(self, t, phi, w, tau, h):
         """State after ``h`` seconds with held ``tau``: ``(phi, w, external_work)``,
