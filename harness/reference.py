@@ -63,7 +63,7 @@ def _shaft_rates(shaft, t, phi, w, tau):
         a, external = shaft.rates(t, phi, w, tau)
         if np.shape(a) == np.shape(t) and np.shape(external) == np.shape(t):
             return np.asarray(a, dtype=float), np.asarray(external, dtype=float)
-    except TypeError:
+    except (TypeError, ValueError):  # a scalar-only model fed arrays (e.g. bisect on an array)
         pass
     a, external = zip(*(shaft.rates(*row) for row in zip(t, phi, w, tau)))
     return np.array(a), np.array(external)

@@ -269,3 +269,15 @@ def test_cli_no_reference_run(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["master"] == "gauss-seidel" and summary["step_s"] == 1e-3
     assert "error_vs_reference" not in summary
+
+
+def test_reference_handles_a_tabulated_engine_characteristic():
+    # A scalar-only torque model: the reference must evaluate its traces point by point.
+    spec = kavz("engine.characteristic=0:700; 30:300; 40:0", *SMOOTH)
+    result = run.simulate(spec)
+    assert result.ok, result.failure
+    ref = reference.solve(spec, result.times, use_cache=False)
+    e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"],
+                       metrics.error_scales(spec, ref.traces))
+    assert e["coupling.tau2"]["rms_relative"] < 5e-3
+    assert np.all(np.isfinite(ref.traces["engine.a"]))
