@@ -101,6 +101,9 @@ class Component:
         self._get_real = self.fmu._functions["fmi2GetReal"]
         self._set_real = self.fmu._functions["fmi2SetReal"]
         self._do_step = self.fmu._functions["fmi2DoStep"]
+        self._get_state = self.fmu._functions["fmi2GetFMUstate"]
+        self._set_state = self.fmu._functions["fmi2SetFMUstate"]
+        self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
         self._handle = self.fmu.component
         self._freed = False
 
@@ -185,15 +188,28 @@ class Component:
         return list(values)
 
     # -- state (for masters that roll back) --------------------------------------------------
-    def save_state(self):
-        return self._checked("fmi2GetFMUstate", self.fmu.getFMUstate)
+    # Raw calls like the hot path: an iterating master saves, restores and frees a state
+    # on every communication step.
+    def save_state(self) -> ctypes.c_void_p:
+        self.calls += 1
+        state = ctypes.c_void_p()
+        status = self._get_state(self._handle, ctypes.byref(state))
+        if status > 1:
+            self._fail("fmi2GetFMUstate", status)
+        return state
 
     def restore_state(self, state, time: float):
-        self._checked("fmi2SetFMUstate", self.fmu.setFMUstate, state)
+        self.calls += 1
+        status = self._set_state(self._handle, state)
+        if status > 1:
+            self._fail("fmi2SetFMUstate", status)
         self.time = time
 
     def free_state(self, state):
-        self._checked("fmi2FreeFMUstate", self.fmu.freeFMUstate, state)
+        self.calls += 1
+        status = self._free_state(self._handle, ctypes.byref(state))
+        if status > 1:
+            self._fail("fmi2FreeFMUstate", status)
 
     # -- tear-down ---------------------------------------------------------------------------
     def free(self):

@@ -8,8 +8,14 @@ each master implements one step in ``_step_impl``:
   at the new time: every connected input holds its source's current output, so a
   recorder can read any exposed value.  It raises ``FmuCallError`` (from the component
   that failed) and otherwise returns nothing.
-* Counters: ``n_steps``, ``n_rollbacks``, ``n_iterations``; ``fmu_calls`` counts the
-  FMI calls on the hot path (read, write, doStep) of all components.
+* Counters: ``n_steps`` (accepted steps), ``n_rollbacks``, ``n_iterations`` (coupled
+  evaluations beyond the first in a step, including those for Jacobians), ``n_rejected``;
+  ``fmu_calls`` counts the FMI calls on the hot path (read, write, doStep and the state
+  calls) of all components.
+* Variable steps: an ``adaptive`` master chooses its own step; ``step()`` without
+  arguments takes the step it proposes (``h``), clipped to ``t_end``.
+* A master that cannot make a step (an iteration that does not converge, a step size
+  that underflows) raises ``MasterFailure`` saying where, when and why.
 * ``order``: the global convergence order the master promises on smooth problems
   (the tests check it against the monolithic reference).
 
@@ -18,6 +24,8 @@ feedthrough, stepped in scene order) and its propagation.
 """
 from __future__ import annotations
 
+import ctypes
+import math
 from collections import deque
 
 import numpy as np
@@ -25,20 +33,35 @@ import numpy as np
 from .system import System
 
 
+class MasterFailure(RuntimeError):
+    """A master could not make a step; the system is left at the last accepted step."""
+
+
 class Master:
     name = "abstract"
     order = 0
     description = ""
+    adaptive = False
+    #: options ``make`` accepts for this master, with their defaults
+    options: dict = {}
 
-    def __init__(self, system: System, step: float):
+    def __init__(self, system: System, step: float, **options):
         if not step > 0.0:
             raise ValueError(f"communication step must be > 0, got {step}")
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise ValueError(f"master '{self.name}' takes no option {', '.join(sorted(unknown))}"
+                             + (f" (it takes: {', '.join(self.options)})" if self.options else ""))
+        for key, default in self.options.items():
+            setattr(self, key, options.get(key, default))
         self.system = system
         self.h = float(step)
         self.t = system.scene.experiment.start
+        self.t_end = system.scene.experiment.stop
         self.n_steps = 0
         self.n_rollbacks = 0
         self.n_iterations = 0
+        self.n_rejected = 0
 
     @property
     def fmu_calls(self) -> int:
@@ -49,16 +72,50 @@ class Master:
         target time exactly, to avoid accumulating rounding in ``t``."""
         h = self.h if h is None else h
         target = self.t + h if t_next is None else t_next
-        self._step_impl(self.t, target - self.t)
-        self.t = target
+        taken = self._step_impl(self.t, target - self.t)
+        # An adaptive master may take less than it was offered; it returns what it took.
+        self.t = target if taken is None else self.t + taken
         self.n_steps += 1
 
     def _step_impl(self, t: float, h: float):
+        """Advance the system from ``t`` by ``h``; return ``None``, or the step actually
+        taken if it is shorter (adaptive masters)."""
         raise NotImplementedError
 
     def counters(self) -> dict:
         return {"steps": self.n_steps, "fmu_calls": self.fmu_calls, "rollbacks": self.n_rollbacks,
-                "iterations": self.n_iterations}
+                "iterations": self.n_iterations, "rejected": self.n_rejected}
+
+    # -- shared helpers ------------------------------------------------------------------------
+    def _coupled_inputs(self):
+        """The input buffers of stateful components that propagation fills (the coupling
+        torques), as the last propagation left them: ``[(component, vrs, values)]``."""
+        system = self.system
+        return [(target, vrs, values) for writes in system.writes.values()
+                for target, vrs, values, _ in writes if target.name in system.stateful]
+
+    def _rate_inputs(self, inputs):
+        """For each ``(component, vrs, values)`` of ``inputs``: the buffer of the inputs
+        declared as their time derivatives (FMI ``derivative`` attribute; a shaft's
+        ``tau_rate``), or None where a component has none for one of them."""
+        out = []
+        for target, vrs, _ in inputs:
+            rate_of = {v.derivative.valueReference: v.name for v in target.description.modelVariables
+                       if v.derivative is not None and v.causality == "input"}
+            names = [rate_of.get(vr) for vr in vrs]
+            out.append(target.real_buffer(names) if all(names) else None)
+        return out
+
+    def _step_stateful(self, t, h):
+        components = self.system.components
+        for name in self.system.stateful:
+            components[name].do_step(t, h)
+
+    def _step_feedthrough(self, t, h):
+        components = self.system.components
+        for name in self.system.order:
+            if name in self.system.feedthrough:
+                components[name].do_step(t, h)
 
 
 class JacobiMaster(Master):
@@ -91,81 +148,472 @@ class GaussSeidelMaster(Master):
         for name in system.stateful:
             components[name].do_step(t, h)
             system.propagate([name])
-        for name in system.order:
-            if name in system.feedthrough:
-                components[name].do_step(t, h)
+        self._step_feedthrough(t, h)
 
 
-def extrapolation_weights(past_times, t: float, h: float) -> np.ndarray:
-    """Weights ``w_j`` such that ``sum_j w_j u(t_j)`` is the mean over ``[t, t + h]`` of
-    the polynomial through the points ``(t_j, u(t_j))``.
+def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, list]:
+    """Weights ``(m_j, r_j, e_j)`` over past values ``u(t_j)`` of the polynomial ``p``
+    through them: ``sum_j m_j u(t_j)`` is the mean of ``p`` over ``[t, t + h]``,
+    ``sum_j r_j u(t_j) / h`` the slope of its best linear fit there (the ramp with the same
+    mean and first moment) and ``sum_j e_j u(t_j)`` its value at ``t + h``.
 
-    A shaft FMU holds its input torque over a step, so what matters is the torque's
-    mean over the step; for uniform steps these are the Adams-Bashforth weights
-    (degree 1: -1/2, 3/2; degree 2: 5/12, -16/12, 23/12), one order above the degree."""
-    nodes = (np.asarray(past_times, dtype=float) - t) / h          # <= 0, scaled to the step
-    degree = len(nodes) - 1
-    vandermonde = nodes[:, None] ** np.arange(degree + 1)[None, :]
-    means = 1.0 / np.arange(1, degree + 2)                         # mean of x^k over [0, 1]
-    return np.linalg.solve(vandermonde.T, means)
+    A shaft sees the torque's mean over the step in its speed and the first moment in
+    its angle; with a held torque only the mean can match (for uniform steps the
+    Adams-Bashforth weights: degree 1: -1/2, 3/2; degree 2: 5/12, -16/12, 23/12).
+    Pure Python over the Lagrange basis: this runs on every step of an adaptive master."""
+    nodes = [(x - t) / h for x in past_times]          # <= 0, scaled to the step
+    means, slopes, ends = [], [], []
+    for j, xj in enumerate(nodes):
+        basis = [1.0]                                   # coefficients of L_j, lowest power first
+        for m, xm in enumerate(nodes):
+            if m != j:
+                scale = 1.0 / (xj - xm)
+                shifted = [0.0] + basis                 # x * L
+                basis = [(shifted[k] - xm * (basis[k] if k < len(basis) else 0.0)) * scale
+                         for k in range(len(shifted))]
+        means.append(sum(c / (k + 1) for k, c in enumerate(basis)))
+        slopes.append(12.0 * sum(c * (1.0 / (k + 2) - 0.5 / (k + 1)) for k, c in enumerate(basis)))
+        ends.append(sum(basis))
+    return means, slopes, ends
 
 
 class ExtrapolatingJacobiMaster(JacobiMaster):
     """Jacobi, but each stateful component's inputs are extrapolated from the last
-    ``degree + 1`` communication points instead of held: the value held over the step
-    is the mean of the extrapolating polynomial over it.  Order ``degree + 1`` on smooth
-    problems; the first steps use the history there is."""
+    ``degree + 1`` communication points instead of held.  Where the component declares
+    a derivative input (a shaft's ``tau_rate``) it gets the ramp that matches the
+    extrapolating polynomial's mean and first moment over the step (first-order hold),
+    otherwise the mean, held.  Order ``degree + 1`` with the ramp, at most 2 without;
+    the first steps use the history there is."""
 
     degree = 1
+    options = {"ramp": True}
 
-    def __init__(self, system: System, step: float):
-        super().__init__(system, step)
-        # The input buffers of stateful components, as the last propagation left them.
-        self._inputs = [(target, vrs, values) for writes in system.writes.values()
-                        for target, vrs, values, _ in writes if target.name in system.stateful]
-        self._history: deque = deque(maxlen=self.degree + 1)
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        self._inputs = self._coupled_inputs()
+        rates = self._rate_inputs(self._inputs) if self.ramp else [None] * len(self._inputs)
+        # One write per component: the inputs and, after them, their rates.
+        self._held = []
+        for (target, vrs, values), rate in zip(self._inputs, rates):
+            n = len(values)
+            if rate is None:
+                self._held.append((target, vrs, (ctypes.c_double * n)(), n, False))
+            else:
+                both = (ctypes.c_uint * (2 * n))(*vrs, *rate[0])
+                self._held.append((target, both, (ctypes.c_double * (2 * n))(), n, True))
+        # The last ``degree`` communication points before the current one.
+        self._history: deque = deque(maxlen=self.degree)
         self._weights_cache: dict = {}
+        self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
+                                  for n in system.stateful)
+
+    def _hold(self, t, h, points):
+        """Write the inputs for the step ``[t, t + h]`` from the polynomial through
+        ``points`` (``[(time, values per input)]``); return its values at ``t + h``."""
+        weights = self._weights([p[0] for p in points], t, h)
+        ends = []
+        for k, (target, vrs, values, n, ramped) in enumerate(self._held):
+            component_ends = []
+            for i in range(n):
+                mean = change = end = 0.0
+                for (w_mean, w_slope, w_end), point in zip(weights, points):
+                    u = point[1][k][i]
+                    mean += w_mean * u
+                    change += w_slope * u         # slope * h
+                    end += w_end * u
+                if ramped:
+                    values[i] = mean - 0.5 * change
+                    values[n + i] = change / h
+                else:
+                    values[i] = mean
+                component_ends.append(end)
+            target.write(vrs, values)
+            ends.append(component_ends)
+        return ends
+
+    def _weights(self, times, t, h):
+        key = tuple(round((x - t) / h, 9) for x in times)
+        weights = self._weights_cache.get(key)
+        if weights is None:
+            if len(self._weights_cache) > 32:      # variable steps: do not grow without bound
+                self._weights_cache.clear()
+            weights = self._weights_cache[key] = list(zip(*extrapolation_weights(times, t, h)))
+        return weights
+
+    def _starting(self) -> bool:
+        """Whether the history is still too short for the full degree and the stateful
+        components can roll back to make up for it."""
+        return len(self._history) < self.degree and self._can_roll_back
 
     def _step_impl(self, t, h):
-        self._history.append((t, [list(values) for _, _, values in self._inputs]))
-        if len(self._history) > 1:
-            times = [entry[0] for entry in self._history]
-            key = tuple(round((x - t) / h, 9) for x in times)
-            weights = self._weights_cache.get(key)
-            if weights is None:
-                weights = self._weights_cache.setdefault(key, extrapolation_weights(times, t, h).tolist())
-            for k, (target, vrs, values) in enumerate(self._inputs):
-                for i in range(len(values)):
-                    values[i] = sum(w * entry[1][k][i] for w, entry in zip(weights, self._history))
-                target.write(vrs, values)
-        super()._step_impl(t, h)
+        start = [list(values) for _, _, values in self._inputs]
+        points = list(self._history) + [(t, start)]
+        if self._starting():
+            self._start_step(t, h, points)
+        else:
+            self._hold(t, h, points)
+            super()._step_impl(t, h)
+        self._history.append((t, start))
+
+    def _start_step(self, t, h, points):
+        """A start-up step of the master's order although the history is short: step
+        with what extrapolation there is, then roll back and step again with the
+        polynomial that also passes through the torques found at the end of the step,
+        ``degree + 1`` times over (each pass gains an order)."""
+        stateful = [self.system.components[n] for n in self.system.stateful]
+        states = [component.save_state() for component in stateful]
+        try:
+            through = points
+            for iteration in range(self.degree + 2):
+                if iteration:
+                    for component, state in zip(stateful, states):
+                        component.restore_state(state, t)
+                    self.n_rollbacks += 1
+                    self.n_iterations += 1
+                self._hold(t, h, through)
+                self._step_stateful(t, h)
+                self.system.propagate()
+                through = points + [(t + h, [list(values) for _, _, values in self._inputs])]
+        finally:
+            for component, state in zip(stateful, states):
+                component.free_state(state)
+        self._step_feedthrough(t, h)
 
 
 class LinearExtrapolationMaster(ExtrapolatingJacobiMaster):
     name = "jacobi-linear"
     order = 2
     degree = 1
-    description = "Jacobi with linear extrapolation of the coupling torques (mean over the step)"
+    description = "Jacobi with linear extrapolation of the coupling torques (ramped over the step)"
 
 
 class QuadraticExtrapolationMaster(ExtrapolatingJacobiMaster):
-    """Order 2, not 3: a shaft holds its input over the step, so its speed sees the
-    torque's mean (third order here) but its angle sees the torque's first moment, which
-    a held value matches only to second order.  Beating that needs input derivatives
-    (fmi2SetRealInputDerivatives), which pythonfmu FMUs do not support."""
+    """Order 3 with the ramp.  Without it (``ramp=False``, or shafts with no derivative
+    input) order 2: a held torque matches the mean but not the first moment."""
 
     name = "jacobi-quadratic"
-    order = 2
+    order = 3
     degree = 2
-    description = "Jacobi with quadratic extrapolation of the coupling torques (mean over the step)"
+    description = "Jacobi with quadratic extrapolation of the coupling torques (ramped over the step)"
+
+
+class MidpointPredictionMaster(JacobiMaster):
+    """Jacobi, but the torque each shaft holds over the step is the coupling evaluated on
+    the states *predicted at mid-step*: every connected output of a stateful component is
+    extrapolated by its Taylor series, from the time derivatives its model description
+    declares (``phi -> w -> a`` for a shaft).  The midpoint rule then approximates the
+    torque's mean over the step with a tenth of the error of Adams-Bashforth
+    extrapolation (h^2/24 against 5h^2/12), for one more coupling evaluation per step.
+    Order 2 (a held torque cannot match its first moment, see the quadratic master)."""
+
+    name = "jacobi-midpoint"
+    order = 2
+    description = "Jacobi with the coupling evaluated on the shafts' states predicted at mid-step"
+
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        scene = system.scene
+        chains = {}
+        for c in scene.connections:
+            if c.source in system.stateful and c.target in system.feedthrough:
+                chains[(c.source, c.output)] = system.derivative_chain(c.source, c.output)
+        system.expose([f"{source}.{v}" for (source, _), chain in chains.items() for v in chain[1:]])
+        system.propagate()       # fill the buffers of the newly exposed outputs
+        # Per source and feedthrough target: the buffer indices of each input's Taylor terms.
+        self._predictions = []
+        for source in system.stateful:
+            values = system.buffers[source][1]
+            names = system.exposed[source]
+            for target, vrs, target_values, positions in system.writes[source]:
+                if target.name not in system.feedthrough:
+                    continue
+                terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in positions]
+                self._predictions.append((values, target, vrs, target_values, terms))
+        self._feedthrough = [n for n in system.order if n in system.feedthrough]
+
+    def _predict(self, dt):
+        """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
+        and propagate the coupling torques they give to the stateful components."""
+        factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
+        for values, target, vrs, target_values, terms in self._predictions:
+            for k, indices in enumerate(terms):
+                target_values[k] = sum(f * values[i] for f, i in zip(factors, indices))
+            target.write(vrs, target_values)
+        self.system.propagate(self._feedthrough)
+
+    def _step_impl(self, t, h):
+        self._predict(0.5 * h)
+        super()._step_impl(t, h)
+
+
+# -- iterative coupling with rollback ------------------------------------------------------------
+
+class IterativeMaster(Master):
+    """Implicit coupling: the torques ``u`` the shafts hold over a step are iterated until
+    they agree with what the coupling gives on the states they produce,
+
+        implicit:     u = tau(t + h)                    (order 1, damps like backward Euler)
+        trapezoidal:  u = (tau(t) + tau(t + h)) / 2     (order 2; for a linear spring at a
+                      constant ratio, the shafts receive exactly the energy the spring gives)
+
+    Every evaluation rolls the stateful components back to the start of the step (their
+    full FMU state) and steps them again.  ``fixed-point`` iterates ``u <- G(u)`` and
+    converges only while the coupling is soft for the step (``c h^2 / I`` well below 1);
+    ``newton`` solves ``G(u) - u = 0`` with an interface Jacobian from finite differences
+    over rolled-back steps, reused across steps while it keeps converging fast.  The
+    first guess extrapolates the last accepted torques linearly.
+
+    Direct-feedthrough components are taken to be algebraic (their outputs functions of
+    their inputs, as the coupling's are): they are not rolled back and step once.
+    """
+
+    scheme = "implicit"
+    solver = "newton"
+    options = {"tolerance": 1e-7, "max_iterations": 30}
+
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        self._inputs = self._coupled_inputs()
+        self._stateful = [system.components[n] for n in system.stateful]
+        self._history: deque = deque(maxlen=2)
+        self._jacobian = None       # d G / d u, reused while it serves
+        self.n_jacobians = 0
+
+    def counters(self) -> dict:
+        return {**super().counters(), "jacobians": self.n_jacobians}
+
+    # u is a flat list over the coupled inputs, in the order of self._inputs
+    def _current_inputs(self) -> np.ndarray:
+        return np.array([v for _, _, values in self._inputs for v in values])
+
+    def _evaluate(self, u, t, h, states, start, rolled):
+        """Step the stateful components from their saved ``states`` holding ``u`` and
+        return ``G(u)``; ``rolled`` says whether they must be rolled back first."""
+        if rolled:
+            for component, state in zip(self._stateful, states):
+                component.restore_state(state, t)
+            self.n_rollbacks += 1
+        k = 0
+        for target, vrs, values in self._inputs:
+            for i in range(len(values)):
+                values[i] = u[k]
+                k += 1
+            target.write(vrs, values)
+        self._step_stateful(t, h)
+        self.system.propagate()            # the inputs' buffers now hold tau(t + h)
+        end = self._current_inputs()
+        return end if self.scheme == "implicit" else 0.5 * (start + end)
+
+    def _guess(self, t, h, start):
+        if len(self._history) < 2:
+            return start.copy()
+        (t0, u0), (t1, u1) = self._history
+        return u1 + (u1 - u0) * ((t + h - t1) / (t1 - t0)) if t1 > t0 else u1.copy()
+
+    def _step_impl(self, t, h):
+        start = self._current_inputs()
+        states = [component.save_state() for component in self._stateful]
+        try:
+            u = self._guess(t, h, start)
+            scale = max(1.0, float(np.max(np.abs(start))))
+            tolerance = self.tolerance * scale
+            g = self._evaluate(u, t, h, states, start, rolled=False)
+            residual = g - u
+            norm = float(np.max(np.abs(residual)))
+            previous = math.inf
+            for iteration in range(self.max_iterations):
+                if norm <= tolerance:
+                    break
+                if self.solver == "newton":
+                    if self._jacobian is None or norm > 0.2 * previous:
+                        self._jacobian = self._finite_difference_jacobian(u, g, t, h, states, start, scale)
+                    u = u - np.linalg.solve(self._jacobian - np.eye(len(u)), residual)
+                else:
+                    u = g
+                previous = norm
+                g = self._evaluate(u, t, h, states, start, rolled=True)
+                self.n_iterations += 1
+                residual = g - u
+                norm = float(np.max(np.abs(residual)))
+                if not math.isfinite(norm) or (self.solver == "fixed-point" and iteration > 2 and norm > previous):
+                    break
+            if not norm <= tolerance:
+                hint = ("use a newton master or a smaller step" if self.solver == "fixed-point"
+                        else "use a smaller step")
+                raise MasterFailure(f"{self.name}: the coupling iteration did not converge in the step from "
+                                    f"t = {t:.9g} s (h = {h:.3g} s): residual {norm:.3g} N.m after "
+                                    f"{iteration + 1} iterations, tolerance {tolerance:.3g} N.m; {hint}")
+        finally:
+            for component, state in zip(self._stateful, states):
+                component.free_state(state)
+        self._history.append((t + h, u))
+        self._step_feedthrough(t, h)
+
+    def _finite_difference_jacobian(self, u, g, t, h, states, start, scale):
+        self.n_jacobians += 1
+        columns = []
+        for j in range(len(u)):
+            delta = 1e-6 * max(abs(u[j]), scale)
+            shifted = u.copy()
+            shifted[j] += delta
+            columns.append((self._evaluate(shifted, t, h, states, start, rolled=True) - g) / delta)
+            self.n_iterations += 1
+        return np.array(columns).T
+
+
+class ImplicitFixedPointMaster(IterativeMaster):
+    name = "implicit-fixed-point"
+    order = 1
+    scheme, solver = "implicit", "fixed-point"
+    description = "implicit coupling (end-of-step torques), fixed-point iteration with rollback"
+
+
+class ImplicitNewtonMaster(IterativeMaster):
+    name = "implicit-newton"
+    order = 1
+    scheme, solver = "implicit", "newton"
+    description = "implicit coupling (end-of-step torques), Newton iteration with rollback"
+
+
+class TrapezoidalFixedPointMaster(IterativeMaster):
+    name = "trapezoidal-fixed-point"
+    order = 2
+    scheme, solver = "trapezoidal", "fixed-point"
+    description = "trapezoidal coupling (mean of both ends' torques), fixed-point iteration with rollback"
+
+
+class TrapezoidalNewtonMaster(IterativeMaster):
+    name = "trapezoidal-newton"
+    order = 2
+    scheme, solver = "trapezoidal", "newton"
+    description = "trapezoidal coupling (mean of both ends' torques), Newton iteration with rollback"
+
+
+# -- adaptive step size ----------------------------------------------------------------------------
+
+class AdaptiveMaster(ExtrapolatingJacobiMaster):
+    """``jacobi-quadratic`` (ramped quadratic extrapolation of the coupling torques, over
+    variable steps) with the step chosen by an error estimate.
+
+    Predictor-corrector estimate (Milne's device): the extrapolating polynomial's value at
+    the end of the step against the torque the coupling actually gives there.  For
+    degree ``d`` the error of the mean over the step is a fixed fraction of that
+    difference (``MEAN_FRACTION``, from the polynomial error term); relative to the torque
+    scale (the largest coupling torque so far) it is compared with ``tolerance``.  A step
+    above tolerance is rolled back (full FMU states) and retried shorter; the next step
+    comes from a PI controller (Gustafsson's gains).  While the history is short the
+    degree is lower, so the start-up transient is taken with short steps.
+
+    The power-bond energy residual at the coupling - what OSP's ECCO controls - is
+    accumulated as a diagnostic (``bond_energy_residual_J``): the work the shafts received
+    minus what the torques found at both ends of each step account for (trapezoidal rule).
+    """
+
+    name = "adaptive"
+    order = 3
+    degree = 2
+    adaptive = True
+    description = "ramped quadratic extrapolation with error-controlled steps (predictor-corrector, PI)"
+    options = {"tolerance": 1e-3, "min_step": 1e-8, "max_step": None, "ramp": True}
+
+    SAFETY, GROWTH, SHRINK = 0.8, 3.0, 0.2
+    MEAN_FRACTION = (0.5, 5.0 / 12.0, 3.0 / 8.0)   # by degree: mean error / end-point error
+    K_I, K_P = 0.3 / 3.0, 0.4 / 3.0                # PI gains over (estimate order + 1)
+
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
+            raise ValueError(f"option 'tolerance' = {self.tolerance!r} is outside its allowed range (0, 1) "
+                             "(relative torque error)")
+        span = self.t_end - self.t
+        self.max_step = float(self.max_step) if self.max_step else span / 50.0
+        self.h = min(self.h, self.max_step)
+        self._stateful = [system.components[n] for n in system.stateful]
+        self._speeds = self._bond_speeds()
+        self._previous_error = 1.0
+        self._scale = 0.0
+        self.bond_energy_residual = 0.0
+
+    def _bond_speeds(self):
+        """For each coupled input (a torque on a shaft), the speed at the same port: the
+        component's exposed output in rad/s, if it has one."""
+        system = self.system
+        speeds = []
+        for target, _, _ in self._inputs:
+            candidates = [v for v in system.exposed[target.name] if _unit(target, v) == "rad/s"]
+            index = system.index[(target.name, candidates[0])] if candidates else None
+            speeds.append((system.buffers[target.name][1], index))
+        return speeds
+
+    def _read_speeds(self):
+        return [values[i] if i is not None else 0.0 for values, i in self._speeds]
+
+    def counters(self) -> dict:
+        return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
+
+    def _step_impl(self, t, h):
+        h = min(h, self.h)
+        if self.t_end - (t + h) < 0.25 * h:        # do not leave a sliver before the end
+            h = self.t_end - t
+        start = [list(values) for _, _, values in self._inputs]
+        speeds = self._read_speeds()
+        points = list(self._history) + [(t, start)]
+        while True:
+            states = [component.save_state() for component in self._stateful]
+            try:
+                predicted = self._hold(t, h, points)
+                self._step_stateful(t, h)
+                self.system.propagate()
+                end = [list(values) for _, _, values in self._inputs]
+                self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
+                fraction = self.MEAN_FRACTION[len(points) - 1]
+                difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
+                error = fraction * difference / (self.tolerance * (self._scale or 1.0))
+                if error <= 1.0 or h <= self.min_step:
+                    break
+                for component, state in zip(self._stateful, states):
+                    component.restore_state(state, t)
+                self.n_rollbacks += 1
+                self.n_rejected += 1
+                h = max(self.min_step, h * max(self.SHRINK, self.SAFETY * error ** (-1.0 / 3.0)))
+                self.system.propagate()            # the buffers back to the start of the step
+            finally:
+                for component, state in zip(self._stateful, states):
+                    component.free_state(state)
+        if error > 1.0:
+            raise MasterFailure(f"{self.name}: the step size fell to its minimum {self.min_step:.3g} s at "
+                                f"t = {t:.9g} s with the error estimate still {error:.3g} times the tolerance "
+                                f"{self.tolerance:g}; the coupling torque changes too fast for this tolerance")
+        # ECCO's power-bond residual: work given (held means) against work accounted for.
+        end_speeds = self._read_speeds()
+        for (_, _, values, n, _), ss, es, w0, w1 in zip(self._held, start, end, speeds, end_speeds):
+            for i in range(n):
+                mean = values[i] + (0.5 * values[n + i] * h if len(values) > n else 0.0)
+                self.bond_energy_residual += h * (mean - 0.5 * (ss[i] + es[i])) * 0.5 * (w0 + w1)
+        self._history.append((t, start))
+        self._step_feedthrough(t, h)
+        # PI controller for the next step.
+        error = max(error, 1e-10)
+        factor = self.SAFETY * error ** -self.K_I * (self._previous_error / error) ** self.K_P
+        self._previous_error = error
+        self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
+        return h
+
+
+def _unit(component, name):
+    variable = component.variable(name)
+    return variable.unit or (variable.declaredType.unit if variable.declaredType is not None else None)
 
 
 MASTERS = {cls.name: cls for cls in (JacobiMaster, GaussSeidelMaster, LinearExtrapolationMaster,
-                                     QuadraticExtrapolationMaster)}
+                                     QuadraticExtrapolationMaster, MidpointPredictionMaster,
+                                     ImplicitFixedPointMaster, ImplicitNewtonMaster,
+                                     TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster, AdaptiveMaster)}
 
 
-def make(name: str, system: System, step: float) -> Master:
+def make(name: str, system: System, step: float, **options) -> Master:
     try:
-        return MASTERS[name](system, step)
+        cls = MASTERS[name]
     except KeyError:
         raise ValueError(f"unknown master '{name}' (known: {', '.join(MASTERS)})") from None
+    return cls(system, step, **options)

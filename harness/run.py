@@ -40,31 +40,62 @@ class RunResult:
 
 
 class Recorder:
-    """Preallocated rows of the recorded variables, filled from the system's buffers."""
+    """Preallocated rows of the recorded variables, filled from the system's buffers:
+    one numpy copy per component buffer and step, checked for non-finite values in
+    blocks (a non-finite row is found and reported with its time)."""
+
+    CHECK_EVERY = 256
 
     def __init__(self, system: System, names: list[str], n_rows: int):
         self.names = names
-        self.sources = []
-        for item in names:
-            comp, _, var = item.partition(".")
-            self.sources.append((system.buffers[comp][1], system.index[(comp, var)]))
+        # Record whole component buffers (a superset of the names), pick the names at the end.
+        self._columns = {}
+        self._copies = []
+        offset = 0
+        for comp, (_, values) in system.buffers.items():
+            if not len(values):
+                continue
+            view = np.ctypeslib.as_array(values)
+            self._copies.append((offset, offset + len(values), view))
+            for var, i in ((v, system.index[(comp, v)]) for v in system.exposed[comp]):
+                self._columns[f"{comp}.{var}"] = offset + i
+            offset += len(values)
+        missing = [n for n in names if n not in self._columns]
+        if missing:
+            raise KeyError(f"not exposed by the system: {', '.join(missing)}")
         self.times = np.empty(n_rows)
-        self.rows = np.empty((n_rows, len(names)))
+        self.rows = np.empty((n_rows, offset))
         self.count = 0
+        self._checked = 0
 
     def record(self, t: float):
+        if self.count == len(self.times):     # a variable-step run: grow
+            self.times = np.concatenate([self.times, np.empty(len(self.times))])
+            self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
         row = self.rows[self.count]
-        for k, (values, i) in enumerate(self.sources):
-            row[k] = values[i]
+        for start, stop, view in self._copies:
+            row[start:stop] = view
         self.times[self.count] = t
         self.count += 1
-        if not np.isfinite(row).all():
-            bad = [self.names[k] for k in range(len(self.names)) if not math.isfinite(row[k])]
-            raise Diverged(f"non-finite value of {', '.join(bad)} at t = {t:.6g} s")
+        if self.count - self._checked >= self.CHECK_EVERY:
+            self.check()
+
+    def check(self):
+        """Raise ``Diverged`` at the first non-finite recorded value since the last check
+        (the rows up to it are kept)."""
+        block = self.rows[self._checked:self.count, [self._columns[n] for n in self.names]]
+        finite = np.isfinite(block)
+        if not finite.all():
+            first = int(np.argmin(finite.all(axis=1)))
+            row = self._checked + first
+            bad = [n for n, ok in zip(self.names, finite[first]) if not ok]
+            self.count = row + 1
+            raise Diverged(f"non-finite value of {', '.join(bad)} at t = {self.times[row]:.6g} s")
+        self._checked = self.count
 
     def traces(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         n = self.count
-        return self.times[:n].copy(), {name: self.rows[:n, k].copy() for k, name in enumerate(self.names)}
+        return self.times[:n].copy(), {name: self.rows[:n, self._columns[name]].copy() for name in self.names}
 
 
 def recorded_names(scene: scenes.Scene) -> list[str]:
@@ -77,45 +108,60 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-             fmu_dir: Path = FMUS, progress: bool = False) -> RunResult:
+             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None) -> RunResult:
+    """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
+    (for an adaptive master: its first step); ``options`` go to the master."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
+    options = dict(options or {})
     if master not in master_family.MASTERS:
         raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = None
-    started = clock.perf_counter()
-    recorder = None
-    driver = None
+    recorder = driver = None
+    started = stepping = clock.perf_counter()
     try:
         system.initialize()
-        driver = master_family.make(master, system, step)
+        driver = master_family.make(master, system, step, **options)
         recorder = Recorder(system, names, n_steps + 1)
         recorder.record(e.start)
-        bar = _progress(n_steps, scene.name, master) if progress else None
-        for n in range(1, n_steps + 1):
-            driver.step(t_next=min(e.start + n * step, e.stop))
-            recorder.record(driver.t)
-            if bar is not None and n % 500 == 0:
-                bar.update(500)
+        bar = _progress(e.stop - e.start, scene.name, master) if progress else None
+        stepping = clock.perf_counter()
+        if driver.adaptive:
+            while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
+                driver.step(min(driver.h, e.stop - driver.t))
+                recorder.record(driver.t)
+                if bar is not None:
+                    bar.update(driver.t - bar.n)
+        else:
+            # Targets from the step count, not by summing steps: no drift in t.
+            stride = 500 if bar is not None else n_steps + 1
+            for n in range(1, n_steps + 1):
+                driver.step(t_next=min(e.start + n * step, e.stop))
+                recorder.record(driver.t)
+                if n % stride == 0:
+                    bar.update(driver.t - bar.n)
+        recorder.check()
         if bar is not None:
             bar.close()
-    except (FmuCallError, Diverged) as error:
+    except (FmuCallError, Diverged, master_family.MasterFailure) as error:
         stage = "stepping" if driver else "initialisation"
         failure = (f"{error} (master {master}, step {step:g} s"
                    + (f", after {driver.n_steps} steps" if driver else ", during initialisation") + ")")
     finally:
-        wall = clock.perf_counter() - started
+        ended = clock.perf_counter()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
+        counters["setup_time"] = stepping - started
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
-    return RunResult(scene, master, step, times, traces, wall, counters, failure, stage)
+    # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage)
 
 
-def _progress(total: int, scene: str, master: str):
+def _progress(span: float, scene: str, master: str):
     from tqdm import tqdm
-    return tqdm(total=total, desc=f"{scene} [{master}]", unit="step", unit_scale=True, leave=False,
-                mininterval=0.5)
+    return tqdm(total=span, desc=f"{scene} [{master}]", unit="s", unit_scale=False, leave=False,
+                mininterval=0.5, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")

@@ -55,11 +55,33 @@ class System:
         except Exception:
             self.free()
             raise
+        # Direct feedthrough that matters: a *connected* output depends on inputs (a
+        # shaft's acceleration depends on its torque, but nothing is wired from it).
+        connected = {(c.source, c.output) for c in scene.connections}
         self.feedthrough = {name for name, c in self.components.items()
-                            if any(u.dependencies for u in c.description.outputs)}
+                            if any(u.dependencies and (name, u.variable.name) in connected
+                                   for u in c.description.outputs)}
         # Stateful components in scene order: the order a Gauss-Seidel master steps them.
         self.stateful = [n for n in scene.components if n not in self.feedthrough]
         self._plan()
+
+    def derivative_chain(self, component: str, output: str) -> list[str]:
+        """``[output, d/dt output, d2/dt2 output, ...]`` as far as the component's model
+        description declares them (FMI's ``derivative`` attribute)."""
+        of = {v.derivative.name: v.name for v in self.components[component].description.modelVariables
+              if v.derivative is not None}
+        chain = [output]
+        while chain[-1] in of and len(chain) < 4:
+            chain.append(of[chain[-1]])
+        return chain
+
+    def expose(self, items: list[str]):
+        """Also read the outputs ``component.variable`` on every propagation (for a master
+        that needs more than the connections carry)."""
+        new = [item for item in items if item not in self.record]
+        if new:
+            self.record += new
+            self._plan()
 
     # -- wiring --------------------------------------------------------------------------------
     def _plan(self):
@@ -112,17 +134,44 @@ class System:
                     reach.add(n)
             self.downstream[name] = [n for n in order if n in reach]
 
+        self._compile()
+
+    def _compile(self):
+        """Flatten the plan into tuples of raw calls: propagation runs on every step, and
+        every Python attribute lookup on it shows in the harness's overhead."""
+        self._plan_of = {}
+        for name in self.order:
+            component = self.components[name]
+            vrs, values = self.buffers[name]
+            writes = tuple((target, target._set_real, target._handle, t_vrs, len(t_vrs), t_values,
+                            tuple(enumerate(positions)))
+                           for target, t_vrs, t_values, positions in self.writes[name])
+            self._plan_of[name] = (component, component._get_real, component._handle, vrs, len(vrs), values, writes)
+        self._full_plan = [self._plan_of[n] for n in self.order]
+        self._partial_plans = {}
+
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""
-        names = self.order if sources is None else self._downstream_of(sources)
-        for name in names:
-            vrs, values = self.buffers[name]
-            if len(vrs):
-                self.components[name].read(vrs, values)
-            for target, t_vrs, t_values, positions in self.writes[name]:
-                for k, i in enumerate(positions):
+        if sources is None:
+            plan = self._full_plan
+        else:
+            key = tuple(sources)
+            plan = self._partial_plans.get(key)
+            if plan is None:
+                plan = self._partial_plans[key] = [self._plan_of[n] for n in self._downstream_of(sources)]
+        for component, get_real, handle, vrs, n, values, writes in plan:
+            if n:
+                component.calls += 1
+                status = get_real(handle, vrs, n, values)
+                if status > 1:
+                    component._fail("fmi2GetReal", status)
+            for target, set_real, target_handle, t_vrs, t_n, t_values, pairs in writes:
+                for k, i in pairs:
                     t_values[k] = values[i]
-                target.write(t_vrs, t_values)
+                target.calls += 1
+                status = set_real(target_handle, t_vrs, t_n, t_values)
+                if status > 1:
+                    target._fail("fmi2SetReal", status)
 
     def _downstream_of(self, sources):
         if len(sources) == 1:

@@ -30,6 +30,12 @@ class Output(NamedTuple):
     name: str
     unit: str
     description: str
+    #: the output this one is the time derivative of (FMI's ``derivative`` attribute):
+    #: lets a master predict connected outputs by Taylor expansion
+    derivative_of: str = ""
+    #: inputs this output depends on directly; None: all inputs if the model has direct
+    #: feedthrough (``FEEDTHROUGH``), else none
+    depends_on: tuple | None = None
 
 
 def guarded(default=None):
@@ -323,10 +329,10 @@ class LeverSlave(Fmi2Slave):
         position = list(root).index(root.find("CoSimulation")) + 1
         root.insert(position, units)
 
-        index_of = {}
-        for i, node in enumerate(root.find("ModelVariables").findall("ScalarVariable"), start=1):
+        nodes = root.find("ModelVariables").findall("ScalarVariable")
+        index_of = {node.get("name"): i for i, node in enumerate(nodes, start=1)}
+        for node in nodes:
             name = node.get("name")
-            index_of[name] = i
             spec = self._declared.get(name)
             typed = node[0]
             if spec is None or typed.tag not in ("Real", "Integer"):
@@ -335,6 +341,8 @@ class LeverSlave(Fmi2Slave):
                 typed.set("unit", spec.unit)
                 if spec.unit in DISPLAY_UNITS:
                     typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
+            if getattr(spec, "derivative_of", ""):
+                typed.set("derivative", str(index_of[spec.derivative_of]))
             if isinstance(spec, Parameter):
                 as_text = repr if typed.tag == "Real" else (lambda x: str(int(x)))
                 if math.isfinite(spec.low):
@@ -342,16 +350,19 @@ class LeverSlave(Fmi2Slave):
                 if math.isfinite(spec.high):
                     typed.set("max", as_text(spec.high))
 
-        inputs = " ".join(str(index_of[p.name]) for p in self.INPUTS) if self.FEEDTHROUGH else ""
         structure = root.find("ModelStructure")
         for child in list(structure):
             structure.remove(child)
         outputs = SubElement(structure, "Outputs")
         initial = SubElement(structure, "InitialUnknowns")
         for o in self.OUTPUTS:
-            attrs = {"index": str(index_of[o.name]), "dependencies": inputs}
-            if inputs:
-                attrs["dependenciesKind"] = " ".join("dependent" for _ in self.INPUTS)
+            if o.depends_on is not None:
+                sources = list(o.depends_on)
+            else:
+                sources = [p.name for p in self.INPUTS] if self.FEEDTHROUGH else []
+            attrs = {"index": str(index_of[o.name]), "dependencies": " ".join(str(index_of[n]) for n in sources)}
+            if sources:
+                attrs["dependenciesKind"] = " ".join("dependent" for _ in sources)
             SubElement(outputs, "Unknown", attrs)
             SubElement(initial, "Unknown", dict(attrs))
         return root

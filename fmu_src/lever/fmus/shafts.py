@@ -10,7 +10,13 @@ from .base import LeverSlave, Output
 
 
 class _ShaftSlave(LeverSlave):
-    INPUTS = (Parameter("tau", 0.0, "N.m", "torque the coupling applies to this shaft", -1e12, 1e12, fixed=False),)
+    INPUTS = (
+        Parameter("tau", 0.0, "N.m", "torque the coupling applies to this shaft", -1e12, 1e12, fixed=False),
+        # FMI 2 input derivatives, which pythonfmu cannot take, as an input of its own: a
+        # master that knows how the torque changes over the step passes its slope here.
+        Parameter("tau_rate", 0.0, "N.m/s", "rate of change of tau over the coming step (first-order hold; "
+                  "0: tau held)", -1e15, 1e15, fixed=False, derivative_of="tau"),
+    )
     #: name of the output carrying the external torque and its work, set by subclasses
     TORQUE_OUTPUT = WORK_OUTPUT = ""
     SIGN = 1.0   # external torque on the shaft = SIGN * (reported torque)
@@ -34,7 +40,7 @@ class _ShaftSlave(LeverSlave):
         setattr(self, self.TORQUE_OUTPUT, self.SIGN * external)
 
     def _advance(self, t, h):
-        phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h)
+        phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h, self.tau_rate)
         if not (abs(phi) < 1e15 and abs(w) < 1e12):
             return (f"the shaft state became non-finite or unbounded (phi = {phi:.6g} rad, w = {w:.6g} rad/s) "
                     f"with input tau = {self.tau:.6g} N.m; the state was not updated")
@@ -45,8 +51,9 @@ class _ShaftSlave(LeverSlave):
 
 _SHAFT_OUTPUTS = (
     Output("phi", "rad", "shaft angle"),
-    Output("w", "rad/s", "shaft speed"),
-    Output("a", "rad/s2", "shaft acceleration (with the current input torque)"),
+    Output("w", "rad/s", "shaft speed", derivative_of="phi"),
+    Output("a", "rad/s2", "shaft acceleration (with the current input torque)", derivative_of="w",
+           depends_on=("tau",)),
 )
 
 

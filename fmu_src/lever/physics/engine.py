@@ -19,16 +19,42 @@ class LinearCharacteristic:
     def torque(self, t, phi, w):
         return self.stall_torque - self.slope * w
 
-    def advance(self, inertia, t, phi, w, tau, h):
-        """Exact solution over a step with constant coupling torque ``tau``:
-        ``I w' = A - K1 w`` with ``A = M1 + tau``, a first-order lag."""
+    def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
+        """Exact solution over a step with coupling torque ``tau + r s`` (``r`` =
+        ``tau_rate``): ``I w' = A + r s - K1 w`` with ``A = M1 + tau``, a first-order lag
+        driven by a ramp.  With ``x = K1 h / I`` and the exponential-integrator functions
+        ``phi_k`` (below):
+
+            w(h)   = w e^-x + (A h / I) phi_1 + (r h^2 / I) phi_2
+            phi(h) = phi + w h phi_1 + (A h^2 / I) phi_2 + (r h^3 / I) phi_3
+
+        which stays exact and well-conditioned down to ``K1 = 0``."""
         drive = self.stall_torque + tau
-        if self.slope == 0.0:
-            return phi + h * w + 0.5 * h * h * drive / inertia, w + h * drive / inertia
-        rate = self.slope / inertia
-        w_inf = drive / self.slope
-        lag = -math.expm1(-rate * h)          # 1 - exp(-rate h), accurate for small steps
-        return phi + w_inf * h + (w - w_inf) * lag / rate, w + (w_inf - w) * lag
+        x = self.slope * h / inertia
+        p1, p2, p3 = _phi_functions(x)
+        return (phi + w * h * p1 + (drive * p2 + tau_rate * h * p3) * h * h / inertia,
+                w * math.exp(-x) + (drive * p1 + tau_rate * h * p2) * h / inertia)
+
+
+def _phi_functions(x: float) -> tuple[float, float, float]:
+    """``phi_k(x) = sum_j (-x)^j / (j + k)!`` for k = 1, 2, 3: ``(1 - e^-x)/x``,
+    ``(x - 1 + e^-x)/x^2``, ``(x^2/2 - x + 1 - e^-x)/x^3``; by series where the closed
+    forms cancel."""
+    if x < 0.05:
+        terms1, terms2, terms3 = 0.0, 0.0, 0.0
+        power, factorial = 1.0, 1.0             # (-x)^j and j!
+        for j in range(10):
+            terms1 += power / (factorial * (j + 1))
+            terms2 += power / (factorial * (j + 1) * (j + 2))
+            terms3 += power / (factorial * (j + 1) * (j + 2) * (j + 3))
+            power *= -x
+            factorial *= j + 1
+        return terms1, terms2, terms3
+    decay = -math.expm1(-x)                   # 1 - e^-x
+    p1 = decay / x
+    p2 = (1.0 - p1) / x
+    p3 = (0.5 - p2) / x
+    return p1, p2, p3
 
 
 class TabulatedCharacteristic:
@@ -59,7 +85,7 @@ class TabulatedCharacteristic:
         k = min(bisect.bisect_right(ws, w) - 1, len(ws) - 2)
         return ms[k] + (ms[k + 1] - ms[k]) * (w - ws[k]) / (ws[k + 1] - ws[k])
 
-    def advance(self, inertia, t, phi, w, tau, h):
+    def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         return None  # no closed form: the shaft integrates numerically
 
 

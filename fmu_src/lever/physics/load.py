@@ -44,10 +44,11 @@ class _TimeLoad:
     def torque(self, t, phi, w):
         return -self.resistance(t, phi, w)
 
-    def advance(self, inertia, t, phi, w, tau, h):
+    def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
+        """Exact step with coupling torque ``tau + tau_rate * s``."""
         impulse, second = self.integrals(t, h)
-        return (phi + w * h + (0.5 * tau * h * h - second) / inertia,
-                w + (tau * h - impulse) / inertia)
+        return (phi + w * h + ((0.5 * tau + tau_rate * h / 6.0) * h * h - second) / inertia,
+                w + ((tau + 0.5 * tau_rate * h) * h - impulse) / inertia)
 
 
 class ConstantLoad(_TimeLoad):
@@ -186,7 +187,7 @@ class FourierLoad:
     def torque(self, t, phi, w):
         return -self.resistance(t, phi, w)
 
-    def advance(self, inertia, t, phi, w, tau, h):
+    def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         return None  # depends on the angle: the shaft integrates numerically
 
 

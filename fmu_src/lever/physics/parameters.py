@@ -31,6 +31,7 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "rpm": ({"rad": 1, "s": -1}, 2.0 * math.pi / 60.0),
     "rad/s2": ({"rad": 1, "s": -2}, 1.0),
     "N.m": ({"kg": 1, "m": 2, "s": -2}, 1.0),
+    "N.m/s": ({"kg": 1, "m": 2, "s": -3}, 1.0),
     "N.m/rad": ({"kg": 1, "m": 2, "s": -2, "rad": -1}, 1.0),
     "N.m.s/rad": ({"kg": 1, "m": 2, "s": -1, "rad": -1}, 1.0),
     "kg.m2": ({"kg": 1, "m": 2}, 1.0),
@@ -68,6 +69,8 @@ class Parameter:
     kind: str = "real"
     choices: Optional[tuple[str, ...]] = None
     fixed: bool = True  # structural: may not change after initialisation
+    #: for an input: the input this one is the time derivative of (FMI ``derivative``)
+    derivative_of: str = ""
 
     def range_text(self) -> str:
         if self.kind == "string":

@@ -1,8 +1,9 @@
 """A shaft: an inertia driven by an external torque model and the coupling torque,
 ``I * a = M_ext(t, phi, w) + tau`` (MODEL.md sections 4-5).
 
-The coupling torque ``tau`` is held constant over a communication step (that is what a
-co-simulation master gives a shaft).  Where the external torque model has a closed-form
+The coupling torque over a communication step is ``tau + tau_rate * s`` (``s`` the time
+into the step): held constant (zero-order hold, ``tau_rate = 0``) or ramped (first-order
+hold), as a co-simulation master gives it.  Where the external torque model has a closed-form
 solution (linear engine zone, loads that depend on time only) the step is exact, so the
 only error a co-simulation makes is the coupling's; otherwise classical RK4 substeps.
 """
@@ -26,28 +27,42 @@ class Shaft:
     def acceleration(self, t, phi, w, tau):
         return self.rates(t, phi, w, tau)[0]
 
-    def advance(self, t, phi, w, tau, h):
-        """State after ``h`` seconds with held ``tau``: ``(phi, w, external_work)``,
-        where ``external_work`` is the work the external torque did on the shaft in
-        the step, from the shaft's own energy balance ``dKE = W_ext + tau * dphi``."""
-        exact = self.external.advance(self.inertia, t, phi, w, tau, h)
+    def advance(self, t, phi, w, tau, h, tau_rate=0.0):
+        """State after ``h`` seconds with coupling torque ``tau + tau_rate * s``:
+        ``(phi, w, external_work)``, where ``external_work`` is the work the external
+        torque did on the shaft in the step, from the shaft's own energy balance
+        ``dKE = W_ext + W_coupling``."""
+        exact = self.external.advance(self.inertia, t, phi, w, tau, h, tau_rate)
         if exact is not None:
             phi1, w1 = exact
         else:
-            phi1, w1 = self._rk4(t, phi, w, tau, h)
-        work = 0.5 * self.inertia * (w1 * w1 - w * w) - tau * (phi1 - phi)
+            phi1, w1 = self._rk4(t, phi, w, tau, h, tau_rate)
+        coupling_work = tau * (phi1 - phi)
+        if tau_rate:
+            coupling_work += tau_rate * self._first_moment_of_speed(t, phi, w, tau, h, tau_rate, phi1, w1)
+        work = 0.5 * self.inertia * (w1 * w1 - w * w) - coupling_work
         return phi1, w1, work
 
-    def _rk4(self, t, phi, w, tau, h):
+    def _first_moment_of_speed(self, t, phi, w, tau, h, tau_rate, phi1, w1):
+        """``integral of s * w(s) ds`` over the step, from the cubic Hermite interpolant
+        of the speed (error O(h^6), far below the coupling's)."""
+        a0 = self.acceleration(t, phi, w, tau)
+        a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h)
+        return h * h * (0.15 * w + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0))
+
+    def _rk4(self, t, phi, w, tau, h, tau_rate=0.0):
         n = max(1, math.ceil(h / self.max_substep - 1e-9))
         dt = h / n
-        acc = self.acceleration
+
+        def acc(ti, p, v):
+            return self.acceleration(ti, p, v, tau + tau_rate * (ti - t))
+
         for i in range(n):
             ti = t + i * dt
-            k1p, k1w = w, acc(ti, phi, w, tau)
-            k2p, k2w = w + 0.5 * dt * k1w, acc(ti + 0.5 * dt, phi + 0.5 * dt * k1p, w + 0.5 * dt * k1w, tau)
-            k3p, k3w = w + 0.5 * dt * k2w, acc(ti + 0.5 * dt, phi + 0.5 * dt * k2p, w + 0.5 * dt * k2w, tau)
-            k4p, k4w = w + dt * k3w, acc(ti + dt, phi + dt * k3p, w + dt * k3w, tau)
+            k1p, k1w = w, acc(ti, phi, w)
+            k2p, k2w = w + 0.5 * dt * k1w, acc(ti + 0.5 * dt, phi + 0.5 * dt * k1p, w + 0.5 * dt * k1w)
+            k3p, k3w = w + 0.5 * dt * k2w, acc(ti + 0.5 * dt, phi + 0.5 * dt * k2p, w + 0.5 * dt * k2w)
+            k4p, k4w = w + dt * k3w, acc(ti + dt, phi + dt * k3p, w + dt * k3w)
             phi += dt * (k1p + 2.0 * k2p + 2.0 * k3p + k4p) / 6.0
             w += dt * (k1w + 2.0 * k2w + 2.0 * k3w + k4w) / 6.0
         return phi, w
