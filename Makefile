@@ -25,6 +25,10 @@ test: $(STAMP)
 	$(BIN)/lever build
 	$(BIN)/python -m pytest -q
 
+bench: $(STAMP)
+	$(BIN)/lever bench kavz685
+	$(BIN)/lever bench kavz685_stiff
+
 clean:
 	rm -rf results build/fmus build/tmp
 

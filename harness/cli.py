@@ -68,9 +68,12 @@ def list_scenes():
 @click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/<scene>).")
+@click.option("--tolerance", type=float, default=None,
+              help="Tolerance of an adaptive master (relative torque error per step) or of an iterative "
+                   "master's coupling iteration.")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def run(scene, assignments, master, step, out, no_reference, progress):
+def run(scene, assignments, master, step, tolerance, out, no_reference, progress):
     """Run SCENE (a name in resources/scenes or a .toml path) and write traces, plots,
     summary.json and report.md."""
     from . import masters as family
@@ -88,13 +91,21 @@ def run(scene, assignments, master, step, out, no_reference, progress):
         raise UserError(f"master '{chosen}' is unknown (known: {', '.join(family.MASTERS)})")
     if step is not None and not (math.isfinite(step) and step > 0):
         raise UserError(f"--step {step}: the communication step must be > 0 s")
+    options = {}
+    if tolerance is not None:
+        if "tolerance" not in family.MASTERS[chosen].options:
+            raise UserError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
+                            + ", ".join(n for n, m in family.MASTERS.items() if "tolerance" in m.options) + ")")
+        if not (math.isfinite(tolerance) and 0 < tolerance < 1):
+            raise UserError(f"--tolerance {tolerance}: must lie in (0, 1)")
+        options["tolerance"] = tolerance
     try:
         ensure_fmus(quiet=True)
     except RuntimeError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
-        result = simulate(spec, master, step, progress=show_progress)
+        result = simulate(spec, master, step, progress=show_progress, options=options)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     reference = None
@@ -132,6 +143,50 @@ def _print_summary(summary: dict, out: Path):
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
     click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
+
+
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
+              help="Runs per case; the median run time is quoted.")
+@click.option("--only", "only", multiple=True, metavar="MASTER", help="Bench only these masters (repeatable).")
+@click.option("--no-peers", is_flag=True, help="Leave out fmpy and libcosim.")
+@click.option("--no-monolithic", is_flag=True, help="Leave out the monolithic scipy solutions.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/bench/<scene>).")
+def bench(scene, repeats, only, no_peers, no_monolithic, out):
+    """Error against run time for every master (and peers) on SCENE: writes bench.csv,
+    bench.md, bench.json and work_precision.png."""
+    from . import bench as benchmark
+    from .masters import MASTERS
+
+    try:
+        spec = scenes.load(scene)
+        benchmark.plan(spec, list(only))
+    except (scenes.SceneError, ValueError) as error:
+        raise UserError(str(error)) from None
+    unknown = [m for m in only if m not in MASTERS]
+    if unknown:
+        raise UserError(f"--only: unknown master(s) {', '.join(unknown)}")
+    ensure_fmus(quiet=True)
+    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                             progress=click.echo)
+    out = out or benchmark.default_out(spec)
+    paths = benchmark.write(out, result)
+    click.echo("")
+    claims = result["claims"]
+    target = claims["target_error"]
+    for name, t in claims["time_at_target_s"].items():
+        click.echo(f"  at {100 * target:g} % RMS torque error: {name:26s} "
+                   + ("not reached" if t is None else f"{t:.3f} s"))
+    if claims.get("best_master"):
+        speedup = claims.get("speedup_over_baseline")
+        click.echo(f"  best master: {claims['best_master']}"
+                   + (f", {speedup:.1f}x faster than {claims['baseline']}" if speedup else ""))
+    if claims.get("overhead_above_floor"):
+        click.echo("  above the FMU-call floor: " + ", ".join(
+            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    click.echo("written: " + ", ".join(str(p) for p in paths))
 
 
 @main.command()

@@ -414,40 +414,55 @@ class IterativeMaster(Master):
         start = self._current_inputs()
         states = [component.save_state() for component in self._stateful]
         try:
-            u = self._guess(t, h, start)
-            scale = max(1.0, float(np.max(np.abs(start))))
-            tolerance = self.tolerance * scale
-            g = self._evaluate(u, t, h, states, start, rolled=False)
-            residual = g - u
-            norm = float(np.max(np.abs(residual)))
-            previous = math.inf
-            for iteration in range(self.max_iterations):
-                if norm <= tolerance:
-                    break
-                if self.solver == "newton":
-                    if self._jacobian is None or norm > 0.2 * previous:
-                        self._jacobian = self._finite_difference_jacobian(u, g, t, h, states, start, scale)
-                    u = u - np.linalg.solve(self._jacobian - np.eye(len(u)), residual)
-                else:
-                    u = g
-                previous = norm
-                g = self._evaluate(u, t, h, states, start, rolled=True)
-                self.n_iterations += 1
-                residual = g - u
-                norm = float(np.max(np.abs(residual)))
-                if not math.isfinite(norm) or (self.solver == "fixed-point" and iteration > 2 and norm > previous):
-                    break
-            if not norm <= tolerance:
-                hint = ("use a newton master or a smaller step" if self.solver == "fixed-point"
-                        else "use a smaller step")
-                raise MasterFailure(f"{self.name}: the coupling iteration did not converge in the step from "
-                                    f"t = {t:.9g} s (h = {h:.3g} s): residual {norm:.3g} N.m after "
-                                    f"{iteration + 1} iterations, tolerance {tolerance:.3g} N.m; {hint}")
+            u, _ = self._solve(t, h, states, start, self.tolerance)
         finally:
             for component, state in zip(self._stateful, states):
                 component.free_state(state)
         self._history.append((t + h, u))
         self._step_feedthrough(t, h)
+
+    def _solve(self, t, h, states, start, relative_tolerance):
+        """Iterate the held torques of the step from ``t`` to convergence; the stateful
+        components end at ``t + h`` stepped with them.  Returns ``(u, first guess)``."""
+        guess = self._guess(t, h, start)
+        u = guess
+        scale = max(1.0, float(np.max(np.abs(start))))
+        tolerance = relative_tolerance * scale
+        g = self._evaluate(u, t, h, states, start, rolled=False)
+        residual = g - u
+        norm = float(np.max(np.abs(residual)))
+        previous = math.inf
+        iteration = 0
+        for iteration in range(self.max_iterations):
+            if norm <= tolerance:
+                break
+            if self.solver == "newton":
+                # A finite-difference Jacobian at the first step, and again when the
+                # iteration stalls; Broyden's secant updates keep it current otherwise
+                # (the step size and the transfer ratio change it from step to step).
+                if self._jacobian is None or norm > 0.5 * previous:
+                    self._jacobian = self._finite_difference_jacobian(u, g, t, h, states, start, scale)
+                change = -np.linalg.solve(self._jacobian - np.eye(len(u)), residual)
+            else:
+                change = g - u
+            previous = norm
+            u_new = u + change
+            g_new = self._evaluate(u_new, t, h, states, start, rolled=True)
+            self.n_iterations += 1
+            if self.solver == "newton":
+                secant = g_new - g
+                self._jacobian = self._jacobian + np.outer(secant - self._jacobian @ change, change) / float(change @ change)
+            u, g = u_new, g_new
+            residual = g - u
+            norm = float(np.max(np.abs(residual)))
+            if not math.isfinite(norm) or (self.solver == "fixed-point" and iteration > 2 and norm > previous):
+                break
+        if not norm <= tolerance:
+            hint = "use a newton master or a smaller step" if self.solver == "fixed-point" else "use a smaller step"
+            raise MasterFailure(f"{self.name}: the coupling iteration did not converge in the step from "
+                                f"t = {t:.9g} s (h = {h:.3g} s): residual {norm:.3g} N.m after "
+                                f"{iteration + 1} iterations, tolerance {tolerance:.3g} N.m; {hint}")
+        return u, guess
 
     def _finite_difference_jacobian(self, u, g, t, h, states, start, scale):
         self.n_jacobians += 1
@@ -487,6 +502,74 @@ class TrapezoidalNewtonMaster(IterativeMaster):
     order = 2
     scheme, solver = "trapezoidal", "newton"
     description = "trapezoidal coupling (mean of both ends' torques), Newton iteration with rollback"
+
+
+class AdaptiveTrapezoidalMaster(TrapezoidalNewtonMaster):
+    """``trapezoidal-newton`` with the step chosen by an error estimate, for stiff
+    couplings: the converged torques against the first guess (linear extrapolation of
+    the last ones).  Their errors are h^2/12 and 5h^2/12 times the torque's second
+    derivative, so the held torque's error is a sixth of their difference; relative to
+    the torque scale it is compared with ``tolerance``.  Steps above tolerance are
+    rolled back and retried shorter; a PI controller proposes the next.  Short steps
+    where the stiff mode rings, long ones (h * omega_n >> 1) where the motion is smooth:
+    the trapezoidal coupling is stable at any step."""
+
+    name = "adaptive-trapezoidal"
+    order = 2
+    adaptive = True
+    description = "trapezoidal coupling (Newton, rollback) with error-controlled steps, for stiff couplings"
+    options = {"tolerance": 1e-3, "iteration_tolerance": 1e-7, "max_iterations": 30, "min_step": 1e-8,
+               "max_step": None}
+
+    SAFETY, GROWTH, SHRINK = 0.8, 3.0, 0.2
+    K_I, K_P = 0.3 / 2.0, 0.4 / 2.0
+
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
+            raise ValueError(f"option 'tolerance' = {self.tolerance!r} is outside its allowed range (0, 1) "
+                             "(relative torque error)")
+        self.max_step = float(self.max_step) if self.max_step else (self.t_end - self.t) / 50.0
+        self.h = min(self.h, self.max_step)
+        self._previous_error = 1.0
+        self._scale = 0.0
+
+    def _step_impl(self, t, h):
+        h = min(h, self.h)
+        if self.t_end - (t + h) < 0.25 * h:
+            h = self.t_end - t
+        start = self._current_inputs()
+        self._scale = max(self._scale, float(np.max(np.abs(start))))
+        while True:
+            states = [component.save_state() for component in self._stateful]
+            try:
+                try:
+                    u, guess = self._solve(t, h, states, start, self.iteration_tolerance)
+                    scale = max(self._scale, float(np.max(np.abs(u)))) or 1.0
+                    fraction = 1.0 / 6.0 if len(self._history) >= 2 else 0.5
+                    error = fraction * float(np.max(np.abs(u - guess))) / (self.tolerance * scale)
+                except MasterFailure:
+                    if h <= self.min_step:
+                        raise
+                    error = 1.0 / self.SHRINK ** 3      # not converged: shrink hard and retry
+                if error <= 1.0 or h <= self.min_step:
+                    break
+                for component, state in zip(self._stateful, states):
+                    component.restore_state(state, t)
+                self.n_rollbacks += 1
+                self.n_rejected += 1
+                h = max(self.min_step, h * max(self.SHRINK, self.SAFETY * error ** -0.5))
+                self.system.propagate()
+            finally:
+                for component, state in zip(self._stateful, states):
+                    component.free_state(state)
+        self._history.append((t + h, u))
+        self._step_feedthrough(t, h)
+        error = max(error, 1e-10)
+        factor = self.SAFETY * error ** -self.K_I * (self._previous_error / error) ** self.K_P
+        self._previous_error = error
+        self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
+        return h
 
 
 # -- adaptive step size ----------------------------------------------------------------------------
@@ -608,7 +691,8 @@ def _unit(component, name):
 MASTERS = {cls.name: cls for cls in (JacobiMaster, GaussSeidelMaster, LinearExtrapolationMaster,
                                      QuadraticExtrapolationMaster, MidpointPredictionMaster,
                                      ImplicitFixedPointMaster, ImplicitNewtonMaster,
-                                     TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster, AdaptiveMaster)}
+                                     TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster, AdaptiveMaster,
+                                     AdaptiveTrapezoidalMaster)}
 
 
 def make(name: str, system: System, step: float, **options) -> Master:

@@ -86,20 +86,32 @@ def statistics(times: np.ndarray, traces: dict, names: list[str], transient: flo
 
 
 def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, reference: dict, names: list[str],
-           scales: dict[str, float]) -> dict:
+           scales: dict[str, float], after: float | None = None) -> dict:
     """RMS and max error of each signal against the reference, absolute and relative to
-    ``scales[name]`` (the scene's mean torque for torques, mean speed for speeds)."""
+    ``scales[name]`` (the scene's mean torque for torques, mean speed for speeds).  The
+    RMS is a time average (trapezoidal weights), so variable-step runs are judged by the
+    same measure as fixed-step ones; ``after`` leaves out the times before it."""
     out = {}
     n = min(len(times), len(reference_times))
     if n == 0:
         return out
     if not np.allclose(times[:n], reference_times[:n], rtol=0, atol=1e-9):
         raise ValueError("co-simulation and reference are not on the same time grid")
+    keep = slice(0, n) if after is None else np.flatnonzero(times[:n] >= after)
+    t = times[:n][keep]
+    if len(t) == 0:
+        return out
+    if len(t) > 1:
+        dt = np.diff(t)
+        weights = np.concatenate([[dt[0] / 2], (dt[1:] + dt[:-1]) / 2, [dt[-1] / 2]])
+        weights /= weights.sum()
+    else:
+        weights = np.ones(1)
     for name in names:
         if name not in traces or name not in reference:
             continue
-        diff = traces[name][:n] - reference[name][:n]
-        rms = float(np.sqrt(np.mean(diff ** 2)))
+        diff = traces[name][:n][keep] - reference[name][:n][keep]
+        rms = float(np.sqrt(np.dot(weights, diff ** 2)))
         peak = float(np.max(np.abs(diff)))
         scale = scales.get(name, 1.0)
         out[name] = {"rms": rms, "max": peak, "rms_relative": rms / scale, "max_relative": peak / scale,

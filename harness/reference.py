@@ -69,11 +69,12 @@ def _shaft_rates(shaft, t, phi, w, tau):
     return np.array(a), np.array(external)
 
 
-def cache_key(scene: scenes.Scene, times: np.ndarray) -> str:
+def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
+              method: str = "DOP853") -> str:
     payload = {
         "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in sorted(scene.components.items())},
         "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
-        "rtol": RTOL, "atol": ATOL,
+        "rtol": rtol, "atol": atol, "method": method,
         "physics": _physics_hash(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
@@ -87,10 +88,13 @@ def _physics_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Reference:
-    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...)."""
+def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+          atol: float = ATOL, method: str = "DOP853") -> Reference:
+    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
+    Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
+    benchmark compares the masters with."""
     engine_name, coupling_name, load_name = _roles(scene)
-    key = cache_key(scene, times)
+    key = cache_key(scene, times, rtol, atol, method)
     path = CACHE / f"reference-{scene.name}-{key}.npz"
     if use_cache and path.exists():
         data = np.load(path, allow_pickle=False)
@@ -117,7 +121,7 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Ref
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
     solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), [phi1, w1, phi2, w2, 0.0, 0.0, 0.0],
-                         method="DOP853", t_eval=times, rtol=RTOL, atol=ATOL,
+                         method=method, t_eval=times, rtol=rtol, atol=atol,
                          first_step=min(1e-4, 0.1 / omega))
     wall = clock.perf_counter() - started
     if not solution.success:
@@ -137,7 +141,7 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True) -> Ref
         f"{c}.theta": np.asarray(r.deflection), f"{c}.elastic_energy": np.asarray(r.energy),
         f"{c}.dissipated_power": np.asarray(r.dissipation), f"{c}.dissipated_energy": dissipated,
     }
-    reference = Reference(t, traces, wall, int(solution.nfev), f"DOP853 rtol={RTOL:g} atol={ATOL:g}")
+    reference = Reference(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
         CACHE.mkdir(parents=True, exist_ok=True)
         meta = json.dumps({"wall_time": wall, "n_rhs": reference.n_rhs, "method": reference.method})

@@ -66,6 +66,8 @@ class Scene:
     features: set[str]
     path: Path | None = None
     notes: str = ""
+    #: the work-precision benchmark's plan for this scene (``[bench]`` table; see harness.bench)
+    bench: dict = field(default_factory=dict)
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
@@ -170,7 +172,7 @@ def load(name_or_path: str | Path) -> Scene:
     return Scene(name=data.get("name", path.stem), description=data.get("description", ""),
                  components=components, connections=connections, experiment=experiment,
                  record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
-                 notes=data.get("notes", ""))
+                 notes=data.get("notes", ""), bench=dict(data.get("bench", {})))
 
 
 def parse_connection(text: str) -> Connection:

@@ -1,0 +1,61 @@
+"""The work-precision benchmark: its interpolation, and a small end-to-end run that
+writes every artefact."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import pytest
+
+from harness import bench, scene
+from harness.bench import Case
+
+
+@pytest.fixture(autouse=True)
+def _fmus(fmu_dir):
+    return fmu_dir
+
+
+def _case(wall, error, engine="m"):
+    c = Case(engine, "master", 1e-3, wall_times=[wall], errors={"tau_rms": error})
+    return c
+
+
+def test_time_at_error_interpolates_log_log():
+    cases = [_case(1.0, 1e-2), _case(4.0, 1e-4)]
+    assert bench.time_at_error(cases, 1e-3) == pytest.approx(2.0)
+    assert bench.time_at_error(cases, 1e-2) == pytest.approx(1.0)
+    assert bench.time_at_error(cases, 1e-5) is None           # never reached
+    assert bench.time_at_error(cases, 1.0) == pytest.approx(1.0)
+
+
+def test_failed_runs_are_left_out_of_the_curves():
+    failed = Case("m", "master", 1e-3, wall_times=[0.1], failure="diverged")
+    assert bench.time_at_error([failed, _case(2.0, 1e-4)], 1e-3) == pytest.approx(2.0)
+
+
+def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.3", "experiment.transient=0.1"])
+    spec.bench = {"steps": {"jacobi": [2e-3, 1e-3], "jacobi-quadratic": [2e-3]},
+                  "tolerances": {"adaptive": [1e-2]}, "target_error": 5e-3, "monolithic_rtol": [1e-6]}
+    result = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False)
+    paths = bench.write(tmp_path, result)
+    assert {p.name for p in paths} == {"bench.csv", "bench.json", "bench.md", "work_precision.png"}
+    rows = list(csv.DictReader(open(tmp_path / "bench.csv")))
+    assert [r["engine"] for r in rows] == ["jacobi", "jacobi", "jacobi-quadratic", "adaptive", "monolithic"]
+    jacobi = [r for r in rows if r["engine"] == "jacobi"]
+    assert float(jacobi[1]["tau_rms"]) < float(jacobi[0]["tau_rms"])   # smaller step, smaller error
+    assert all(float(r["overhead_above_floor"]) > -0.5 for r in jacobi)
+    claims = json.loads((tmp_path / "bench.json").read_text())["claims"]
+    assert claims["time_at_target_s"]["jacobi-quadratic"] is not None
+    assert claims["best_master"] in ("jacobi-quadratic", "adaptive", "jacobi")
+    assert math.isfinite(result["floor_per_step_s"]) and result["floor_per_step_s"] > 0
+    assert "At an RMS torque error" in (tmp_path / "bench.md").read_text()
+
+
+def test_bench_plan_refuses_unknown_masters():
+    spec = scene.load("kavz685")
+    spec.bench = {"steps": {"no-such-master": [1e-3]}}
+    with pytest.raises(ValueError, match="no-such-master"):
+        bench.plan(spec)

@@ -1,0 +1,135 @@
+"""Masters that roll back: the state round trip they rely on, the implicit couplings'
+stability and energy behaviour on a stiff undamped coupling, and the adaptive masters'
+tolerances."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from harness import masters, metrics, reference, run, scene
+from harness.component import Component
+from harness.system import System
+
+STIFF_SHORT = ["experiment.stop=0.5", "experiment.transient=0.2"]
+
+
+@pytest.fixture(autouse=True)
+def _fmus(fmu_dir):
+    return fmu_dir
+
+
+def _tau_error(spec, result, after=None):
+    ref = reference.solve(spec, result.times)
+    e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau1", "coupling.tau2"],
+                       metrics.error_scales(spec, ref.traces), after=after)
+    return max(v["rms_relative"] for v in e.values())
+
+
+def test_rollback_restores_a_shaft_exactly(fmu_dir):
+    """Step, roll back, step again (also with a ramped torque): identical outputs, bit
+    for bit, through the raw state calls the masters use."""
+    shaft = Component("load", f"{fmu_dir}/LoadShaft.fmu")
+    try:
+        shaft.set_parameters({"seed": 5, "random_amplitude": 20.0})
+        shaft.initialize(0.0, 1.0)
+        shaft.exit_initialization()
+        vrs, values = shaft.real_buffer(["tau", "tau_rate"])
+        names = ["phi", "w", "a", "load_torque", "load_work"]
+
+        def steps(t0, n, h=2e-3):
+            out = []
+            for k in range(n):
+                values[0], values[1] = 100.0 + 7.0 * k, 3.0e3 * (-1) ** k
+                shaft.write(vrs, values)
+                shaft.do_step(t0 + k * h, h)
+                out.append(shaft.get(names))
+            return out
+
+        steps(0.0, 10)
+        saved = shaft.save_state()
+        first = steps(0.02, 10)
+        for _ in range(3):        # a master may roll back many times from one saved state
+            shaft.restore_state(saved, 0.02)
+            assert steps(0.02, 10) == first
+        shaft.free_state(saved)
+    finally:
+        shaft.free()
+
+
+def test_iterative_masters_reach_their_tolerance_every_step():
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.2", "experiment.transient=0"])
+    for name in ("implicit-fixed-point", "trapezoidal-newton"):
+        result = run.simulate(spec, name, 1e-3, options={"tolerance": 1e-9})
+        assert result.ok, result.failure
+        assert result.counters["rollbacks"] >= result.counters["steps"] / 2
+
+
+def test_fixed_point_iteration_fails_clearly_on_a_stiff_coupling():
+    spec = scene.load("kavz685_stiff").with_overrides(STIFF_SHORT)
+    result = run.simulate(spec, "trapezoidal-fixed-point", 5e-3)
+    assert not result.ok
+    assert "did not converge" in result.failure and "newton" in result.failure
+    assert "t = 0 s" in result.failure and len(result.times) == 1    # kept what it had
+
+
+def test_zero_order_hold_diverges_on_the_stiff_coupling_and_says_where():
+    spec = scene.load("kavz685_stiff").with_overrides(STIFF_SHORT)
+    result = run.simulate(spec, "jacobi", 5e-4)
+    assert not result.ok and result.failure_stage == "stepping"
+    assert "outside its allowed range" in result.failure and "jacobi" in result.failure
+    assert 0 < len(result.times) < 1001 and np.isfinite(result.traces["coupling.tau2"]).all()
+
+
+def test_trapezoidal_coupling_is_stable_far_beyond_the_eigenfrequency():
+    spec = scene.load("kavz685_stiff").with_overrides(STIFF_SHORT)
+    omega = 1184.0
+    h = 5e-3
+    assert h * omega >= 5
+    result = run.simulate(spec, "trapezoidal-newton", h)
+    assert result.ok, result.failure
+    balance = metrics.energy_balance(spec, result.times, result.traces)
+    assert balance["residual_relative"] < 1e-4
+    assert np.all(np.abs(result.traces["coupling.tau2"]) < 1e3)
+
+
+def test_trapezoidal_coupling_conserves_the_spring_energy():
+    """Undamped linear spring at a constant ratio (synchronous coupling), constant load:
+    the shafts receive exactly what the spring gives, so the energy residual is the
+    iteration's, whatever the step; the explicit Jacobi master's is not."""
+    spec = scene.load("kavz685_stiff").with_overrides(
+        STIFF_SHORT + ["coupling.transfer_mode=synchronous", "load.load_kind=constant", "coupling.stiffness=2e4"])
+    trapezoidal = run.simulate(spec, "trapezoidal-newton", 2e-3, options={"tolerance": 1e-12})
+    assert trapezoidal.ok, trapezoidal.failure
+    residual = metrics.energy_balance(spec, trapezoidal.times, trapezoidal.traces)["residual_relative"]
+    jacobi = run.simulate(spec, "jacobi", 2e-5)
+    jacobi_residual = metrics.energy_balance(spec, jacobi.times, jacobi.traces)["residual_relative"]
+    assert residual < 1e-8 and residual < jacobi_residual / 100, (residual, jacobi_residual)
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-3])
+def test_adaptive_master_meets_its_tolerance_on_kavz(tolerance):
+    spec = scene.load("kavz685")
+    result = run.simulate(spec, "adaptive", 1e-3, options={"tolerance": tolerance})
+    assert result.ok, result.failure
+    assert _tau_error(spec, result) <= tolerance
+    steps = np.diff(result.times)
+    # It takes short steps in the start-up transient and long ones afterwards.
+    assert np.median(steps[result.times[1:] < 0.02]) < np.median(steps[result.times[1:] > 2.0]) / 2
+
+
+def test_adaptive_trapezoidal_meets_its_tolerance_on_the_stiff_start():
+    spec = scene.load("kavz685_stiff").with_overrides(STIFF_SHORT)
+    result = run.simulate(spec, "adaptive-trapezoidal", 1e-3, options={"tolerance": 3e-3})
+    assert result.ok, result.failure
+    assert _tau_error(spec, result) <= 3e-2     # local control: the global error within 10x
+    assert np.max(np.diff(result.times)) * 1184 > 1.0   # and steps past the explicit limit
+
+
+def test_master_options_are_checked():
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.01", "experiment.transient=0"])
+    with pytest.raises(ValueError, match="takes no option"):
+        run.simulate(spec, "jacobi", 1e-3, options={"tolerance": 1e-3})
+    with pytest.raises(ValueError, match="tolerance"):
+        run.simulate(spec, "adaptive", 1e-3, options={"tolerance": 2.0})

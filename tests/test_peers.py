@@ -1,0 +1,48 @@
+"""Peers for the benchmark: fmpy's plain stepping reproduces the harness's Jacobi
+exactly, libcosim runs our FMUs (fixed step and ECCO) and lands near the reference."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness import metrics, peers, reference, run, scene
+
+SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
+
+
+@pytest.fixture(autouse=True)
+def _fmus(fmu_dir):
+    return fmu_dir
+
+
+def test_all_peers_are_available():
+    assert {name: peers.available(name) for name in peers.PEERS} == {name: None for name in peers.PEERS}
+
+
+def test_fmpy_jacobi_is_the_harness_jacobi(fmu_dir):
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    ours = run.simulate(spec, "jacobi", 1e-3, fmu_dir)
+    theirs = peers.simulate_peer("fmpy-jacobi", spec, 1e-3, fmu_dir)
+    assert theirs.ok, theirs.failure
+    assert np.array_equal(ours.times, theirs.times)
+    for name in ("engine.w", "load.w", "coupling.tau1", "coupling.tau2"):
+        assert np.array_equal(ours.traces[name], theirs.traces[name]), name
+
+
+@pytest.mark.parametrize("name, tolerance", [("libcosim-fixed", None), ("libcosim-ecco", 1e-2)])
+def test_libcosim_runs_our_fmus(name, tolerance, fmu_dir):
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    result = peers.simulate_peer(name, spec, 5e-4, fmu_dir, tolerance=tolerance)
+    assert result.ok, result.failure
+    assert result.times[0] == 0.0 and result.times[-1] >= 0.3 - 1e-9
+    ref = reference.solve(spec, result.times)
+    e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["engine.w", "coupling.tau2"],
+                       metrics.error_scales(spec, ref.traces))
+    assert e["engine.w"]["rms_relative"] < 1e-2 and e["coupling.tau2"]["rms_relative"] < 5e-2, e
+
+
+def test_libcosim_reports_a_refused_parameter_instead_of_crashing(fmu_dir):
+    spec = scene.load("kavz685").with_overrides(SHORT + ["coupling.transfer_mode=bogus"])
+    result = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)
+    assert not result.ok and result.failure_stage == "initialisation"
+    assert "transfer_mode" in result.failure
