@@ -206,6 +206,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._weights_cache: dict = {}
         self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
                                   for n in system.stateful)
+        self._all_components = list(system.components.values())
+        self._held_plan = system.held_plan({target.name for target, _, _ in self._inputs})
 
     def _hold(self, t, h, points):
         """Write the inputs for the step ``[t, t + h]`` from the polynomial through
@@ -252,7 +254,10 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             self._start_step(t, h, points)
         else:
             self._hold(t, h, points)
-            super()._step_impl(t, h)
+            for component in self._all_components:
+                component.do_step(t, h)
+            # The shafts' torques are written by the next _hold: only fill the buffers.
+            self.system.propagate_with(self._held_plan)
         self._history.append((t, start))
 
     def _start_step(self, t, h, points):

@@ -150,6 +150,35 @@ class System:
         self._full_plan = [self._plan_of[n] for n in self.order]
         self._partial_plans = {}
 
+    def held_plan(self, held: set[str]):
+        """A propagation plan that fills the input buffers of the components in ``held``
+        but does not send them: for a master that writes those inputs itself before the
+        next step (saves two FMI calls a step on a driveline)."""
+        plan = []
+        for component, get_real, handle, vrs, n, values, writes in self._full_plan:
+            kept = tuple(w for w in writes if w[0].name not in held)
+            copied = tuple((w[5], w[6]) for w in writes if w[0].name in held)
+            plan.append((component, get_real, handle, vrs, n, values, kept, copied))
+        return plan
+
+    def propagate_with(self, plan):
+        for component, get_real, handle, vrs, n, values, writes, copied in plan:
+            if n:
+                component.calls += 1
+                status = get_real(handle, vrs, n, values)
+                if status > 1:
+                    component._fail("fmi2GetReal", status)
+            for t_values, pairs in copied:
+                for k, i in pairs:
+                    t_values[k] = values[i]
+            for target, set_real, target_handle, t_vrs, t_n, t_values, pairs in writes:
+                for k, i in pairs:
+                    t_values[k] = values[i]
+                target.calls += 1
+                status = set_real(target_handle, t_vrs, t_n, t_values)
+                if status > 1:
+                    target._fail("fmi2SetReal", status)
+
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""
         if sources is None:

@@ -253,7 +253,7 @@ def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
     assert summary["error_vs_reference"]["tau2"]["rms_relative"] < 1e-2
     assert abs(summary["energy_balance"]["residual_relative"]) < 1e-3
     rows = (out / "traces.csv").read_text().splitlines()
-    assert len(rows) == 1 + 1001   # header + 0 ... 0.5 s at the scene's 5e-4 s
+    assert len(rows) == 1 + 501    # header + 0 ... 0.5 s at the scene's 1e-3 s
     assert "report.md" in result.output
     report = (out / "report.md").read_text()
     assert "kavz685" in report and "Energy balance" in report
