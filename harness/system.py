@@ -146,7 +146,9 @@ class System:
             writes = tuple((target, target._set_real, target._handle, t_vrs, len(t_vrs), t_values,
                             tuple(enumerate(positions)))
                            for target, t_vrs, t_values, positions in self.writes[name])
-            self._plan_of[name] = (component, component._get_real, component._handle, vrs, len(vrs), values, writes)
+            # the last field: buffers filled but not sent (see held_plan)
+            self._plan_of[name] = (component, component._get_real, component._handle, vrs, len(vrs), values, writes,
+                                   ())
         self._full_plan = [self._plan_of[n] for n in self.order]
         self._partial_plans = {}
 
@@ -155,13 +157,14 @@ class System:
         but does not send them: for a master that writes those inputs itself before the
         next step (saves two FMI calls a step on a driveline)."""
         plan = []
-        for component, get_real, handle, vrs, n, values, writes in self._full_plan:
+        for component, get_real, handle, vrs, n, values, writes, _ in self._full_plan:
             kept = tuple(w for w in writes if w[0].name not in held)
             copied = tuple((w[5], w[6]) for w in writes if w[0].name in held)
             plan.append((component, get_real, handle, vrs, n, values, kept, copied))
         return plan
 
     def propagate_with(self, plan):
+        """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
         for component, get_real, handle, vrs, n, values, writes, copied in plan:
             if n:
                 component.calls += 1
@@ -188,19 +191,7 @@ class System:
             plan = self._partial_plans.get(key)
             if plan is None:
                 plan = self._partial_plans[key] = [self._plan_of[n] for n in self._downstream_of(sources)]
-        for component, get_real, handle, vrs, n, values, writes in plan:
-            if n:
-                component.calls += 1
-                status = get_real(handle, vrs, n, values)
-                if status > 1:
-                    component._fail("fmi2GetReal", status)
-            for target, set_real, target_handle, t_vrs, t_n, t_values, pairs in writes:
-                for k, i in pairs:
-                    t_values[k] = values[i]
-                target.calls += 1
-                status = set_real(target_handle, t_vrs, t_n, t_values)
-                if status > 1:
-                    target._fail("fmi2SetReal", status)
+        self.propagate_with(plan)
 
     def _downstream_of(self, sources):
         if len(sources) == 1:
