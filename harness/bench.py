@@ -113,14 +113,16 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
 
-def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
-    case = Case(name, "master", step, tolerance)
-    options = {"tolerance": tolerance} if tolerance is not None else {}
+def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
+    """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
+    judge the first run (runs are deterministic), stop at a failure or a long run."""
     for attempt in range(repeats):
-        result = simulate(scene, name, step, fmu_dir, options=options)
+        result: RunResult = run_once()
         case.wall_times.append(result.wall_time)
         if attempt == 0:
-            case.steps = int(result.counters.get("steps", 0))
+            # a master counts its accepted steps; a peer, its communication points
+            case.steps = (int(result.counters.get("steps", 0)) if case.kind == "master"
+                          else max(0, len(result.times) - 1))
             case.fmu_calls = int(result.counters.get("fmu_calls", 0))
             case.rollbacks = int(result.counters.get("rollbacks", 0))
             if not result.ok:
@@ -132,6 +134,12 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
     return case
 
 
+def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
+    options = {"tolerance": tolerance} if tolerance is not None else {}
+    return _measure(Case(name, "master", step, tolerance), scene,
+                    lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s)
+
+
 def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
     from . import peers
     case = Case(name, "peer", step, tolerance)
@@ -139,18 +147,8 @@ def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Ca
     if reason:
         case.failure = f"not run: {reason}"
         return case
-    for attempt in range(repeats):
-        result: RunResult = peers.simulate_peer(name, scene, step, fmu_dir, tolerance=tolerance)
-        case.wall_times.append(result.wall_time)
-        if attempt == 0:
-            case.steps = max(0, len(result.times) - 1)
-            if not result.ok:
-                case.failure = result.failure
-                break
-            _judge(case, scene, result.times, result.traces)
-        if result.wall_time > limit_s:
-            break
-    return case
+    return _measure(case, scene, lambda: peers.simulate_peer(name, scene, step, fmu_dir, tolerance=tolerance),
+                    repeats, limit_s)
 
 
 def run_monolithic(scene, rtol, grid_step, repeats) -> Case:

@@ -62,6 +62,7 @@ class Master:
         self.n_rollbacks = 0
         self.n_iterations = 0
         self.n_rejected = 0
+        self._stateful = [system.components[n] for n in system.stateful]
 
     @property
     def fmu_calls(self) -> int:
@@ -105,6 +106,19 @@ class Master:
             names = [rate_of.get(vr) for vr in vrs]
             out.append(target.real_buffer(names) if all(names) else None)
         return out
+
+    # Full FMU states of the stateful components, for masters that roll back.
+    def _save_states(self) -> list:
+        return [component.save_state() for component in self._stateful]
+
+    def _restore_states(self, states, t):
+        for component, state in zip(self._stateful, states):
+            component.restore_state(state, t)
+        self.n_rollbacks += 1
+
+    def _free_states(self, states):
+        for component, state in zip(self._stateful, states):
+            component.free_state(state)
 
     def _step_stateful(self, t, h):
         components = self.system.components
@@ -265,23 +279,19 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         with what extrapolation there is, then roll back and step again with the
         polynomial that also passes through the torques found at the end of the step,
         ``degree + 1`` times over (each pass gains an order)."""
-        stateful = [self.system.components[n] for n in self.system.stateful]
-        states = [component.save_state() for component in stateful]
+        states = self._save_states()
         try:
             through = points
             for iteration in range(self.degree + 2):
                 if iteration:
-                    for component, state in zip(stateful, states):
-                        component.restore_state(state, t)
-                    self.n_rollbacks += 1
+                    self._restore_states(states, t)
                     self.n_iterations += 1
                 self._hold(t, h, through)
                 self._step_stateful(t, h)
                 self.system.propagate()
                 through = points + [(t + h, [list(values) for _, _, values in self._inputs])]
         finally:
-            for component, state in zip(stateful, states):
-                component.free_state(state)
+            self._free_states(states)
         self._step_feedthrough(t, h)
 
 
@@ -376,10 +386,20 @@ class IterativeMaster(Master):
     solver = "newton"
     options = {"tolerance": 1e-7, "max_iterations": 30}
 
+    #: scheme -> (order, what the shafts hold)
+    SCHEMES = {"implicit": (1, "end-of-step torques"), "trapezoidal": (2, "mean of both ends' torques")}
+
+    def __init_subclass__(cls, **kwargs):
+        """A subclass that picks a scheme and a solver is named and described by them."""
+        super().__init_subclass__(**kwargs)
+        if "scheme" in cls.__dict__ or "solver" in cls.__dict__:
+            cls.order, held = cls.SCHEMES[cls.scheme]
+            cls.name = f"{cls.scheme}-{cls.solver}"
+            cls.description = f"{cls.scheme} coupling ({held}), {cls.solver} iteration with rollback"
+
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
         self._inputs = self._coupled_inputs()
-        self._stateful = [system.components[n] for n in system.stateful]
         self._history: deque = deque(maxlen=2)
         self._jacobian = None       # d G / d u, reused while it serves
         self.n_jacobians = 0
@@ -395,9 +415,7 @@ class IterativeMaster(Master):
         """Step the stateful components from their saved ``states`` holding ``u`` and
         return ``G(u)``; ``rolled`` says whether they must be rolled back first."""
         if rolled:
-            for component, state in zip(self._stateful, states):
-                component.restore_state(state, t)
-            self.n_rollbacks += 1
+            self._restore_states(states, t)
         k = 0
         for target, vrs, values in self._inputs:
             for i in range(len(values)):
@@ -417,12 +435,11 @@ class IterativeMaster(Master):
 
     def _step_impl(self, t, h):
         start = self._current_inputs()
-        states = [component.save_state() for component in self._stateful]
+        states = self._save_states()
         try:
             u, _ = self._solve(t, h, states, start, self.tolerance)
         finally:
-            for component, state in zip(self._stateful, states):
-                component.free_state(state)
+            self._free_states(states)
         self._history.append((t + h, u))
         self._step_feedthrough(t, h)
 
@@ -482,34 +499,72 @@ class IterativeMaster(Master):
 
 
 class ImplicitFixedPointMaster(IterativeMaster):
-    name = "implicit-fixed-point"
-    order = 1
     scheme, solver = "implicit", "fixed-point"
-    description = "implicit coupling (end-of-step torques), fixed-point iteration with rollback"
 
 
 class ImplicitNewtonMaster(IterativeMaster):
-    name = "implicit-newton"
-    order = 1
     scheme, solver = "implicit", "newton"
-    description = "implicit coupling (end-of-step torques), Newton iteration with rollback"
 
 
 class TrapezoidalFixedPointMaster(IterativeMaster):
-    name = "trapezoidal-fixed-point"
-    order = 2
     scheme, solver = "trapezoidal", "fixed-point"
-    description = "trapezoidal coupling (mean of both ends' torques), fixed-point iteration with rollback"
 
 
 class TrapezoidalNewtonMaster(IterativeMaster):
-    name = "trapezoidal-newton"
-    order = 2
     scheme, solver = "trapezoidal", "newton"
-    description = "trapezoidal coupling (mean of both ends' torques), Newton iteration with rollback"
 
 
-class AdaptiveTrapezoidalMaster(TrapezoidalNewtonMaster):
+class _StepControl:
+    """Error-controlled step size, shared by the adaptive masters: a step whose error
+    estimate (relative to ``tolerance``) exceeds 1 is rolled back and retried shorter,
+    and a PI controller (Gustafsson's gains) proposes the next one.  ``ESTIMATE_ORDER``
+    is the power of ``h`` the estimate scales with."""
+
+    adaptive = True
+    SAFETY, GROWTH, SHRINK = 0.8, 3.0, 0.2
+    ESTIMATE_ORDER = 2
+
+    def _init_control(self):
+        if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
+            raise ValueError(f"option 'tolerance' = {self.tolerance!r} is outside its allowed range (0, 1) "
+                             "(relative torque error)")
+        self.max_step = float(self.max_step) if self.max_step else (self.t_end - self.t) / 50.0
+        self.h = min(self.h, self.max_step)
+        self._previous_error = 1.0
+        self._scale = 0.0
+
+    def _clip(self, t, h):
+        h = min(h, self.h)
+        if self.t_end - (t + h) < 0.25 * h:        # do not leave a sliver before the end
+            h = self.t_end - t
+        return h
+
+    def _controlled_step(self, t, h, attempt):
+        """Step from ``t`` with ``attempt(h, states)`` (it steps the stateful components
+        and returns ``(error, result)``) until the error is within tolerance or ``h`` at
+        ``min_step``; propose the next step.  Returns ``(h, error, result)``."""
+        states = self._save_states()
+        try:
+            while True:
+                error, result = attempt(h, states)
+                if error <= 1.0 or h <= self.min_step:
+                    break
+                self._restore_states(states, t)
+                self.n_rejected += 1
+                shrink = max(self.SHRINK, self.SAFETY * error ** (-1.0 / self.ESTIMATE_ORDER))
+                h = max(self.min_step, h * shrink)
+                self.system.propagate()            # the buffers back to the start of the step
+        finally:
+            self._free_states(states)
+        k = self.ESTIMATE_ORDER
+        bounded = max(error, 1e-10)
+        factor = self.SAFETY * bounded ** (-0.3 / k) * (self._previous_error / bounded) ** (0.4 / k)
+        self._previous_error = bounded
+        self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
+        return h, error, result
+
+
+class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
     """``trapezoidal-newton`` with the step chosen by an error estimate, for stiff
     couplings: the converged torques against the first guess (linear extrapolation of
     the last ones).  Their errors are h^2/12 and 5h^2/12 times the torque's second
@@ -520,66 +575,39 @@ class AdaptiveTrapezoidalMaster(TrapezoidalNewtonMaster):
     the trapezoidal coupling is stable at any step."""
 
     name = "adaptive-trapezoidal"
-    order = 2
-    adaptive = True
     description = "trapezoidal coupling (Newton, rollback) with error-controlled steps, for stiff couplings"
     options = {"tolerance": 1e-3, "iteration_tolerance": 1e-7, "max_iterations": 30, "min_step": 1e-8,
                "max_step": None}
-
-    SAFETY, GROWTH, SHRINK = 0.8, 3.0, 0.2
-    K_I, K_P = 0.3 / 2.0, 0.4 / 2.0
+    ESTIMATE_ORDER = 2
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
-        if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
-            raise ValueError(f"option 'tolerance' = {self.tolerance!r} is outside its allowed range (0, 1) "
-                             "(relative torque error)")
-        self.max_step = float(self.max_step) if self.max_step else (self.t_end - self.t) / 50.0
-        self.h = min(self.h, self.max_step)
-        self._previous_error = 1.0
-        self._scale = 0.0
+        self._init_control()
 
     def _step_impl(self, t, h):
-        h = min(h, self.h)
-        if self.t_end - (t + h) < 0.25 * h:
-            h = self.t_end - t
         start = self._current_inputs()
         self._scale = max(self._scale, float(np.max(np.abs(start))))
-        while True:
-            states = [component.save_state() for component in self._stateful]
+
+        def attempt(h, states):
             try:
-                try:
-                    u, guess = self._solve(t, h, states, start, self.iteration_tolerance)
-                    scale = max(self._scale, float(np.max(np.abs(u)))) or 1.0
-                    fraction = 1.0 / 6.0 if len(self._history) >= 2 else 0.5
-                    error = fraction * float(np.max(np.abs(u - guess))) / (self.tolerance * scale)
-                except MasterFailure:
-                    if h <= self.min_step:
-                        raise
-                    error = 1.0 / self.SHRINK ** 3      # not converged: shrink hard and retry
-                if error <= 1.0 or h <= self.min_step:
-                    break
-                for component, state in zip(self._stateful, states):
-                    component.restore_state(state, t)
-                self.n_rollbacks += 1
-                self.n_rejected += 1
-                h = max(self.min_step, h * max(self.SHRINK, self.SAFETY * error ** -0.5))
-                self.system.propagate()
-            finally:
-                for component, state in zip(self._stateful, states):
-                    component.free_state(state)
+                u, guess = self._solve(t, h, states, start, self.iteration_tolerance)
+            except MasterFailure:
+                if h <= self.min_step:
+                    raise
+                return 1.0 / self.SHRINK ** 3, None      # not converged: shrink hard and retry
+            scale = max(self._scale, float(np.max(np.abs(u)))) or 1.0
+            fraction = 1.0 / 6.0 if len(self._history) >= 2 else 0.5
+            return fraction * float(np.max(np.abs(u - guess))) / (self.tolerance * scale), u
+
+        h, _, u = self._controlled_step(t, self._clip(t, h), attempt)
         self._history.append((t + h, u))
         self._step_feedthrough(t, h)
-        error = max(error, 1e-10)
-        factor = self.SAFETY * error ** -self.K_I * (self._previous_error / error) ** self.K_P
-        self._previous_error = error
-        self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
         return h
 
 
 # -- adaptive step size ----------------------------------------------------------------------------
 
-class AdaptiveMaster(ExtrapolatingJacobiMaster):
+class AdaptiveMaster(_StepControl, ExtrapolatingJacobiMaster):
     """``jacobi-quadratic`` (ramped quadratic extrapolation of the coupling torques, over
     variable steps) with the step chosen by an error estimate.
 
@@ -600,26 +628,16 @@ class AdaptiveMaster(ExtrapolatingJacobiMaster):
     name = "adaptive"
     order = 3
     degree = 2
-    adaptive = True
     description = "ramped quadratic extrapolation with error-controlled steps (predictor-corrector, PI)"
     options = {"tolerance": 1e-3, "min_step": 1e-8, "max_step": None, "ramp": True}
 
-    SAFETY, GROWTH, SHRINK = 0.8, 3.0, 0.2
     MEAN_FRACTION = (0.5, 5.0 / 12.0, 3.0 / 8.0)   # by degree: mean error / end-point error
-    K_I, K_P = 0.3 / 3.0, 0.4 / 3.0                # PI gains over (estimate order + 1)
+    ESTIMATE_ORDER = 3
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
-        if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
-            raise ValueError(f"option 'tolerance' = {self.tolerance!r} is outside its allowed range (0, 1) "
-                             "(relative torque error)")
-        span = self.t_end - self.t
-        self.max_step = float(self.max_step) if self.max_step else span / 50.0
-        self.h = min(self.h, self.max_step)
-        self._stateful = [system.components[n] for n in system.stateful]
+        self._init_control()
         self._speeds = self._bond_speeds()
-        self._previous_error = 1.0
-        self._scale = 0.0
         self.bond_energy_residual = 0.0
 
     def _bond_speeds(self):
@@ -640,51 +658,33 @@ class AdaptiveMaster(ExtrapolatingJacobiMaster):
         return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
 
     def _step_impl(self, t, h):
-        h = min(h, self.h)
-        if self.t_end - (t + h) < 0.25 * h:        # do not leave a sliver before the end
-            h = self.t_end - t
         start = [list(values) for _, _, values in self._inputs]
         speeds = self._read_speeds()
         points = list(self._history) + [(t, start)]
-        while True:
-            states = [component.save_state() for component in self._stateful]
-            try:
-                predicted = self._hold(t, h, points)
-                self._step_stateful(t, h)
-                self.system.propagate()
-                end = [list(values) for _, _, values in self._inputs]
-                self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
-                fraction = self.MEAN_FRACTION[len(points) - 1]
-                difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
-                error = fraction * difference / (self.tolerance * (self._scale or 1.0))
-                if error <= 1.0 or h <= self.min_step:
-                    break
-                for component, state in zip(self._stateful, states):
-                    component.restore_state(state, t)
-                self.n_rollbacks += 1
-                self.n_rejected += 1
-                h = max(self.min_step, h * max(self.SHRINK, self.SAFETY * error ** (-1.0 / 3.0)))
-                self.system.propagate()            # the buffers back to the start of the step
-            finally:
-                for component, state in zip(self._stateful, states):
-                    component.free_state(state)
+        fraction = self.MEAN_FRACTION[len(points) - 1]
+
+        def attempt(h, states):
+            predicted = self._hold(t, h, points)
+            self._step_stateful(t, h)
+            self.system.propagate()
+            end = [list(values) for _, _, values in self._inputs]
+            self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
+            difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
+            return fraction * difference / (self.tolerance * (self._scale or 1.0)), end
+
+        h, error, end = self._controlled_step(t, self._clip(t, h), attempt)
         if error > 1.0:
             raise MasterFailure(f"{self.name}: the step size fell to its minimum {self.min_step:.3g} s at "
                                 f"t = {t:.9g} s with the error estimate still {error:.3g} times the tolerance "
                                 f"{self.tolerance:g}; the coupling torque changes too fast for this tolerance")
         # ECCO's power-bond residual: work given (held means) against work accounted for.
         end_speeds = self._read_speeds()
-        for (_, _, values, n, _), ss, es, w0, w1 in zip(self._held, start, end, speeds, end_speeds):
+        for (_, _, values, n, ramped), ss, es, w0, w1 in zip(self._held, start, end, speeds, end_speeds):
             for i in range(n):
-                mean = values[i] + (0.5 * values[n + i] * h if len(values) > n else 0.0)
+                mean = values[i] + (0.5 * values[n + i] * h if ramped else 0.0)
                 self.bond_energy_residual += h * (mean - 0.5 * (ss[i] + es[i])) * 0.5 * (w0 + w1)
         self._history.append((t, start))
         self._step_feedthrough(t, h)
-        # PI controller for the next step.
-        error = max(error, 1e-10)
-        factor = self.SAFETY * error ** -self.K_I * (self._previous_error / error) ** self.K_P
-        self._previous_error = error
-        self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
         return h
 
 

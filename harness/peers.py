@@ -60,7 +60,7 @@ from . import component as harness_component
 from . import scene as scenes
 from .paths import FMUS, ROOT
 from .run import RunResult, recorded_names
-from .system import SceneInvalid, descriptions_for, fmu_path
+from .system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
 
 PEERS = {
     "fmpy-jacobi": "fixed-step Jacobi on fmpy's FMU2Slave API (getReal/setReal/doStep per call)",
@@ -161,12 +161,8 @@ class _SceneSetup:
         self.variables = {name: {v.name: v for v in md.modelVariables} for name, md in self.descriptions.items()}
         self.parameters = {name: {k: scenes.quantity(v, f"{name}.{k}") for k, v in spec.parameters.items()}
                            for name, spec in scene.components.items()}
-        # Feedthrough that matters for the propagation order: a *connected* output that
-        # depends on inputs (a shaft's acceleration depends on its torque, but is not wired).
-        connected = {(c.source, c.output) for c in scene.connections}
-        feedthrough = {name for name, md in self.descriptions.items()
-                       if any(u.dependencies and (name, u.variable.name) in connected for u in md.outputs)}
-        self.order = _dependency_order(scene, feedthrough)
+        # The order the harness propagates in.
+        self.order = dependency_order(scene, feedthrough_components(scene, self.descriptions))
 
     def vr(self, component: str, variable: str) -> int:
         return self.variables[component][variable].valueReference
@@ -192,22 +188,6 @@ class _SceneSetup:
                         and unit(effort.source, effort.output) in EFFORT_UNITS:
                     bonds.append((flow.source, effort.input, flow.output, flow.target, effort.output, flow.input))
         return bonds
-
-
-def _dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
-    """Components without direct feedthrough first, then each feedthrough component
-    after the components feeding it (as ``harness.system.System`` propagates)."""
-    order = [n for n in scene.components if n not in feedthrough]
-    pending = [n for n in scene.components if n in feedthrough]
-    while pending:
-        ready = [n for n in pending if all(c.source in order or c.source not in feedthrough
-                                           for c in scene.connections if c.target == n)]
-        if not ready:
-            raise SceneInvalid(scene.name, [f"algebraic loop between direct-feedthrough components "
-                                            f"{', '.join(pending)}"])
-        order += ready
-        pending = [n for n in pending if n not in ready]
-    return order
 
 
 # -- fmpy-jacobi ------------------------------------------------------------------------------

@@ -40,6 +40,32 @@ def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
     return out
 
 
+def feedthrough_components(scene: scenes.Scene, descriptions: dict) -> set[str]:
+    """Components (name -> model description) with direct feedthrough that matters: a
+    *connected* output depends on inputs (a shaft's acceleration depends on its torque,
+    but nothing is wired from it)."""
+    connected = {(c.source, c.output) for c in scene.connections}
+    return {name for name, md in descriptions.items()
+            if any(u.dependencies and (name, u.variable.name) in connected for u in md.outputs)}
+
+
+def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
+    """Components without direct feedthrough first (scene order), then each feedthrough
+    component after the components feeding it; an algebraic loop is a finding."""
+    order = [n for n in scene.components if n not in feedthrough]
+    pending = [n for n in scene.components if n in feedthrough]
+    while pending:
+        ready = [n for n in pending
+                 if all(c.source in order or c.source not in feedthrough
+                        for c in scene.connections if c.target == n)]
+        if not ready:
+            raise SceneInvalid(scene.name, [f"algebraic loop between direct-feedthrough components "
+                                            f"{', '.join(pending)}"])
+        order += ready
+        pending = [n for n in pending if n not in ready]
+    return order
+
+
 class System:
     def __init__(self, scene: scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
                  record: list[str] | None = None):
@@ -55,12 +81,8 @@ class System:
         except Exception:
             self.free()
             raise
-        # Direct feedthrough that matters: a *connected* output depends on inputs (a
-        # shaft's acceleration depends on its torque, but nothing is wired from it).
-        connected = {(c.source, c.output) for c in scene.connections}
-        self.feedthrough = {name for name, c in self.components.items()
-                            if any(u.dependencies and (name, u.variable.name) in connected
-                                   for u in c.description.outputs)}
+        self.feedthrough = feedthrough_components(
+            scene, {name: c.description for name, c in self.components.items()})
         # Stateful components in scene order: the order a Gauss-Seidel master steps them.
         self.stateful = [n for n in scene.components if n not in self.feedthrough]
         self._plan()
@@ -98,19 +120,7 @@ class System:
         self.buffers = {name: self.components[name].real_buffer(names) for name, names in exposed.items()}
         self.index = {(name, var): i for name, names in exposed.items() for i, var in enumerate(names)}
 
-        # Topological order: feedthrough components after their sources.
-        order = [n for n in self.components if n not in self.feedthrough]
-        pending = [n for n in self.components if n in self.feedthrough]
-        while pending:
-            ready = [n for n in pending
-                     if all(c.source in order or c.source not in self.feedthrough
-                            for c in scene.connections if c.target == n)]
-            if not ready:
-                raise SceneInvalid(scene.name, [f"algebraic loop between direct-feedthrough components "
-                                                f"{', '.join(pending)}"])
-            order += ready
-            pending = [n for n in pending if n not in ready]
-        self.order = order
+        order = self.order = dependency_order(scene, self.feedthrough)
 
         # For each source: the writes to each target (target buffer and the copy map).
         self.writes = {}
