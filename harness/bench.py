@@ -76,6 +76,9 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
     if unknown:
         raise ValueError(f"scene '{scene.name}' [bench]: unknown master(s) {', '.join(unknown)}")
     if only:
+        unknown = [n for n in only if n not in master_family.MASTERS]
+        if unknown:
+            raise ValueError(f"unknown master(s) {', '.join(unknown)} (known: {', '.join(master_family.MASTERS)})")
         steps = {k: v for k, v in steps.items() if k in only}
         tolerances = {k: v for k, v in tolerances.items() if k in only}
     return {
