@@ -125,6 +125,22 @@ def test_adaptive_trapezoidal_meets_its_tolerance_on_the_stiff_start():
     assert result.ok, result.failure
     assert _tau_error(spec, result) <= 3e-2     # local control: the global error within 10x
     assert np.max(np.diff(result.times)) * 1184 > 1.0   # and steps past the explicit limit
+    # Newton from the extrapolated torques with the step-size model of the Jacobian: about
+    # one correction a step, and finite differences only at the start.
+    c = result.counters
+    assert c["iterations"] <= 1.5 * c["steps"] and c["jacobians"] <= 4, c
+
+
+def test_interface_jacobian_model_is_exact_for_a_linear_coupling_of_inertias():
+    a, b = np.array([[0.3, -0.1], [0.2, 0.4]]), np.array([[50.0, -20.0], [-30.0, 60.0]])
+    model = masters.InterfaceJacobian()
+    assert model.at(1e-3) is None
+    model.add(1e-3, a * 1e-3 + b * 1e-6)
+    assert np.array_equal(model.at(1.01e-3), a * 1e-3 + b * 1e-6)      # the same step
+    assert model.at(2e-3) is None                                      # one sample: no model yet
+    model.add(3e-3, a * 3e-3 + b * 9e-6)
+    for h in (1e-4, 2e-3, 1e-2):
+        assert np.allclose(model.at(h), a * h + b * h * h, rtol=1e-9, atol=1e-15)
 
 
 def test_master_options_are_checked():
