@@ -197,6 +197,39 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+@main.command("measured")
+@click.argument("files", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("--stiffness", type=float, default=None,
+              help="Torsional stiffness of the grade [N*m/rad], when the files do not state it (overrides them).")
+@click.option("--no-cycles", is_flag=True, help="Compare the mean curves only (one run a grade).")
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "measured", show_default=True)
+def measured_command(files, stiffness, no_cycles, out):
+    """Model against measurement: predict the drive-shaft torque from the measured
+    driven-shaft torque for every grade in FILES (tables or folders; default: the
+    monograph's data) and report the errors (measured.md, measured.json, plots).  Exit
+    code 1 when a grade misses the monograph's stated model-experiment difference."""
+    import json
+
+    from . import measured
+
+    if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
+        raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+    ensure_fmus(quiet=True)
+    findings = measured.validate_measured(list(files) or measured.default_files(), out, stiffness=stiffness,
+                                          cycles=not no_cycles)
+    grades = json.loads((out / "measured.json").read_text())["grades"]
+    for g in grades:
+        click.echo(f"  {g['grade']:12s} c {g['conditions']['stiffness']:6g} N*m/rad: RMS error model "
+                   f"{100 * g['rms_model']:5.1f} %, naive {100 * g['rms_naive']:5.1f} %, scatter "
+                   f"{100 * g['scatter']:4.1f} %; A measured {g['amplitude_measured']:5.1f}, predicted "
+                   f"{g['amplitude_predicted']:5.1f} N*m  {'ok' if g['within_target'] else 'ABOVE TARGET'}")
+    for finding in findings:
+        click.echo(f"finding: {finding}", err=True)
+    click.echo(f"written: {out / 'measured.md'}")
+    if findings:
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without
