@@ -230,6 +230,55 @@ def measured_command(files, stiffness, no_cycles, out):
         sys.exit(1)
 
 
+@main.command("sweep")
+@click.option("--axis", "axes", multiple=True, metavar="NAME",
+              help="Sweep only these axes (repeatable): load, inertia, stiffness, damping, misalignment, "
+                   "stiffness_measured, load_alpha0, load_alpha5 (default: all).")
+@click.option("--scene", default="kavz685", show_default=True, help="Base scene.")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override the base scene.")
+@click.option("--stop", type=float, default=None, help="Simulated time per case [s] (default: the scene's).")
+@click.option("--thin", type=click.IntRange(1, 100), default=1, help="Every n-th value of each axis (ends kept).")
+@click.option("--workers", type=click.IntRange(1, 256), default=None, help="Local processes (default: CPU count).")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
+              help="Run the cases on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead.")
+@click.option("--no-resume", is_flag=True, help="Start afresh instead of reusing finished cases.")
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "sweep", show_default=True)
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, no_resume, out, progress):
+    """The monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12): amplitude and mean
+    curves with its reported points overlaid, and a trend report (sweep.md, sweep.json,
+    sweep_<axis>.png).  Finished and failed cases are kept in OUT/cases.jsonl; a re-run
+    resumes."""
+    from . import sweep as sweeps
+
+    try:
+        chosen = sweeps.thin(sweeps.select(list(axes)), thin)
+        scenes.load(scene).with_overrides(list(assignments))
+    except (ValueError, scenes.SceneError) as error:
+        raise UserError(str(error)) from None
+    if stop is not None and not (math.isfinite(stop) and stop > 0):
+        raise UserError(f"--stop {stop}: must be > 0 s")
+    ensure_fmus(quiet=True)
+    show_progress = sys.stderr.isatty() if progress is None else progress
+    try:
+        report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
+                              dask=dask_address, progress=show_progress, resume=not no_resume)
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    except OSError as error:       # e.g. no Dask scheduler at the address
+        raise click.ClickException(f"the sweep could not run: {error}") from None
+    failed = [c for c in report["cases"] if c["result"].get("status") != "ok"]
+    for t in report["trends"]:
+        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced"}[t["reproduced"]]
+        click.echo(f"  {verdict:14s}  {t['trend']}" + (f" (holds for {', '.join(t['holds_for'])})"
+                                                       if t["reproduced"] == "partly" else ""))
+    click.echo(f"{len(report['cases']) - len(failed)} cases ok, {len(failed)} failed; written: {out / 'sweep.md'}")
+    for c in failed:
+        click.echo(f"  failed: {c['axis']} = {c['x']:g}: {c['result'].get('error')}", err=True)
+    if failed:
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without
