@@ -197,6 +197,88 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+@main.command("measured")
+@click.argument("files", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("--stiffness", type=float, default=None,
+              help="Torsional stiffness of the grade [N*m/rad], when the files do not state it (overrides them).")
+@click.option("--no-cycles", is_flag=True, help="Compare the mean curves only (one run a grade).")
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "measured", show_default=True)
+def measured_command(files, stiffness, no_cycles, out):
+    """Model against measurement: predict the drive-shaft torque from the measured
+    driven-shaft torque for every grade in FILES (tables or folders; default: the
+    monograph's data) and report the errors (measured.md, measured.json, plots).  Exit
+    code 1 when a grade misses the monograph's stated model-experiment difference."""
+    import json
+
+    from . import measured
+
+    if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
+        raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+    ensure_fmus(quiet=True)
+    findings = measured.validate_measured(list(files) or measured.default_files(), out, stiffness=stiffness,
+                                          cycles=not no_cycles)
+    grades = json.loads((out / "measured.json").read_text())["grades"]
+    for g in grades:
+        click.echo(f"  {g['grade']:12s} c {g['conditions']['stiffness']:6g} N*m/rad: RMS error model "
+                   f"{100 * g['rms_model']:5.1f} %, naive {100 * g['rms_naive']:5.1f} %, scatter "
+                   f"{100 * g['scatter']:4.1f} %; A measured {g['amplitude_measured']:5.1f}, predicted "
+                   f"{g['amplitude_predicted']:5.1f} N*m  {'ok' if g['within_target'] else 'ABOVE TARGET'}")
+    for finding in findings:
+        click.echo(f"finding: {finding}", err=True)
+    click.echo(f"written: {out / 'measured.md'}")
+    if findings:
+        sys.exit(1)
+
+
+@main.command("sweep")
+@click.option("--axis", "axes", multiple=True, metavar="NAME",
+              help="Sweep only these axes (repeatable): load, inertia, stiffness, damping, misalignment, "
+                   "stiffness_measured, load_alpha0, load_alpha5 (default: all).")
+@click.option("--scene", default="kavz685", show_default=True, help="Base scene.")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override the base scene.")
+@click.option("--stop", type=float, default=None, help="Simulated time per case [s] (default: the scene's).")
+@click.option("--thin", type=click.IntRange(1, 100), default=1, help="Every n-th value of each axis (ends kept).")
+@click.option("--workers", type=click.IntRange(1, 256), default=None, help="Local processes (default: CPU count).")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
+              help="Run the cases on the Dask cluster at ADDRESS (e.g. tcp://scheduler:8786) instead.")
+@click.option("--no-resume", is_flag=True, help="Start afresh instead of reusing finished cases.")
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "sweep", show_default=True)
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, no_resume, out, progress):
+    """The monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12): amplitude and mean
+    curves with its reported points overlaid, and a trend report (sweep.md, sweep.json,
+    sweep_<axis>.png).  Finished and failed cases are kept in OUT/cases.jsonl; a re-run
+    resumes."""
+    from . import sweep as sweeps
+
+    try:
+        chosen = sweeps.thin(sweeps.select(list(axes)), thin)
+        scenes.load(scene).with_overrides(list(assignments))
+    except (ValueError, scenes.SceneError) as error:
+        raise UserError(str(error)) from None
+    if stop is not None and not (math.isfinite(stop) and stop > 0):
+        raise UserError(f"--stop {stop}: must be > 0 s")
+    ensure_fmus(quiet=True)
+    show_progress = sys.stderr.isatty() if progress is None else progress
+    try:
+        report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
+                              dask=dask_address, progress=show_progress, resume=not no_resume)
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    except OSError as error:       # e.g. no Dask scheduler at the address
+        raise click.ClickException(f"the sweep could not run: {error}") from None
+    failed = [c for c in report["cases"] if c["result"].get("status") != "ok"]
+    for t in report["trends"]:
+        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced"}[t["reproduced"]]
+        click.echo(f"  {verdict:14s}  {t['trend']}" + (f" (holds for {', '.join(t['holds_for'])})"
+                                                       if t["reproduced"] == "partly" else ""))
+    click.echo(f"{len(report['cases']) - len(failed)} cases ok, {len(failed)} failed; written: {out / 'sweep.md'}")
+    for c in failed:
+        click.echo(f"  failed: {c['axis']} = {c['x']:g}: {c['result'].get('error')}", err=True)
+    if failed:
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without

@@ -127,7 +127,12 @@ _QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/.0-9]+)\s*$")
 def quantity(value, name: str = "value"):
     """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is.
     A table ``{harmonics = "monograph/harmonics_driven.csv", cycle = "mean"}`` becomes
-    the load's Fourier series text (file relative to resources/data)."""
+    the load's Fourier series text (file relative to resources/data); so does
+    ``{samples = "monograph/torque_driven_7V-14MVS.csv", cycle = "mean"}``, the series
+    through a measured torque table's ordinates (harness.measured)."""
+    if isinstance(value, dict) and "samples" in value:
+        from .measured import samples_parameter
+        return samples_parameter(value, name)
     if isinstance(value, dict) and "harmonics" in value:
         from lever.physics.load import read_harmonics
         path = DATA / value["harmonics"]

@@ -191,6 +191,25 @@ class FourierLoad:
         return None  # depends on the angle: the shaft integrates numerically
 
 
+def fourier_from_samples(values: Sequence[float]) -> FourierLoad:
+    """The series (4.4) through ``m`` equally spaced ordinates over one revolution (the
+    first at angle 0), by the monograph's (4.2)-(4.3): the mean and harmonics up to
+    ``m // 2``.  For even ``m`` the highest harmonic's sine is undetermined by the samples
+    and left out (as Tables 4.12-4.13 print no b_6) and its cosine is halved, so that the
+    series passes exactly through every ordinate."""
+    y = np.asarray(values, dtype=float)
+    m = len(y)
+    if m < 3 or not np.all(np.isfinite(y)):
+        raise ParameterError("fourier", f"a Fourier series needs at least 3 finite ordinates, got {values!r}")
+    spectrum = np.fft.rfft(y) / m
+    cosines = (2.0 * spectrum[1:].real).tolist()
+    sines = (-2.0 * spectrum[1:].imag).tolist()
+    if m % 2 == 0:
+        cosines[-1] *= 0.5
+        sines = sines[:-1]
+    return FourierLoad(float(spectrum[0].real), [float(a) for a in cosines], [float(b) for b in sines])
+
+
 def read_harmonics(path: Path | str, cycle: str | int = "mean") -> FourierLoad:
     """Fourier coefficients from a table in the monograph's format (Tables 4.12/4.13:
     columns cycle, M_mean, a_1..a_n, b_1..b_m).  ``cycle`` is a cycle number or "mean"
