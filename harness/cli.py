@@ -197,6 +197,28 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+@main.command()
+@click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
+def check(fmus):
+    """Compliance checks on FMU files (default: the built ones): fmpy's validation plus
+    ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
+    when there are findings."""
+    from .compliance import check_fmu
+
+    if not fmus:
+        ensure_fmus(quiet=True)
+        fmus = sorted(FMUS.glob("*.fmu"))
+    total = 0
+    for path in fmus:
+        findings = check_fmu(path)
+        total += len(findings)
+        click.echo(f"{path}: {len(findings)} finding{'' if len(findings) == 1 else 's'}")
+        for finding in findings:
+            click.echo(f"  - {finding}")
+    if total:
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without
