@@ -74,8 +74,8 @@ def list_scenes():
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 def run(scene, assignments, master, step, tolerance, out, no_reference, progress):
-    """Run SCENE (a name in resources/scenes or a .toml path) and write traces, plots,
-    summary.json and report.md."""
+    """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
+    write traces, plots, summary.json and report.md."""
     from . import masters as family
     from . import reference as references
     from . import report
@@ -105,7 +105,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
-        result = simulate(spec, master, step, progress=show_progress, options=options)
+        result = simulate(spec, master, step, fmu_dir=spec.fmu_dir or FMUS, progress=show_progress,
+                          options=options)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     reference = None
@@ -195,6 +196,58 @@ def study(name, out):
     ensure_fmus(quiet=True)
     click.echo(studies.transfer_modes(out))
     click.echo(f"written to {out / 'transfer_modes.md'}")
+
+
+@main.command("export-ssp")
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter before exporting (as for `lever run`).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="The archive to write (default results/ssp/<scene>.ssp).")
+def export_ssp(scene, assignments, out):
+    """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
+    descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
+    libcosim and in `lever run`."""
+    from . import ssp
+    from .system import SceneInvalid
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    ensure_fmus(quiet=True)
+    out = out or RESULTS / "ssp" / f"{spec.name}.ssp"
+    try:
+        path = ssp.export(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    click.echo(f"written: {path}")
+
+
+@main.command("export-container")
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter before exporting (as for `lever run`).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="The FMU to write (default results/container/<scene>.fmu).")
+def export_container(scene, assignments, out):
+    """Write SCENE as one FMU (fmpy's container FMU holding the scene's FMUs): its
+    parameters are the scene's values, its outputs the scene's recorded variables, its
+    internal step the scene's step (Jacobi, as the harness's `jacobi` master)."""
+    from . import container
+    from .system import SceneInvalid
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    ensure_fmus(quiet=True)
+    out = out or RESULTS / "container" / f"{spec.name}.fmu"
+    try:
+        path = container.build_container(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    click.echo(f"written: {path}")
 
 
 @main.command()
