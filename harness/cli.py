@@ -198,6 +198,37 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--engine", "engine_names", multiple=True, metavar="ENGINE",
+              help="Only these engines (repeatable; default all: lever, lever-jacobi, container, fmpy-ssp, "
+                   "libcosim-ssp, libcosim-ecco).")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
+@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
+              help="Runs per engine; the median run time is quoted.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/engines/<scene>).")
+def engines(scene, engine_names, assignments, step, repeats, out):
+    """SCENE in every engine that runs our FMUs (ours, fmpy.ssp, libcosim, the container
+    FMU): error against the monolithic reference and run time; writes engines.md and
+    engines.json."""
+    from . import engines as comparison
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    chosen = list(engine_names) or list(comparison.ENGINES)
+    unknown = [n for n in chosen if n not in comparison.ENGINES]
+    if unknown:
+        raise UserError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
+    ensure_fmus(quiet=True)
+    rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=click.echo)
+    paths = comparison.write(out or comparison.default_out(spec), spec, rows)
+    click.echo("written: " + ", ".join(str(p) for p in paths))
+
+
 @main.command("export-ssp")
 @click.argument("scene", default="kavz685")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
