@@ -10,8 +10,8 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   each), as an fmpy user would write it.  Same algorithm as the harness's ``jacobi``
   (after every step, outputs are propagated in dependency order, so the coupling's
   torques are those of the shafts' new states) without the harness's raw ctypes calls.
-  fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp`` (fmpy 0.3.x), is no peer: it
-  cannot set String parameters (``transfer_mode``, ``load_kind``: "Unsupported type:
+  fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp`` (fmpy 0.3.x), is the peer
+  ``fmpy-ssp`` below, with care: it cannot set String parameters (``transfer_mode``, ``load_kind``: "Unsupported type:
   String"), ignores the SSD's parameter bindings (only a ``parameter_set`` argument is
   applied), starts every connected input at 0.0 instead of propagating the initial
   outputs, and labels each row with the start time of the step that produced it.
