@@ -9,7 +9,12 @@ For each model:
 3. let pythonfmu build the FMU (state handling declared: our slaves save their full state);
 4. put the status shim (``build/shim``) in front of pythonfmu's native library, so that
    errors our slaves log come back to the importer as fmi2Error;
-5. check the result with ``fmpy.validation.validate_fmu``: zero findings or the build fails.
+5. ship what an importer needs to know, generated from the model's declarations
+   (``lever.fmus.interface``): ``documentation/_main.html`` and
+   ``resources/requirements.txt`` inside the FMU, ``<Model>_OspModelDescription.xml``
+   next to it (OSP Interface Specification: the mechanical ports);
+6. check the result with ``harness.compliance.check_fmu`` (fmpy's validation and ours):
+   zero findings or the build fails.
 
 The FMUs land in ``build/fmus/`` with a stamp of the sources' hash; a build with an
 unchanged hash does nothing (``--force`` rebuilds).
@@ -29,6 +34,10 @@ ROOT = HERE.parent
 SOURCE = ROOT / "fmu_src" / "lever"
 OUTPUT = HERE / "fmus"
 STAGING = HERE / "tmp"
+
+#: The packages our model code imports on the importing machine (pythonfmu's Python part
+#: travels inside each FMU, in resources/pythonfmu); pinned as in constraints.txt.
+RUNTIME_PACKAGES = ("numpy",)
 
 #: model identifier -> module of lever.fmus that defines the class of that name
 MODELS = {
@@ -55,6 +64,32 @@ def _load(path: Path, name: str):
     return module
 
 
+def runtime_requirements() -> list[str]:
+    """``name==version`` of each runtime package, from constraints.txt."""
+    pins = {}
+    for line in (ROOT / "constraints.txt").read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if "==" in line:
+            name, version = (part.strip() for part in line.split("==", 1))
+            pins[name.lower()] = version
+    missing = [p for p in RUNTIME_PACKAGES if p not in pins]
+    if missing:
+        raise RuntimeError(f"constraints.txt pins no version of {', '.join(missing)}")
+    return [f"{p}=={pins[p]}" for p in RUNTIME_PACKAGES]
+
+
+REQUIREMENTS_HEADER = """\
+# Python packages this FMU's model imports in the importer's Python interpreter
+# (CPython >= 3.11 with a shared libpython; pythonfmu's Python part is in resources/pythonfmu).
+# Install with:  python -m pip install -r requirements.txt
+# Non-Python hosts: see documentation/_main.html, "Host requirements".
+"""
+
+
+def osp_description_path(fmu: Path) -> Path:
+    return fmu.with_name(f"{fmu.stem}_OspModelDescription.xml")
+
+
 def source_hash() -> str:
     """Hash of everything that goes into an FMU: the package, the shim, this script and
     the pythonfmu version."""
@@ -63,6 +98,7 @@ def source_hash() -> str:
     digest = hashlib.sha256(pythonfmu.__version__.encode())
     files = sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)
     files += sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", Path(__file__).resolve()]
+    files += [ROOT / "constraints.txt", ROOT / "harness" / "compliance.py"]
     for path in files:
         digest.update(str(path.relative_to(ROOT)).encode())
         digest.update(path.read_bytes())
@@ -74,13 +110,15 @@ def is_current(out_dir: Path = OUTPUT) -> bool:
     if not stamp.exists():
         return False
     recorded = json.loads(stamp.read_text())
-    return recorded.get("hash") == source_hash() and all((out_dir / f"{m}.fmu").exists() for m in MODELS)
+    return recorded.get("hash") == source_hash() and all(
+        (out_dir / f"{m}.fmu").exists() and osp_description_path(out_dir / f"{m}.fmu").exists() for m in MODELS)
 
 
 def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, Path]:
     """Build every FMU into ``out_dir``; return {model identifier: path}."""
-    from fmpy.validation import validate_fmu
     from pythonfmu.builder import FmuBuilder
+
+    from harness.compliance import check_fmu
 
     out_dir = Path(out_dir)
     paths = {m: out_dir / f"{m}.fmu" for m in MODELS}
@@ -94,6 +132,7 @@ def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, P
     shim_so = STAGING / "lever_fmi2_shim.so"
     STAGING.mkdir(parents=True, exist_ok=True)
     shim.compile_shim(shim_so)
+    requirements = runtime_requirements()
 
     for model, module in MODELS.items():
         stage = STAGING / model
@@ -103,10 +142,20 @@ def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, P
         shutil.copytree(SOURCE, stage / package, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         script = stage / f"{model}_{tag}.py"
         script.write_text(ENTRY_SCRIPT.format(model=model, package=package, module=module))
+        (stage / "requirements.txt").write_text(REQUIREMENTS_HEADER + "\n".join(requirements) + "\n")
         log(f"building {model} ...")
         sys.path.insert(0, str(stage))
         try:
-            FmuBuilder.build_FMU(script, dest=paths[model], project_files=[stage / package],
+            # The documents come from the staged copy of the model: what the FMU runs.
+            staged = importlib.import_module(f"{package}.fmus.{module}")
+            interface = importlib.import_module(f"{package}.fmus.interface")
+            model_class = getattr(staged, model)
+            documentation = stage / "documentation"
+            documentation.mkdir()
+            (documentation / "_main.html").write_text(interface.documentation_html(model_class, requirements))
+            osp_description = interface.osp_model_description(model_class)
+            FmuBuilder.build_FMU(script, dest=paths[model], project_files=[stage / package, stage / "requirements.txt"],
+                                 documentation_folder=documentation,
                                  canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
             sys.path.remove(str(stage))
@@ -114,10 +163,11 @@ def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, P
                          or n == script.stem]:
                 del sys.modules[name]
         shim.wrap_fmu(paths[model], shim_so)
-        problems = validate_fmu(str(paths[model]))
+        osp_description_path(paths[model]).write_text(osp_description)
+        problems = check_fmu(paths[model])
         if problems:
-            raise RuntimeError(f"{model}.fmu does not validate:\n  " + "\n  ".join(problems))
-        log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), fmpy validation: 0 findings")
+            raise RuntimeError(f"{model}.fmu does not pass `lever check`:\n  " + "\n  ".join(problems))
+        log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), lever check: 0 findings")
     (out_dir / "build-stamp.json").write_text(json.dumps({"hash": digest, "models": list(MODELS)}, indent=1))
     return paths
 

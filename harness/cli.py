@@ -74,8 +74,8 @@ def list_scenes():
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 def run(scene, assignments, master, step, tolerance, out, no_reference, progress):
-    """Run SCENE (a name in resources/scenes or a .toml path) and write traces, plots,
-    summary.json and report.md."""
+    """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
+    write traces, plots, summary.json and report.md."""
     from . import masters as family
     from . import reference as references
     from . import report
@@ -105,7 +105,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
-        result = simulate(spec, master, step, progress=show_progress, options=options)
+        result = simulate(spec, master, step, fmu_dir=spec.fmu_dir or FMUS, progress=show_progress,
+                          options=options)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     reference = None
@@ -276,6 +277,111 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
     for c in failed:
         click.echo(f"  failed: {c['axis']} = {c['x']:g}: {c['result'].get('error')}", err=True)
     if failed:
+        sys.exit(1)
+
+
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--engine", "engine_names", multiple=True, metavar="ENGINE",
+              help="Only these engines (repeatable; default all: lever, lever-jacobi, container, fmpy-ssp, "
+                   "libcosim-ssp, libcosim-ecco).")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
+@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
+              help="Runs per engine; the median run time is quoted.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/engines/<scene>).")
+def engines(scene, engine_names, assignments, step, repeats, out):
+    """SCENE in every engine that runs our FMUs (ours, fmpy.ssp, libcosim, the container
+    FMU): error against the monolithic reference and run time; writes engines.md and
+    engines.json."""
+    from . import engines as comparison
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    chosen = list(engine_names) or list(comparison.ENGINES)
+    unknown = [n for n in chosen if n not in comparison.ENGINES]
+    if unknown:
+        raise UserError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
+    ensure_fmus(quiet=True)
+    rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=click.echo)
+    paths = comparison.write(out or comparison.default_out(spec), spec, rows)
+    click.echo("written: " + ", ".join(str(p) for p in paths))
+
+
+@main.command("export-ssp")
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter before exporting (as for `lever run`).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="The archive to write (default results/ssp/<scene>.ssp).")
+def export_ssp(scene, assignments, out):
+    """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
+    descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
+    libcosim and in `lever run`."""
+    from . import ssp
+    from .system import SceneInvalid
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    ensure_fmus(quiet=True)
+    out = out or RESULTS / "ssp" / f"{spec.name}.ssp"
+    try:
+        path = ssp.export(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    click.echo(f"written: {path}")
+
+
+@main.command("export-container")
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter before exporting (as for `lever run`).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="The FMU to write (default results/container/<scene>.fmu).")
+def export_container(scene, assignments, out):
+    """Write SCENE as one FMU (fmpy's container FMU holding the scene's FMUs): its
+    parameters are the scene's values, its outputs the scene's recorded variables, its
+    internal step the scene's step (Jacobi, as the harness's `jacobi` master)."""
+    from . import container
+    from .system import SceneInvalid
+
+    try:
+        spec = scenes.load(scene).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+    ensure_fmus(quiet=True)
+    out = out or RESULTS / "container" / f"{spec.name}.fmu"
+    try:
+        path = container.build_container(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    click.echo(f"written: {path}")
+
+
+@main.command()
+@click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
+def check(fmus):
+    """Compliance checks on FMU files (default: the built ones): fmpy's validation plus
+    ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
+    when there are findings."""
+    from .compliance import check_fmu
+
+    if not fmus:
+        ensure_fmus(quiet=True)
+        fmus = sorted(FMUS.glob("*.fmu"))
+    total = 0
+    for path in fmus:
+        findings = check_fmu(path)
+        total += len(findings)
+        click.echo(f"{path}: {len(findings)} finding{'' if len(findings) == 1 else 's'}")
+        for finding in findings:
+            click.echo(f"  - {finding}")
+    if total:
         sys.exit(1)
 
 

@@ -10,11 +10,21 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   each), as an fmpy user would write it.  Same algorithm as the harness's ``jacobi``
   (after every step, outputs are propagated in dependency order, so the coupling's
   torques are those of the shafts' new states) without the harness's raw ctypes calls.
-  fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp`` (fmpy 0.3.x), is no peer: it
-  cannot set String parameters (``transfer_mode``, ``load_kind``: "Unsupported type:
+  fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp`` (fmpy 0.3.x), is the peer
+  ``fmpy-ssp`` below, with care: it cannot set String parameters (``transfer_mode``, ``load_kind``: "Unsupported type:
   String"), ignores the SSD's parameter bindings (only a ``parameter_set`` argument is
   applied), starts every connected input at 0.0 instead of propagating the initial
   outputs, and labels each row with the start time of the step that produced it.
+* ``fmpy-ssp`` - fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp``, on the scene
+  exported as an SSP archive (``harness.ssp``), as an fmpy user runs an SSP.  Its
+  limitations (above) are worked around where that is honest and refused where not: the
+  parameters are read from the archive's parameter sets and passed as its
+  ``parameter_set``; a String parameter that differs from the FMU's default is refused
+  (it cannot be set); the zero start of the connected inputs stays (the first step sees
+  no torque); rows are labelled with the end of the step that produced them.  Each
+  component's outputs are read right after its own ``doStep``, so the coupling's torques
+  lag one step as under libcosim.  Its wall time includes unpacking and instantiating
+  the FMUs (``simulate_ssp`` does everything in one call).
 * ``libcosim-fixed`` - OSP libcosim (PyPI ``libcosimpy``) with its fixed-step
   algorithm.  libcosim reads a slave's outputs right after its ``doStep`` and sets its
   inputs just before the next one, so an output with direct feedthrough (the coupling's
@@ -27,6 +37,16 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   torque (N.m) the other way between two components.  Its communication points are
   irregular, and the last one may pass the stop time by less than a step (libcosim does
   not shorten the last step).
+
+* ``libcosim-ssp`` - ``libcosim-fixed`` with the scene loaded from its SSP export
+  (``CosimExecution.from_ssp_file``: libcosim reads the components, connections and
+  parameter sets itself).
+* ``libcosim-osp`` - ``libcosim-fixed`` with the scene loaded from an
+  ``OspSystemStructure.xml`` whose connections go flange to flange
+  (``VariableGroupConnection`` between the FMUs' OSP ports, ``harness.osp``).
+
+ECCO's power bonds come from the OSP model descriptions next to the FMUs (each connected
+``AngularMechanicalPort`` pair is a bond); for FMUs without one, from the units.
 
 The libcosim peers run in a child process (see ``_CHILD``).  libcosim steps the FMUs on
 a worker thread, and pythonfmu then creates and destroys a Python thread state on every
@@ -64,7 +84,10 @@ from .system import SceneInvalid, dependency_order, descriptions_for, feedthroug
 
 PEERS = {
     "fmpy-jacobi": "fixed-step Jacobi on fmpy's FMU2Slave API (getReal/setReal/doStep per call)",
+    "fmpy-ssp": "fmpy.ssp.simulate_ssp on the scene's SSP export; inputs start at 0, feedthrough outputs lag one step",
     "libcosim-fixed": "OSP libcosim fixed-step algorithm (libcosimpy); feedthrough outputs lag one step",
+    "libcosim-ssp": "OSP libcosim fixed step on the scene's SSP export (CosimExecution.from_ssp_file)",
+    "libcosim-osp": "OSP libcosim fixed step on an OspSystemStructure.xml connecting the FMUs' OSP ports",
     "libcosim-ecco": "OSP libcosim ECCO: step size controlled by the power residual at the coupling's bonds",
 }
 
@@ -94,6 +117,12 @@ def available(name: str) -> str | None:
     if name not in PEERS:
         return f"unknown peer '{name}' (known: {', '.join(PEERS)})"
     if name == "fmpy-jacobi":
+        return None
+    if name == "fmpy-ssp":
+        try:
+            from fmpy.ssp.simulation import simulate_ssp  # noqa: F401
+        except ImportError as error:
+            return f"fmpy.ssp does not import: {error}"
         return None
     try:
         from libcosimpy._internal import libcosimc
@@ -129,6 +158,8 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
     setup = _SceneSetup(scene, Path(fmu_dir), names)
     if name == "fmpy-jacobi":
         return _simulate_fmpy_jacobi(setup, float(step))
+    if name == "fmpy-ssp":
+        return _simulate_fmpy_ssp(setup, float(step))
     return _simulate_libcosim_in_child(setup, float(step), name,
                                        tolerance=ECCO_TOLERANCE if tolerance is None else float(tolerance))
 
@@ -175,7 +206,15 @@ class _SceneSetup:
 
     def power_bonds(self) -> list[tuple[str, str, str, str, str, str]]:
         """``(a, a_effort_input, a_flow_output, b, b_effort_output, b_flow_input)`` for
-        each pair of components joined by a flow one way and an effort the other way."""
+        each pair of components joined by a flow one way and an effort the other way:
+        the connected ports of the OSP model descriptions, or (FMUs without one) a
+        flow unit one way and an effort unit back."""
+        from . import osp
+
+        groups = osp.scene_groups(self.scene, self.fmu_dir)
+        if any(groups.values()):
+            return osp.power_bonds(self.scene, groups)
+
         def unit(comp, var):
             return self.variables[comp][var].unit
 
@@ -300,6 +339,60 @@ def _set_fmpy_parameters(fmu, variables: dict, parameters: dict):
             fmu.setString([var.valueReference], [str(value)])
 
 
+# -- fmpy-ssp ---------------------------------------------------------------------------------
+
+def _simulate_fmpy_ssp(setup: _SceneSetup, step: float) -> RunResult:
+    from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import Parameter, ParameterSet
+
+    from . import ssp
+
+    scene, e = setup.scene, setup.scene.experiment
+    refused = []
+    parameters = []
+    for comp, values in setup.parameters.items():
+        for name, value in values.items():
+            var = setup.variables[comp][name]
+            if var.type == "String":
+                if str(value) != (var.start or ""):
+                    refused.append(f"{comp}.{name} = {value!r} (the FMU's default is {var.start!r})")
+                continue
+            parameters.append(Parameter(name=f"{comp}.{name}", type=var.type, value=value))
+    if refused:
+        raise ValueError("fmpy-ssp: fmpy.ssp cannot set String parameters, and the scene sets "
+                         + ", ".join(refused))
+    for item in setup.record:
+        comp, _, var = item.partition(".")
+        if setup.variables[comp][var].causality not in ("input", "output"):
+            raise ValueError(f"fmpy-ssp: fmpy.ssp records connectors only; {item} is a "
+                             f"{setup.variables[comp][var].causality}")
+    failure = None
+    with tempfile.TemporaryDirectory(prefix="lever-fmpy-ssp-") as scratch:
+        archive = ssp.export(scene, Path(scratch) / f"{scene.name}.ssp", setup.fmu_dir)
+        started = clock.perf_counter()
+        try:
+            table = simulate_ssp(str(archive), start_time=e.start, stop_time=e.stop, step_size=step,
+                                 parameter_set=ParameterSet(name="scene", parameters=parameters))
+        except Exception as error:  # noqa: BLE001 - simulate_ssp keeps nothing of a failed run
+            table = None
+            failure = f"{type(error).__name__}: {error} (peer fmpy-ssp, step {step:g} s)"
+        wall = clock.perf_counter() - started
+    if table is None:
+        return RunResult(scene, "fmpy-ssp", step, np.empty(0), {n: np.empty(0) for n in setup.record}, wall,
+                         {}, failure, "stepping")
+    # Row k holds the values after step k; simulate_ssp labels it with the step's start.
+    times = np.asarray(table["time"], dtype=float) + step
+    keep = times <= e.stop + 1e-9 * max(1.0, abs(e.stop))
+    traces = {item: np.asarray(table[item], dtype=float)[keep] for item in setup.record}
+    times = times[keep]
+    bad = _first_non_finite(times, traces)
+    if bad is not None:
+        times, traces = times[:bad[0] + 1], {n: v[:bad[0] + 1] for n, v in traces.items()}
+        failure = f"{bad[1]} (peer fmpy-ssp, step {step:g} s)"
+    return RunResult(scene, "fmpy-ssp", step, times, traces, wall, {"steps": len(times)}, failure,
+                     "stepping" if failure else None)
+
+
 # -- libcosim ---------------------------------------------------------------------------------
 
 class LibcosimError(RuntimeError):
@@ -400,18 +493,27 @@ def _run_libcosim(setup: _SceneSetup, step: float, peer: str, tolerance: float) 
         execution = CosimExecution.from_algorithm(algorithm)
         most_samples = math.ceil(e.stop / params.min_step_size) + 2
     else:
-        execution = CosimExecution.from_step_size(step_ns)
         most_samples = math.ceil(stop_ns / step_ns) + 2
+    from_file = peer in ("libcosim-ssp", "libcosim-osp")
+    if not (ecco or from_file):
+        execution = CosimExecution.from_step_size(step_ns)
 
     local_slaves = {}   # the Python wrappers free their C objects when collected
     index = {}
-    for name in scene.components:
+    if from_file:
+        # libcosim builds the system itself: components, connections, parameter values.
+        execution = _execution_from_file(setup, step, peer)
+        for name in scene.components:
+            index[name] = execution.slave_index_from_instance_name(name)
+            if index[name] is None:
+                raise LibcosimError(f"{peer}: libcosim loaded no component '{name}'")
+    for name in ([] if from_file else scene.components):
         local_slaves[name] = CosimLocalSlave(fmu_path=str(setup.fmu_paths[name]), instance_name=name)
         if not local_slaves[name].ptr():
             _check(False, f"loading {setup.fmu_paths[name].name} as '{name}'")
         index[name] = execution.add_local_slave(local_slaves[name])
         _check(index[name], f"adding '{name}' to the execution")
-    for c in scene.connections:
+    for c in ([] if from_file else scene.connections):
         _check(execution.connect_real_variables(index[c.source], setup.vr(c.source, c.output),
                                                 index[c.target], setup.vr(c.target, c.input)), f"connecting {c}")
     for a, a_effort, a_flow, b, b_effort, b_flow in bonds:
@@ -436,7 +538,7 @@ def _run_libcosim(setup: _SceneSetup, step: float, peer: str, tolerance: float) 
     started = clock.perf_counter()
     try:
         stage = "initialisation"
-        for name, values in setup.parameters.items():
+        for name, values in ({} if from_file else setup.parameters).items():
             for param, value in values.items():
                 var, i = setup.variables[name][param], index[name]
                 if var.type == "Real":
@@ -474,6 +576,28 @@ def _run_libcosim(setup: _SceneSetup, step: float, peer: str, tolerance: float) 
     del execution, observer, algorithm, local_slaves
     return dict(times=times, traces=traces, wall_time=wall, counters=counters, failure=failure,
                 failure_stage=stage if failure else None)
+
+
+def _execution_from_file(setup: _SceneSetup, step: float, peer: str):
+    """A libcosim execution built by libcosim from the scene written as an SSP archive
+    or as an OspSystemStructure.xml (in this child's scratch folder, TMPDIR)."""
+    from dataclasses import replace
+
+    from libcosimpy.CosimExecution import CosimExecution
+
+    from . import osp, ssp
+
+    scene = replace(setup.scene, experiment=replace(setup.scene.experiment, step=step))
+    folder = Path(tempfile.mkdtemp(prefix=f"{peer}-"))
+    try:
+        if peer == "libcosim-ssp":
+            archive = ssp.export(scene, folder / f"{scene.name}.ssp", setup.fmu_dir)
+            return CosimExecution.from_ssp_file(str(archive), round(step * _NS))
+        config = folder / "OspSystemStructure.xml"
+        config.write_text(osp.system_structure(scene, setup.fmu_dir))
+        return CosimExecution.from_osp_config_file(str(config))
+    except AssertionError as error:   # libcosimpy asserts on a failed creation
+        raise LibcosimError(f"{peer}: {error}") from None
 
 
 def _observed_series(observer, index: dict, setup: _SceneSetup, most_samples: int) -> tuple[np.ndarray, dict]:

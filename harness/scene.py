@@ -68,6 +68,8 @@ class Scene:
     notes: str = ""
     #: the work-precision benchmark's plan for this scene (``[bench]`` table; see harness.bench)
     bench: dict = field(default_factory=dict)
+    #: where the scene's FMUs are when not in build/fmus (a scene loaded from an SSP archive)
+    fmu_dir: Path | None = None
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
@@ -161,6 +163,10 @@ def resolve(name_or_path: str | Path) -> Path:
 
 
 def load(name_or_path: str | Path) -> Scene:
+    """A scene by name (resources/scenes), from a .toml file, or from an SSP archive (.ssp)."""
+    if str(name_or_path).endswith(".ssp"):
+        from . import ssp
+        return ssp.load(name_or_path)
     path = resolve(name_or_path)
     try:
         data = tomllib.loads(path.read_text())

@@ -22,7 +22,7 @@ from pythonfmu import Fmi2Slave, Real, Integer, String, Fmi2Causality, Fmi2Varia
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
-from ..physics.parameters import DISPLAY_UNITS, UNITS, Parameter, ParameterError
+from ..physics.parameters import DISPLAY_UNITS, QUANTITIES, UNITS, Parameter, ParameterError
 from .. import __version__
 
 
@@ -36,6 +36,42 @@ class Output(NamedTuple):
     #: inputs this output depends on directly; None: all inputs if the model has direct
     #: feedthrough (``FEEDTHROUGH``), else none
     depends_on: tuple | None = None
+
+
+class MechanicalPort(NamedTuple):
+    """A rotational flange of the model, as the OSP Interface Specification describes it
+    (``AngularMechanicalPort``: a torque and an angular velocity of opposite causality, a
+    power bond), with the flange's angle beside it (``AngularDisplacement``: our compliant
+    coupling needs angles as well as speeds)."""
+    name: str
+    torque: str
+    angular_velocity: str
+    angle: str
+    description: str
+
+
+def declared_type(spec) -> tuple[str, str, dict]:
+    """The FMI type definition a declared variable refers to: (type name, FMI type
+    element, attributes of that element)."""
+    kind = getattr(spec, "kind", "real")
+    if kind == "real":
+        unit = spec.unit or "1"
+        quantity = QUANTITIES[unit]
+        attrs = {"quantity": quantity}
+        if unit != "1":
+            attrs["unit"] = unit
+            if unit in DISPLAY_UNITS:
+                attrs["displayUnit"] = DISPLAY_UNITS[unit]
+        return quantity, "Real", attrs
+    if kind == "integer":
+        return _camel(spec.name), "Integer", {"quantity": _camel(spec.name)}
+    if spec.choices:
+        return _camel(spec.name), "String", {}
+    return "PointTable", "String", {}
+
+
+def _camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.split("_"))
 
 
 def guarded(default=None):
@@ -83,6 +119,10 @@ class LeverSlave(Fmi2Slave):
     OUTPUTS: Sequence[Output] = ()
     FEEDTHROUGH = False
     DESCRIPTION = ""
+    #: the model's equations, one per line, for its documentation
+    EQUATIONS: Sequence[str] = ()
+    #: rotational flanges (``MechanicalPort``), for the OSP model description
+    PORTS: Sequence[MechanicalPort] = ()
 
     author = "lever-cosim project"
     license = "MIT"
@@ -328,6 +368,22 @@ class LeverSlave(Fmi2Slave):
                 SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})
         position = list(root).index(root.find("CoSimulation")) + 1
         root.insert(position, units)
+        # One type definition per quantity (and per kind of string), as the Reference-FMUs
+        # do; every variable refers to its type.
+        types = Element("TypeDefinitions")
+        seen = {}
+        for spec in self._declared.values():
+            name, element, attrs = declared_type(spec)
+            if name in seen:
+                continue
+            seen[name] = True
+            description = {"PointTable": "a table of points as text, 'x:y; x:y; ...'"}.get(name)
+            if getattr(spec, "choices", None):
+                description = "one of " + ", ".join(repr(c) for c in spec.choices)
+            simple = SubElement(types, "SimpleType", {"name": name, **({"description": description}
+                                                                        if description else {})})
+            SubElement(simple, element, attrs)
+        root.insert(position + 1, types)
 
         nodes = root.find("ModelVariables").findall("ScalarVariable")
         index_of = {node.get("name"): i for i, node in enumerate(nodes, start=1)}
@@ -335,7 +391,10 @@ class LeverSlave(Fmi2Slave):
             name = node.get("name")
             spec = self._declared.get(name)
             typed = node[0]
-            if spec is None or typed.tag not in ("Real", "Integer"):
+            if spec is None:
+                continue
+            typed.set("declaredType", declared_type(spec)[0])
+            if typed.tag not in ("Real", "Integer"):
                 continue
             if typed.tag == "Real" and spec.unit not in ("", "1"):
                 typed.set("unit", spec.unit)

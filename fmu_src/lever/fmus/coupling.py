@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
 from ..physics.parameters import Parameter
-from .base import LeverSlave, Output
+from .base import LeverSlave, MechanicalPort, Output
 
 _BIG = 1e12
 
@@ -30,6 +30,17 @@ class LeverCoupling(LeverSlave):
         Output("dissipated_power", "W", "power dissipated in the elastic elements, b*thetadot^2"),
     )
     FEEDTHROUGH = True
+    EQUATIONS = (
+        "theta = phi1 - Phi(phi2)   (elastic deflection; Phi the driven shaft's angle seen through the coupling)",
+        "U12 = dPhi/dphi2   (transfer function: 1 if synchronous; from the half-coupling function g if kinematic)",
+        "T = T_el(theta) + b*(w1 - U12*w2)   (T_el = c*theta, or the tabulated elastic law)",
+        "tau1 = -T,  tau2 = U12*T",
+        "tau1*w1 + tau2*w2 = -(dV/dt + b*thetadot^2)   (V = elastic_energy; the coupling creates no energy)",
+    )
+    PORTS = (
+        MechanicalPort("drive_flange", "tau1", "w1", "phi1", "flange on the drive (engine) shaft"),
+        MechanicalPort("driven_flange", "tau2", "w2", "phi2", "flange on the driven (load) shaft"),
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from ..physics import catalogue
 from ..physics.parameters import Parameter
-from .base import LeverSlave, Output
+from .base import LeverSlave, MechanicalPort, Output
 
 
 class _ShaftSlave(LeverSlave):
@@ -17,6 +17,7 @@ class _ShaftSlave(LeverSlave):
         Parameter("tau_rate", 0.0, "N.m/s", "rate of change of tau over the coming step (first-order hold; "
                   "0: tau held)", -1e15, 1e15, fixed=False, derivative_of="tau"),
     )
+    PORTS = (MechanicalPort("flange", "tau", "w", "phi", "the shaft's flange to the coupling"),)
     #: name of the output carrying the external torque and its work, set by subclasses
     TORQUE_OUTPUT = WORK_OUTPUT = ""
     SIGN = 1.0   # external torque on the shaft = SIGN * (reported torque)
@@ -65,6 +66,12 @@ class EngineShaft(_ShaftSlave):
         Output("engine_work", "J", "work done by the engine since the start, integral of Mg*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "engine_torque", "engine_work", 1.0
+    EQUATIONS = (
+        "dphi/dt = w",
+        "I1*dw/dt = Mg(w) + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "Mg(w) = M1 - K1*w   (stall_torque, torque_slope), or the tabulated characteristic",
+        "engine_work = integral of Mg*w dt",
+    )
 
     def _make_shaft(self):
         return catalogue.engine_from(self._values())
@@ -78,6 +85,13 @@ class LoadShaft(_ShaftSlave):
         Output("load_work", "J", "work absorbed by the load since the start, integral of Mc*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "load_torque", "load_work", -1.0
+    EQUATIONS = (
+        "dphi/dt = w",
+        "I2*dw/dt = tau(t) - Mc(t, phi, w),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "Mc = Mm (constant); Mm + seeded multisine bounded by dM (random); angle-periodic Fourier series "
+        "(fourier); linear interpolation in a time series (table)",
+        "load_work = integral of Mc*w dt",
+    )
 
     def _make_shaft(self):
         return catalogue.load_from(self._values())

@@ -39,6 +39,24 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
     "W": ({"kg": 1, "m": 2, "s": -3}, 1.0),
 }
 
+# The physical quantity of each unit: the FMUs declare one FMI type definition per
+# quantity (``<SimpleType name="Torque"><Real quantity="Torque" unit="N.m"/>``), and every
+# real variable refers to its type.
+QUANTITIES = {
+    "1": "Ratio",
+    "s": "Time",
+    "rad": "Angle",
+    "rad/s": "AngularVelocity",
+    "rad/s2": "AngularAcceleration",
+    "N.m": "Torque",
+    "N.m/s": "TorqueRate",
+    "N.m/rad": "RotationalSpringConstant",
+    "N.m.s/rad": "RotationalDampingConstant",
+    "kg.m2": "MomentOfInertia",
+    "J": "Energy",
+    "W": "Power",
+}
+
 # Which display unit goes with which unit (FMI DisplayUnit).
 DISPLAY_UNITS = {"rad": "deg", "rad/s": "rpm"}
 

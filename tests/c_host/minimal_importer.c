@@ -1,0 +1,133 @@
+/*
+ * minimal_importer.c -- a host that is not a Python process: it loads an FMI 2.0
+ * co-simulation FMU's binary with dlopen, instantiates it, sets one real input,
+ * steps, reads one real output and frees the instance.  Used by the tests to check
+ * the host set-up the README documents for pythonfmu FMUs (libpython loaded into
+ * the host, PYTHONHOME and PYTHONPATH naming an interpreter with the FMU's
+ * requirements).
+ *
+ * usage: minimal_importer UNZIPPED_DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE
+ *                         OUTPUT_VR STEP N_STEPS
+ * prints "t=<time> y=<output>" after every step and "freed" at the end; exit 0 on success.
+ */
+#include <dlfcn.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+typedef void *fmi2Component;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Boolean;
+typedef const char *fmi2String;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef struct {
+    void (*logger)(void *, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
+    void *(*allocateMemory)(size_t, size_t);
+    void (*freeMemory)(void *);
+    void (*stepFinished)(void *, fmi2Status);
+    void *componentEnvironment;
+} fmi2CallbackFunctions;
+
+typedef fmi2Component (*InstantiateT)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                      const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+typedef void (*FreeInstanceT)(fmi2Component);
+typedef fmi2Status (*SetupExperimentT)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
+                                       fmi2Real);
+typedef fmi2Status (*ModeT)(fmi2Component);
+typedef fmi2Status (*GetRealT)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
+typedef fmi2Status (*SetRealT)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
+typedef fmi2Status (*DoStepT)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+
+static void logger(void *env, fmi2String instance, fmi2Status status, fmi2String category,
+                   fmi2String message, ...) {
+    (void)env;
+    va_list args;
+    va_start(args, message);
+    fprintf(stderr, "[%d] %s (%s): ", (int)status, instance, category);
+    vfprintf(stderr, message, args);
+    fputc('\n', stderr);
+    va_end(args);
+}
+
+static void *symbol(void *lib, const char *name) {
+    void *f = dlsym(lib, name);
+    if (!f) {
+        fprintf(stderr, "minimal_importer: %s not found: %s\n", name, dlerror());
+        exit(3);
+    }
+    return f;
+}
+
+#define CHECK(call)                                                                   \
+    do {                                                                              \
+        fmi2Status s_ = (call);                                                       \
+        if (s_ > fmi2Warning) {                                                       \
+            fprintf(stderr, "minimal_importer: %s returned status %d\n", #call, s_);  \
+            return 4;                                                                 \
+        }                                                                             \
+    } while (0)
+
+int main(int argc, char **argv) {
+    if (argc != 9) {
+        fprintf(stderr, "usage: %s DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE OUTPUT_VR STEP N\n",
+                argv[0]);
+        return 2;
+    }
+    const char *dir = argv[1], *model = argv[2], *guid = argv[3];
+    fmi2ValueReference in_vr = (fmi2ValueReference)strtoul(argv[4], NULL, 10);
+    fmi2Real in_value = strtod(argv[5], NULL);
+    fmi2ValueReference out_vr = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
+    fmi2Real h = strtod(argv[7], NULL);
+    long n = strtol(argv[8], NULL, 10);
+
+    char path[4096], uri[4096];
+    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, model);
+    snprintf(uri, sizeof uri, "file://%s/resources", dir);
+    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!lib) {
+        fprintf(stderr, "minimal_importer: cannot load %s: %s\n", path, dlerror());
+        return 3;
+    }
+    InstantiateT instantiate = (InstantiateT)symbol(lib, "fmi2Instantiate");
+    FreeInstanceT free_instance = (FreeInstanceT)symbol(lib, "fmi2FreeInstance");
+    SetupExperimentT setup = (SetupExperimentT)symbol(lib, "fmi2SetupExperiment");
+    ModeT enter = (ModeT)symbol(lib, "fmi2EnterInitializationMode");
+    ModeT exit_init = (ModeT)symbol(lib, "fmi2ExitInitializationMode");
+    ModeT terminate = (ModeT)symbol(lib, "fmi2Terminate");
+    GetRealT get_real = (GetRealT)symbol(lib, "fmi2GetReal");
+    SetRealT set_real = (SetRealT)symbol(lib, "fmi2SetReal");
+    DoStepT do_step = (DoStepT)symbol(lib, "fmi2DoStep");
+
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = instantiate("host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
+    if (!c) {
+        fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
+        return 4;
+    }
+    CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
+    CHECK(enter(c));
+    CHECK(set_real(c, &in_vr, 1, &in_value));
+    CHECK(exit_init(c));
+    for (long k = 0; k < n; ++k) {
+        fmi2Real y;
+        CHECK(do_step(c, k * h, h, 1));
+        CHECK(get_real(c, &out_vr, 1, &y));
+        printf("t=%.17g y=%.17g\n", (k + 1) * h, y);
+    }
+    CHECK(terminate(c));
+    free_instance(c);
+    printf("freed\n");
+    /* Leave without running the libraries' exit-time destructors: pythonfmu 0.7
+     * finalises its embedded interpreter in a static destructor, which corrupts the
+     * heap at process exit (seen with numpy loaded: "free(): corrupted unsorted
+     * chunks").  Our Python tools leave the same way (harness/cli.py, tests/conftest.py).
+     * The library is not unloaded either: an embedded interpreter cannot be. */
+    fflush(stdout);
+    fflush(stderr);
+    _exit(0);
+}
