@@ -263,11 +263,10 @@ class FreewheelRectifier:
             if fly not in (STICK, FREE):
                 y[10] += 0.5 * self.J5 * y[7] ** 2
                 y[7] = 0.0
+                fly = self.flywheel_mode_at(t, y, disc, ext)
             else:
                 f = self.forces(t, y, disc, STICK, ext)
                 fly = 1 if f[9] > 0.0 else -1
-            if fly not in (STICK, FREE) and y[7] == 0.0:
-                fly = self.flywheel_mode_at(t, y, disc, ext)
         return y, disc, fly
 
     # -- start ---------------------------------------------------------------------------------
@@ -365,7 +364,7 @@ class FreewheelRectifier:
             k, theta = hit
             lo, hi, g_lo, g_hi = 0.0, dt, g0[k], g1[k]
             y_hi = y1
-            side = -1 if g_lo > 0.0 else 1
+            side = -1 if k >= N_EDGES or g_lo > 0.0 else 1
             # Illinois: keep the bracket [lo, hi] around the sign change of g_k
             stale = 0
             for _ in range(60):
@@ -381,7 +380,7 @@ class FreewheelRectifier:
                 if early is not None and early[0] != k:
                     k, hi, g_hi, y_hi = early[0], s, gs[early[0]], ys
                     lo, g_lo = 0.0, g0[k]
-                    side = -1 if g_lo > 0.0 else 1
+                    side = -1 if k >= N_EDGES or g_lo > 0.0 else 1
                     stale = 0
                     continue
                 if (gs[k] > 0.0) == (side < 0) and gs[k] != 0.0:
@@ -409,16 +408,16 @@ class FreewheelRectifier:
     @staticmethod
     def _first_crossing(g0, g1):
         """``(index, fraction)`` of the earliest sign change between ``g0`` and ``g1`` by
-        linear interpolation, or None.  Gap edges count both ways; mode functions only
-        from positive to non-positive.  A function at exactly zero at the start is just
-        leaving its edge."""
+        linear interpolation, or None.  Gap edges count both ways (an edge function at
+        exactly zero at the start is just leaving its edge); a mode function counts when it
+        turns negative, also from exactly zero (a slip starts with equal speeds)."""
         best = None
         for k in range(len(g0)):
             a, b = g0[k], g1[k]
             if k < N_EDGES:
                 crossed = (a > 0.0 and b <= 0.0) or (a < 0.0 and b >= 0.0)
-            else:
-                crossed = a > 0.0 and b <= 0.0
+            else:      # a mode ends when its function turns negative (it may start at 0)
+                crossed = a >= 0.0 and b < 0.0
             if crossed:
                 theta = a / (a - b)
                 if best is None or theta < best[1]:
