@@ -345,3 +345,12 @@ def test_scene_refuses_a_value_out_of_range_before_running():
     assert "rectifier.mesh_gap" in str(info.value) and "[0, 1]" in str(info.value)
     assert "msm_gap" not in str(info.value)        # 5 deg is allowed
 
+
+
+@pytest.mark.parametrize("master", ["trapezoidal-newton", "adaptive"])
+def test_coupling_iterating_masters_are_refused_on_the_one_fmu_scene(fmu_dir, master):
+    spec = scenes.load("freewheel_rectifier").with_overrides(["experiment.stop=0.01"])
+    result = simulate(spec, master, fmu_dir=fmu_dir)
+    assert not result.ok and result.failure_stage == "initialisation"
+    assert "connects none" in result.failure and "jacobi" in result.failure
+    assert len(simulate(spec, "jacobi-quadratic", fmu_dir=fmu_dir).times) == 51   # extrapolation just steps it
