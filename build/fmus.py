@@ -44,6 +44,7 @@ MODELS = {
     "LeverCoupling": "coupling",
     "EngineShaft": "shafts",
     "LoadShaft": "shafts",
+    "FreewheelRectifier": "freewheel",
 }
 
 

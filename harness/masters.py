@@ -797,4 +797,8 @@ def make(name: str, system: System, step: float, **options) -> Master:
         cls = MASTERS[name]
     except KeyError:
         raise ValueError(f"unknown master '{name}' (known: {', '.join(MASTERS)})") from None
+    if issubclass(cls, (IterativeMaster, _StepControl)) and not system.scene.connections:
+        # nothing to iterate on or to estimate an error from (e.g. the rectifier scene's one FMU)
+        raise MasterFailure(f"master '{name}' iterates on the values the scene's components exchange, and scene "
+                            f"'{system.scene.name}' connects none: use jacobi")
     return cls(system, step, **options)

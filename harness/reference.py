@@ -93,6 +93,9 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
     Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
     benchmark compares the masters with."""
+    from . import freewheel
+    if freewheel.component(scene):      # the rectifier scene: its own event-aware reference
+        return freewheel.solve_reference(scene, times, use_cache, rtol, atol, method)
     engine_name, coupling_name, load_name = _roles(scene)
     key = cache_key(scene, times, rtol, atol, method)
     path = CACHE / f"reference-{scene.name}-{key}.npz"

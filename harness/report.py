@@ -166,6 +166,9 @@ def plot(out: Path, result: RunResult, reference=None):
 
 
 def write(out: Path, result: RunResult, reference=None) -> dict:
+    from . import freewheel
+    if freewheel.component(result.scene):   # the rectifier scene has a report of its own
+        return freewheel.write(out, result, reference)
     out.mkdir(parents=True, exist_ok=True)
     write_traces(out / "traces.csv", result.times, result.traces)
     if reference is not None:

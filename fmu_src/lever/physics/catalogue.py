@@ -104,3 +104,60 @@ def load_from(values: dict) -> Shaft:
 def start_state(values: dict, declared) -> tuple[float, float]:
     p = check_all(declared, values)
     return p["phi_start"], p["w_start"]
+
+
+# -- the freewheel rectifier (MODEL.md section 8; the paper's Table 1) ------------------------------
+# Table 1 gives the gaps in degrees; they are stored in rad (scenes may write "1.74 deg").
+FREEWHEEL = (
+    Parameter("input_speed", 42.41, "rad/s", "angular frequency omega of the rocker's oscillation (speed of the "
+              "transmission's input shaft; 42.41 rad/s = 405 rpm in the stop-mode test)", 0.0, 1e4, low_open=True),
+    Parameter("rocker_amplitude", 0.103, "rad", "phi0 in the rocker's motion phi1 = phi0 (1 - cos(omega t))",
+              0.0, 1.5, low_open=True),
+    Parameter("half_coupling_inertia", 0.000202, "kg.m2", "J2, moment of inertia of ONE half-coupling (there are two)",
+              0.0, 1e3, low_open=True),
+    Parameter("driven_parts_inertia", 0.000217, "kg.m2", "J3, moment of inertia of the driven parts of ONE half "
+              "(driven discs, output shaft share; there are two)", 0.0, 1e3, low_open=True),
+    Parameter("torsion_end_inertia", 0.0014, "kg.m2", "J4, output end of the torsion shaft with its peripheral gear",
+              0.0, 1e3, low_open=True),
+    Parameter("flywheel_inertia", 5.0, "kg.m2", "J5, central gear of the summing gearbox (5: the paper's stop mode; "
+              "the real one is 0.00225)", 0.0, 1e6, low_open=True),
+    Parameter("ramp_angle", 0.3054, "rad", "alpha, inclination of the tear-shaped ramps the balls roll on",
+              0.0, math.pi / 2.0, low_open=True, high_open=True),
+    Parameter("contact_radius", 0.026, "m", "r, radius at which the balls and the discs act", 0.0, 10.0,
+              low_open=True),
+    Parameter("friction_pairs", 9, "", "n, friction pairs per half-coupling", 1, 1000, kind="integer"),
+    Parameter("disc_friction", 0.05, "1", "f_s, sliding (and static) friction coefficient of the discs", 0.0, 2.0),
+    Parameter("ball_friction", 0.001, "1", "f_k, rolling friction coefficient of the balls on the ramps", 0.0, 1.0,
+              high_open=True),
+    Parameter("ball_friction_speed", 0.05, "rad/s", "speed below which the balls' friction sign is regularised "
+              "linearly (not in the paper)", 0.0, 1e3, low_open=True),
+    Parameter("drag_torque", 0.85, "N.m", "M_v, drag moment of the disc packs at small slip speed (both halves)",
+              0.0, 1e5),
+    Parameter("drag_damping", 0.075, "N.m.s/rad", "k_v, growth of the disc drag with the slip speed", 0.0, 1e5),
+    Parameter("spring_force", 6.0, "N", "P_pr, force of the return spring on each half-coupling", 0.0, 1e6),
+    Parameter("msm_gap", math.radians(1.74), "rad", "z1, axial gap of the freewheel as a rocker angle", 0.0, 1.0),
+    Parameter("torsion_gap", math.radians(2.23), "rad", "z2, gap in the torsion shaft's splines", 0.0, 1.0),
+    Parameter("mesh_gap", math.radians(1.1), "rad", "z3, backlash of the gear mesh", 0.0, 1.0),
+    Parameter("msm_stiffness", 10313.0, "N.m/rad", "C_fi, torsional stiffness of the engaged freewheel (ramps, balls, "
+              "clamped discs) between the rocker and the half-couplings", 0.0, 1e9, low_open=True),
+    Parameter("pocket_stiffness", 10313.0, "N.m/rad", "stiffness of the pockets' ends that drag the half-couplings "
+              "back (not in the paper: taken equal to C_fi)", 0.0, 1e9, low_open=True),
+    Parameter("torsion_stiffness", 3798.0, "N.m/rad", "C_t, torsional stiffness of the torsion shaft",
+              0.0, 1e9, low_open=True),
+    Parameter("mesh_stiffness", 25000.0, "N.m/rad", "C_z, torsional stiffness of the gear mesh", 0.0, 1e9,
+              low_open=True),
+    Parameter("torsion_damping", 0.3, "N.m.s/rad", "k_t, damping of the torsion shaft", 0.0, 1e6),
+    Parameter("mesh_damping", 0.3, "N.m.s/rad", "k_z, damping of the gear mesh", 0.0, 1e6),
+    Parameter("resistance_torque", 0.0, "N.m", "Mc, Coulomb resistance on the output shaft (stick/slip; a value "
+              "above the largest mesh torque holds the output still, as in the stop-mode test)", 0.0, 1e7),
+    Parameter("max_substep", 2e-5, "s", "largest internal RK4 substep (events are located inside substeps)",
+              0.0, 1e-2, low_open=True),
+    Parameter("max_events", 10000, "", "most events (gap edges, stick/slip changes) one communication step may "
+              "hold before the FMU reports chattering", 1, 10 ** 9, kind="integer"),
+)
+
+
+def freewheel_from(values: dict):
+    from .freewheel import FreewheelRectifier
+
+    return FreewheelRectifier(check_all(FREEWHEEL, values))

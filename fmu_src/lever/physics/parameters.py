@@ -25,6 +25,9 @@ class ParameterError(ValueError):
 UNITS: dict[str, tuple[dict[str, int], float]] = {
     "1": ({}, 1.0),
     "s": ({"s": 1}, 1.0),
+    "m": ({"m": 1}, 1.0),
+    "kg": ({"kg": 1}, 1.0),
+    "N": ({"kg": 1, "m": 1, "s": -2}, 1.0),
     "rad": ({"rad": 1}, 1.0),
     "deg": ({"rad": 1}, math.pi / 180.0),
     "rad/s": ({"rad": 1, "s": -1}, 1.0),

@@ -1,0 +1,115 @@
+"""``FreewheelRectifier`` FMU: the whole rectifier chain - prescribed rocker, half-couplings
+on their ball ramps, friction discs, torsion shaft, gear mesh and output flywheel - in one
+FMU, because its gaps and stiff contacts (2000-5000 rad/s) must be stepped by one
+integrator with located events (docs/decisions.md).
+
+Its port is the output shaft, with a shaft's causality (``tau -> phi, w, a``, no direct
+feedthrough of ``phi, w``): a downstream model can be coupled through a compliant element
+as the project's shafts are.  Left unconnected, ``tau = 0``."""
+from __future__ import annotations
+
+import math
+
+from ..physics import catalogue
+from ..physics.freewheel import EVENTS, FREE, STATE
+from ..physics.parameters import Parameter
+from .base import LeverSlave, Output
+
+_PORT = ("tau",)
+
+
+class FreewheelRectifier(LeverSlave):
+    DESCRIPTION = ("Axial freewheel vibration rectifier (rocker phi0 (1 - cos(omega t)), ball ramps with gap z1, "
+                   "friction discs with stick/slip, torsion shaft with gap z2, gear mesh with gap z3, flywheel J5)")
+    PARAMETERS = catalogue.FREEWHEEL
+    INPUTS = (
+        Parameter("tau", 0.0, "N.m", "torque a downstream element applies to the output shaft (flywheel)",
+                  -1e9, 1e9, fixed=False),
+        Parameter("tau_rate", 0.0, "N.m/s", "rate of change of tau over the coming step (0: tau held)",
+                  -1e13, 1e13, fixed=False, derivative_of="tau"),
+    )
+    OUTPUTS = (
+        Output("phi", "rad", "angle of the output shaft (flywheel, element 5)", depends_on=()),
+        Output("w", "rad/s", "speed of the output shaft", derivative_of="phi", depends_on=()),
+        Output("a", "rad/s2", "acceleration of the output shaft (with the current input torque)", derivative_of="w",
+               depends_on=_PORT),
+        Output("rocker_angle", "rad", "phi1, rocker (element 1)", depends_on=()),
+        Output("rocker_speed", "rad/s", "w1, rocker", depends_on=()),
+        Output("rocker_acceleration", "rad/s2", "a1, rocker", depends_on=()),
+        Output("half_coupling_angle", "rad", "phi2, half-couplings (element 2)", depends_on=()),
+        Output("half_coupling_speed", "rad/s", "w2, half-couplings", depends_on=()),
+        Output("half_coupling_acceleration", "rad/s2", "a2, half-couplings", depends_on=()),
+        Output("driven_angle", "rad", "phi3, driven parts of the freewheel = input end of the torsion shaft (element 3)",
+               depends_on=()),
+        Output("driven_speed", "rad/s", "w3, driven parts", depends_on=()),
+        Output("driven_acceleration", "rad/s2", "a3, driven parts", depends_on=()),
+        Output("torsion_end_angle", "rad", "phi4, output end of the torsion shaft (element 4)", depends_on=()),
+        Output("torsion_end_speed", "rad/s", "w4, output end of the torsion shaft", depends_on=()),
+        Output("torsion_end_acceleration", "rad/s2", "a4, output end of the torsion shaft", depends_on=()),
+        Output("msm_deflection", "rad", "e = phi1 - phi2: > 0 engaged, in [-z1, 0] axial gap, < -z1 pocket end",
+               depends_on=()),
+        Output("torsion_twist", "rad", "phi3 - phi4: > 0 twisted forward, in [-z2, 0] spline gap", depends_on=()),
+        Output("mesh_deflection", "rad", "phi4 - phi5: > 0 driving contact, in [-z3, 0] backlash", depends_on=()),
+        Output("msm_contact", "1", "+1 engaged (discs clamped), 0 axial gap open, -1 pocket end (dragged back)",
+               depends_on=()),
+        Output("torsion_contact", "1", "+1 driving flank, 0 spline gap open, -1 back flank", depends_on=()),
+        Output("mesh_contact", "1", "+1 driving flank, 0 backlash open, -1 back flank", depends_on=()),
+        Output("disc_slip", "1", "0 discs stuck, +1 slipping with w2 > w3, -1 with w2 < w3", depends_on=()),
+        Output("flywheel_stuck", "1", "1 while the output's resistance holds the flywheel still", depends_on=()),
+        Output("rocker_torque", "N.m", "T12, torque the rocker applies to the half-couplings", depends_on=()),
+        Output("disc_torque", "N.m", "torque the half-couplings pass to the driven parts through the discs",
+               depends_on=()),
+        Output("disc_capacity", "N.m", "torque the discs can pass before they slip", depends_on=()),
+        Output("torsion_torque", "N.m", "T34, torque in the torsion shaft", depends_on=()),
+        Output("mesh_torque", "N.m", "T45, torque in the gear mesh", depends_on=()),
+        Output("resistance", "N.m", "torque of the output's resistance against the flywheel", depends_on=_PORT),
+        Output("input_work", "J", "work the rocker has done since the start, integral of T12*w1 dt", depends_on=()),
+        Output("output_work", "J", "work delivered to the resistance and the port since the start", depends_on=()),
+        Output("kinetic_energy", "J", "kinetic energy of elements 2-5", depends_on=()),
+        Output("elastic_energy", "J", "potential energy of the ramps, torsion shaft and mesh", depends_on=()),
+        Output("dissipated_energy", "J", "energy dissipated since the start (discs, balls, dampers)", depends_on=()),
+        Output("events", "1", "events located since the start (gap edges, stick/slip changes)", depends_on=()),
+    )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._model = None
+        self._y = None
+        self._disc = 0
+        self._fly = FREE
+        self._events = 0
+
+    def _build(self):
+        self._model = catalogue.freewheel_from(self._values())
+
+    def _reset_state(self):
+        self._y, self._disc, self._fly = self._model.start()
+        self._events = 0
+
+    def _compute_outputs(self):
+        values = self._model.named_outputs(self._time, self._y, self._disc, self._fly, self.tau, self._events)
+        for name, value in values.items():
+            setattr(self, name, value)
+
+    def _advance(self, t, h):
+        try:
+            y, disc, fly, n = self._model.advance(t, h, self._y, self._disc, self._fly, self.tau, self.tau_rate)
+        except RuntimeError as error:
+            return f"{error}; the state was not updated"
+        if not all(math.isfinite(v) and abs(v) < 1e15 for v in y):
+            bad = ", ".join(f"{name} = {v:.6g}" for name, v in zip(STATE, y) if not (math.isfinite(v) and abs(v) < 1e15))
+            return f"the state became non-finite or unbounded ({bad}) with input tau = {self.tau:.6g} N.m"
+        self._y, self._disc, self._fly = y, disc, fly
+        self._events += n
+        return None
+
+    def _internal_state(self) -> dict:
+        return {"y": list(self._y) if self._y is not None else None, "disc": self._disc, "fly": self._fly,
+                "events": self._events}
+
+    def _restore_internal_state(self, state: dict):
+        self._y = None if state["y"] is None else list(state["y"])
+        self._disc, self._fly, self._events = state["disc"], state["fly"], state["events"]
+
+
+__all__ = ["FreewheelRectifier", "EVENTS"]
