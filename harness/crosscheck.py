@@ -360,7 +360,16 @@ def generate_scene(scene: scenes.Scene) -> Reference:
 
 
 def scene_names() -> list[str]:
-    return sorted(p.stem for p in SCENES.glob("*.toml"))
+    """The scenes that have a reference: those declaring the ``reference`` feature."""
+    names = []
+    for path in sorted(SCENES.glob("*.toml")):
+        try:
+            spec = scenes.load(path)
+        except scenes.SceneError:
+            continue
+        if "reference" in spec.features:
+            names.append(path.stem)
+    return names
 
 
 def all_names() -> list[str]:
