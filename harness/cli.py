@@ -198,17 +198,9 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
-@main.command("measured")
-@click.argument("files", nargs=-1, type=click.Path(exists=True, path_type=Path))
-@click.option("--stiffness", type=float, default=None,
-              help="Torsional stiffness of the grade [N*m/rad], when the files do not state it (overrides them).")
-@click.option("--no-cycles", is_flag=True, help="Compare the mean curves only (one run a grade).")
-@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "measured", show_default=True)
-def measured_command(files, stiffness, no_cycles, out):
-    """Model against measurement: predict the drive-shaft torque from the measured
-    driven-shaft torque for every grade in FILES (tables or folders; default: the
-    monograph's data) and report the errors (measured.md, measured.json, plots).  Exit
-    code 1 when a grade misses the monograph's stated model-experiment difference."""
+def _measured_report(files, out: Path, stiffness: float | None = None, cycles: bool = True):
+    """Model against measurement for ``files`` (default: the monograph's data): print a
+    line per grade and the findings; exit 1 when there are findings."""
     import json
 
     from . import measured
@@ -217,7 +209,7 @@ def measured_command(files, stiffness, no_cycles, out):
         raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
     ensure_fmus(quiet=True)
     findings = measured.validate_measured(list(files) or measured.default_files(), out, stiffness=stiffness,
-                                          cycles=not no_cycles)
+                                          cycles=cycles)
     grades = json.loads((out / "measured.json").read_text())["grades"]
     for g in grades:
         click.echo(f"  {g['grade']:12s} c {g['conditions']['stiffness']:6g} N*m/rad: RMS error model "
@@ -229,6 +221,20 @@ def measured_command(files, stiffness, no_cycles, out):
     click.echo(f"written: {out / 'measured.md'}")
     if findings:
         sys.exit(1)
+
+
+@main.command("measured")
+@click.argument("files", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("--stiffness", type=float, default=None,
+              help="Torsional stiffness of the grade [N*m/rad], when the files do not state it (overrides them).")
+@click.option("--no-cycles", is_flag=True, help="Compare the mean curves only (one run a grade).")
+@click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "measured", show_default=True)
+def measured_command(files, stiffness, no_cycles, out):
+    """Model against measurement: predict the drive-shaft torque from the measured
+    driven-shaft torque for every grade in FILES (tables or folders; default: the
+    monograph's data) and report the errors (measured.md, measured.json, plots).  Exit
+    code 1 when a grade misses the monograph's stated model-experiment difference."""
+    _measured_report(files, out, stiffness, not no_cycles)
 
 
 @main.command("sweep")
@@ -383,6 +389,189 @@ def check(fmus):
             click.echo(f"  - {finding}")
     if total:
         sys.exit(1)
+
+
+@main.command("reference")
+@click.argument("names", nargs=-1, metavar="[NAMES]...")
+@click.option("--update", is_flag=True, help="Regenerate the traces (all, or NAMES) and write them.")
+def reference_command(names, update):
+    """Check that the committed reference traces (resources/reference/) are what the project
+    computes now; with --update, regenerate them and show what changed (per signal: max change).
+
+    NAMES are FMUs (LeverCoupling, EngineShaft, LoadShaft) or scenes; default: all.
+    Exit code without --update: 0 when every trace is current, 1 otherwise."""
+    from . import crosscheck
+    from .reference import ReferenceUnavailable
+
+    chosen = _reference_names(names)
+    stale = []
+    for name in chosen:
+        try:
+            fresh = crosscheck.generate(name)
+        except (ReferenceUnavailable, scenes.SceneError) as error:
+            click.echo(f"{name}: no reference ({error})")
+            continue
+        try:
+            committed = crosscheck.load(name)
+        except crosscheck.TraceFileError:
+            committed = None
+        diff = crosscheck.difference(committed, fresh)
+        if diff.current:
+            click.echo(f"{name}: current")
+            continue
+        stale.append(name)
+        if update:
+            crosscheck.write(fresh)
+            click.echo(f"{name}: updated ({crosscheck.paths(name)['ref'].parent})")
+        else:
+            click.echo(f"{name}: NOT current (`lever reference --update {name}` regenerates it)")
+        for problem in diff.problems:
+            click.echo(f"  {problem}")
+        for change in diff.changes:
+            click.echo(f"  {change.signal:24s} max change {change.max_change:11.4g} "
+                       f"({100 * change.relative:.3g} % of its largest magnitude) at t = {change.at_time:.6g} s")
+    if stale and not update:
+        sys.exit(1)
+
+
+def _reference_names(names) -> list[str]:
+    from . import crosscheck
+
+    known = crosscheck.all_names()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise UserError(f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
+    return list(names) or known
+
+
+def _fmu_start_values(model: str, assignments) -> dict:
+    """``--set name=value`` for an FMU run stand-alone: its parameters (and inputs not in
+    the ``_in.csv``), checked against the model description."""
+    from fmpy import read_model_description
+
+    variables = {v.name: v for v in read_model_description(str(FMUS / f"{model}.fmu")).modelVariables}
+    values = {}
+    for assignment in assignments:
+        if "=" not in assignment:
+            raise UserError(f"--set {assignment!r}: expected name=value")
+        key, raw = (x.strip() for x in assignment.split("=", 1))
+        name = key.split(".", 1)[1] if key.startswith(model + ".") else key
+        var = variables.get(name)
+        if var is None or var.causality not in ("parameter", "input"):
+            known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
+            raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
+        try:
+            value = scenes.quantity(scenes._coerce(raw), key)
+        except scenes.SceneError as error:
+            raise UserError(str(error)) from None
+        problems = scenes._check_value(f"{model}.{name}", var, value)
+        if problems:
+            raise UserError("; ".join(problems))
+        values[name] = value
+    return values
+
+
+@main.command("validate")
+@click.argument("names", nargs=-1, metavar="[NAMES]...")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Change a parameter of the run under test, not of the reference: component.parameter=value "
+                   "for a scene, parameter=value for an FMU (e.g. --set coupling.stiffness=800).")
+@click.option("--master", type=str, default=None, help="Master for a scene (default: the scene's).")
+@click.option("--step", type=float, default=None, help="Communication step for a scene [s] (default: the scene's).")
+@click.option("--result", "result_csv", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Validate this CSV from another tool's run of NAME instead of running it: a 'time' column and "
+                   "columns named like the reference's signals (component.variable for a scene, the FMU's "
+                   "variable names for an FMU; 'anything.variable' also matches an FMU's variable).")
+@click.option("--tolerance", type=click.Choice(["lever", "cross-check"]), default="lever", show_default=True,
+              help="The band's figures: 'lever' (1 % of each signal's range, one result step, at most 1 % of the "
+                   "samples outside) or the FMI cross-check's (10 %, 2 % of the span, at most 10 % outside).")
+@click.option("--measured", is_flag=True,
+              help="Model vs measurement instead (lever validate --measured GRADE_FILES...): NAMES are "
+                   "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
+                   "the model-vs-measurement check (as lever measured; default: the monograph's grades).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/validate/<NAME>).")
+def validate_command(names, assignments, master, step, result_csv, tolerance, measured, out):
+    """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
+    or a scene, with its master) and compare every recorded output with its committed
+    reference trace: RMS and max error, fraction of samples outside the tolerance band,
+    pass/fail per signal; a plot per failing signal.  NAMES default: every reference.
+
+    Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
+    2 on bad input."""
+    from . import crosscheck
+    from . import validate as judge
+
+    if measured:
+        _measured_report([Path(n) for n in names], out or RESULTS / "validate" / "measured")
+        return
+
+    chosen = _reference_names(names)
+    if result_csv is not None and len(chosen) != 1:
+        raise UserError("--result: name exactly one reference the CSV is to be compared with "
+                        "(e.g. lever validate --result run.csv kavz685)")
+    if step is not None and not (math.isfinite(step) and step > 0):
+        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    tol = judge.TOLERANCES[tolerance]
+    if result_csv is None:
+        try:
+            ensure_fmus(quiet=True)
+        except RuntimeError as error:
+            raise click.ClickException(f"building the FMUs failed: {error}") from None
+    all_passed = True
+    for name in chosen:
+        try:
+            ref = crosscheck.load(name)
+        except crosscheck.TraceFileError as error:
+            raise UserError(str(error)) from None
+        if result_csv is not None:
+            try:
+                other = crosscheck.read_csv(result_csv)
+            except crosscheck.TraceFileError as error:
+                raise UserError(str(error)) from None
+            result = crosscheck.Result(other.times, other.signals, f"from {result_csv}")
+        elif ref.kind == "fmu":
+            if master or step:
+                raise UserError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
+            result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+        else:
+            from . import masters as family
+            from .system import SceneInvalid
+            try:
+                spec = scenes.load(name).with_overrides(list(assignments))
+            except scenes.SceneError as error:
+                raise UserError(str(error)) from None
+            if master and master not in family.MASTERS:
+                raise UserError(f"master '{master}' is unknown (known: {', '.join(family.MASTERS)})")
+            try:
+                result = crosscheck.run_scene(spec, master, step)
+            except SceneInvalid as error:
+                raise UserError(str(error)) from None
+        findings, bands = judge.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
+                                        tol, ref.opt.start, ref.opt.stop)
+        if result.failure:
+            findings.problems.append(f"the run failed: {result.failure}")
+        target = out if (out and len(chosen) == 1) else (out or RESULTS / "validate") / name
+        crosscheck.write_validation(target, findings, bands, result, ref, write_result=result_csv is None)
+        _print_validation(name, findings, result, target)
+        all_passed &= findings.passed
+    sys.exit(0 if all_passed else 1)
+
+
+def _print_validation(name, findings, result, out: Path):
+    click.echo(f"{name}: {result.how}; tolerance {findings.tolerance.describe()}")
+    click.echo(f"  {'signal':24s} {'RMS error':>11s} {'max error':>11s} {'at t [s]':>9s} {'band +-':>10s} "
+               f"{'outside':>8s}  verdict")
+    for s in findings.signals:
+        click.echo(f"  {s.name:24s} {s.rms_error:11.4g} {s.max_error:11.4g} {s.max_error_time:9.4g} "
+                   f"{s.band_width:10.4g} {100 * s.fraction_outside:7.3g}%  {'pass' if s.passed else 'FAIL'}")
+    for problem in findings.problems:
+        click.echo(f"  problem: {problem}")
+    for note in findings.notes:
+        click.echo(f"  note: {note}")
+    verdict = "PASS" if findings.passed else "FAIL" + (
+        f" ({', '.join(findings.failed_signals)})" if findings.failed_signals else "")
+    click.echo(f"  {name}: {verdict}; written to {out}/")
 
 
 def entry():

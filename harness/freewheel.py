@@ -51,15 +51,17 @@ def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         meta = json.loads(str(data["meta"]))
         traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
         return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
-                         info={"cached": True, "events": meta["events"]})
+                         info={"cached": True, "events": meta["events"], "bookkeeping": [f"{name}.events"]})
     model = catalogue.freewheel_from(parameters(scene, name))
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
     wall = clock.perf_counter() - started
-    traces = {f"{name}.{k}": np.array([r[k] for r in rows]) for k in rows[0]}
+    # ``events`` counts the events the integrator located: bookkeeping of each solver, not
+    # a signal a co-simulation could match (the reference's own count is in ``info``).
+    traces = {f"{name}.{k}": np.array([r[k] for r in rows]) for k in rows[0] if k != "events"}
     reference = Reference(np.asarray(times, dtype=float)[:len(rows)], traces, wall, n_rhs,
                           f"{method} rtol={rtol:g} atol={atol:g}, restarted at {len(events)} located events",
-                          info={"events": len(events)})
+                          info={"events": len(events), "bookkeeping": [f"{name}.events"]})
     if use_cache:
         CACHE.mkdir(parents=True, exist_ok=True)
         meta = json.dumps({"wall_time": wall, "n_rhs": n_rhs, "method": reference.method, "events": len(events)})

@@ -48,6 +48,9 @@ UNITS: dict[str, tuple[dict[str, int], float]] = {
 QUANTITIES = {
     "1": "Ratio",
     "s": "Time",
+    "m": "Length",
+    "kg": "Mass",
+    "N": "Force",
     "rad": "Angle",
     "rad/s": "AngularVelocity",
     "rad/s2": "AngularAcceleration",
@@ -59,6 +62,7 @@ QUANTITIES = {
     "J": "Energy",
     "W": "Power",
 }
+assert set(QUANTITIES) == set(UNITS) - {"deg", "rpm"}, "every unit a variable may have needs its quantity"
 
 # Which display unit goes with which unit (FMI DisplayUnit).
 DISPLAY_UNITS = {"rad": "deg", "rad/s": "rpm"}

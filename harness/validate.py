@@ -1,0 +1,289 @@
+"""Judging a result against a reference trace: pure functions returning findings.
+
+The tolerance band is the FMI cross-check convention, as ``fmpy.util.validate_signal``
+implements it (reimplemented here, so that the band can be drawn and its figures set;
+``tests/test_validate.py`` checks that with the cross-check's figures it gives exactly
+fmpy's band and outliers):
+
+1. the reference is resampled linearly onto ``num`` uniformly spaced points over its span;
+2. a horizontal tolerance: running minimum and maximum over ``dx`` neighbouring points;
+3. a vertical tolerance ``w = dy * (max - min)`` of the resampled reference (for a constant
+   reference ``dy * |value|``, or 0.5 when it is zero) added below and above;
+4. a result sample strictly inside the band's time span is an outlier when it lies outside
+   the band interpolated linearly at its time; the fraction of outliers is judged.
+
+Two sets of figures (``TOLERANCES``):
+
+* ``cross-check``: fmpy's own (1000 points, ``dx`` = 20, ``dy`` = 0.1, fail above 10 %
+  outliers).  Its horizontal tolerance is 2 % of the span: on a 10 s scene that is 0.2 s,
+  more than two periods of the coupling's torque ripple, so the band is the ripple's
+  envelope and cannot tell a changed ripple from the right one.
+* ``lever`` (default): ``dy`` = 1 % of the signal's range, no sample outside allowed, and
+  the horizontal tolerance of one step *of the result*, judged at the reference's samples:
+  a reference sample ``(t, y_ref)`` is matched when the result, over its samples next to
+  ``t`` (one either side when ``t`` is a result sample, else the two around it), comes
+  within ``w`` of ``y_ref``.  This is the cross-check's band with the roles of the two
+  curves exchanged, so that it works for references kept at every k-th step (a 10 s scene
+  keeps 1000 rows, not one per communication step): the band must be built on the finer
+  curve.  One step is what an importer that reads an output depending on an input before
+  it sets the step's inputs is late by - fmpy's ``simulate_fmu`` with a feedthrough FMU,
+  the harness's recorded shaft accelerations - and what a variable-step result leaves
+  unknown between its samples.
+
+With a reference kept at every k-th step, the ``cross-check`` figures judge the result's
+samples between two reference samples against the straight line between them: content
+faster than the reference's sampling (the load's tones up to 450 rad/s against a 10 ms
+grid) puts some correct samples outside - one more reason for the ``lever`` figures.
+
+Besides the band, every signal gets its RMS and maximum error at the reference's samples
+(the result interpolated linearly there), whichever figures judge it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    name: str
+    #: vertical tolerance, relative to the reference's range over the span
+    dy: float
+    #: largest fraction of compared samples allowed outside the band
+    max_outside: float
+    #: the cross-check band's points over the span and running window (in points);
+    #: None: the ``lever`` judging (one result step, at the reference's samples)
+    num: int | None = None
+    dx: int | None = None
+
+    @property
+    def cross_check(self) -> bool:
+        return self.num is not None
+
+    def describe(self) -> str:
+        if self.cross_check:
+            how = (f"band on {self.num} points, horizontal {self.dx} points, judged at the result's samples")
+        else:
+            how = "horizontal one result step, judged at the reference's samples"
+        return (f"{self.name}: vertical {100 * self.dy:g} % of each signal's range, {how}, "
+                f"at most {100 * self.max_outside:g} % outside")
+
+
+TOLERANCES = {
+    "lever": Tolerance("lever", dy=0.01, max_outside=0.01),
+    "cross-check": Tolerance("cross-check", dy=0.1, max_outside=0.1, num=1000, dx=20),
+}
+
+
+@dataclass
+class Band:
+    """A tolerance band to draw: ``low ... high`` at times ``t``."""
+    t: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    width: float      # the vertical tolerance w
+
+
+@dataclass
+class SignalFinding:
+    name: str
+    rms_error: float
+    max_error: float
+    #: time of the largest error
+    max_error_time: float
+    fraction_outside: float
+    n_compared: int
+    band_width: float
+    passed: bool
+    #: why it failed, in words (empty when it passed)
+    problem: str = ""
+    #: times of the samples outside the band (for plots; the first 5000)
+    outside_times: list = field(default_factory=list, repr=False)
+
+
+@dataclass
+class Findings:
+    """The verdict on one result: per signal, and about the result as a whole."""
+    name: str
+    tolerance: Tolerance
+    signals: list[SignalFinding] = field(default_factory=list)
+    #: problems that fail the whole result (missing signals, span not covered, ...)
+    problems: list[str] = field(default_factory=list)
+    #: remarks that do not fail it (columns the reference does not have, ...)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return not self.problems and all(s.passed for s in self.signals)
+
+    @property
+    def failed_signals(self) -> list[str]:
+        return [s.name for s in self.signals if not s.passed]
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "passed": self.passed, "tolerance": self.tolerance.describe(),
+                "problems": list(self.problems), "notes": list(self.notes),
+                "signals": {s.name: {k: v for k, v in vars(s).items() if k not in ("name", "outside_times")}
+                            for s in self.signals}}
+
+
+def _width(values: np.ndarray, dy: float) -> float:
+    low, high = float(np.min(values)), float(np.max(values))
+    if low == high:
+        return 0.5 if low == 0 else abs(low) * dy
+    return (high - low) * dy
+
+
+def band(t_ref: np.ndarray, y_ref: np.ndarray, num: int = 1000, dx: int = 20, dy: float = 0.1) -> Band:
+    """The cross-check's band around ``y_ref(t_ref)``: ``num`` uniform points over the
+    reference's span, running min/max over ``dx`` points, widened by ``dy`` times the range."""
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    t_ref = np.array(t_ref, dtype=float)
+    y_ref = np.asarray(y_ref, dtype=float)
+    t_band = np.linspace(t_ref[0], t_ref[-1], num)
+    # duplicate sample times (an event): the later sample 1e-13 s later, as fmpy does
+    for i in range(1, len(t_ref)):
+        while t_ref[i - 1] >= t_ref[i]:
+            t_ref[i] += 1e-13
+    y_band = np.interp(t_band, t_ref, y_ref)
+    width = _width(y_band, dy)
+    return Band(t_band, minimum_filter1d(y_band, size=dx) - width, maximum_filter1d(y_band, size=dx) + width, width)
+
+
+def outside(t: np.ndarray, y: np.ndarray, b: Band) -> np.ndarray:
+    """Which samples ``y(t)`` lie outside band ``b`` (only samples strictly inside the
+    band's time span count, as in the cross-check; a non-finite value is outside)."""
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    low = np.interp(t, b.t, b.low)
+    high = np.interp(t, b.t, b.high)
+    out = (y < low) | (y > high) | ~np.isfinite(y)
+    return out & (t > b.t[0]) & (t < b.t[-1])
+
+
+def result_window(t: np.ndarray, y: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The result's smallest and largest value over one of its steps around each time in
+    ``at``: its samples before, at and after ``at`` when ``at`` is a sample, else the two
+    around it.  (Times outside the result's span get its first or last sample.)"""
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = len(t)
+    slack = 1e-9 * max(1.0, float(np.max(np.abs(t))))
+    right = np.clip(np.searchsorted(t, at - slack, side="left"), 0, n - 1)   # first sample >= at
+    hit = np.abs(t[right] - at) <= slack
+    lo_index = np.clip(right - 1, 0, n - 1)
+    hi_index = np.clip(np.where(hit, right + 1, right), 0, n - 1)
+    stack = np.stack([y[lo_index], y[right], y[hi_index]])
+    return np.min(stack, axis=0), np.max(stack, axis=0)
+
+
+def compare_signal(name: str, t: np.ndarray, y: np.ndarray, t_ref: np.ndarray, y_ref: np.ndarray,
+                   tolerance: Tolerance) -> tuple[SignalFinding, Band]:
+    """One signal against its reference: errors, fraction outside the band, verdict."""
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    t_ref, y_ref = np.asarray(t_ref, dtype=float), np.asarray(y_ref, dtype=float)
+    slack = 1e-9 * max(1.0, abs(float(t_ref[-1])))
+    # errors at the reference's samples in the result's span (the result interpolated there)
+    covered = (t_ref >= t[0] - slack) & (t_ref <= t[-1] + slack)
+    t_cmp, y_true = t_ref[covered], y_ref[covered]
+    y_cmp = np.interp(t_cmp, t, y)
+    if tolerance.cross_check:
+        b = band(t_ref, y_ref, tolerance.num, tolerance.dx, tolerance.dy)
+        flags_at, flags = t, outside(t, y, b)
+        n = len(t)                       # the cross-check divides by all result samples
+    else:
+        width = _width(y_ref, tolerance.dy)
+        low, high = result_window(t, y, t_cmp)
+        flags = (y_true < low - width) | (y_true > high + width) | ~np.isfinite(low) | ~np.isfinite(high)
+        flags_at = t_cmp
+        b = Band(t_ref, y_ref - width, y_ref + width, width)
+        n = len(t_cmp)
+    error = y_cmp - y_true
+    finite = np.isfinite(error)
+    if len(error) and finite.all():
+        rms = float(np.sqrt(np.mean(error ** 2)))
+        i = int(np.argmax(np.abs(error)))
+        peak, peak_time = float(abs(error[i])), float(t_cmp[i])
+    elif len(error):
+        rms = peak = math.inf
+        peak_time = float(t_cmp[np.flatnonzero(~finite)[0]])
+    else:
+        rms = peak = peak_time = math.nan
+    fraction = float(np.count_nonzero(flags)) / n if n else 1.0
+    passed = bool(n) and fraction <= tolerance.max_outside
+    problem = ""
+    if not n:
+        problem = "no sample inside the reference's span"
+    elif not passed:
+        first = float(flags_at[np.flatnonzero(flags)[0]])
+        problem = (f"{100 * fraction:.3g} % of the samples outside the band (allowed "
+                   f"{100 * tolerance.max_outside:g} %), the first at t = {first:.6g} s")
+    outside_times = [float(x) for x in flags_at[flags][:5000]]
+    return SignalFinding(name, rms, peak, peak_time, fraction, n, b.width, passed, problem, outside_times), b
+
+
+def match_columns(reference_names: list[str], result_names: list[str]) -> tuple[dict[str, str], list[str]]:
+    """Which result column carries each reference signal: the same name, or else the one
+    column named ``<anything>.<name>`` (a single FMU's variables as another tool names them,
+    e.g. ``coupling.tau1`` for ``tau1``).  Returns the mapping and the unmatched names."""
+    mapping, missing = {}, []
+    for name in reference_names:
+        if name in result_names:
+            mapping[name] = name
+            continue
+        suffixed = [c for c in result_names if c.endswith("." + name)]
+        if len(suffixed) == 1:
+            mapping[name] = suffixed[0]
+        else:
+            missing.append(name)
+    return mapping, missing
+
+
+def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], reference_times: np.ndarray,
+            reference: dict[str, np.ndarray], tolerance: Tolerance = TOLERANCES["lever"],
+            start: float | None = None, stop: float | None = None) -> tuple[Findings, dict[str, Band]]:
+    """Every signal of ``reference`` against the result ``traces`` (both by name, on their own
+    time grids).  The result must cover ``start ... stop`` (default: the reference's span).
+    Returns the findings and the band of each compared signal (for plots)."""
+    findings = Findings(name, tolerance)
+    bands: dict[str, Band] = {}
+    times = np.asarray(times, dtype=float)
+    reference_times = np.asarray(reference_times, dtype=float)
+    start = float(reference_times[0]) if start is None else float(start)
+    stop = float(reference_times[-1]) if stop is None else float(stop)
+    if len(times) < 2:
+        findings.problems.append(f"the result has {len(times)} sample(s); at least two are needed")
+        return findings, bands
+    if np.any(np.diff(times) < 0):
+        findings.problems.append("the result's time column is not monotonic")
+        return findings, bands
+    slack = 1e-9 * max(1.0, abs(stop))
+    if times[0] > start + slack:
+        findings.problems.append(f"the result starts at t = {times[0]:.6g} s, after the start time ({start:g} s)")
+    if times[-1] < stop - slack:
+        findings.problems.append(f"the result ends at t = {times[-1]:.6g} s, before the stop time ({stop:g} s)")
+    mapping, missing = match_columns(list(reference), list(traces))
+    for signal in missing:
+        findings.problems.append(f"signal '{signal}' is missing from the result")
+    extra = sorted(set(traces) - set(mapping.values()))
+    if extra:
+        findings.notes.append("not in the reference (not compared): " + ", ".join(extra))
+    for signal, column in mapping.items():
+        finding, b = compare_signal(signal, times, traces[column], reference_times, reference[signal], tolerance)
+        findings.signals.append(finding)
+        bands[signal] = b
+    return findings, bands
+
+
+def fmpy_max_outside(times: np.ndarray, traces: dict, reference_times: np.ndarray, reference: dict) -> float:
+    """fmpy's own verdict, ``fmpy.util.validate_result``: the largest fraction of samples
+    outside the cross-check band over all signals (for comparison with ours)."""
+    from fmpy.util import validate_result
+
+    names = [n for n in reference if n in traces]
+    as_array = lambda t, cols: np.rec.fromarrays([np.asarray(t, float)] + [np.asarray(cols[n], float) for n in names],
+                                                 names=["time"] + names)
+    return float(validate_result(as_array(times, traces), as_array(reference_times, reference)))

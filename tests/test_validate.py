@@ -1,0 +1,244 @@
+"""Reference traces and validation (harness.crosscheck, harness.validate, `lever reference`,
+`lever validate`)."""
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from harness import crosscheck, validate
+from harness import scene as scenes
+from harness.cli import main
+
+LEVER = validate.TOLERANCES["lever"]
+CROSS = validate.TOLERANCES["cross-check"]
+
+
+def _invoke(*args):
+    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+
+
+# -- the band: the cross-check's, as fmpy implements it ----------------------------------------
+
+@pytest.mark.parametrize("kind", ["ripple", "constant", "zero", "steps"])
+def test_band_is_fmpys_with_the_cross_check_figures(kind):
+    from fmpy.util import validate_signal
+
+    rng = np.random.default_rng(3)
+    t_ref = np.linspace(0.0, 2.0, 701)
+    y_ref = {"ripple": 3 * np.sin(7 * t_ref) + np.sin(90 * t_ref), "constant": np.full_like(t_ref, 4.2),
+             "zero": np.zeros_like(t_ref), "steps": np.floor(3 * t_ref)}[kind]
+    t = np.sort(rng.uniform(-0.1, 2.1, 900))
+    y = np.interp(t, t_ref, y_ref) + rng.normal(0, 0.3, t.size)
+    t_band, y_min, y_max, i_out = validate_signal(t, y, t_ref.copy(), y_ref)
+    ours = validate.band(t_ref, y_ref, CROSS.num, CROSS.dx, CROSS.dy)
+    np.testing.assert_array_equal(ours.t, t_band)
+    np.testing.assert_allclose(ours.low, y_min, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ours.high, y_max, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(validate.outside(t, y, ours), i_out)
+
+
+def test_cross_check_fraction_is_fmpys_validate_result():
+    t_ref = np.linspace(0, 1, 401)
+    reference = {"x": np.sin(20 * t_ref), "v": np.cos(3 * t_ref)}
+    t = np.linspace(0, 1, 1001)
+    traces = {"x": np.sin(20 * t) * 1.3, "v": np.cos(3 * t)}
+    findings, _ = validate.compare("x", t, traces, t_ref, reference, CROSS)
+    assert max(s.fraction_outside for s in findings.signals) == pytest.approx(
+        validate.fmpy_max_outside(t, traces, t_ref, reference), abs=1e-12)
+    assert findings.failed_signals == ["x"]
+
+
+# -- the lever figures --------------------------------------------------------------------------
+
+def _signal(t):
+    return 50 * np.sin(74 * t) + 10 * t
+
+
+def test_lever_tolerance_forgives_one_step_of_lag_not_three():
+    h = 1e-3
+    t = np.arange(0, 1 + h / 2, h)
+    t_ref = t[::10]
+    reference = {"y": _signal(t_ref)}
+    exact, _ = validate.compare("y", t, {"y": _signal(t)}, t_ref, reference)
+    late, _ = validate.compare("y", t, {"y": _signal(t - h)}, t_ref, reference)
+    later, _ = validate.compare("y", t, {"y": _signal(t - 3 * h)}, t_ref, reference)
+    assert exact.passed and exact.signals[0].max_error < 1e-12
+    assert late.passed and late.signals[0].max_error > late.signals[0].band_width   # outside 1 % ...
+    assert not later.passed and later.signals[0].fraction_outside > 0.5              # ... but one step
+
+
+def test_lever_tolerance_allows_one_percent_of_samples_outside():
+    t = np.linspace(0, 1, 1001)
+    y = 100 * t                  # band +-1, one step 0.1: a sample's neighbours are within the band
+    spiky = y.copy()
+    spiky[100:700:3] += 30.0     # 200 isolated wrong samples: each is excused by its neighbours
+    findings, _ = validate.compare("y", t, {"y": spiky}, t, {"y": y})
+    assert findings.passed and findings.signals[0].fraction_outside == 0
+    for run, passes in ((12, True), (13, False)):
+        wrong = y.copy()
+        wrong[200:200 + run] += 30.0      # a run of wrong samples: all but its two ends are outside
+        findings, _ = validate.compare("y", t, {"y": wrong}, t, {"y": y})
+        assert findings.signals[0].fraction_outside == pytest.approx((run - 2) / 1001)
+        assert findings.passed == passes
+
+
+def test_structural_problems_fail_the_result():
+    t = np.linspace(0, 1, 101)
+    reference = {"a": np.sin(t), "b": np.cos(t)}
+    short, _ = validate.compare("r", t[:50], {"a": np.sin(t[:50]), "b": np.cos(t[:50])}, t, reference)
+    assert not short.passed and any("ends at" in p for p in short.problems)
+    missing, _ = validate.compare("r", t, {"a": np.sin(t), "c": t}, t, reference)
+    assert not missing.passed and any("'b' is missing" in p for p in missing.problems)
+    assert any("c" in n for n in missing.notes)
+    nan = np.sin(t)
+    nan[40:60] = np.nan
+    broken, _ = validate.compare("r", t, {"a": nan, "b": np.cos(t)}, t, reference)
+    assert broken.failed_signals == ["a"] and broken.signals[0].rms_error == np.inf
+
+
+def test_columns_match_by_name_or_unique_suffix():
+    mapping, missing = validate.match_columns(["tau1", "tau2", "w"], ["coupling.tau1", "tau2", "a.w", "b.w"])
+    assert mapping == {"tau1": "coupling.tau1", "tau2": "tau2"} and missing == ["w"]
+
+
+# -- the committed references -------------------------------------------------------------------
+
+def test_lever_reference_reports_every_committed_trace_current():
+    result = _invoke("reference")
+    assert result.exit_code == 0, result.output
+    for name in crosscheck.all_names():
+        assert f"{name}: current" in result.output
+
+
+def test_reference_files_are_in_the_cross_check_layout():
+    from fmpy.util import read_csv, read_ref_opt_file
+
+    for name in crosscheck.all_names():
+        p = crosscheck.paths(name)
+        opt = read_ref_opt_file(str(p["opt"]))
+        ref = read_csv(str(p["ref"]))
+        assert ref.dtype.names[0] == "time" and ref["time"][0] == opt["StartTime"] and ref["time"][-1] == opt["StopTime"]
+        assert p["in"].exists() == (name in crosscheck.FMU_CASES)
+        assert p["ref"].stat().st_size < 200_000
+        if name in crosscheck.FMU_CASES:
+            assert set(read_csv(str(p["in"])).dtype.names) > {"time"}
+
+
+def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monkeypatch):
+    for name in ("LeverCoupling", "EngineShaft"):
+        shutil.copytree(crosscheck.paths(name)["ref"].parent, tmp_path / name)
+    monkeypatch.setattr(crosscheck, "REFERENCE_DIR", tmp_path)
+    ref = crosscheck.load("LeverCoupling")
+    ref.outputs.signals["tau1"][500] += 2.5
+    crosscheck.write(ref)
+    checked = _invoke("reference", "LeverCoupling", "EngineShaft")
+    assert checked.exit_code == 1
+    assert "LeverCoupling: NOT current" in checked.output and "EngineShaft: current" in checked.output
+    line = next(l for l in checked.output.splitlines() if l.strip().startswith("tau1"))
+    assert line.split()[1:4] == ["max", "change", "2.5"] and line.endswith("t = 0.5 s")
+    assert _invoke("reference", "--update", "LeverCoupling").exit_code == 0
+    assert "LeverCoupling: current" in _invoke("reference", "LeverCoupling").output
+
+
+# -- every FMU and scene validates; perturbed parameters fail where they should -----------------
+
+def _validate(name, assignments=()):
+    ref = crosscheck.load(name)
+    if ref.kind == "fmu":
+        from harness.cli import _fmu_start_values
+        result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+    else:
+        result = crosscheck.run_scene(scenes.load(name).with_overrides(list(assignments)))
+    assert result.failure is None, result.failure
+    findings, _ = validate.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
+                                   LEVER, ref.opt.start, ref.opt.stop)
+    return findings, result
+
+
+@pytest.mark.parametrize("name", crosscheck.all_names())
+def test_every_fmu_and_scene_validates_against_its_reference(fmu_dir, name):
+    findings, _ = _validate(name)
+    assert findings.passed, (findings.problems, findings.failed_signals)
+    assert [s.name for s in findings.signals] == list(crosscheck.load(name).outputs.signals)
+
+
+def test_stiffer_coupling_fails_the_torques_and_energy_not_the_kinematics(fmu_dir):
+    findings, _ = _validate("LeverCoupling", ["stiffness=750"])
+    assert set(findings.failed_signals) == {"tau1", "tau2", "elastic_energy"}
+
+
+def test_heavier_load_shaft_fails_its_motion_not_its_load_torque(fmu_dir):
+    findings, _ = _validate("LoadShaft", ["inertia=0.165"])
+    failed = set(findings.failed_signals)
+    assert "w" in failed and failed <= {"phi", "w", "a", "load_work"}
+
+
+@pytest.fixture(scope="module")
+def kavz685_run(fmu_dir):
+    return crosscheck.run_scene(scenes.load("kavz685"))
+
+
+def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_path):
+    result = _invoke("validate", "kavz685", "--set", "coupling.stiffness=800", "--out", str(tmp_path))
+    assert result.exit_code == 1
+    findings = __import__("json").loads((tmp_path / "validation.json").read_text())
+    failed = {n for n, s in findings["signals"].items() if not s["passed"]}
+    # the torques follow the load; the deflection theta = T/c is what a stiffness sets
+    assert failed == {"coupling.theta"}
+    assert (tmp_path / "coupling.theta.png").exists() and (tmp_path / "kavz685_out.csv").exists()
+
+
+# -- results produced elsewhere -------------------------------------------------------------------
+
+def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp_path):
+    good = tmp_path / "other_tool.csv"
+    crosscheck.write_csv(good, crosscheck.Traces(kavz685_run.times, kavz685_run.traces))
+    result = _invoke("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
+    assert result.exit_code == 0, result.output
+    # a tool whose coupling torque lags 10 ms behind (as a 10 ms zero-order hold would)
+    traces = dict(kavz685_run.traces)
+    for name in ("coupling.tau1", "coupling.tau2"):
+        traces[name] = np.concatenate([np.full(10, traces[name][0]), traces[name][:-10]])
+    bad = tmp_path / "lagging_tool.csv"
+    crosscheck.write_csv(bad, crosscheck.Traces(kavz685_run.times, traces))
+    result = _invoke("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
+    assert result.exit_code == 1
+    assert "FAIL (coupling.tau1, coupling.tau2)" in result.output
+
+
+def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
+    ref = crosscheck.load("EngineShaft")
+    run = crosscheck.run_fmu("EngineShaft", ref)
+    path = tmp_path / "engine.csv"
+    crosscheck.write_csv(path, crosscheck.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
+    assert _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
+    # ending early and missing a signal: both fail
+    crosscheck.write_csv(path, crosscheck.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
+                                                                     if k != "engine_work"}))
+    result = _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
+    assert result.exit_code == 1
+    assert "ends at t = 0.499" in result.output and "'engine_work' is missing" in result.output
+
+
+def test_validate_refuses_bad_input(tmp_path):
+    assert _invoke("validate", "nope").exit_code == 2
+    assert _invoke("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers
+    result = _invoke("validate", "LeverCoupling", "--set", "stiffness=-3")
+    assert result.exit_code == 2 and "allowed range" in result.output
+    result = _invoke("validate", "LeverCoupling", "--set", "stiffnes=3")
+    assert result.exit_code == 2 and "no parameter 'stiffnes'" in result.output
+
+
+# -- lever validate --measured: the model-vs-measurement check on given files ----------------
+
+def test_measured_option_checks_a_grade(tmp_path):
+    from harness.paths import DATA
+    grade = [str(DATA / "monograph" / f"torque_{shaft}_7IRP13-48.csv") for shaft in ("drive", "driven")]
+    result = _invoke("validate", "--measured", *grade, "--out", str(tmp_path))
+    assert result.exit_code == 0, result.output
+    assert "7IRP" in result.output and (tmp_path / "measured.md").exists()
+    result = _invoke("validate", "--measured", grade[0], "--out", str(tmp_path / "lonely"))
+    assert result.exit_code == 1 and "finding" in result.output
