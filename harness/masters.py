@@ -473,9 +473,11 @@ class IterativeMaster(Master):
 
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
-        at the end of the step (the evaluations left the held ones in place)."""
+        at the end of the step (the evaluations left the held ones in place), and the
+        outputs that depend on them (a shaft's acceleration) are read with them."""
         for target, vrs, values in self._inputs:
             target.write(vrs, values)
+        self.system.refresh_dependent()
 
     def _guess(self, t, h, start):
         if len(self._history) < 2:

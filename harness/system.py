@@ -161,6 +161,14 @@ class System:
                                    ())
         self._full_plan = [self._plan_of[n] for n in self.order]
         self._partial_plans = {}
+        # Components without direct feedthrough whose exposed outputs still depend on their
+        # inputs (a shaft's acceleration on its torque): propagation reads them before their
+        # inputs are written, so such an output lags a step unless it is read again.
+        self._dependent_reads = tuple(
+            self._plan_of[name][:6] for name in self.order
+            if name not in self.feedthrough
+            and any(u.dependencies and u.variable.name in self.exposed[name]
+                    for u in self.components[name].description.outputs))
 
     def held_plan(self, held: set[str]):
         """A propagation plan that fills the input buffers of the components in ``held``
@@ -191,6 +199,15 @@ class System:
                 status = set_real(target_handle, t_vrs, t_n, t_values)
                 if status > 1:
                     target._fail("fmi2SetReal", status)
+
+    def refresh_dependent(self):
+        """Read again the outputs that depend on inputs written since they were read (see
+        ``_dependent_reads``); a master calls it when its inputs are final for the step."""
+        for component, get_real, handle, vrs, n, values in self._dependent_reads:
+            component.calls += 1
+            status = get_real(handle, vrs, n, values)
+            if status > 1:
+                component._fail("fmi2GetReal", status)
 
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""

@@ -122,7 +122,7 @@ def test_reference_files_are_in_the_cross_check_layout():
         ref = read_csv(str(p["ref"]))
         assert ref.dtype.names[0] == "time" and ref["time"][0] == opt["StartTime"] and ref["time"][-1] == opt["StopTime"]
         assert p["in"].exists() == (name in crosscheck.FMU_CASES)
-        assert p["ref"].stat().st_size < 200_000
+        assert p["ref"].stat().st_size < 400_000      # small enough to commit (the rectifier: 34 signals)
         if name in crosscheck.FMU_CASES:
             assert set(read_csv(str(p["in"])).dtype.names) > {"time"}
 
