@@ -35,6 +35,7 @@ MODELS = {
     "LeverCoupling": "coupling",
     "EngineShaft": "shafts",
     "LoadShaft": "shafts",
+    "MisalignmentSource": "sources",
 }
 
 
