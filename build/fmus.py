@@ -45,6 +45,7 @@ MODELS = {
     "EngineShaft": "shafts",
     "LoadShaft": "shafts",
     "FreewheelRectifier": "freewheel",
+    "MisalignmentSource": "sources",
 }
 
 

@@ -56,6 +56,17 @@ def _roles(scene: scenes.Scene):
     return engine, coupling, load
 
 
+def _misalignment_source(scene: scenes.Scene, coupling_name: str):
+    """alpha(t) when a source drives the coupling's misalignment input, else None."""
+    driver = next((c for c in scene.connections if c.target == coupling_name and c.input == "misalignment"), None)
+    if driver is None:
+        return None
+    if scene.components[driver.source].fmu != "MisalignmentSource" or driver.output != "misalignment":
+        raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
+                                   f"MisalignmentSource, not from {driver}")
+    return catalogue.misalignment_source_from(_params(scene, driver.source))
+
+
 def _shaft_rates(shaft, t, phi, w, tau):
     """``Shaft.rates`` over arrays; element by element where a torque model only takes
     scalars (tabulated characteristics)."""
@@ -109,14 +120,23 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     load = catalogue.load_from(_params(scene, load_name))
     coupling_params = _params(scene, coupling_name)
     coupling = catalogue.coupling_from(coupling_params)
+    misalignment = _misalignment_source(scene, coupling_name)
     phi1, w1 = catalogue.start_state(_params(scene, engine_name), catalogue.ENGINE)
     phi2, w2 = catalogue.start_state(_params(scene, load_name), catalogue.LOAD)
     drive_rates, driven_rates = engine.rates, load.rates
-    evaluate = coupling.evaluate
+
+    if misalignment is not None:
+        # the coupling at alpha(t), exactly as the coupling FMU evaluates it (CouplingFamily)
+        family = catalogue.coupling_family_from(coupling_params)
+        alpha_at = misalignment.value
+
+        def evaluate(p1, v1, p2, v2, t):
+            return family.at(alpha_at(t)).evaluate(p1, v1, p2, v2)
+    fixed = coupling.evaluate if misalignment is None else None
 
     def rhs(t, y):
         p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
-        r = evaluate(p1, v1, p2, v2)
+        r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
         a1, m1 = drive_rates(t, p1, v1, r.tau1)
         a2, m2 = driven_rates(t, p2, v2, r.tau2)
         return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation]
@@ -131,7 +151,11 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
         raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
     p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
     t = solution.t
-    r = evaluate(p1, v1, p2, v2)
+    if misalignment is None:
+        r = coupling.evaluate(p1, v1, p2, v2)
+    else:
+        rows = [evaluate(*row) for row in zip(p1, v1, p2, v2, t)]
+        r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
     a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
     a2, m2 = _shaft_rates(load, t, p2, v2, np.asarray(r.tau2))
     e, c, l = engine_name, coupling_name, load_name

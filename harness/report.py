@@ -35,6 +35,7 @@ def summarize(result: RunResult, reference=None) -> dict:
         "transient_s": scene.experiment.transient,
         "ok": result.ok,
         "failure": result.failure,
+        "diagnosis": getattr(result, "diagnosis", None),
         "wall_time_s": result.wall_time,
         "counters": result.counters,
         "python": platform.python_version(),

@@ -4,6 +4,7 @@ wrong, where and when (``RunResult.failure``)."""
 from __future__ import annotations
 
 import math
+import re
 import time as clock
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,12 +14,9 @@ import numpy as np
 from . import masters as master_family
 from . import scene as scenes
 from .component import FmuCallError
+from .divergence import Diverged, Guard
 from .paths import FMUS
 from .system import System
-
-
-class Diverged(RuntimeError):
-    pass
 
 
 @dataclass
@@ -33,6 +31,9 @@ class RunResult:
     failure: str | None = None
     #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
     failure_stage: str | None = None
+    #: a failed run's diagnosis: kind (bound, non-finite, fmu-error, master), component,
+    #: fmu, variable, value, bound, time, master, step, step_index (see harness.divergence)
+    diagnosis: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -120,11 +121,12 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
-    failure = stage = None
+    failure = stage = diagnosis = None
     recorder = driver = None
     started = stepping = clock.perf_counter()
     try:
         system.initialize()
+        guard = Guard(system, scene, master, step)     # before the master: it may expose outputs
         driver = master_family.make(master, system, step, **options)
         recorder = Recorder(system, names, n_steps + 1)
         recorder.record(e.start)
@@ -134,6 +136,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
                 driver.step(min(driver.h, e.stop - driver.t))
                 recorder.record(driver.t)
+                guard.check(driver.t, driver.n_steps)
                 if bar is not None:
                     bar.update(driver.t - bar.n)
         else:
@@ -142,6 +145,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
             for n in range(1, n_steps + 1):
                 driver.step(t_next=min(e.start + n * step, e.stop))
                 recorder.record(driver.t)
+                guard.check(driver.t, n)
                 if n % stride == 0:
                     bar.update(driver.t - bar.n)
         recorder.check()
@@ -149,8 +153,11 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
             bar.close()
     except (FmuCallError, Diverged, master_family.MasterFailure) as error:
         stage = "stepping" if driver else "initialisation"
-        failure = (f"{error} (master {master}, step {step:g} s"
+        refused = scene.components.get(getattr(error, "component", None))
+        failure = ((f"FMU {refused.fmu} refused a call: " if refused else "")
+                   + f"{error} (master {master}, step {step:g} s"
                    + (f", after {driver.n_steps} steps" if driver else ", during initialisation") + ")")
+        diagnosis = _diagnosis(error, scene, master, step, driver)
     finally:
         ended = clock.perf_counter()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
@@ -158,7 +165,26 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
-    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage)
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis)
+
+
+def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
+    """What a failed run reports in ``RunResult.diagnosis``: the guard's own, or one
+    built from an FMU's refusal (its log names the variable) or a master's failure."""
+    if isinstance(error, Diverged) and error.diagnosis:
+        return dict(error.diagnosis)
+    out = {"kind": "master", "master": master, "step": step,
+           "step_index": (driver.n_steps + 1) if driver else 0,
+           "time": driver.t if driver else None, "message": str(error)}
+    if isinstance(error, Diverged):
+        out["kind"] = "non-finite"
+    elif isinstance(error, FmuCallError):
+        named = re.search(r"(?:parameter|variable) '(\w+)'", " ".join(error.messages))
+        spec = scene.components.get(error.component)
+        out.update(kind="fmu-error", component=error.component, fmu=spec.fmu if spec else None,
+                   variable=named.group(1) if named else None, call=error.call, time=error.time,
+                   fmu_messages=error.messages)
+    return out
 
 
 def _progress(span: float, scene: str, master: str):

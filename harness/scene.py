@@ -70,6 +70,9 @@ class Scene:
     bench: dict = field(default_factory=dict)
     #: where the scene's FMUs are when not in build/fmus (a scene loaded from an SSP archive)
     fmu_dir: Path | None = None
+    #: overrides of the divergence guard's physical bounds (``[limits]``: speed, torque,
+    #: margin; see harness.divergence)
+    limits: dict = field(default_factory=dict)
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
@@ -80,11 +83,15 @@ class Scene:
         component has it) and ``experiment.field=value`` assignments."""
         components = {n: ComponentSpec(c.fmu, dict(c.parameters)) for n, c in self.components.items()}
         experiment = replace(self.experiment)
+        limits = dict(self.limits)
         for assignment in assignments:
             if "=" not in assignment:
                 raise SceneError(f"--set {assignment!r}: expected name=value")
             key, raw = (s.strip() for s in assignment.split("=", 1))
             value = _coerce(raw)
+            if key.startswith("limits."):
+                limits[key.split(".", 1)[1]] = value
+                continue
             if key.startswith("experiment."):
                 attr = key.split(".", 1)[1]
                 if not hasattr(experiment, attr):
@@ -109,7 +116,7 @@ class Scene:
                     raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
                                      f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
                 components[components_with[0]].parameters[key] = value
-        return replace(self, components=components, experiment=experiment)
+        return replace(self, components=components, experiment=experiment, limits=limits)
 
 
 def _coerce(raw: str):
@@ -183,7 +190,8 @@ def load(name_or_path: str | Path) -> Scene:
     return Scene(name=data.get("name", path.stem), description=data.get("description", ""),
                  components=components, connections=connections, experiment=experiment,
                  record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
-                 notes=data.get("notes", ""), bench=dict(data.get("bench", {})))
+                 notes=data.get("notes", ""), bench=dict(data.get("bench", {})),
+                 limits=dict(data.get("limits", {})))
 
 
 def parse_connection(text: str) -> Connection:
@@ -244,8 +252,28 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
         findings.append(f"experiment.step = {e.step} s is longer than the experiment ({e.stop - e.start} s)")
     if not 0.0 <= e.transient < e.stop - e.start:
         findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
+    findings += _check_limits(scene.limits)
     for feature in scene.features - set(FEATURES):
         findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
+    return findings
+
+
+def _check_limits(limits: dict) -> list[str]:
+    """The ``[limits]`` table: speed [rad/s], torque [N*m], margin, each > 0 (inf allowed)."""
+    from .divergence import LIMIT_KEYS
+
+    findings = []
+    for key, raw in limits.items():
+        if key not in LIMIT_KEYS:
+            findings.append(f"limits.{key}: unknown limit (known: {', '.join(LIMIT_KEYS)})")
+            continue
+        try:
+            value = float(quantity(raw, f"limits.{key}"))
+        except (TypeError, ValueError):
+            findings.append(f"limits.{key} = {raw!r}: expected a number")
+            continue
+        if not value > 0.0:
+            findings.append(f"limits.{key} = {value:g} must be > 0 (inf: check finiteness only)")
     return findings
 
 

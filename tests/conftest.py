@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
+FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 
 
 @pytest.fixture(scope="session")

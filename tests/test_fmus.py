@@ -14,7 +14,7 @@ from lever.physics import catalogue
 
 DEG = math.pi / 180.0
 FMI2_ERROR = 3
-FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
+FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12"}
 COUPLING_INPUTS = {"phi1", "w1", "phi2", "w2", "misalignment"}
 

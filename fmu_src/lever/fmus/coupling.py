@@ -44,20 +44,14 @@ class LeverCoupling(LeverSlave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._couplings = {}   # misalignment -> LeverCoupling (the input may vary in time)
+        self._family = None   # the coupling at any misalignment (the input may vary in time)
 
     def _build(self):
-        self._couplings = {}
-        self._coupling_for(self.misalignment)
+        # exact at the misalignment the model is built with; blended elsewhere (CouplingFamily)
+        self._family = catalogue.coupling_family_from(self._values() | {"misalignment": self.misalignment})
 
     def _coupling_for(self, alpha):
-        coupling = self._couplings.get(alpha)
-        if coupling is None:
-            if len(self._couplings) > 256:
-                self._couplings.clear()
-            coupling = catalogue.coupling_from(self._values(), misalignment=alpha)
-            self._couplings[alpha] = coupling
-        return coupling
+        return self._family.at(alpha)
 
     def _compute_outputs(self):
         r = self._coupling_for(self.misalignment).evaluate(self.phi1, self.w1, self.phi2, self.w2)

@@ -43,8 +43,11 @@ class _ShaftSlave(LeverSlave):
     def _advance(self, t, h):
         phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h, self.tau_rate)
         if not (abs(phi) < 1e15 and abs(w) < 1e12):
-            return (f"the shaft state became non-finite or unbounded (phi = {phi:.6g} rad, w = {w:.6g} rad/s) "
-                    f"with input tau = {self.tau:.6g} N.m; the state was not updated")
+            # name the offending state variable first: the importer's diagnosis reads it
+            bad = "w" if not abs(w) < 1e12 else "phi"
+            return (f"state variable '{bad}' became non-finite or unbounded (phi = {phi:.6g} rad, "
+                    f"w = {w:.6g} rad/s; allowed |phi| < 1e15 rad, |w| < 1e12 rad/s) with input "
+                    f"tau = {self.tau:.6g} N.m; the state was not updated")
         self.phi, self.w = phi, w
         setattr(self, self.WORK_OUTPUT, getattr(self, self.WORK_OUTPUT) + self.SIGN * work)
         return None

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import math
 
-from .coupling import LeverCoupling, build_coupling
+from .coupling import CouplingFamily, LeverCoupling, build_coupling
+from .elastic import elastic_law
 from .engine import engine_characteristic
-from .kinematics import GEOMETRIC_LIMIT, MODES
+from .kinematics import GEOMETRIC_LIMIT, MODES, TransferFunction
 from .load import LOAD_KINDS, load_model
-from .parameters import Parameter, check_all
+from .parameters import Parameter, ParameterError, check_all
+from .signals import TimeTable
 from .shaft import Shaft
 
 INF = math.inf
@@ -86,6 +88,39 @@ def coupling_from(values: dict, misalignment: float | None = None) -> LeverCoupl
                                else misalignment)
     return build_coupling(p["transfer_mode"], alpha, p["support_deformation"], p["hinge_deformation"],
                           p["stiffness"], p["damping"], p["elastic_table"])
+
+
+def coupling_family_from(values: dict) -> CouplingFamily:
+    """The coupling for a misalignment that varies in time, exact at the start value
+    (``values['misalignment']``, else the default)."""
+    p = check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"})
+    start = MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default))
+
+    def transfer_at(alpha):
+        return TransferFunction(p["transfer_mode"], MISALIGNMENT.check(alpha), p["support_deformation"],
+                                p["hinge_deformation"])
+
+    return CouplingFamily(transfer_at, elastic_law(p["stiffness"], p["elastic_table"]), p["damping"], start)
+
+
+#: A prescribed misalignment alpha(t) (the coupling's misalignment input driven in time).
+MISALIGNMENT_SOURCE = (
+    Parameter("table", "0:0.2618; 1:0.2618", "", "misalignment angle over time as 't:alpha; ...' points "
+              "(s, and rad or deg as table_unit says), linear between points, the end values held",
+              kind="string"),
+    Parameter("table_unit", "rad", "", "unit of the table's angles", kind="string", choices=("rad", "deg")),
+)
+
+
+def misalignment_source_from(values: dict) -> TimeTable:
+    p = check_all(MISALIGNMENT_SOURCE, values)
+    scale = math.pi / 180.0 if p["table_unit"] == "deg" else 1.0
+    table = TimeTable.parse(p["table"], "table", scale)
+    for t, alpha in table.points:
+        problem = MISALIGNMENT.problem(alpha)
+        if problem:
+            raise ParameterError("table", f"parameter 'table': the angle at t = {t:g} s: {problem}")
+    return table
 
 
 def engine_from(values: dict) -> Shaft:

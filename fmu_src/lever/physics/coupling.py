@@ -16,7 +16,7 @@ import math
 from typing import NamedTuple
 
 from .elastic import LinearElasticLaw, TabulatedElasticLaw, elastic_law
-from .kinematics import TransferFunction
+from .kinematics import BlendedTransferFunction, TransferFunction
 from .parameters import ParameterError
 
 
@@ -65,6 +65,56 @@ class LeverCoupling:
         return omega, self.damping / (2.0 * math.sqrt(stiffness * reduced))
 
 
+class CouplingFamily:
+    """One coupling whose misalignment varies in time (its ``misalignment`` input driven
+    by a source).  At its start misalignment it is exactly ``LeverCoupling``; at any
+    other alpha the transfer function is the linear blend of the exact ones at the
+    neighbouring multiples of ``NODE`` (0.05 deg): building an exact one takes
+    milliseconds (a Fourier analysis), evaluating a blend two Horner passes.  The blend
+    is exact at the nodes and off by O(NODE^2 d2U12/dalpha2), below 1e-6 in U12 at the
+    coupling's operating angles.  Where a node lies outside the defined range (next to
+    45 deg) the exact transfer function at alpha is used; outside the range itself the
+    exact one refuses (``ParameterError`` naming the misalignment)."""
+
+    NODE = math.radians(0.05)
+    NODES = 4096       # exact transfer functions kept (a few kB each): 0 ... 75 deg fits
+    CACHE = 256        # couplings kept by alpha
+
+    def __init__(self, transfer_at, law, damping: float, start_alpha: float):
+        self._transfer_at = transfer_at      # alpha -> TransferFunction
+        self._law, self._damping = law, damping
+        self.start_alpha = float(start_alpha)
+        self.start = LeverCoupling(transfer_at(self.start_alpha), law, damping)
+        self._nodes: dict[int, TransferFunction] = {}
+        self._couplings: dict[float, LeverCoupling] = {self.start_alpha: self.start}
+
+    def _node(self, k: int) -> TransferFunction:
+        transfer = self._nodes.get(k)
+        if transfer is None:
+            if len(self._nodes) > self.NODES:
+                self._nodes.clear()
+            transfer = self._nodes[k] = self._transfer_at(k * self.NODE)
+        return transfer
+
+    def at(self, alpha: float) -> LeverCoupling:
+        coupling = self._couplings.get(alpha)
+        if coupling is not None:
+            return coupling
+        position = alpha / self.NODE
+        k = math.floor(position)
+        if abs(position - round(position)) < 1e-9:           # on a node
+            transfer = self._node(round(position))
+        else:
+            try:
+                transfer = BlendedTransferFunction(self._node(k), self._node(k + 1), alpha)
+            except ParameterError:                           # a node beyond the defined range
+                transfer = self._transfer_at(alpha)
+        if len(self._couplings) > self.CACHE:
+            self._couplings = {self.start_alpha: self.start}
+        coupling = self._couplings[alpha] = LeverCoupling(transfer, self._law, self._damping)
+        return coupling
+
+
 def build_coupling(transfer_mode: str, alpha: float, support_deformation: float, hinge_deformation: float,
                    c: float, b: float, elastic_table: str = "") -> LeverCoupling:
     """The one constructor the FMU, the reference solver and the tests share."""
@@ -72,4 +122,4 @@ def build_coupling(transfer_mode: str, alpha: float, support_deformation: float,
     return LeverCoupling(transfer, elastic_law(c, elastic_table), b)
 
 
-__all__ = ["LeverCoupling", "CouplingResult", "build_coupling", "LinearElasticLaw", "TabulatedElasticLaw"]
+__all__ = ["LeverCoupling", "CouplingFamily", "CouplingResult", "build_coupling", "LinearElasticLaw", "TabulatedElasticLaw"]

@@ -152,10 +152,20 @@ class TransferFunction:
                              "to the 45 deg singularity of the half-coupling function to be represented")
 
     @staticmethod
-    def _amplitude_of(coefficients: np.ndarray) -> float:
-        k = np.arange(1, coefficients.size + 1)
-        phi = 2.0 * np.pi * np.arange(4096) / 4096
-        ratio = (coefficients[None, :] * np.exp(1j * np.outer(phi, k))).sum(axis=1).real
+    def _samples(coefficients: np.ndarray) -> np.ndarray:
+        """``U12 - 1`` at 4096 (or more, for long series) equidistant angles, by one
+        inverse FFT (a transfer function is built for every 0.05 deg a time-varying
+        misalignment passes: this runs often)."""
+        n = 4096
+        while n < 4 * coefficients.size:
+            n *= 2
+        spectrum = np.zeros(n // 2 + 1, dtype=complex)
+        spectrum[1:coefficients.size + 1] = coefficients * (n / 2.0)
+        return np.fft.irfft(spectrum, n)
+
+    @classmethod
+    def _amplitude_of(cls, coefficients: np.ndarray) -> float:
+        ratio = cls._samples(coefficients)
         return float((ratio.max() - ratio.min()) / 2.0)
 
     # -- evaluation ---------------------------------------------------------------------
@@ -182,10 +192,38 @@ class TransferFunction:
         return self.evaluate(phi)[0]
 
     def minimum_ratio(self) -> float:
-        phi = 2.0 * np.pi * np.arange(4096) / 4096
-        return float(np.min(self.ratio(phi)))
+        if not self.coefficients.size:
+            return 1.0
+        return 1.0 + float(np.min(self._samples(self.coefficients)))
 
     def __repr__(self) -> str:
         return (f"TransferFunction(mode={self.mode!r}, alpha={math.degrees(self.alpha):.3g} deg, "
                 f"support_deformation={self.support_deformation}, hinge_deformation={self.hinge_deformation}, "
                 f"amplitude={self.amplitude:.4g}, harmonics={len(self._c)})")
+
+
+class BlendedTransferFunction:
+    """``U12`` and ``Phi`` between two transfer functions ``lower`` (at ``alpha_low``)
+    and ``upper`` (at ``alpha_high``), blended linearly in alpha: what a coupling uses at
+    a misalignment that varies in time (see ``coupling.CouplingFamily``).  A convex
+    combination of unit-mean functions: ``U12`` keeps its unit mean and ``Phi`` its
+    ``Phi(phi + 2 pi) = Phi(phi) + 2 pi``."""
+
+    def __init__(self, lower: TransferFunction, upper: TransferFunction, alpha: float):
+        span = upper.alpha - lower.alpha
+        self.weight = (alpha - lower.alpha) / span if span else 0.0
+        self.lower, self.upper = lower, upper
+        self.mode = lower.mode
+        self.alpha = float(alpha)
+
+    def evaluate(self, phi):
+        p0, u0 = self.lower.evaluate(phi)
+        p1, u1 = self.upper.evaluate(phi)
+        w = self.weight
+        return p0 + w * (p1 - p0), u0 + w * (u1 - u0)
+
+    def ratio(self, phi):
+        return self.evaluate(phi)[1]
+
+    def position(self, phi):
+        return self.evaluate(phi)[0]
