@@ -63,6 +63,8 @@ class Master:
         self.n_iterations = 0
         self.n_rejected = 0
         self._stateful = [system.components[n] for n in system.stateful]
+        #: set by a step that left the coupled inputs in their buffers only (a held plan)
+        self._inputs_unsent = False
 
     @property
     def fmu_calls(self) -> int:
@@ -74,6 +76,11 @@ class Master:
         h = self.h if h is None else h
         target = self.t + h if t_next is None else t_next
         taken = self._step_impl(self.t, target - self.t)
+        if self.system.has_dependent_outputs:
+            # recorded outputs that depend on inputs (a shaft's acceleration on its torque)
+            # were read before the step's last inputs were written: read them with those
+            self.system.refresh_dependent(send=self._inputs_unsent)
+            self._inputs_unsent = False
         # An adaptive master may take less than it was offered; it returns what it took.
         self.t = target if taken is None else self.t + taken
         self.n_steps += 1
@@ -272,6 +279,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 component.do_step(t, h)
             # The shafts' torques are written by the next _hold: only fill the buffers.
             self.system.propagate_with(self._held_plan)
+            self._inputs_unsent = True
         self._history.append((t, start))
 
     def _start_step(self, t, h, points):
@@ -473,11 +481,9 @@ class IterativeMaster(Master):
 
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
-        at the end of the step (the evaluations left the held ones in place), and the
-        outputs that depend on them (a shaft's acceleration) are read with them."""
+        at the end of the step (the evaluations left the held ones in place)."""
         for target, vrs, values in self._inputs:
             target.write(vrs, values)
-        self.system.refresh_dependent()
 
     def _guess(self, t, h, start):
         if len(self._history) < 2:

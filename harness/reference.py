@@ -168,6 +168,10 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
         f"{c}.theta": np.asarray(r.deflection), f"{c}.elastic_energy": np.asarray(r.energy),
         f"{c}.dissipated_power": np.asarray(r.dissipation), f"{c}.dissipated_energy": dissipated,
     }
+    if misalignment is not None:        # the source's outputs: known functions of time
+        source = next(c.source for c in scene.connections if c.target == coupling_name and c.input == "misalignment")
+        traces[f"{source}.misalignment"] = np.array([misalignment.value(x) for x in t])
+        traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
     reference = Reference(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
         CACHE.mkdir(parents=True, exist_ok=True)

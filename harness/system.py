@@ -164,11 +164,15 @@ class System:
         # Components without direct feedthrough whose exposed outputs still depend on their
         # inputs (a shaft's acceleration on its torque): propagation reads them before their
         # inputs are written, so such an output lags a step unless it is read again.
-        self._dependent_reads = tuple(
-            self._plan_of[name][:6] for name in self.order
-            if name not in self.feedthrough
-            and any(u.dependencies and u.variable.name in self.exposed[name]
-                    for u in self.components[name].description.outputs))
+        dependent = [name for name in self.order if name not in self.feedthrough
+                     and any(u.dependencies and u.variable.name in self.exposed[name]
+                             for u in self.components[name].description.outputs)]
+        self._dependent_reads = tuple(self._plan_of[name][:6] for name in dependent)
+        # their connected inputs, for masters whose last propagation only filled the buffers
+        self._dependent_sends = tuple((target, target._set_real, target._handle, vrs, len(vrs), values)
+                                      for writes in self.writes.values()
+                                      for target, vrs, values, _ in writes if target.name in dependent)
+        self.has_dependent_outputs = bool(dependent)
 
     def held_plan(self, held: set[str]):
         """A propagation plan that fills the input buffers of the components in ``held``
@@ -200,9 +204,16 @@ class System:
                 if status > 1:
                     target._fail("fmi2SetReal", status)
 
-    def refresh_dependent(self):
+    def refresh_dependent(self, send: bool = False):
         """Read again the outputs that depend on inputs written since they were read (see
-        ``_dependent_reads``); a master calls it when its inputs are final for the step."""
+        ``_dependent_reads``), after sending those inputs from their buffers first when
+        ``send`` (the last propagation was a held plan)."""
+        if send:
+            for target, set_real, handle, vrs, n, values in self._dependent_sends:
+                target.calls += 1
+                status = set_real(handle, vrs, n, values)
+                if status > 1:
+                    target._fail("fmi2SetReal", status)
         for component, get_real, handle, vrs, n, values in self._dependent_reads:
             component.calls += 1
             status = get_real(handle, vrs, n, values)
