@@ -1,11 +1,13 @@
 """Model against measurement (harness/measured.py, `lever measured`): the tables are
 read and paired, the series through the ordinates is exact, the committed grade scenes
-are the ones the command builds, and the report's numbers follow from the data."""
+are the ones the command builds, the two readings of the gauges behave as the physics
+says, and the report's numbers follow from the data."""
 from __future__ import annotations
 
 import json
 import math
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -61,6 +63,46 @@ def test_bad_measurements_are_findings_not_crashes(tmp_path):
     assert (tmp_path / "out" / "measured.md").exists()
 
 
+def test_transmitted_reading_is_the_driven_torque_through_the_coupling():
+    """Gauges next to a massless coupling: T = M2/U12(phi2) at the same instant, for the
+    mean and every cycle; nothing of the dynamics (c, b, speed, inertias) enters; with
+    U12 = 1 it is the naive prediction exactly; the fundamental keeps the driven phase."""
+    for drive, driven in measured.pair_tables([MONOGRAPH])[0]:
+        conditions = measured.Conditions.of(drive, driven)
+        ratio = measured.transfer_of(conditions).ratio(np.radians(driven.angles_deg))
+        assert 0.99 < ratio.min() < 1.0 < ratio.max() < 1.01
+        for cycle in ("mean", 1, 6):
+            mine = measured.predict_transmitted(driven, conditions, cycle)
+            assert np.allclose(mine.at_marks * ratio, measured.cycle_of(driven, cycle), rtol=1e-12)
+            # the dense curve passes through the marks
+            assert np.allclose(mine.dense[::15][:12], mine.at_marks, rtol=1e-9)
+        other = replace(conditions, stiffness=200.0, damping=0.5, speed=20.0, inertia_driven=0.3)
+        assert np.array_equal(measured.predict_transmitted(driven, other).at_marks,
+                              measured.predict_transmitted(driven, conditions).at_marks)
+        rigid = measured.predict_transmitted(driven, replace(conditions, transfer_mode="synchronous"))
+        assert np.array_equal(rigid.at_marks, driven.mean_curve)
+        numbers = measured.compare(drive, driven, measured.predict_transmitted(driven, conditions), None)
+        assert abs(numbers["fundamental"]["predicted_phase_deg"]) < 0.5
+        assert numbers["settled"] == 0.0 and numbers["speed"] is None
+
+
+def test_brake_reading_tends_to_the_transmitted_one_as_the_gauge_nears_the_coupling(fmu_dir):
+    """The brake reading puts the whole driven inertia between load and coupling: the drive
+    torque lags the driven one.  With less inertia between the gauge and the coupling the lag
+    shrinks and the prediction approaches T = M2/U12 (the limit of no inertia)."""
+    drive, driven = measured.pair_tables([MONOGRAPH])[0][0]        # 3826MVS, the soft grade
+    conditions = measured.Conditions.of(drive, driven)
+    transmitted = measured.predict_transmitted(driven, conditions, "mean", drive.angles_deg)
+    lags, gaps = [], []
+    for inertia in (conditions.inertia_driven, 0.08, 0.04):
+        scene = measured.scene_for(drive, driven, replace(conditions, inertia_driven=inertia))
+        brake = measured.predict(scene, drive.angles_deg)
+        lags.append(measured.compare(drive, driven, brake, None)["fundamental"]["predicted_phase_deg"])
+        gaps.append(np.sqrt(np.mean((brake.at_marks - transmitted.at_marks) ** 2)) / transmitted.at_marks.mean())
+    assert all(lag < 0 for lag in lags) and lags[0] < lags[1] < lags[2], lags
+    assert gaps[0] > gaps[1] > gaps[2], gaps
+
+
 def test_committed_grade_scenes_are_the_ones_the_command_builds():
     for drive, driven in measured.pair_tables([MONOGRAPH])[0]:
         built = measured.scene_for(drive, driven, measured.Conditions.of(drive, driven))
@@ -93,15 +135,28 @@ def test_a_new_measurement_is_checked_the_same_way(tmp_path, fmu_dir):
     assert grade["rms_naive"] == pytest.approx(naive) and grade["scatter"] == pytest.approx(scatter)
     assert grade["amplitude_measured"] == pytest.approx((drive.mean_curve.max() - drive.mean_curve.min()) / 2)
     assert len(grade["rms_model_each_cycle"]) == 6 and grade["settled"] < measured.SETTLED
+    assert grade["reading"] == "transmitted" and grade["alternative_reading"] == "brake"
+    assert grade["alternative"]["settled"] < measured.SETTLED
     # the prediction tracks the measured drive torque far better than no fluctuation at all
     assert grade["rms_model"] < 0.7 * grade["rms_no_fluctuation"]
+    assert grade["beats_naive"] == (grade["rms_model"] < grade["rms_naive"])
     assert grade["within_target"] == (grade["rms_model"] <= measured.TARGET)
     assert any("grade NEW-1" in f for f in findings) == (not grade["within_target"])
     assert (tmp_path / "out" / "measured_NEW-1.png").stat().st_size > 10_000
-    # the stiffness given explicitly overrides the file's and changes the prediction
+    # the stiffness given explicitly overrides the file's: it changes the brake reading's
+    # simulated prediction, not the transmitted one (a massless coupling's torque relation)
     measured.validate_measured([tmp_path], tmp_path / "soft", stiffness=450.0, cycles=False)
     soft = json.loads((tmp_path / "soft" / "measured.json").read_text())["grades"][0]
-    assert soft["conditions"]["stiffness_source"] == "given" and soft["rms_model"] != grade["rms_model"]
+    assert soft["conditions"]["stiffness_source"] == "given" and soft["rms_model"] == grade["rms_model"]
+    assert soft["alternative"]["rms_model"] != grade["alternative"]["rms_model"]
+    # the brake reading as the primary one, per cycle, with the transmitted one alongside
+    measured.validate_measured([tmp_path], tmp_path / "brake", reading="brake")
+    brake = json.loads((tmp_path / "brake" / "measured.json").read_text())["grades"][0]
+    assert brake["reading"] == "brake" and brake["rms_model"] == pytest.approx(grade["alternative"]["rms_model"])
+    assert brake["alternative"]["rms_model"] == pytest.approx(grade["rms_model"])
+    assert brake["settled_cycles"] < measured.SETTLED and brake["fundamental"]["predicted_phase_deg"] < 0
+    with pytest.raises(ValueError, match="reading 'gauge'"):
+        measured.validate_measured([tmp_path], tmp_path / "bad", reading="gauge")
 
 
 def test_lever_measured_reports_every_grade(tmp_path, fmu_dir):
@@ -114,7 +169,14 @@ def test_lever_measured_reports_every_grade(tmp_path, fmu_dir):
     by_grade = {g["grade"]: g for g in report["grades"]}
     # The grade the monograph's 6.5-8.5 % claim is about is within it.
     assert by_grade["7V-14MVS"]["rms_model"] <= measured.TARGET
+    # Read as transmitted torque, every grade is within it; the model is the naive prediction
+    # corrected by 1/U12, so the two differ by less than the mean curve is known.
+    assert report["reading"] == "transmitted" and not missed
+    for g in report["grades"]:
+        assert abs(g["rms_model"] - g["rms_naive"]) < g["mean_curve_uncertainty"]
+        assert g["alternative"]["rms_model"] > g["rms_model"]
     text = (tmp_path / "measured.md").read_text()
     assert "naive drive = driven" in text and "## Conditions and assumptions" in text
+    assert "brake reading" in text and "beats naive" in text
     for g in GRADES:
         assert (tmp_path / f"measured_{g}.png").exists()
