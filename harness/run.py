@@ -33,6 +33,8 @@ class RunResult:
     failure: str | None = None
     #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
     failure_stage: str | None = None
+    #: findings of the checks made before the run (the stability advisor)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -108,9 +110,12 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None) -> RunResult:
+             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
+             advise: bool = True) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master."""
+    (for an adaptive master: its first step); ``options`` go to the master.  ``advise``:
+    check the master and step against the linear stability analysis first (the findings
+    go to ``RunResult.warnings``; the run goes ahead regardless)."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -118,6 +123,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     if master not in master_family.MASTERS:
         raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
+    warnings = stability_advice(scene, master, step, fmu_dir) if advise else []
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = None
@@ -158,7 +164,16 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
-    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage)
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, warnings)
+
+
+def stability_advice(scene, master, step, fmu_dir) -> list[str]:
+    """The stability advisor's findings; advice must never stop a run."""
+    from .stability import advise
+    try:
+        return advise(scene, master, step, fmu_dir)
+    except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
+        return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
 
 
 def _progress(span: float, scene: str, master: str):
