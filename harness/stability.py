@@ -27,7 +27,9 @@ descriptions (ports, derivative attributes, output dependencies) but compute the
 model above in Python, with the same exact shaft integrators the FMUs use.  The real
 master classes step it, so the map is the one of the masters as implemented: zero-order
 hold, the ramp (``tau_rate``) of the extrapolating masters with their torque history in
-the augmented state, Gauss-Seidel's order, the mid-step prediction, the implicit and
+the augmented state, Gauss-Seidel's order, the mid-step prediction (with the
+accelerations it reads from the last propagation, which carry the previous step's
+torque: state of the map as well), the implicit and
 trapezoidal couplings iterated to convergence (Newton to 1e-9).  A fixed-point master
 ends at the same torques where its iteration converges; it fails - spectral radius
 reported as infinite - where the contraction of ``u <- G(u)`` is too weak for its own
@@ -361,7 +363,7 @@ def fixed_point_limit(cls) -> float:
 
 def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FMUS) -> tuple[np.ndarray, list[str]]:
     """The matrix of ``master``'s one-step map at communication step ``step`` [s] on the
-    augmented state ``(theta, w1, w2, past torques...)``, with the names of its
+    augmented state ``(theta, w1, w2, buffered outputs..., past torques...)``, with the names of its
     coordinates.  Raises ``MapUndefined`` where the master fails to make the step (a
     fixed-point iteration whose contraction is not below 1)."""
     cls = master_family.MASTERS[fixed_step_master(master)]
@@ -376,16 +378,25 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
     slots = _history_slots(driver)
     inputs = driver._inputs if slots else []
     width = sum(len(values) for _, _, values in inputs)       # torques per communication point
-    names = ["phi1", "w1", "phi2", "w2"] + [f"{target.name}.{vr}@t-{k + 1}h" for k in range(slots)
-                                            for target, vrs, _ in inputs for vr in range(len(vrs))]
-    n = 4 + slots * width
+    # Outputs of the shafts a master reads from the last propagation besides their states
+    # (jacobi-midpoint's accelerations): propagation reads them before it writes the new
+    # torques, so they carry the torque of the step before - state of the map, too.
+    buffered = [(system.buffers[name][1], system.index[(name, var)], f"{name}.{var}")
+                for name in system.stateful for var in system.exposed[name] if var not in ("phi", "w")]
+    names = (["phi1", "w1", "phi2", "w2"] + [label for _, _, label in buffered]
+             + [f"{target.name}.{vr}@t-{k + 1}h" for k in range(slots) for target, vrs, _ in inputs
+                for vr in range(len(vrs))])
+    first = 4 + len(buffered)                 # where the torque history starts in z
+    n = first + slots * width
 
     def apply(z):
         system.set_state(*z[:4])
+        for (values, index, _), value in zip(buffered, z[4:first]):
+            values[index] = value
         if slots:
             points = []
             for k in reversed(range(slots)):       # oldest first, as the master keeps them
-                flat, values = list(z[4 + k * width:4 + (k + 1) * width]), []
+                flat, values = list(z[first + k * width:first + (k + 1) * width]), []
                 for _, _, buffer in inputs:
                     values.append(flat[:len(buffer)])
                     flat = flat[len(buffer):]
@@ -398,7 +409,7 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
             driver.step(step, t_next=step)
         except master_family.MasterFailure as error:
             raise MapUndefined(str(error)) from None
-        out = system.state()
+        out = system.state() + [values[index] for values, index, _ in buffered]
         if slots:
             history = list(driver._history)  # oldest first; the newest is the step's start
             for k in range(slots):

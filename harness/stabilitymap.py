@@ -583,6 +583,9 @@ def _plot(path: Path, result: StabilityMap) -> Path:
             status = "failed" if r.get("status") == FAILED else r["class"]
             zeta = result.model.with_coupling(case.stiffness, case.damping).zeta
             ax.scatter(case.h_omega, zeta, s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
+        for (m, c, b), edge in result.edges.items():
+            if m == master and edge is not None:
+                ax.plot(edge, result.model.with_coupling(c, b).zeta, marker="|", color="k", ms=16, mew=1.6)
         for c, zs, es in edge_curves(result, master):
             ax.plot(es, zs, "k-", lw=0.9, alpha=0.7)
             ax.annotate(f"c={c:.0e}" if c >= 1e4 else f"c={c:.4g}", (es[-1], zs[-1]), fontsize=6, alpha=0.7)
@@ -599,7 +602,8 @@ def _plot(path: Path, result: StabilityMap) -> Path:
     if zetas:
         axes[0, 0].set_ylim(min(zetas) / 1.5, max(zetas) * 1.5)
     handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in COLOURS]
-    handles.append(Line2D([], [], color="k", lw=0.9, label="predicted edge (per stiffness, damping varied)"))
+    handles.append(Line2D([], [], color="k", lw=0.9, marker="|", ms=10,
+                          label="predicted edge (|: swept coupling; line: per stiffness, damping varied)"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
     fig.tight_layout(rect=(0, 0.04, 1, 0.97))
