@@ -194,11 +194,11 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out):
 @click.option("--damping", "dampings", type=float, multiple=True, metavar="B",
               help="Coupling damping [N*m*s/rad] to sweep (repeatable; default: the scene's, a tenth, 0).")
 @click.option("--h-omega", "h_omegas", type=float, multiple=True, metavar="X",
-              help="Communication step as h*omega_n (repeatable; default 0.02 ... 5, 8 values).")
+              help="Communication step as h*omega_n (repeatable; default 0.05 ... 5, 7 values).")
 @click.option("--master", "masters", multiple=True, metavar="MASTER",
               help="Fixed-step master to sweep (repeatable; default: all).")
 @click.option("--dense", is_flag=True, help="Denser default grids (7 stiffnesses, 5 dampings, 19 steps).")
-@click.option("--min-steps", type=click.IntRange(16, 100000), default=600, show_default=True,
+@click.option("--min-steps", type=click.IntRange(16, 100000), default=500, show_default=True,
               help="Least communication steps per case.")
 @click.option("--no-refine", is_flag=True, help="Do not add cases at 0.9 and 1.1 times each predicted edge.")
 @click.option("--jobs", type=click.IntRange(1, 64), default=min(2, os.cpu_count() or 1), show_default=True,
