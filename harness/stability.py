@@ -27,13 +27,14 @@ descriptions (ports, derivative attributes, output dependencies) but compute the
 model above in Python, with the same exact shaft integrators the FMUs use.  The real
 master classes step it, so the map is the one of the masters as implemented: zero-order
 hold, the ramp (``tau_rate``) of the extrapolating masters with their torque history in
-the augmented state, Gauss-Seidel's order, the mid-step prediction (with the
-accelerations it reads from the last propagation, which carry the previous step's
-torque: state of the map as well), the implicit and
-trapezoidal couplings iterated to convergence (Newton to 1e-9).  A fixed-point master
-ends at the same torques where its iteration converges; it fails - spectral radius
-reported as infinite - where the contraction of ``u <- G(u)`` is too weak for its own
-tolerance and iteration limit (``fixed_point_limit``).  The map's columns come from unit perturbations of the
+the augmented state, Gauss-Seidel's order (its ``c*w*h`` torque bias is affine in the
+steady speed: it moves the operating point, not the map), the mid-step prediction with
+the accelerations it reads from the last propagation (they carry the previous step's
+torque: state of the map as well), the implicit and trapezoidal couplings iterated to
+convergence (Newton to 1e-9).  A fixed-point master ends at the same torques where its
+iteration converges; it fails - spectral radius reported as infinite - where the
+contraction of ``u <- G(u)`` is too slow for its own tolerance and iteration limit
+(``fixed_point_limit``).  The map's columns are the images of unit perturbations of the
 augmented state (exact: the stand-in is linear); the common angle of both shafts, which
 nothing depends on (eigenvalue 1 for every master), is removed.  ``tests/test_stability.py``
 checks the stand-in against the masters on the real FMUs, step for step.

@@ -55,6 +55,14 @@ def test_zero_order_hold_jacobi_map_is_the_textbook_one():
     assert np.allclose(matrix, expected, rtol=1e-12, atol=1e-12)
 
 
+def test_adaptive_masters_are_analysed_as_the_fixed_step_master_they_step_with():
+    assert masters.MASTERS["adaptive"].degree == masters.MASTERS["jacobi-quadratic"].degree
+    assert issubclass(masters.MASTERS["adaptive"], masters.ExtrapolatingJacobiMaster)
+    assert issubclass(masters.MASTERS["adaptive-trapezoidal"], masters.MASTERS["trapezoidal-newton"])
+    h = KAVZ.step_for(0.8)
+    assert stability.spectral_radius(KAVZ, "adaptive", h) == stability.spectral_radius(KAVZ, "jacobi-quadratic", h)
+
+
 def test_extrapolating_masters_carry_their_torque_history():
     matrix, names = stability.one_step_map(KAVZ, "jacobi-quadratic", 1e-3)
     assert matrix.shape == (7, 7) and len(names) == 7      # theta, w1, w2 + 2 past points x 2 torques
