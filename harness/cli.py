@@ -79,7 +79,7 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     from . import masters as family
     from . import reference as references
     from . import report
-    from .run import simulate
+    from .run import simulate, stability_advice
     from .system import SceneInvalid
 
     try:
@@ -104,6 +104,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     except RuntimeError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
+    for warning in stability_advice(spec, chosen, step or spec.experiment.step, FMUS):
+        click.echo(f"warning: {warning}", err=True)     # before the run; simulate keeps them too
     try:
         result = simulate(spec, master, step, fmu_dir=spec.fmu_dir or FMUS, progress=show_progress,
                           options=options)
@@ -183,6 +185,65 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out):
     if claims.get("overhead_above_floor"):
         click.echo("  above the FMU-call floor: " + ", ".join(
             f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    click.echo("written: " + ", ".join(str(p) for p in paths))
+
+
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--stiffness", "stiffnesses", type=float, multiple=True, metavar="C",
+              help="Coupling stiffness [N*m/rad] to sweep (repeatable; default: the scene's, 1e4, 1e5, 1e6).")
+@click.option("--damping", "dampings", type=float, multiple=True, metavar="B",
+              help="Coupling damping [N*m*s/rad] to sweep (repeatable; default: the scene's, a tenth, 0).")
+@click.option("--h-omega", "h_omegas", type=float, multiple=True, metavar="X",
+              help="Communication step as h*omega_n (repeatable; default 0.05 ... 5, 7 values).")
+@click.option("--master", "masters", multiple=True, metavar="MASTER",
+              help="Fixed-step master to sweep (repeatable; default: all).")
+@click.option("--dense", is_flag=True, help="Denser default grids (7 stiffnesses, 5 dampings, 19 steps).")
+@click.option("--min-steps", type=click.IntRange(16, 100000), default=500, show_default=True,
+              help="Least communication steps per case.")
+@click.option("--no-refine", is_flag=True, help="Do not add cases at 0.9 and 1.1 times each predicted edge.")
+@click.option("--jobs", type=click.IntRange(1, 64), default=min(2, os.cpu_count() or 1), show_default=True,
+              help="Cases run in parallel (processes).")
+@click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the case log.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/stability/<scene>).")
+def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps, no_refine, jobs, fresh, out):
+    """The stability map of SCENE: every case classified (stable / energy-drifting /
+    divergent) against the edges the linear analysis predicts; writes stability.md,
+    stability.csv, stability_map.png and the resumable case log cases.jsonl."""
+    from . import stability as analysis
+    from . import stabilitymap
+
+    try:
+        spec = scenes.load(scene)
+        plan = stabilitymap.default_plan(spec, dense)
+    except (scenes.SceneError, analysis.NotADriveline, ValueError) as error:
+        raise UserError(str(error)) from None
+    unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
+    if unknown:
+        raise UserError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "
+                        f"{', '.join(stabilitymap.FIXED_STEP_MASTERS)})")
+    for name, values, low in (("--stiffness", stiffnesses, 0.0), ("--h-omega", h_omegas, 0.0)):
+        if any(not (math.isfinite(v) and v > low) for v in values):
+            raise UserError(f"{name}: values must be finite and > {low:g}")
+    if any(not (math.isfinite(v) and v >= 0) for v in dampings):
+        raise UserError("--damping: values must be finite and >= 0")
+    plan.stiffnesses = sorted(set(stiffnesses)) or plan.stiffnesses
+    plan.dampings = sorted(set(dampings), reverse=True) or plan.dampings
+    plan.h_omegas = sorted(set(h_omegas)) or plan.h_omegas
+    plan.masters = list(dict.fromkeys(masters)) or plan.masters
+    plan.min_steps = min_steps
+    plan.refine = not no_refine
+    ensure_fmus(quiet=True)
+    out = out or stabilitymap.default_out(spec)
+    result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
+    paths = stabilitymap.write(out, result)
+    agreed = stabilitymap.agreement(result)
+    if agreed["explicit_rows"]:
+        click.echo(f"explicit masters: predicted edge inside the observed bracket in {agreed['explicit_bracketed']} "
+                   f"of {agreed['explicit_rows']} rows; observed/predicted median {agreed['explicit_ratio_median']:.3g}")
+    for m, s in agreed["by_master"].items():
+        click.echo(f"  {m:24s} prediction agrees in {s['agree']}/{s['cases']} cases")
     click.echo("written: " + ", ".join(str(p) for p in paths))
 
 

@@ -34,6 +34,8 @@ class RunResult:
     #: a failed run's diagnosis: kind (bound, non-finite, fmu-error, master), component,
     #: fmu, variable, value, bound, time, master, step, step_index (see harness.divergence)
     diagnosis: dict | None = None
+    #: findings of the checks made before the run (the stability advisor)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -109,9 +111,12 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None) -> RunResult:
+             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
+             advise: bool = True) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master."""
+    (for an adaptive master: its first step); ``options`` go to the master.  ``advise``:
+    check the master and step against the linear stability analysis first (the findings
+    go to ``RunResult.warnings``; the run goes ahead regardless)."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -119,6 +124,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     if master not in master_family.MASTERS:
         raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
+    warnings = stability_advice(scene, master, step, fmu_dir) if advise else []
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = diagnosis = None
@@ -165,7 +171,8 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
-    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis)
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
+                     warnings)
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
@@ -185,6 +192,15 @@ def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, 
                    variable=named.group(1) if named else None, call=error.call, time=error.time,
                    fmu_messages=error.messages)
     return out
+
+
+def stability_advice(scene, master, step, fmu_dir) -> list[str]:
+    """The stability advisor's findings; advice must never stop a run."""
+    from .stability import advise
+    try:
+        return advise(scene, master, step, fmu_dir)
+    except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
+        return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
 
 
 def _progress(span: float, scene: str, master: str):
