@@ -28,9 +28,9 @@ model above in Python, with the same exact shaft integrators the FMUs use.  The 
 master classes step it, so the map is the one of the masters as implemented: zero-order
 hold, the ramp (``tau_rate``) of the extrapolating masters with their torque history in
 the augmented state, Gauss-Seidel's order (its ``c*w*h`` torque bias is affine in the
-steady speed: it moves the operating point, not the map), the mid-step prediction with
-the accelerations it reads from the last propagation (they carry the previous step's
-torque: state of the map as well), the implicit and trapezoidal couplings iterated to
+steady speed: it moves the operating point, not the map), the mid-step prediction from
+the accelerations of the last propagation (kept in the map's state, as the master reads
+them from its buffers), the implicit and trapezoidal couplings iterated to
 convergence (Newton to 1e-9).  A fixed-point master ends at the same torques where its
 iteration converges; it fails - spectral radius reported as infinite - where the
 contraction of ``u <- G(u)`` is too slow for its own tolerance and iteration limit
