@@ -197,6 +197,23 @@ def study(name, out):
     click.echo(f"written to {out / 'transfer_modes.md'}")
 
 
+@main.command("badinputs")
+@click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
+def bad_inputs(verbose):
+    """Run the bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built
+    FMUs: every case must be refused with an FMI error naming the variable and its range."""
+    from . import badinputs
+
+    ensure_fmus(quiet=True)
+    outcomes = badinputs.run()
+    if verbose:
+        for o in outcomes:
+            click.echo(f"{'ok  ' if o.passed else 'FAIL'} {o.case.name}: {' | '.join(o.messages)}")
+    click.echo(badinputs.summary(outcomes))
+    if not all(o.passed for o in outcomes):
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without

@@ -10,9 +10,10 @@ from __future__ import annotations
 import math
 
 from .coupling import LeverCoupling, build_coupling
+from .elastic import TabulatedElasticLaw
 from .engine import engine_characteristic
 from .kinematics import GEOMETRIC_LIMIT, MODES
-from .load import LOAD_KINDS, load_model
+from .load import LOAD_KINDS, FourierLoad, TabulatedLoad, load_model
 from .parameters import Parameter, check_all
 from .shaft import Shaft
 
@@ -37,7 +38,7 @@ COUPLING = (
               kind="string", choices=MODES),
     Parameter("elastic_table", "", "", "nonlinear elastic law T_el(theta) as 'theta:torque; ...' points for "
               "theta >= 0 (rad, N.m), monotone, odd-symmetric; empty for the linear law stiffness*theta",
-              kind="string"),
+              kind="string", parser=TabulatedElasticLaw.parse),
 )
 
 #: The misalignment is an input (it may vary in time, like Simscape's universal joint);
@@ -52,7 +53,7 @@ ENGINE = (
     Parameter("torque_slope", 14.06, "N.m.s/rad", "K1 of the linearised engine characteristic Mg = M1 - K1*w",
               0.0, 1e6),
     Parameter("characteristic", "", "", "static engine characteristic Mg(w) as 'w:torque; ...' points (rad/s, N.m); "
-              "empty for the linear zone M1 - K1*w", kind="string"),
+              "empty for the linear zone M1 - K1*w", kind="string", parser=lambda text: engine_characteristic(0, 0, text)),
     Parameter("phi_start", 0.0, "rad", "drive shaft angle at the start", -1e9, 1e9),
     Parameter("w_start", 39.0, "rad/s", "drive shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",
@@ -70,9 +71,9 @@ LOAD = (
     Parameter("band_low", 2.0, "rad/s", "lowest angular frequency of the random part", 0.0, 1e5, low_open=True),
     Parameter("band_high", 450.0, "rad/s", "highest angular frequency of the random part", 0.0, 1e5, low_open=True),
     Parameter("fourier", "", "", "angle-periodic resistance 'M_mean; a1:b1; a2:b2; ...' (N.m), series (4.4)",
-              kind="string"),
+              kind="string", parser=FourierLoad.parse),
     Parameter("table", "", "", "resistance time series 't:torque; ...' (s, N.m), linear, ends held",
-              kind="string"),
+              kind="string", parser=TabulatedLoad.parse),
     Parameter("phi_start", 0.0, "rad", "driven shaft angle at the start", -1e9, 1e9),
     Parameter("w_start", 39.0, "rad/s", "driven shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",

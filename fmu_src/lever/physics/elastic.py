@@ -109,6 +109,9 @@ class TabulatedElasticLaw:
             y0, y1, m0, m1 = self._torque[k], self._torque[k + 1], self._slope[k], self._slope[k + 1]
             energy.append(energy[-1] + h * (y0 + y1) / 2.0 + h * h * (m0 - m1) / 12.0)
         self._energy = energy
+        if not all(math.isfinite(x) for x in self._slope + energy):
+            raise ParameterError(name, f"parameter '{name}': the table's slopes or energies overflow (points "
+                                 f"{self.points[:4]}...): deflections too close together for their torques")
 
     @classmethod
     def parse(cls, text: str, name: str = "elastic_table") -> "TabulatedElasticLaw":
