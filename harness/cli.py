@@ -154,7 +154,9 @@ def _print_summary(summary: dict, out: Path):
 @click.option("--no-monolithic", is_flag=True, help="Leave out the monolithic scipy solutions.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/bench/<scene>).")
-def bench(scene, repeats, only, no_peers, no_monolithic, out):
+@click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the cases already in "
+              "OUT/cases.jsonl (the earlier log is kept, renamed).")
+def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     """Error against run time for every master (and peers) on SCENE: writes bench.csv,
     bench.md, bench.json and work_precision.png."""
     from . import bench as benchmark
@@ -165,9 +167,9 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out):
     except (scenes.SceneError, ValueError) as error:
         raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
-    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                             progress=click.echo)
     out = out or benchmark.default_out(spec)
+    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                             progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
     claims = result["claims"]
