@@ -73,7 +73,10 @@ def list_scenes():
                    "master's coupling iteration.")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, progress):
+@click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
+              "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
+              "the reference (the energy balance, integrated over every row, judges the run).")
+def run(scene, assignments, master, step, tolerance, out, no_reference, progress, stream):
     """Run SCENE (a name in resources/scenes or a .toml path) and write traces, plots,
     summary.json and report.md."""
     from . import masters as family
@@ -104,17 +107,18 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     except RuntimeError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
+    out = out or RESULTS / spec.name
     try:
-        result = simulate(spec, master, step, progress=show_progress, options=options)
+        result = simulate(spec, master, step, progress=show_progress, options=options,
+                          stream=out / "traces.csv" if stream else None)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     reference = None
-    if "reference" in spec.features and not no_reference and result.ok:
+    if "reference" in spec.features and not no_reference and not stream and result.ok:
         try:
             reference = references.solve(spec, result.times)
         except references.ReferenceUnavailable as error:
             click.echo(f"note: no reference for this scene: {error}", err=True)
-    out = out or RESULTS / spec.name
     summary = report.write(out, result, reference)
     _print_summary(summary, out)
     if not result.ok:
@@ -142,6 +146,11 @@ def _print_summary(summary: dict, out: Path):
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("stream"):
+        s = summary["stream"]
+        click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (every {s['stride']}th kept for the "
+                   f"report); resident memory {s.get('resident_MB_after_first_chunk', 0):.0f} MB after the first "
+                   f"chunk, {s.get('resident_MB_at_end', 0):.0f} MB at the end, peak {s['peak_resident_MB']:.0f} MB")
     click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
 
 

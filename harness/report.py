@@ -39,6 +39,8 @@ def summarize(result: RunResult, reference=None) -> dict:
         "counters": result.counters,
         "python": platform.python_version(),
     }
+    if result.stream:
+        summary["stream"] = result.stream
     if len(result.times) > 1:
         summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
                                                            scene.experiment.transient).get(full)
@@ -167,7 +169,8 @@ def plot(out: Path, result: RunResult, reference=None):
 
 def write(out: Path, result: RunResult, reference=None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
-    write_traces(out / "traces.csv", result.times, result.traces)
+    if result.stream is None:             # a streamed run wrote its traces while it ran
+        write_traces(out / "traces.csv", result.times, result.traces)
     if reference is not None:
         write_traces(out / "reference.csv", reference.times, reference.traces)
     summary = summarize(result, reference)

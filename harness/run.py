@@ -33,6 +33,8 @@ class RunResult:
     failure: str | None = None
     #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
     failure_stage: str | None = None
+    #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.traces)
+    stream: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -46,8 +48,13 @@ class Recorder:
 
     CHECK_EVERY = 256
 
-    def __init__(self, system: System, names: list[str], n_rows: int):
+    def __init__(self, system: System, names: list[str], n_rows: int, stream=None):
         self.names = names
+        # Streaming (harness.traces.TraceStream): hold one chunk, hand it on when full.
+        self.stream = stream
+        if stream is not None:
+            from .traces import CHUNK
+            n_rows = min(n_rows, CHUNK)
         # Record whole component buffers (a superset of the names), pick the names at the end.
         self._columns = {}
         self._copies = []
@@ -69,7 +76,9 @@ class Recorder:
         self._checked = 0
 
     def record(self, t: float):
-        if self.count == len(self.times):     # a variable-step run: grow
+        if self.count == len(self.times) and self.stream is not None:
+            self._hand_on()
+        elif self.count == len(self.times):     # a variable-step run: grow
             self.times = np.concatenate([self.times, np.empty(len(self.times))])
             self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
         row = self.rows[self.count]
@@ -93,7 +102,19 @@ class Recorder:
             raise Diverged(f"non-finite value of {', '.join(bad)} at t = {self.times[row]:.6g} s")
         self._checked = self.count
 
+    def _hand_on(self):
+        self.check()
+        columns = [self._columns[n] for n in self.names]
+        self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
+        self.count = self._checked = 0
+
     def traces(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        if self.stream is not None:       # the rows since the last chunk (a failed run's included)
+            columns = [self._columns[n] for n in self.names]
+            self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
+            self.count = self._checked = 0
+            self.stream.close()
+            return self.stream.traces()
         n = self.count
         return self.times[:n].copy(), {name: self.rows[:n, self._columns[name]].copy() for name in self.names}
 
@@ -108,9 +129,12 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None) -> RunResult:
+             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
+             stream: Path | None = None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master."""
+    (for an adaptive master: its first step); ``options`` go to the master.  ``stream``: a
+    trace CSV written while the run goes, the result keeping every k-th row
+    (harness.traces)."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -126,7 +150,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     try:
         system.initialize()
         driver = master_family.make(master, system, step, **options)
-        recorder = Recorder(system, names, n_steps + 1)
+        recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
         recorder.record(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
         stepping = clock.perf_counter()
@@ -158,7 +182,15 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
-    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage)
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage,
+                     recorder.stream.report() if recorder and recorder.stream else None)
+
+
+def _stream(path: Path | None, scene: scenes.Scene, names: list[str], rows: int):
+    if path is None:
+        return None
+    from .traces import TraceStream, integrals_for
+    return TraceStream(path, names, rows, integrate=integrals_for(scene))
 
 
 def _progress(span: float, scene: str, master: str):
