@@ -87,8 +87,10 @@ def _outside(p: Parameter) -> list[tuple[str, float]]:
     if math.isfinite(p.low):
         if p.low_open:
             values.append(("zero" if p.low == 0 else "at the open lower bound", p.low))
-        values.append(("negative" if p.low == 0 else "below the range",
-                       p.low - max(1.0, abs(p.low)) if p.low_open or p.low != 0 else -1.0))
+        elif p.low > 0:
+            values += [("zero", 0.0), ("below the range", p.low / 2)]
+        values.append(("negative" if p.low >= 0 else "below the range",
+                       -1.0 if p.low >= 0 else p.low - max(1.0, abs(p.low))))
     if math.isfinite(p.high):
         values.append(("at the open upper bound" if p.high_open else "above the range",
                        p.high if p.high_open else p.high + max(1.0, abs(p.high))))
@@ -260,18 +262,18 @@ def _listen():
 class _Slave:
     """One FMU2Slave instance of a built FMU with its own log."""
 
-    _unzipped: dict[str, str] = {}
+    _descriptions: dict[str, object] = {}
 
     def __init__(self, fmu: str, fmu_dir: Path):
         import fmpy
         from fmpy.fmi2 import FMU2Slave
         from .component import log_callbacks
+        from .component import unzipped as extracted
 
         path = Path(fmu_dir) / f"{fmu}.fmu"
-        key = str(path)
-        if key not in self._unzipped:
-            self._unzipped[key] = (fmpy.read_model_description(key), fmpy.extract(key))
-        self.md, unzipped = self._unzipped[key]
+        if str(path) not in self._descriptions:
+            self._descriptions[str(path)] = fmpy.read_model_description(str(path))
+        self.md, unzipped = self._descriptions[str(path)], extracted(path)
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.instance = f"corpus-{fmu}-{next(_counter)}"
         self.log = _LOG.setdefault(self.instance, [])

@@ -48,7 +48,9 @@ MISALIGNMENT = Parameter("misalignment", math.radians(15.0), "rad",
                          0.0, GEOMETRIC_LIMIT, high_open=True, fixed=False)
 
 ENGINE = (
-    Parameter("inertia", 0.128, "kg.m2", "reduced moment of inertia I1 of the drive shaft", 0.0, 1e6, low_open=True),
+    # Inertias from 1e-6 kg.m2 (a 1 cm steel disc; any shaft is far above): below it the
+    # accelerations of admissible torques overflow.
+    Parameter("inertia", 0.128, "kg.m2", "reduced moment of inertia I1 of the drive shaft", 1e-6, 1e6),
     Parameter("stall_torque", 623.0, "N.m", "M1 of the linearised engine characteristic Mg = M1 - K1*w", -1e6, 1e6),
     Parameter("torque_slope", 14.06, "N.m.s/rad", "K1 of the linearised engine characteristic Mg = M1 - K1*w",
               0.0, 1e6),
@@ -61,7 +63,7 @@ ENGINE = (
 )
 
 LOAD = (
-    Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 0.0, 1e6, low_open=True),
+    Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 1e-6, 1e6),
     Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part), "
               "fourier (angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
     Parameter("mean_torque", 107.5, "N.m", "mean technological resistance Mm", -1e6, 1e6),

@@ -56,7 +56,8 @@ def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         else:
             w1 = 2.0 * h[k] + h[k - 1]
             w2 = h[k] + 2.0 * h[k - 1]
-            m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
+            with np.errstate(over="ignore"):   # a tiny slope next to k: the harmonic mean tends to 0
+                m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
 
     def end(h0, h1, d0, d1):
         s = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1)
