@@ -234,6 +234,8 @@ def entry():
         status = 0
     except SystemExit as done:
         status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
+    from .component import remove_extractions
+    remove_extractions()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(status)

@@ -50,8 +50,10 @@ class TraceStream:
         self.integrate = {self.names.index(src): out for src, out in (integrate or {}).items() if src in self.names}
         self.stride = max(1, math.ceil(expected_rows / keep))
         capacity = math.ceil(expected_rows / self.stride) + 2
-        self._kept_times = np.empty(capacity)
-        self._kept = np.empty((capacity, len(self.names) + len(self.integrate)))
+        # Written through at once, so the process's memory is all there from the start
+        # (np.empty's pages would be mapped as they fill and look like growth).
+        self._kept_times = np.full(capacity, np.nan)
+        self._kept = np.full((capacity, len(self.names) + len(self.integrate)), np.nan)
         self.n_kept = 0
         self.rows_written = 0
         self._last: tuple[float, np.ndarray] | None = None     # last row written, with its integrals
@@ -127,7 +129,10 @@ class TraceStream:
                "stride": self.stride, "peak_resident_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
         if rss:
             out.update({"resident_MB_after_first_chunk": rss[0] / 2 ** 20, "resident_MB_at_end": rss[-1] / 2 ** 20,
-                        "resident_MB_max_while_stepping": max(rss) / 2 ** 20})
+                        "resident_MB_max_while_stepping": max(rss) / 2 ** 20,
+                        # ten samples over the run: (simulated time [s], resident memory [MB])
+                        "resident_MB_over_the_run": [(t, round(m / 2 ** 20, 1)) for t, m in
+                                                     self.memory[::max(1, len(self.memory) // 10)]]})
         return out
 
 
