@@ -148,7 +148,7 @@ def _print_summary(summary: dict, out: Path):
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
     if summary.get("stream"):
         s = summary["stream"]
-        click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (every {s['stride']}th kept for the "
+        click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "
                    f"report); resident memory {s.get('resident_MB_after_first_chunk', 0):.0f} MB after the first "
                    f"chunk, {s.get('resident_MB_at_end', 0):.0f} MB at the end, peak {s['peak_resident_MB']:.0f} MB")
     click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")

@@ -76,6 +76,10 @@ def write_report(path: Path, summary: dict):
     if summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "",
                   "The traces up to the failure are in traces.csv."]
+    if summary.get("stream"):
+        st = summary["stream"]
+        lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
+                  f"plots below use 1 row in {st['stride']}, the energy balance every row."]
     stats = summary.get("statistics")
     if stats:
         lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", "",
