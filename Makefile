@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt 2>/dev/null | cksum | cut -d' ' -f1)
 
-.PHONY: run test fmus bench clean distclean
+.PHONY: run test fmus bench fuzz clean distclean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,11 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/lever bench kavz685
 	$(BIN)/lever bench kavz685_stiff
+
+# A longer, randomised property-based fuzz run (20x the CI examples; see tests/test_fuzz.py).
+fuzz: $(STAMP)
+	$(BIN)/lever build
+	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics
 
 clean:
 	rm -rf results build/fmus build/tmp

@@ -27,6 +27,7 @@ import numpy as np
 
 from . import masters as master_family
 from . import metrics, reference
+from .cases import FAILED, CaseLog, case_key
 from . import scene as scenes
 from .paths import FMUS, RESULTS
 from .run import RunResult, recorded_names, simulate
@@ -208,41 +209,81 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
 
 # -- the whole benchmark -------------------------------------------------------------------------------
 
+def fingerprint(scene: scenes.Scene, repeats: int, fmu_dir: Path = FMUS) -> dict:
+    """What a benchmark's results depend on: a case log with another fingerprint is set
+    aside, never mixed in (the scene with its bench plan, the repeats, the FMU build)."""
+    from lever import __version__
+    stamp = Path(fmu_dir) / "build-stamp.json"
+    return {"study": "bench", "scene": asdict(scene), "repeats": repeats, "lever": __version__,
+            "fmus": json.loads(stamp.read_text()).get("hash") if stamp.exists() else None}
+
+
+def _logged(log: CaseLog | None, case: Case, measure) -> tuple[Case, bool]:
+    """``measure()`` -> Case, through the case log: a case already in the log is taken
+    from it; a case that raises is recorded as failed with its diagnosis, and the
+    benchmark goes on with the others."""
+    if log is None:
+        try:
+            return measure(), False
+        except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
+            case.failure = f"{type(error).__name__}: {error}"
+            return case, False
+    key = case_key(case.kind, case.engine, case.step, case.tolerance)
+    entry, reused = log.run(key, lambda: asdict(measure()))
+    if entry.get("status") == FAILED:
+        case.failure = f"{entry['error']} (at {entry['where']})"
+        return case, reused
+    return Case(**{k: v for k, v in entry.items() if k in Case.__dataclass_fields__}), reused
+
+
 def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: list[str] | None = None,
-          peers: bool = True, monolithic: bool = True, progress=None) -> dict:
+          peers: bool = True, monolithic: bool = True, progress=None, out: Path | None = None,
+          resume: bool = True) -> dict:
+    """Run the scene's plan.  With ``out``, every finished case goes to ``out/cases.jsonl``
+    as it finishes (harness.cases): a benchmark killed part-way and run again resumes
+    with the cases not yet done (``resume=False`` starts afresh)."""
     p = plan(scene, only)
     say = progress or (lambda text: None)
+    log = CaseLog(out, fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
+    if log is not None and len(log):
+        say(f"resuming: {len(log)} case(s) already in {log.path}")
     cases: list[Case] = []
-    floor_per_step = stats.median(call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats))
+
+    def take(case: Case, measure, floor: float | None = None):
+        case, reused = _logged(log, case, measure)
+        if floor is not None and case.floor_time is None:
+            case.floor_time = floor * case.steps
+        cases.append(case)
+        say(_line(case) + ("  (from the case log)" if reused else ""))
+
+    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: Case(
+        "floor", "floor", scene.experiment.step, wall_times=[call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats)]))
+    floor_per_step = floor_case.wall
     say(f"FMU-call floor: {floor_per_step * 1e6:.1f} us per communication step")
+    limit = p["repeats_limit_s"]
     for name, steps in p["steps"].items():
         for h in steps:
-            case = run_master(scene, name, h, None, repeats, fmu_dir, p["repeats_limit_s"])
-            case.floor_time = floor_per_step * case.steps
-            cases.append(case)
-            say(_line(case))
+            take(Case(name, "master", h), lambda name=name, h=h: run_master(scene, name, h, None, repeats, fmu_dir,
+                                                                            limit), floor_per_step)
     for name, tolerances in p["tolerances"].items():
         for tol in tolerances:
-            case = run_master(scene, name, scene.experiment.step, tol, repeats, fmu_dir, p["repeats_limit_s"])
-            case.floor_time = floor_per_step * case.steps
-            cases.append(case)
-            say(_line(case))
+            h = scene.experiment.step
+            take(Case(name, "master", h, tol),
+                 lambda name=name, tol=tol: run_master(scene, name, scene.experiment.step, tol, repeats, fmu_dir,
+                                                       limit), floor_per_step)
     if peers:
         for name, steps in p["peers"].items():
             for h in steps:
-                case = run_peer(scene, name, h, repeats, fmu_dir, p["repeats_limit_s"])
-                cases.append(case)
-                say(_line(case))
+                take(Case(name, "peer", h), lambda name=name, h=h: run_peer(scene, name, h, repeats, fmu_dir, limit))
         for name, tolerances in p["peer_tolerances"].items():
             for tol in tolerances:
-                case = run_peer(scene, name, scene.experiment.step, repeats, fmu_dir, p["repeats_limit_s"], tol)
-                cases.append(case)
-                say(_line(case))
+                take(Case(name, "peer", scene.experiment.step, tol),
+                     lambda name=name, tol=tol: run_peer(scene, name, scene.experiment.step, repeats, fmu_dir,
+                                                         limit, tol))
     if monolithic:
         for rtol in p["monolithic"]:
-            case = run_monolithic(scene, rtol, scene.experiment.step, repeats)
-            cases.append(case)
-            say(_line(case))
+            take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
+                 lambda rtol=rtol: run_monolithic(scene, rtol, scene.experiment.step, repeats))
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
             "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases, "claims": claims(scene, cases, p)}
 

@@ -73,7 +73,10 @@ def list_scenes():
                    "master's coupling iteration.")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, progress):
+@click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
+              "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
+              "the reference (the energy balance, integrated over every row, judges the run).")
+def run(scene, assignments, master, step, tolerance, out, no_reference, progress, stream):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
     from . import masters as family
@@ -106,18 +109,18 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     show_progress = sys.stderr.isatty() if progress is None else progress
     for warning in stability_advice(spec, chosen, step or spec.experiment.step, FMUS):
         click.echo(f"warning: {warning}", err=True)     # before the run; simulate keeps them too
+    out = out or RESULTS / spec.name
     try:
         result = simulate(spec, master, step, fmu_dir=spec.fmu_dir or FMUS, progress=show_progress,
-                          options=options)
+                          options=options, stream=out / "traces.csv" if stream else None)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     reference = None
-    if "reference" in spec.features and not no_reference and result.ok:
+    if "reference" in spec.features and not no_reference and not stream and result.ok:
         try:
             reference = references.solve(spec, result.times)
         except references.ReferenceUnavailable as error:
             click.echo(f"note: no reference for this scene: {error}", err=True)
-    out = out or RESULTS / spec.name
     summary = report.write(out, result, reference)
     _print_summary(summary, out)
     if not result.ok:
@@ -145,6 +148,11 @@ def _print_summary(summary: dict, out: Path):
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("stream"):
+        s = summary["stream"]
+        click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "
+                   f"report); resident memory {s.get('resident_MB_after_first_chunk', 0):.0f} MB after the first "
+                   f"chunk, {s.get('resident_MB_at_end', 0):.0f} MB at the end, peak {s['peak_resident_MB']:.0f} MB")
     click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
 
 
@@ -157,7 +165,9 @@ def _print_summary(summary: dict, out: Path):
 @click.option("--no-monolithic", is_flag=True, help="Leave out the monolithic scipy solutions.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/bench/<scene>).")
-def bench(scene, repeats, only, no_peers, no_monolithic, out):
+@click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the cases already in "
+              "OUT/cases.jsonl (the earlier log is kept, renamed).")
+def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     """Error against run time for every master (and peers) on SCENE: writes bench.csv,
     bench.md, bench.json and work_precision.png."""
     from . import bench as benchmark
@@ -168,9 +178,9 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out):
     except (scenes.SceneError, ValueError) as error:
         raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
-    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                             progress=click.echo)
     out = out or benchmark.default_out(spec)
+    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                             progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
     claims = result["claims"]
@@ -635,6 +645,23 @@ def _print_validation(name, findings, result, out: Path):
     click.echo(f"  {name}: {verdict}; written to {out}/")
 
 
+@main.command("badinputs")
+@click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
+def bad_inputs(verbose):
+    """Run the bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built
+    FMUs: every case must be refused with an FMI error naming the variable and its range."""
+    from . import badinputs
+
+    ensure_fmus(quiet=True)
+    outcomes = badinputs.run()
+    if verbose:
+        for o in outcomes:
+            click.echo(f"{'ok  ' if o.passed else 'FAIL'} {o.case.name}: {' | '.join(o.messages)}")
+    click.echo(badinputs.summary(outcomes))
+    if not all(o.passed for o in outcomes):
+        sys.exit(1)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without
@@ -644,6 +671,8 @@ def entry():
         status = 0
     except SystemExit as done:
         status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
+    from .component import remove_extractions
+    remove_extractions()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(status)

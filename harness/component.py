@@ -8,6 +8,7 @@ FMU refused what, and why.
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
 import itertools
 import shutil
@@ -67,6 +68,36 @@ _callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(("free", _libc))
 addLoggerProxy(ctypes.byref(_callbacks))
 
 
+# One extraction per FMU file and process.  Every instance of an FMU then loads the same
+# library file, which the dynamic loader maps once; a fresh directory per instance maps a
+# fresh copy of pythonfmu's library, which is never unmapped (about 0.3 MB per instance,
+# so sweeps of thousands of runs grew without bound).
+_extracted: dict[tuple, str] = {}
+
+
+def unzipped(fmu_path: Path | str) -> str:
+    """The directory this process extracted ``fmu_path`` to (extracted again when the
+    file changes: a rebuilt FMU is a new library)."""
+    path = Path(fmu_path).resolve()
+    stat = path.stat()
+    key = (str(path), stat.st_mtime_ns, stat.st_size)
+    folder = _extracted.get(key)
+    if folder is None or not Path(folder).is_dir():
+        folder = _extracted[key] = extract(str(path))
+    return folder
+
+
+def remove_extractions():
+    """Delete the extracted FMUs (at exit; entry points that leave by ``os._exit`` call it
+    themselves).  Libraries already loaded stay usable: their files are mapped."""
+    for folder in _extracted.values():
+        shutil.rmtree(folder, ignore_errors=True)
+    _extracted.clear()
+
+
+atexit.register(remove_extractions)
+
+
 class FmuCallError(RuntimeError):
     """An FMI call returned error/fatal (or discard): which component, which call,
     at what time, and what the FMU said."""
@@ -87,7 +118,7 @@ class Component:
         self.fmu_path = Path(fmu_path)
         self.description = read_model_description(str(self.fmu_path))
         self.variables = {v.name: v for v in self.description.modelVariables}
-        self._unzipped = extract(str(self.fmu_path))
+        self._unzipped = unzipped(self.fmu_path)
         self.messages: deque[str] = deque(maxlen=50)
         self.calls = 0          # FMI calls made on the hot path (read, write, do_step)
         self.time = 0.0
@@ -224,5 +255,4 @@ class Component:
             self.fmu.freeInstance()
         finally:
             _routes.pop(self.instance_name, None)
-            shutil.rmtree(self._unzipped, ignore_errors=True)
 

@@ -55,6 +55,8 @@ def energy_balance(scene: scenes.Scene, times: np.ndarray, traces: dict, dissipa
     work_out = float(traces[f"{load}.load_work"][-1] - traces[f"{load}.load_work"][0])
     kinetic = 0.5 * i1 * (w1[-1] ** 2 - w1[0] ** 2) + 0.5 * i2 * (w2[-1] ** 2 - w2[0] ** 2)
     elastic = float(traces[f"{coupling}.elastic_energy"][-1] - traces[f"{coupling}.elastic_energy"][0])
+    if dissipated is None and f"{coupling}.dissipated_energy" in traces:
+        dissipated = traces[f"{coupling}.dissipated_energy"]   # integrated over every row (a streamed run)
     if dissipated is None:
         lost = _trapezoid(traces[f"{coupling}.dissipated_power"], times)
     else:

@@ -65,7 +65,6 @@ import ctypes
 import math
 import os
 import pickle
-import shutil
 import signal
 import subprocess
 import sys
@@ -232,7 +231,6 @@ class _SceneSetup:
 # -- fmpy-jacobi ------------------------------------------------------------------------------
 
 def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
-    from fmpy import extract
     from fmpy.fmi2 import FMU2Slave
 
     scene, e = setup.scene, setup.scene.experiment
@@ -274,7 +272,7 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
     try:
         for name in setup.order:
             md = setup.descriptions[name]
-            unzipped.append(extract(str(setup.fmu_paths[name])))
+            unzipped.append(harness_component.unzipped(setup.fmu_paths[name]))   # shared: see there
             instance = f"{name}@fmpy-jacobi"
             # The harness's process-wide logger routes messages by instance name: keep
             # this peer's, to say in a failure what the FMU said.
@@ -318,8 +316,6 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
             fmu.freeInstance()
         for name in setup.order:
             harness_component._routes.pop(f"{name}@fmpy-jacobi", None)
-        for directory in unzipped:
-            shutil.rmtree(directory, ignore_errors=True)
     table = np.array(rows, dtype=float).reshape(len(rows), len(setup.record))
     traces = {item: table[:, k].copy() for k, item in enumerate(setup.record)}
     return RunResult(scene, "fmpy-jacobi", step, grid[:len(rows)].copy(), traces, wall,

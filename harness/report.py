@@ -40,6 +40,8 @@ def summarize(result: RunResult, reference=None) -> dict:
         "counters": result.counters,
         "python": platform.python_version(),
     }
+    if result.stream:
+        summary["stream"] = result.stream
     if len(result.times) > 1:
         summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
                                                            scene.experiment.transient).get(full)
@@ -75,6 +77,10 @@ def write_report(path: Path, summary: dict):
     if summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "",
                   "The traces up to the failure are in traces.csv."]
+    if summary.get("stream"):
+        st = summary["stream"]
+        lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
+                  f"plots below use 1 row in {st['stride']}, the energy balance every row."]
     stats = summary.get("statistics")
     if stats:
         lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", "",
@@ -171,7 +177,8 @@ def write(out: Path, result: RunResult, reference=None) -> dict:
     if freewheel.component(result.scene):   # the rectifier scene has a report of its own
         return freewheel.write(out, result, reference)
     out.mkdir(parents=True, exist_ok=True)
-    write_traces(out / "traces.csv", result.times, result.traces)
+    if result.stream is None:             # a streamed run wrote its traces while it ran
+        write_traces(out / "traces.csv", result.times, result.traces)
     if reference is not None:
         write_traces(out / "reference.csv", reference.times, reference.traces)
     summary = summarize(result, reference)

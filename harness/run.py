@@ -36,6 +36,8 @@ class RunResult:
     diagnosis: dict | None = None
     #: findings of the checks made before the run (the stability advisor)
     warnings: list[str] = field(default_factory=list)
+    #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.traces)
+    stream: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -49,8 +51,13 @@ class Recorder:
 
     CHECK_EVERY = 256
 
-    def __init__(self, system: System, names: list[str], n_rows: int):
+    def __init__(self, system: System, names: list[str], n_rows: int, stream=None):
         self.names = names
+        # Streaming (harness.traces.TraceStream): hold one chunk, hand it on when full.
+        self.stream = stream
+        if stream is not None:
+            from .traces import CHUNK
+            n_rows = min(n_rows, CHUNK)
         # Record whole component buffers (a superset of the names), pick the names at the end.
         self._columns = {}
         self._copies = []
@@ -72,7 +79,9 @@ class Recorder:
         self._checked = 0
 
     def record(self, t: float):
-        if self.count == len(self.times):     # a variable-step run: grow
+        if self.count == len(self.times) and self.stream is not None:
+            self._hand_on()
+        elif self.count == len(self.times):     # a variable-step run: grow
             self.times = np.concatenate([self.times, np.empty(len(self.times))])
             self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
         row = self.rows[self.count]
@@ -96,7 +105,19 @@ class Recorder:
             raise Diverged(f"non-finite value of {', '.join(bad)} at t = {self.times[row]:.6g} s")
         self._checked = self.count
 
+    def _hand_on(self):
+        self.check()
+        columns = [self._columns[n] for n in self.names]
+        self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
+        self.count = self._checked = 0
+
     def traces(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        if self.stream is not None:       # the rows since the last chunk (a failed run's included)
+            columns = [self._columns[n] for n in self.names]
+            self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
+            self.count = self._checked = 0
+            self.stream.close()
+            return self.stream.traces()
         n = self.count
         return self.times[:n].copy(), {name: self.rows[:n, self._columns[name]].copy() for name in self.names}
 
@@ -112,11 +133,12 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
-             advise: bool = True) -> RunResult:
+             advise: bool = True, stream: Path | None = None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
     (for an adaptive master: its first step); ``options`` go to the master.  ``advise``:
     check the master and step against the linear stability analysis first (the findings
-    go to ``RunResult.warnings``; the run goes ahead regardless)."""
+    go to ``RunResult.warnings``; the run goes ahead regardless).  ``stream``: a trace CSV
+    written while the run goes, the result keeping every k-th row (harness.traces)."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -134,7 +156,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         system.initialize()
         guard = Guard(system, scene, master, step)     # before the master: it may expose outputs
         driver = master_family.make(master, system, step, **options)
-        recorder = Recorder(system, names, n_steps + 1)
+        recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
         recorder.record(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
         stepping = clock.perf_counter()
@@ -172,7 +194,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     warnings)
+                     warnings, recorder.stream.report() if recorder and recorder.stream else None)
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
@@ -201,6 +223,13 @@ def stability_advice(scene, master, step, fmu_dir) -> list[str]:
         return advise(scene, master, step, fmu_dir)
     except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
         return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
+
+
+def _stream(path: Path | None, scene: scenes.Scene, names: list[str], rows: int):
+    if path is None:
+        return None
+    from .traces import TraceStream, integrals_for
+    return TraceStream(path, names, rows, integrate=integrals_for(scene))
 
 
 def _progress(span: float, scene: str, master: str):

@@ -35,6 +35,8 @@ def pytest_sessionfinish(session, exitstatus):
 def pytest_unconfigure(config):
     status = getattr(config, "_lever_exit_status", None)
     if status is not None:
+        from harness.component import remove_extractions
+        remove_extractions()
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(status)

@@ -59,3 +59,45 @@ def test_bench_plan_refuses_unknown_masters():
     spec.bench = {"steps": {"no-such-master": [1e-3]}}
     with pytest.raises(ValueError, match="no-such-master"):
         bench.plan(spec)
+
+
+def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monkeypatch):
+    """A diverging case and a case that raises are recorded with their diagnosis, the
+    others complete; a second run takes every case from the case log."""
+    spec = scene.load("kavz685_stiff").with_overrides(["experiment.stop=0.2", "experiment.transient=0.05"])
+    spec.bench = {"steps": {"jacobi": [1e-3], "trapezoidal-newton": [2e-3]}, "monolithic_rtol": [1e-6],
+                  "target_error": 1e-2}
+
+    def broken(*args, **kwargs):
+        raise FloatingPointError("the monolithic solver blew up")
+
+    monkeypatch.setattr(bench, "run_monolithic", broken)
+    floor = bench.call_floor
+    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir: floor(scene, n_steps=500, fmu_dir=fmu_dir))
+    first = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path)
+    by_engine = {c.engine: c for c in first["cases"]}
+    assert "outside its allowed range" in by_engine["jacobi"].failure and "t = 0.09" in by_engine["jacobi"].failure
+    assert by_engine["monolithic"].failure.startswith("FloatingPointError: the monolithic solver blew up (at ")
+    assert by_engine["trapezoidal-newton"].stable and by_engine["trapezoidal-newton"].energy_residual < 1e-5
+    bench.write(tmp_path, first)
+    assert "FloatingPointError" in (tmp_path / "bench.md").read_text()
+
+    calls = []
+    monkeypatch.setattr(bench, "simulate", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench, "call_floor", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench, "run_monolithic", lambda *a, **k: calls.append(a))
+    lines = []
+    again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
+    assert calls == []
+    assert lines[0].startswith("resuming: 4 case(s) already in")
+    assert [bench._row(c) for c in again["cases"]] == [bench._row(c) for c in first["cases"]]
+    assert again["floor_per_step_s"] == first["floor_per_step_s"]
+
+    # A changed plan keeps the cases it shares; a fresh run recomputes them all.
+    monkeypatch.undo()
+    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir: floor(scene, n_steps=500, fmu_dir=fmu_dir))
+    spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
+    spec.bench["monolithic_rtol"] = []
+    grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False)
+    assert [c.step for c in grown["cases"] if c.engine == "trapezoidal-newton"] == [2e-3, 4e-3]
+    assert (tmp_path / "cases.old1.jsonl").exists()

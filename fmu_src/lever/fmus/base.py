@@ -297,6 +297,13 @@ class LeverSlave(Fmi2Slave):
         if self._build_error is None and not self._model_stale:
             self._compute_outputs()
             self._dirty = False
+            bad = [o.name for o in self.OUTPUTS if not math.isfinite(getattr(self, o.name))]
+            if bad:
+                # Reported at every read until the inputs change: never a silent NaN.
+                self._dirty = True
+                inputs = ", ".join(f"{p.name} = {getattr(self, p.name)!r}" for p in self.INPUTS)
+                self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with inputs "
+                            f"{inputs}: the inputs are beyond what the model can represent")
 
     def _build(self):
         raise NotImplementedError
@@ -326,10 +333,33 @@ class LeverSlave(Fmi2Slave):
             "internal": self._internal_state(),
         }
 
+    def _state_problem(self, state) -> str | None:
+        """Why ``state`` is not a state of this FMU (None when it is one)."""
+        if isinstance(state, dict) and "not_a_state" in state:
+            return f"not a state of this FMU: {state['not_a_state']}"
+        if not isinstance(state, dict) or set(state) != {"time", "phase", "variables", "internal"}:
+            return "not a state of this FMU"
+        variables = state["variables"]
+        if not isinstance(variables, dict) or set(variables) != set(self._declared):
+            names = set(variables) if isinstance(variables, dict) else set()
+            return (f"not a state of {type(self).__name__}: its variables differ (unknown: "
+                    f"{', '.join(sorted(names - set(self._declared))) or '-'}; missing: "
+                    f"{', '.join(sorted(set(self._declared) - names)) or '-'})")
+        if state["phase"] not in ("instantiated", "initialization", "stepping", "terminated"):
+            return f"not a state of this FMU: unknown phase {state['phase']!r}"
+        if not (isinstance(state["time"], float) and math.isfinite(state["time"])):
+            return f"not a state of this FMU: time {state['time']!r} is not a finite number"
+        for p in self.PARAMETERS:
+            message = p.problem(variables[p.name])
+            if message:
+                return f"not a state of this FMU: {message}"
+        return None
+
     @guarded()
     def _set_fmu_state(self, state):
-        if not state or "variables" not in state:
-            self._error("fmi2SetFMUstate: not a state of this FMU")
+        problem = self._state_problem(state)
+        if problem:
+            self._error(f"fmi2SetFMUstate: {problem}; the FMU's state is unchanged")
             return
         parameters_changed = any(getattr(self, p.name) != state["variables"].get(p.name)
                                  for p in self.PARAMETERS)
@@ -349,7 +379,14 @@ class LeverSlave(Fmi2Slave):
 
     @staticmethod
     def _fmu_state_from_bytes(data: bytes):
-        return json.loads(data.decode("utf-8"))
+        # pythonfmu calls this on the class, where nothing can be logged, and turns an
+        # exception into fmi2Fatal: bytes that are no state become a marker that
+        # fmi2SetFMUstate refuses with a message (fmi2Error) instead.
+        try:
+            return json.loads(bytes(data).decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as error:
+            return {"not_a_state": f"the bytes given to fmi2DeSerializeFMUstate do not decode "
+                                   f"({type(error).__name__}: {error})"}
 
     # -- model description -----------------------------------------------------------------
     def to_xml(self, model_options=None) -> Element:

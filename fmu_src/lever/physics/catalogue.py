@@ -10,10 +10,10 @@ from __future__ import annotations
 import math
 
 from .coupling import CouplingFamily, LeverCoupling, build_coupling
-from .elastic import elastic_law
+from .elastic import TabulatedElasticLaw, elastic_law
 from .engine import engine_characteristic
 from .kinematics import GEOMETRIC_LIMIT, MODES, TransferFunction
-from .load import LOAD_KINDS, load_model
+from .load import LOAD_KINDS, FourierLoad, TabulatedLoad, load_model
 from .parameters import Parameter, ParameterError, check_all
 from .signals import TimeTable
 from .shaft import Shaft
@@ -39,7 +39,7 @@ COUPLING = (
               kind="string", choices=MODES),
     Parameter("elastic_table", "", "", "nonlinear elastic law T_el(theta) as 'theta:torque; ...' points for "
               "theta >= 0 (rad, N.m), monotone, odd-symmetric; empty for the linear law stiffness*theta",
-              kind="string"),
+              kind="string", parser=TabulatedElasticLaw.parse),
 )
 
 #: The misalignment is an input (it may vary in time, like Simscape's universal joint);
@@ -49,12 +49,14 @@ MISALIGNMENT = Parameter("misalignment", math.radians(15.0), "rad",
                          0.0, GEOMETRIC_LIMIT, high_open=True, fixed=False)
 
 ENGINE = (
-    Parameter("inertia", 0.128, "kg.m2", "reduced moment of inertia I1 of the drive shaft", 0.0, 1e6, low_open=True),
+    # Inertias from 1e-6 kg.m2 (a 1 cm steel disc; any shaft is far above): below it the
+    # accelerations of admissible torques overflow.
+    Parameter("inertia", 0.128, "kg.m2", "reduced moment of inertia I1 of the drive shaft", 1e-6, 1e6),
     Parameter("stall_torque", 623.0, "N.m", "M1 of the linearised engine characteristic Mg = M1 - K1*w", -1e6, 1e6),
     Parameter("torque_slope", 14.06, "N.m.s/rad", "K1 of the linearised engine characteristic Mg = M1 - K1*w",
               0.0, 1e6),
     Parameter("characteristic", "", "", "static engine characteristic Mg(w) as 'w:torque; ...' points (rad/s, N.m); "
-              "empty for the linear zone M1 - K1*w", kind="string"),
+              "empty for the linear zone M1 - K1*w", kind="string", parser=lambda text: engine_characteristic(0, 0, text)),
     Parameter("phi_start", 0.0, "rad", "drive shaft angle at the start", -1e9, 1e9),
     Parameter("w_start", 39.0, "rad/s", "drive shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",
@@ -62,7 +64,7 @@ ENGINE = (
 )
 
 LOAD = (
-    Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 0.0, 1e6, low_open=True),
+    Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 1e-6, 1e6),
     Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part), "
               "fourier (angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
     Parameter("mean_torque", 107.5, "N.m", "mean technological resistance Mm", -1e6, 1e6),
@@ -72,9 +74,9 @@ LOAD = (
     Parameter("band_low", 2.0, "rad/s", "lowest angular frequency of the random part", 0.0, 1e5, low_open=True),
     Parameter("band_high", 450.0, "rad/s", "highest angular frequency of the random part", 0.0, 1e5, low_open=True),
     Parameter("fourier", "", "", "angle-periodic resistance 'M_mean; a1:b1; a2:b2; ...' (N.m), series (4.4)",
-              kind="string"),
+              kind="string", parser=FourierLoad.parse),
     Parameter("table", "", "", "resistance time series 't:torque; ...' (s, N.m), linear, ends held",
-              kind="string"),
+              kind="string", parser=TabulatedLoad.parse),
     Parameter("phi_start", 0.0, "rad", "driven shaft angle at the start", -1e9, 1e9),
     Parameter("w_start", 39.0, "rad/s", "driven shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",

@@ -56,7 +56,8 @@ def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         else:
             w1 = 2.0 * h[k] + h[k - 1]
             w2 = h[k] + 2.0 * h[k - 1]
-            m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
+            with np.errstate(over="ignore"):   # a tiny slope next to k: the harmonic mean tends to 0
+                m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
 
     def end(h0, h1, d0, d1):
         s = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1)
@@ -109,6 +110,9 @@ class TabulatedElasticLaw:
             y0, y1, m0, m1 = self._torque[k], self._torque[k + 1], self._slope[k], self._slope[k + 1]
             energy.append(energy[-1] + h * (y0 + y1) / 2.0 + h * h * (m0 - m1) / 12.0)
         self._energy = energy
+        if not all(math.isfinite(x) for x in self._slope + energy):
+            raise ParameterError(name, f"parameter '{name}': the table's slopes or energies overflow (points "
+                                 f"{self.points[:4]}...): deflections too close together for their torques")
 
     @classmethod
     def parse(cls, text: str, name: str = "elastic_table") -> "TabulatedElasticLaw":

@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .parameters import ParameterError, parse_table
+from .parameters import TABLE_LIMIT, ParameterError, parse_table
 
 LOAD_KINDS = ("constant", "random", "fourier", "table")
 
@@ -171,6 +171,9 @@ class FourierLoad:
             mean = float(rows[0])
         except ValueError:
             raise ParameterError(name, f"parameter '{name}': the first entry {rows[0]!r} must be the mean torque") from None
+        if not abs(mean) <= TABLE_LIMIT:
+            raise ParameterError(name, f"parameter '{name}': the mean torque {rows[0]!r} must be finite and within "
+                                 f"+-{TABLE_LIMIT:g}")
         pairs = parse_table(";".join(rows[1:]), name)
         return cls(mean, [p[0] for p in pairs], [p[1] for p in pairs])
 

@@ -7,8 +7,8 @@ wherever it enters.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Optional, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional, Sequence
 
 
 class ParameterError(ValueError):
@@ -96,6 +96,9 @@ class Parameter:
     fixed: bool = True  # structural: may not change after initialisation
     #: for an input: the input this one is the time derivative of (FMI ``derivative``)
     derivative_of: str = ""
+    #: for a string holding a table: parses a non-empty value, raising ParameterError when
+    #: it is malformed, so a bad table is refused when it is set, like a bad number
+    parser: Optional[Callable[[str], Any]] = field(default=None, compare=False)
 
     def range_text(self) -> str:
         if self.kind == "string":
@@ -113,6 +116,11 @@ class Parameter:
             if self.choices and value not in self.choices:
                 return (f"parameter '{self.name}' = {value!r} is not allowed: "
                         f"it must be {self.range_text()} ({self.description})")
+            if self.parser is not None and value.strip():
+                try:
+                    self.parser(value)
+                except ParameterError as error:
+                    return f"{error} (allowed: {self.description})"
             return None
         try:
             x = float(value)
@@ -153,9 +161,15 @@ def check_all(declared: Sequence[Parameter], values: dict) -> dict:
     return {p.name: p.check(values.get(p.name, p.default)) for p in declared}
 
 
+#: Largest magnitude of a table value: keeps slopes, integrals and energies of any
+#: table representable (a table of physical values never comes near it).
+TABLE_LIMIT = 1e15
+
+
 def parse_table(text: str, name: str, columns: int = 2) -> list[tuple[float, ...]]:
     """Parse a table given as text: rows separated by ';' or newlines, values within a
-    row by ',' or ':' or whitespace.  Example: ``"0:0; 0.05:10; 0.1:16"``."""
+    row by ',' or ':' or whitespace, each finite and within +-TABLE_LIMIT.  Example:
+    ``"0:0; 0.05:10; 0.1:16"``."""
     rows = []
     for raw in text.replace("\n", ";").split(";"):
         raw = raw.strip()
@@ -170,6 +184,9 @@ def parse_table(text: str, name: str, columns: int = 2) -> list[tuple[float, ...
             raise ParameterError(name, f"parameter '{name}': row {raw!r} is not numeric") from None
         if not all(math.isfinite(v) for v in row):
             raise ParameterError(name, f"parameter '{name}': row {raw!r} has a non-finite value")
+        if any(abs(v) > TABLE_LIMIT for v in row):
+            raise ParameterError(name, f"parameter '{name}': row {raw!r} has a value beyond the allowed "
+                                 f"magnitude: values must lie within +-{TABLE_LIMIT:g}")
         rows.append(row)
     return rows
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+from .parameters import ParameterError
+
 
 class Shaft:
     def __init__(self, inertia: float, external, max_substep: float = 2.5e-4):
@@ -50,8 +52,17 @@ class Shaft:
         a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h)
         return h * h * (0.15 * w + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0))
 
+    #: RK4 substeps one step may take: beyond it the step is refused, not ground through
+    #: for minutes (an importer waiting on doStep would hang).
+    MAX_SUBSTEPS = 200_000
+
     def _rk4(self, t, phi, w, tau, h, tau_rate=0.0):
-        n = max(1, math.ceil(h / self.max_substep - 1e-9))
+        ratio = h / self.max_substep
+        if not ratio <= self.MAX_SUBSTEPS:
+            raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {ratio:.3g} RK4 substeps of "
+                                 f"max_substep = {self.max_substep:.6g} s, more than the {self.MAX_SUBSTEPS} allowed "
+                                 "per step: take smaller communication steps or a larger 'max_substep'")
+        n = max(1, math.ceil(ratio - 1e-9))
         dt = h / n
 
         def acc(ti, p, v):

@@ -1,0 +1,41 @@
+"""The bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built FMUs:
+every case is refused with fmi2Error/fmi2Discard and a message naming the variable and
+what is allowed, nothing is fatal, and every instance is freed cleanly."""
+from __future__ import annotations
+
+import pytest
+
+from harness import badinputs
+
+CORPUS = badinputs.corpus()
+
+
+@pytest.mark.parametrize("case", CORPUS, ids=[c.name for c in CORPUS])
+def test_bad_input_is_refused_with_a_message(fmu_dir, case):
+    outcome = badinputs.run_case(case, fmu_dir)
+    assert outcome.passed, "; ".join(outcome.problems)
+    assert outcome.status in badinputs.REFUSED and outcome.messages
+
+
+def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
+    categories = {(c.fmu, c.category) for c in CORPUS}
+    for fmu in badinputs.DECLARED:
+        for category in ("non-finite parameter", "non-finite input", "set after initialisation",
+                         "out-of-order call", "bad step", "bad state", "malformed table"):
+            assert (fmu, category) in categories, (fmu, category)
+    for fmu in ("EngineShaft", "LoadShaft"):
+        assert (fmu, "non-positive inertia") in categories
+    for category in ("non-positive stiffness", "negative damping", "misalignment out of range"):
+        assert ("LeverCoupling", category) in categories
+    assert ("LeverCoupling", "unknown mode") in categories and ("LoadShaft", "unknown mode") in categories
+    assert len({c.name for c in CORPUS}) == len(CORPUS) > 200
+
+
+def test_the_summary_counts_cases_and_names_failures(fmu_dir):
+    cases = [c for c in CORPUS if c.category == "bad step"][:2]
+    broken = badinputs.Case("EngineShaft", "not refused", "a good inertia", "instantiated",
+                            ("set", "inertia", 0.2), ("'inertia'",))
+    outcomes = badinputs.run(fmu_dir, cases + [broken])
+    text = badinputs.summary(outcomes)
+    assert text.splitlines()[0].endswith("3 cases through fmpy's FMU2Slave, 2 pass, 1 fail")
+    assert "FAIL EngineShaft: a good inertia: status 0, expected fmi2Error or fmi2Discard" in text
