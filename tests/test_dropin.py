@@ -63,7 +63,7 @@ def test_lever_check_reports_what_a_careless_fmu_lacks(fmu_dir, tmp_path):
             text = data.decode()
             text = text.replace(' declaredType="Torque"', "", 1)
             text = text.replace('description="reduced moment of inertia I1 of the drive shaft" ', "")
-            text = text.replace(' min="0.0" max="1000000.0"', "", 1)
+            text = text.replace(' min="1e-06" max="1000000.0"', "", 1)
             return text.encode()
         return data
 
