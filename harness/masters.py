@@ -198,6 +198,11 @@ def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, l
     return means, slopes, ends
 
 
+def _lagrange_weights(nodes, x: float) -> list[float]:
+    """Weights of the values at ``nodes`` in the interpolating polynomial's value at ``x``."""
+    return [math.prod((x - m) / (n - m) for m in nodes if m != n) for n in nodes]
+
+
 class ExtrapolatingJacobiMaster(JacobiMaster):
     """Jacobi, but each stateful component's inputs are extrapolated from the last
     ``degree + 1`` communication points instead of held.  Where the component declares
@@ -679,8 +684,7 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
         times = [p[0] for p in points]
 
         def attempt(h, states):
-            weights = extrapolation_weights(times, t, h)[2]
-            predicted = sum(w * p[1] for w, p in zip(weights, points))
+            predicted = sum(w * p[1] for w, p in zip(_lagrange_weights(times, t + h), points))
             self._predicted_inputs = 0.5 * (start + predicted)
             try:
                 u, _ = self._solve(t, h, states, start, self.iteration_tolerance)
