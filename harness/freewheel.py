@@ -38,20 +38,15 @@ def parameters(scene: scenes.Scene, name: str) -> dict:
 
 def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
                     atol: float = ATOL, method: str = "DOP853"):
-    from .reference import CACHE, Reference, ReferenceUnavailable, cache_key
+    from .reference import Reference, ReferenceUnavailable, cache_path, load_cached, store
 
     name = component(scene)
     if len(scene.components) != 1 or scene.connections:
         raise ReferenceUnavailable(f"scene '{scene.name}': the rectifier's reference covers the rectifier alone "
                                    "(its port unconnected, tau = 0)")
-    key = cache_key(scene, times, rtol, atol, method)
-    path = CACHE / f"reference-{scene.name}-{key}.npz"
-    if use_cache and path.exists():
-        data = np.load(path, allow_pickle=False)
-        meta = json.loads(str(data["meta"]))
-        traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
-        return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
-                         info={"cached": True, "events": meta["events"], "bookkeeping": [f"{name}.events"]})
+    path = cache_path(scene, times, rtol, atol, method)
+    if use_cache and (cached := load_cached(path)) is not None:
+        return cached
     model = catalogue.freewheel_from(parameters(scene, name))
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
@@ -63,9 +58,7 @@ def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
                           f"{method} rtol={rtol:g} atol={atol:g}, restarted at {len(events)} located events",
                           info={"events": len(events), "bookkeeping": [f"{name}.events"]})
     if use_cache:
-        CACHE.mkdir(parents=True, exist_ok=True)
-        meta = json.dumps({"wall_time": wall, "n_rhs": n_rhs, "method": reference.method, "events": len(events)})
-        np.savez_compressed(path, times=reference.times, meta=np.array(meta), **traces)
+        store(path, reference)
     return reference
 
 
@@ -373,18 +366,10 @@ def write_report(path, summary: dict):
                   f"**{eb['residual_relative']:.2g}** at the end and at most {eb['worst_residual_relative']:.2g} "
                   "at any recorded time."]
         lines += ["", "## Kinematics beside the source's description", ""] + _comparison(fw)
+    from .report import reference_error_lines
     errs = summary.get("error_vs_reference")
-    if errs:
-        ref = summary["reference"]
-        lines += ["", "## Against the monolithic reference", "",
-                  f"Reference: {ref['method']} ({ref['rhs_evaluations']} right-hand-side evaluations, "
-                  f"{ref['wall_time_s']:.2f} s; its own energy residual "
-                  f"{ref['energy_balance']['residual_relative']:.1e}).", "",
-                  "| signal | RMS error | max error | RMS / scale | max / scale | scale |", "|---|---|---|---|---|---|"]
-        for var, e in errs.items():
-            lines.append(f"| {var} | {_f(e['rms'])} | {_f(e['max'])} | {100 * e['rms_relative']:.3g} % | "
-                         f"{100 * e['max_relative']:.3g} % | {_f(e['scale'])} |")
-        lines += ["", "Scales: speeds relative to the rocker's peak speed, torques to the reference's peak torque."]
+    lines += reference_error_lines(summary, "Against the monolithic reference",
+                                   "speeds relative to the rocker's peak speed, torques to the reference's peak torque")
     lines += ["", "Plots: kinematics.png (elements 1-4, as the paper's Figs. 8-11), gaps.png, torques.png, energy.png"
               + (", vs_reference.png" if errs else "") + ".  Traces: traces.csv" + (" and reference.csv." if errs else ".")]
     path.write_text("\n".join(lines) + "\n")

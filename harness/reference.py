@@ -108,13 +108,9 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     if freewheel.component(scene):      # the rectifier scene: its own event-aware reference
         return freewheel.solve_reference(scene, times, use_cache, rtol, atol, method)
     engine_name, coupling_name, load_name = _roles(scene)
-    key = cache_key(scene, times, rtol, atol, method)
-    path = CACHE / f"reference-{scene.name}-{key}.npz"
-    if use_cache and path.exists():
-        data = np.load(path, allow_pickle=False)
-        meta = json.loads(str(data["meta"]))
-        traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
-        return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"], info={"cached": True})
+    path = cache_path(scene, times, rtol, atol, method)
+    if use_cache and (cached := load_cached(path)) is not None:
+        return cached
 
     engine = catalogue.engine_from(_params(scene, engine_name))
     load = catalogue.load_from(_params(scene, load_name))
@@ -174,7 +170,27 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
         traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
     reference = Reference(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
-        CACHE.mkdir(parents=True, exist_ok=True)
-        meta = json.dumps({"wall_time": wall, "n_rhs": reference.n_rhs, "method": reference.method})
-        np.savez_compressed(path, times=t, meta=np.array(meta), **traces)
+        store(path, reference)
     return reference
+
+
+def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
+    return CACHE / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
+
+
+def load_cached(path: Path) -> Reference | None:
+    """A stored reference (its ``info`` as stored, marked cached), or None."""
+    if not path.exists():
+        return None
+    data = np.load(path, allow_pickle=False)
+    meta = json.loads(str(data["meta"]))
+    traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
+    return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
+                     info={**meta.get("info", {}), "cached": True})
+
+
+def store(path: Path, reference: Reference):
+    CACHE.mkdir(parents=True, exist_ok=True)
+    meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
+                       "info": reference.info})
+    np.savez_compressed(path, times=reference.times, meta=np.array(meta), **reference.traces)

@@ -61,6 +61,23 @@ def summarize(result: RunResult, reference=None) -> dict:
     return summary
 
 
+def reference_error_lines(summary: dict, title: str, scales: str) -> list[str]:
+    """The report's section on the error against the monolithic reference (none without one)."""
+    errs = summary.get("error_vs_reference")
+    if not errs:
+        return []
+    ref = summary["reference"]
+    lines = ["", f"## {title}", "",
+             f"Reference: {ref['method']} ({ref['rhs_evaluations']} right-hand-side evaluations, "
+             f"{ref['wall_time_s']:.2f} s; its own energy residual "
+             f"{ref['energy_balance']['residual_relative']:.1e}).", "",
+             "| signal | RMS error | max error | RMS / scale | max / scale | scale |", "|---|---|---|---|---|---|"]
+    for signal, e in errs.items():
+        lines.append(f"| {signal} | {_fmt(e['rms'])} | {_fmt(e['max'])} | {100 * e['rms_relative']:.3g} % | "
+                     f"{100 * e['max_relative']:.3g} % | {_fmt(e['scale'])} |")
+    return lines + ["", f"Scales: {scales}."]
+
+
 def _fmt(x, digits=4):
     if x is None:
         return "-"
@@ -92,18 +109,8 @@ def write_report(path: Path, summary: dict):
                              f"{_fmt(s.get('unevenness'))} |")
         lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
                   "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
-    errs = summary.get("error_vs_reference")
-    if errs:
-        ref = summary["reference"]
-        lines += ["", "## Error against the monolithic reference", "",
-                  f"Reference: {ref['method']} ({ref['rhs_evaluations']} right-hand-side evaluations, "
-                  f"{ref['wall_time_s']:.2f} s; its own energy residual "
-                  f"{ref['energy_balance']['residual_relative']:.1e}).", "",
-                  "| signal | RMS error | max error | RMS / scale | max / scale | scale |", "|---|---|---|---|---|---|"]
-        for short, e in errs.items():
-            lines.append(f"| {short} | {_fmt(e['rms'])} | {_fmt(e['max'])} | {100 * e['rms_relative']:.3g} % | "
-                         f"{100 * e['max_relative']:.3g} % | {_fmt(e['scale'])} |")
-        lines += ["", "Scales: torques relative to the mean transmitted torque, speeds to the mean speed."]
+    lines += reference_error_lines(summary, "Error against the monolithic reference",
+                                   "torques relative to the mean transmitted torque, speeds to the mean speed")
     eb = summary.get("energy_balance")
     if eb:
         lines += ["", "## Energy balance", "",
