@@ -33,6 +33,15 @@ def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):
         build.build(fmu_dir, force=force, log=(lambda *_: None) if quiet else click.echo)
 
 
+def _scene(name: str, assignments=()) -> scenes.Scene:
+    """The scene NAME (a name, a .toml or an .ssp) with the --set overrides; bad input ends
+    the command with exit code 2 and the scene's message."""
+    try:
+        return scenes.load(name).with_overrides(list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 def main():
     """Co-simulation of lever-articulated drive-shaft couplings (FMI 2.0, fmpy)."""
@@ -85,10 +94,7 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     from .run import simulate, stability_advice
     from .system import SceneInvalid
 
-    try:
-        spec = scenes.load(scene).with_overrides(list(assignments))
-    except scenes.SceneError as error:
-        raise UserError(str(error)) from None
+    spec = _scene(scene, assignments)
     chosen = master or spec.experiment.master
     if chosen not in family.MASTERS:
         raise UserError(f"master '{chosen}' is unknown (known: {', '.join(family.MASTERS)})")
@@ -374,10 +380,7 @@ def engines(scene, engine_names, assignments, step, repeats, out):
     engines.json."""
     from . import engines as comparison
 
-    try:
-        spec = scenes.load(scene).with_overrides(list(assignments))
-    except scenes.SceneError as error:
-        raise UserError(str(error)) from None
+    spec = _scene(scene, assignments)
     chosen = list(engine_names) or list(comparison.ENGINES)
     unknown = [n for n in chosen if n not in comparison.ENGINES]
     if unknown:
@@ -401,10 +404,7 @@ def export_ssp(scene, assignments, out):
     from . import ssp
     from .system import SceneInvalid
 
-    try:
-        spec = scenes.load(scene).with_overrides(list(assignments))
-    except scenes.SceneError as error:
-        raise UserError(str(error)) from None
+    spec = _scene(scene, assignments)
     ensure_fmus(quiet=True)
     out = out or RESULTS / "ssp" / f"{spec.name}.ssp"
     try:
@@ -427,10 +427,7 @@ def export_container(scene, assignments, out):
     from . import container
     from .system import SceneInvalid
 
-    try:
-        spec = scenes.load(scene).with_overrides(list(assignments))
-    except scenes.SceneError as error:
-        raise UserError(str(error)) from None
+    spec = _scene(scene, assignments)
     ensure_fmus(quiet=True)
     out = out or RESULTS / "container" / f"{spec.name}.fmu"
     try:
