@@ -61,7 +61,9 @@ class TabulatedCharacteristic:
     """Full static characteristic ``Mg(w)`` from points (speed, torque): start-up
     torque, idle speed, nominal point... (as in the monograph's Fig. 3.9).  Linear
     between points; below the first speed the first torque is held (start-up), above
-    the last the last segment is extended (the governor's falling branch)."""
+    the last a falling last segment is extended (the governor's falling branch) and a
+    rising one held at its end: no engine's torque grows without bound with its speed
+    (extended, a rising segment made the speed run away exponentially)."""
 
     def __init__(self, points, name: str = "characteristic"):
         pts = sorted((float(w), float(m)) for w, m in points)
@@ -73,6 +75,17 @@ class TabulatedCharacteristic:
         self.points = pts
         self._w = speeds
         self._m = [p[1] for p in pts]
+        slopes = [(m1 - m0) / (w1 - w0) for (w0, m0), (w1, m1) in zip(pts, pts[1:])]
+        if not all(math.isfinite(k) for k in slopes):
+            raise ParameterError(name, f"parameter '{name}': the characteristic's slopes overflow: speeds too "
+                                 "close together for their torques")
+        self._falls = slopes[-1] < 0.0
+        #: largest |dMg/dw| [N.m.s/rad]: sets the RK4 substep that stays stable
+        self.speed_stiffness = max(abs(k) for k in slopes)
+
+    def rate(self, inertia: float) -> float:
+        """Fastest rate [1/s] of the shaft's own dynamics (for a stable explicit substep)."""
+        return self.speed_stiffness / inertia
 
     @classmethod
     def parse(cls, text: str, name: str = "characteristic") -> "TabulatedCharacteristic":
@@ -82,6 +95,8 @@ class TabulatedCharacteristic:
         ws, ms = self._w, self._m
         if w <= ws[0]:
             return ms[0]
+        if w >= ws[-1] and not self._falls:
+            return ms[-1]
         k = min(bisect.bisect_right(ws, w) - 1, len(ws) - 2)
         return ms[k] + (ms[k + 1] - ms[k]) * (w - ws[k]) / (ws[k + 1] - ws[k])
 

@@ -160,6 +160,12 @@ class FourierLoad:
         self.cosines, self.sines = a, b
         # a cos + b sin = Re((a - i b) e^{i n phi}); Horner from the highest harmonic.
         self._c = [complex(ak, -bk) for ak, bk in zip(a, b)][::-1]
+        #: bound of |dMc/dphi| [N.m/rad]: sets the RK4 substep that stays stable
+        self.angle_stiffness = sum(n * math.hypot(ak, bk) for n, (ak, bk) in enumerate(zip(a, b), start=1))
+
+    def rate(self, inertia: float) -> float:
+        """Fastest rate [1/s] of the shaft's own dynamics (for a stable explicit substep)."""
+        return math.sqrt(self.angle_stiffness / inertia)
 
     @classmethod
     def parse(cls, text: str, name: str = "fourier") -> "FourierLoad":

@@ -56,13 +56,21 @@ class Shaft:
     #: for minutes (an importer waiting on doStep would hang).
     MAX_SUBSTEPS = 200_000
 
+    #: RK4's stability limit on the real axis is 2.78 (2.83 on the imaginary): substeps
+    #: stay below it for the external torque model's fastest rate
+    STABLE = 2.5
+
     def _rk4(self, t, phi, w, tau, h, tau_rate=0.0):
         ratio = h / self.max_substep
-        if not ratio <= self.MAX_SUBSTEPS:
-            raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {ratio:.3g} RK4 substeps of "
-                                 f"max_substep = {self.max_substep:.6g} s, more than the {self.MAX_SUBSTEPS} allowed "
-                                 "per step: take smaller communication steps or a larger 'max_substep'")
-        n = max(1, math.ceil(ratio - 1e-9))
+        rate = self.external.rate(self.inertia) if hasattr(self.external, "rate") else 0.0
+        needed = max(ratio, h * rate / self.STABLE)
+        if not needed <= self.MAX_SUBSTEPS:
+            why = (f"of max_substep = {self.max_substep:.6g} s" if needed == ratio else
+                   f"to stay stable with the external torque's rate {rate:.3g} 1/s")
+            raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {needed:.3g} RK4 substeps {why}, "
+                                 f"more than the {self.MAX_SUBSTEPS} allowed per step: take smaller communication "
+                                 "steps, a larger 'max_substep' or a smoother characteristic")
+        n = max(1, math.ceil(needed - 1e-9))
         dt = h / n
 
         def acc(ti, p, v):
