@@ -401,3 +401,23 @@ def test_without_libpython_the_c_host_is_told_what_is_missing(fmu_dir, c_host, t
                           capture_output=True, text=True, timeout=60)
     assert done.returncode != 0
     assert "undefined symbol" in done.stderr and "pythonfmu-export.so" in done.stderr
+
+
+def test_kavz_run_in_libcosim_passes_lever_validate(fmu_dir, tmp_path):
+    """The KAVZ-685 scene assembled by libcosim from our SSP archive, its traces written
+    as another tool would, judged by `lever validate --result` against our reference."""
+    spec = scene.load("kavz685")
+    result = peers.simulate_peer("libcosim-ssp", spec, spec.experiment.step, fmu_dir)
+    assert result.ok, result.failure
+    names = [n for n in spec.record if n in result.traces]
+    table = np.column_stack([result.times] + [result.traces[n] for n in names])
+    csv_path = tmp_path / "libcosim.csv"
+    np.savetxt(csv_path, table, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
+    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v")])
+    assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
+    # and a torque shifted by 10 ms (what a master lagging ten steps would give) fails
+    shifted = table.copy()
+    shifted[10:, 1 + names.index("coupling.tau1")] = table[:-10, 1 + names.index("coupling.tau1")]
+    np.savetxt(csv_path, shifted, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
+    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "w")])
+    assert outcome.exit_code == 1 and "coupling.tau1" in outcome.output
