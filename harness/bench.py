@@ -188,7 +188,7 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
                           [(t._set_real, t._handle, t_vrs, len(t_vrs), t_values)
                            for t, t_vrs, t_values, _ in system.writes[name]]))
         rereads = [(get_real, handle, vrs, n, values)
-                   for _, get_real, handle, vrs, n, values in system._dependent_reads]
+                   for _, get_real, handle, vrs, n, values, _, _ in system._dependent_reads]
         h = scene.experiment.step
         t = scene.experiment.start
         started = clock.perf_counter()

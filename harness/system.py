@@ -167,11 +167,13 @@ class System:
         dependent = [name for name in self.order if name not in self.feedthrough
                      and any(u.dependencies and u.variable.name in self.exposed[name]
                              for u in self.components[name].description.outputs)]
-        self._dependent_reads = tuple(self._plan_of[name][:6] for name in dependent)
-        # their connected inputs, for masters whose last propagation only filled the buffers
-        self._dependent_sends = tuple((target, target._set_real, target._handle, vrs, len(vrs), values)
-                                      for writes in self.writes.values()
-                                      for target, vrs, values, _ in writes if target.name in dependent)
+        # Plans again: reading them (entries without writes), and - for masters whose last
+        # propagation only filled the buffers - first sending their connected inputs from
+        # those buffers (one entry that reads nothing, with writes that copy nothing).
+        self._dependent_reads = [self._plan_of[name][:6] + ((), ()) for name in dependent]
+        sends = tuple(w[:6] + ((),) for name in self.order for w in self._plan_of[name][6]
+                      if w[0].name in dependent)
+        self._dependent_sends = [(None, None, None, None, 0, None, sends, ())] if sends else []
         self.has_dependent_outputs = bool(dependent)
 
     def held_plan(self, held: set[str]):
@@ -209,16 +211,8 @@ class System:
         ``_dependent_reads``), after sending those inputs from their buffers first when
         ``send`` (the last propagation was a held plan)."""
         if send:
-            for target, set_real, handle, vrs, n, values in self._dependent_sends:
-                target.calls += 1
-                status = set_real(handle, vrs, n, values)
-                if status > 1:
-                    target._fail("fmi2SetReal", status)
-        for component, get_real, handle, vrs, n, values in self._dependent_reads:
-            component.calls += 1
-            status = get_real(handle, vrs, n, values)
-            if status > 1:
-                component._fail("fmi2GetReal", status)
+            self.propagate_with(self._dependent_sends)
+        self.propagate_with(self._dependent_reads)
 
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""
