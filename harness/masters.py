@@ -63,6 +63,8 @@ class Master:
         self.n_iterations = 0
         self.n_rejected = 0
         self._stateful = [system.components[n] for n in system.stateful]
+        self._feedthrough = [n for n in system.order if n in system.feedthrough]
+        self._feedthrough_components = [system.components[n] for n in self._feedthrough]
         #: set by a step that left the coupled inputs in their buffers only (a held plan)
         self._inputs_unsent = False
 
@@ -128,15 +130,12 @@ class Master:
             component.free_state(state)
 
     def _step_stateful(self, t, h):
-        components = self.system.components
-        for name in self.system.stateful:
-            components[name].do_step(t, h)
+        for component in self._stateful:
+            component.do_step(t, h)
 
     def _step_feedthrough(self, t, h):
-        components = self.system.components
-        for name in self.system.order:
-            if name in self.system.feedthrough:
-                components[name].do_step(t, h)
+        for component in self._feedthrough_components:
+            component.do_step(t, h)
 
 
 class JacobiMaster(Master):
@@ -357,7 +356,6 @@ class MidpointPredictionMaster(JacobiMaster):
                     continue
                 terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in positions]
                 self._predictions.append((values, target, vrs, target_values, terms))
-        self._feedthrough = [n for n in system.order if n in system.feedthrough]
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
@@ -500,17 +498,16 @@ class IterativeMaster(Master):
         start = self._current_inputs()
         states = self._save_states()
         try:
-            u, _ = self._solve(t, h, states, start, self.tolerance)
+            u = self._solve(t, h, states, start, self.tolerance, self._guess(t, h, start))
         finally:
             self._free_states(states)
         self._history.append((t + h, u))
         self._send_end_torques()
         self._step_feedthrough(t, h)
 
-    def _solve(self, t, h, states, start, relative_tolerance):
-        """Iterate the held torques of the step from ``t`` to convergence; the stateful
-        components end at ``t + h`` stepped with them.  Returns ``(u, first guess)``."""
-        guess = self._guess(t, h, start)
+    def _solve(self, t, h, states, start, relative_tolerance, guess):
+        """Iterate the held torques of the step from ``t`` to convergence, starting from
+        ``guess``; the stateful components end at ``t + h`` stepped with them.  Returns them."""
         u = guess
         scale = max(1.0, float(np.max(np.abs(start))))
         tolerance = relative_tolerance * scale
@@ -552,7 +549,7 @@ class IterativeMaster(Master):
             raise MasterFailure(f"{self.name}: the coupling iteration did not converge in the step from "
                                 f"t = {t:.9g} s (h = {h:.3g} s): residual {norm:.3g} N.m after "
                                 f"{iteration + 1} iterations, tolerance {tolerance:.3g} N.m; {hint}")
-        return u, guess
+        return u
 
     def _finite_difference_jacobian(self, u, g, t, h, states, start, scale):
         self.n_jacobians += 1
@@ -671,11 +668,6 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
         if self.iteration_tolerance is None:
             self.iteration_tolerance = 0.1 * self.tolerance
         self._ends: deque = deque(maxlen=2)     # (time, torques) at the last communication points before t
-        self._predicted_inputs = None
-
-    def _guess(self, t, h, start):
-        """The held torques that the extrapolated end-of-step torques give."""
-        return self._predicted_inputs
 
     def _step_impl(self, t, h):
         start = self._current_inputs()
@@ -685,9 +677,8 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
 
         def attempt(h, states):
             predicted = sum(w * p[1] for w, p in zip(_lagrange_weights(times, t + h), points))
-            self._predicted_inputs = 0.5 * (start + predicted)
-            try:
-                u, _ = self._solve(t, h, states, start, self.iteration_tolerance)
+            try:      # from the held torques that the extrapolated end-of-step torques give
+                u = self._solve(t, h, states, start, self.iteration_tolerance, 0.5 * (start + predicted))
             except MasterFailure:
                 if h <= self.min_step:
                     raise
@@ -699,11 +690,10 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
             else:
                 fraction = self.START_FRACTION
             scale = max(self._scale, float(np.max(np.abs(end)))) or 1.0
-            return fraction * float(np.max(np.abs(end - predicted))) / (self.tolerance * scale), (u, end)
+            return fraction * float(np.max(np.abs(end - predicted))) / (self.tolerance * scale), u
 
-        h, _, (u, _end) = self._controlled_step(t, self._clip(t, h), attempt)
+        h, _, _ = self._controlled_step(t, self._clip(t, h), attempt)
         self._ends.append((t, start))
-        self._history.append((t + h, u))
         self._send_end_torques()
         self._step_feedthrough(t, h)
         return h
