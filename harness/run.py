@@ -73,6 +73,7 @@ class Recorder:
         missing = [n for n in names if n not in self._columns]
         if missing:
             raise KeyError(f"not exposed by the system: {', '.join(missing)}")
+        self._selected = [self._columns[n] for n in names]      # the recorded names' columns
         self.times = np.empty(n_rows)
         self.rows = np.empty((n_rows, offset))
         self.count = 0
@@ -95,7 +96,7 @@ class Recorder:
     def check(self):
         """Raise ``Diverged`` at the first non-finite recorded value since the last check
         (the rows up to it are kept)."""
-        block = self.rows[self._checked:self.count, [self._columns[n] for n in self.names]]
+        block = self.rows[self._checked:self.count, self._selected]
         finite = np.isfinite(block)
         if not finite.all():
             first = int(np.argmin(finite.all(axis=1)))
@@ -105,17 +106,17 @@ class Recorder:
             raise Diverged(f"non-finite value of {', '.join(bad)} at t = {self.times[row]:.6g} s")
         self._checked = self.count
 
-    def _hand_on(self):
-        self.check()
-        columns = [self._columns[n] for n in self.names]
-        self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
+    def _hand_on(self, checked: bool = True):
+        """Pass the rows held so far to the stream (checked first, unless they are the
+        last rows of a run that already failed) and start a new chunk."""
+        if checked:
+            self.check()
+        self.stream.append(self.times[:self.count], self.rows[:self.count][:, self._selected])
         self.count = self._checked = 0
 
     def traces(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         if self.stream is not None:       # the rows since the last chunk (a failed run's included)
-            columns = [self._columns[n] for n in self.names]
-            self.stream.append(self.times[:self.count], self.rows[:self.count][:, columns])
-            self.count = self._checked = 0
+            self._hand_on(checked=False)
             self.stream.close()
             return self.stream.traces()
         n = self.count
