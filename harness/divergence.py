@@ -87,8 +87,7 @@ def plausible_speed(scene: scenes.Scene, engine_name: str, load_name: str) -> tu
     char = engine.external
     candidates = {"start speed": max(starts)}
     if isinstance(char, LinearCharacteristic) and char.slope > 0.0:
-        candidates["steady speed of the engine line"] = max(
-            abs(char.stall_torque - m) / char.slope for m in (0.0, low, high))
+        candidates["steady speed of the engine line"] = max(abs(char.steady_speed(m)) for m in (0.0, low, high))
     else:
         torques = [abs(m) for m in char._m] if hasattr(char, "_m") else [abs(char.stall_torque)]
         if hasattr(char, "_w"):
