@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 from lever.physics import catalogue
 from lever.physics.freewheel import EVENTS, N_EDGES
 
+from . import metrics
 from . import scene as scenes
 
 FMU = "FreewheelRectifier"
@@ -28,10 +29,6 @@ ATOL = 1e-12
 
 def component(scene: scenes.Scene) -> str | None:
     return scene.component_of(FMU)
-
-
-def parameters(scene: scenes.Scene, name: str) -> dict:
-    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
 
 
 # -- the monolithic reference --------------------------------------------------------------------
@@ -47,7 +44,7 @@ def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
     wall = clock.perf_counter() - started
@@ -155,7 +152,7 @@ def _transitions(contact: np.ndarray) -> dict:
 def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
     """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
     name = component(scene)
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
 
     def tr(var):
         return np.asarray(traces[f"{name}.{var}"])
@@ -475,7 +472,7 @@ def plot(out, result, reference=None):
     fig.savefig(out / "kinematics.png", dpi=110)
     plt.close(fig)
 
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
     for ax, (var, gap, label) in zip(axes, (("msm_deflection", model.z1, "e = phi1 - phi2 (gap z1)"),
                                             ("torsion_twist", model.z2, "phi3 - phi4 (gap z2)"),

@@ -56,6 +56,7 @@ from lever.physics.load import ConstantLoad
 from lever.physics.shaft import Shaft
 
 from . import masters as master_family
+from . import metrics
 from . import scene as scenes
 from .paths import FMUS
 from .system import System, feedthrough_components
@@ -127,11 +128,10 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
     from lever.physics import catalogue
     from lever.physics.parameters import check_all
 
-    roles = [scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft")]
+    roles = metrics.roles(scene)
     if not all(roles):
         raise NotADriveline(f"scene '{scene.name}' has no EngineShaft - LeverCoupling - LoadShaft chain")
-    engine, coupling, load = (
-        {k: scenes.quantity(v, f"{n}.{k}") for k, v in scene.components[n].parameters.items()} for n in roles)
+    engine, coupling, load = (metrics.parameters(scene, n) for n in roles)
     drive = check_all(catalogue.ENGINE, engine)
     driven = check_all(catalogue.LOAD, load)
     law = catalogue.coupling_from(coupling)
