@@ -114,14 +114,11 @@ def _side(model, t, y, disc, fly, k) -> int:
     g = model.event_values(t, y, disc, fly, 0.0)[k]
     if g != 0.0:
         return 1 if g > 0.0 else -1
-    a2, a3, a4, a5, *_ = model.forces(t, y, disc, fly, 0.0)
-    _, w1, a1 = model.rocker(t)
+    speeds, accelerations = model.deflection_rates(t, y, disc, fly, 0.0)
     pair = k // 2
-    speed = (w1 - y[1], y[3] - y[5], y[5] - y[7])[pair]
-    if speed != 0.0:
-        return 1 if speed > 0.0 else -1
-    acceleration = (a1 - a2, a3 - a4, a4 - a5)[pair]
-    return 1 if acceleration >= 0.0 else -1
+    if speeds[pair] != 0.0:
+        return 1 if speeds[pair] > 0.0 else -1
+    return 1 if accelerations[pair] >= 0.0 else -1
 
 
 # -- analysis of a run ----------------------------------------------------------------------------
