@@ -293,9 +293,8 @@ def eigenfrequency(scene: scenes.Scene) -> float | None:
     coupling = scene.component_of("LeverCoupling")
     if coupling is None:
         return None
-    params = {k: scenes.quantity(v) for k, v in scene.components[coupling].parameters.items()}
     i1, i2 = metrics.inertias(scene)
-    return catalogue.coupling_from(params).eigen_estimate(i1, i2)[0]
+    return catalogue.coupling_from(metrics.parameters(scene, coupling)).eigen_estimate(i1, i2)[0]
 
 
 def _line(case: Case) -> str:

@@ -37,6 +37,7 @@ from lever.physics.engine import LinearCharacteristic
 from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad
 from lever.physics.parameters import ParameterError
 
+from . import metrics
 from . import scene as scenes
 
 #: default factor between the plausible speeds of a scene and its speed bound
@@ -60,10 +61,6 @@ class Bound:
     why: str             # how the limit was derived (for the diagnosis)
 
 
-def _params(scene: scenes.Scene, name: str) -> dict:
-    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
-
-
 def load_range(load) -> tuple[float, float]:
     """Smallest and largest resistance a load model can give."""
     if isinstance(load, ConstantLoad):
@@ -80,15 +77,14 @@ def load_range(load) -> tuple[float, float]:
 
 def plausible_speed(scene: scenes.Scene, engine_name: str, load_name: str) -> tuple[float, str]:
     """The largest speed the scene's parameters make plausible, and how it was found."""
-    e, l = _params(scene, engine_name), _params(scene, load_name)
+    e, l = metrics.parameters(scene, engine_name), metrics.parameters(scene, load_name)
     engine, load = catalogue.engine_from(e), catalogue.load_from(l)
     starts = [abs(catalogue.start_state(e, catalogue.ENGINE)[1]), abs(catalogue.start_state(l, catalogue.LOAD)[1])]
     low, high = load_range(load.external)
     char = engine.external
     candidates = {"start speed": max(starts)}
     if isinstance(char, LinearCharacteristic) and char.slope > 0.0:
-        candidates["steady speed of the engine line"] = max(
-            abs(char.stall_torque - m) / char.slope for m in (0.0, low, high))
+        candidates["steady speed of the engine line"] = max(abs(char.steady_speed(m)) for m in (0.0, low, high))
     else:
         torques = [abs(m) for m in char._m] if hasattr(char, "_m") else [abs(char.stall_torque)]
         if hasattr(char, "_w"):
@@ -117,8 +113,7 @@ def _deflection_at_energy(law, energy: float) -> float:
 def bounds(scene: scenes.Scene) -> list[Bound]:
     """The bounds a run of ``scene`` is held to (see the module docstring): speeds and
     coupling torques of the driveline, when the scene has one; nothing otherwise."""
-    engine_name, coupling_name, load_name = (scene.component_of(f)
-                                             for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
+    engine_name, coupling_name, load_name = metrics.roles(scene)
     if not (engine_name and coupling_name and load_name):
         return []
     limits = {k: float(scenes.quantity(v, f"limits.{k}")) for k, v in scene.limits.items()}
@@ -126,9 +121,9 @@ def bounds(scene: scenes.Scene) -> list[Bound]:
     out = []
     try:
         plausible, which = plausible_speed(scene, engine_name, load_name)
-        engine = catalogue.engine_from(_params(scene, engine_name))
-        load = catalogue.load_from(_params(scene, load_name))
-        coupling = catalogue.coupling_from(_params(scene, coupling_name))
+        engine = catalogue.engine_from(metrics.parameters(scene, engine_name))
+        load = catalogue.load_from(metrics.parameters(scene, load_name))
+        coupling = catalogue.coupling_from(metrics.parameters(scene, coupling_name))
     except ParameterError:
         return []    # the FMUs will refuse the parameters with the proper message
     if "speed" in limits:

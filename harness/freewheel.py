@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 from lever.physics import catalogue
 from lever.physics.freewheel import EVENTS, N_EDGES
 
+from . import metrics
 from . import scene as scenes
 
 FMU = "FreewheelRectifier"
@@ -28,10 +29,6 @@ ATOL = 1e-12
 
 def component(scene: scenes.Scene) -> str | None:
     return scene.component_of(FMU)
-
-
-def parameters(scene: scenes.Scene, name: str) -> dict:
-    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
 
 
 # -- the monolithic reference --------------------------------------------------------------------
@@ -47,7 +44,7 @@ def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
     wall = clock.perf_counter() - started
@@ -117,14 +114,11 @@ def _side(model, t, y, disc, fly, k) -> int:
     g = model.event_values(t, y, disc, fly, 0.0)[k]
     if g != 0.0:
         return 1 if g > 0.0 else -1
-    a2, a3, a4, a5, *_ = model.forces(t, y, disc, fly, 0.0)
-    _, w1, a1 = model.rocker(t)
+    speeds, accelerations = model.deflection_rates(t, y, disc, fly, 0.0)
     pair = k // 2
-    speed = (w1 - y[1], y[3] - y[5], y[5] - y[7])[pair]
-    if speed != 0.0:
-        return 1 if speed > 0.0 else -1
-    acceleration = (a1 - a2, a3 - a4, a4 - a5)[pair]
-    return 1 if acceleration >= 0.0 else -1
+    if speeds[pair] != 0.0:
+        return 1 if speeds[pair] > 0.0 else -1
+    return 1 if accelerations[pair] >= 0.0 else -1
 
 
 # -- analysis of a run ----------------------------------------------------------------------------
@@ -155,7 +149,7 @@ def _transitions(contact: np.ndarray) -> dict:
 def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
     """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
     name = component(scene)
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
 
     def tr(var):
         return np.asarray(traces[f"{name}.{var}"])
@@ -475,7 +469,7 @@ def plot(out, result, reference=None):
     fig.savefig(out / "kinematics.png", dpi=110)
     plt.close(fig)
 
-    model = catalogue.freewheel_from(parameters(scene, name))
+    model = catalogue.freewheel_from(metrics.parameters(scene, name))
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
     for ax, (var, gap, label) in zip(axes, (("msm_deflection", model.z1, "e = phi1 - phi2 (gap z1)"),
                                             ("torsion_twist", model.z2, "phi3 - phi4 (gap z2)"),

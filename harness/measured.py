@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from lever.physics import catalogue
+from lever.physics.engine import LinearCharacteristic
 from lever.physics.kinematics import TransferFunction
 from lever.physics.load import fourier_from_samples
 from lever.physics.parameters import ParameterError
@@ -260,9 +261,9 @@ class Conditions:
             raise MeasuredDataError(f"grade {drive.grade}: stiffness {c:g} N*m/rad must be > 0")
         mean = float(driven.cycles.mean())
         speed = operating_speed(mean)
-        k1 = cls.torque_slope
+        engine = LinearCharacteristic.through(speed, mean, cls.torque_slope)
         return cls(stiffness=c, stiffness_source=source, mean_load=mean, damping=DAMPING_PER_STIFFNESS * c,
-                   speed=speed, stall_torque=mean + k1 * speed)
+                   speed=speed, stall_torque=engine.stall_torque)
 
     def assumptions(self, reading: str = DEFAULT_READING) -> list[str]:
         """This grade's numbers, then the assumptions common to every grade, for ``reading``."""

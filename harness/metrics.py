@@ -34,14 +34,16 @@ def energy_variables(scene: scenes.Scene) -> list[str]:
             f"{coupling}.elastic_energy", f"{coupling}.dissipated_power"]
 
 
+def parameters(scene: scenes.Scene, name: str) -> dict:
+    """The parameter values the scene gives component ``name`` (quantities with units
+    converted; the catalogue's defaults are not filled in)."""
+    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
+
+
 def inertias(scene: scenes.Scene) -> tuple[float, float]:
     engine, _, load = roles(scene)
-
-    def inertia(name, declared):
-        params = {k: scenes.quantity(v) for k, v in scene.components[name].parameters.items()}
-        return check_all(declared, params)["inertia"]
-
-    return inertia(engine, catalogue.ENGINE), inertia(load, catalogue.LOAD)
+    return (check_all(catalogue.ENGINE, parameters(scene, engine))["inertia"],
+            check_all(catalogue.LOAD, parameters(scene, load))["inertia"])
 
 
 def energy_balance(scene: scenes.Scene, times: np.ndarray, traces: dict, dissipated: np.ndarray | None = None) -> dict:

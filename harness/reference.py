@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 
 from lever.physics import catalogue
 
+from . import metrics
 from . import scene as scenes
 from .paths import RESULTS
 
@@ -42,14 +43,8 @@ class Reference:
     info: dict = field(default_factory=dict)
 
 
-def _params(scene: scenes.Scene, name: str | None) -> dict:
-    if name is None:
-        return {}
-    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
-
-
 def _roles(scene: scenes.Scene):
-    engine, coupling, load = (scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
+    engine, coupling, load = metrics.roles(scene)
     if not (engine and coupling and load):
         raise ReferenceUnavailable(f"scene '{scene.name}': the monolithic reference covers the engine - coupling - "
                                    "load driveline (EngineShaft, LeverCoupling, LoadShaft)")
@@ -64,7 +59,7 @@ def _misalignment_source(scene: scenes.Scene, coupling_name: str):
     if scene.components[driver.source].fmu != "MisalignmentSource" or driver.output != "misalignment":
         raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
                                    f"MisalignmentSource, not from {driver}")
-    return catalogue.misalignment_source_from(_params(scene, driver.source))
+    return catalogue.misalignment_source_from(metrics.parameters(scene, driver.source))
 
 
 def _shaft_rates(shaft, t, phi, w, tau):
@@ -112,13 +107,13 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
 
-    engine = catalogue.engine_from(_params(scene, engine_name))
-    load = catalogue.load_from(_params(scene, load_name))
-    coupling_params = _params(scene, coupling_name)
+    engine = catalogue.engine_from(metrics.parameters(scene, engine_name))
+    load = catalogue.load_from(metrics.parameters(scene, load_name))
+    coupling_params = metrics.parameters(scene, coupling_name)
     coupling = catalogue.coupling_from(coupling_params)
     misalignment = _misalignment_source(scene, coupling_name)
-    phi1, w1 = catalogue.start_state(_params(scene, engine_name), catalogue.ENGINE)
-    phi2, w2 = catalogue.start_state(_params(scene, load_name), catalogue.LOAD)
+    phi1, w1 = catalogue.start_state(metrics.parameters(scene, engine_name), catalogue.ENGINE)
+    phi2, w2 = catalogue.start_state(metrics.parameters(scene, load_name), catalogue.LOAD)
     drive_rates, driven_rates = engine.rates, load.rates
 
     if misalignment is not None:

@@ -50,12 +50,13 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
-from lever.physics.coupling import build_coupling
+from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.load import ConstantLoad
 from lever.physics.shaft import Shaft
 
 from . import masters as master_family
+from . import metrics
 from . import scene as scenes
 from .paths import FMUS
 from .system import System, feedthrough_components
@@ -84,19 +85,19 @@ class TwoInertia:
     damping: float
 
     @property
-    def reduced_inertia(self) -> float:
-        return self.drive_inertia * self.driven_inertia / (self.drive_inertia + self.driven_inertia)
-
-    @property
     def omega_n(self) -> float:
         """Undamped eigenfrequency of the coupling mode [rad/s]."""
-        return math.sqrt(self.stiffness / self.reduced_inertia)
+        return self._mode[0]
 
     @property
     def zeta(self) -> float:
         """Modal damping ratio of the coupling mode (coupling damping and engine slope)."""
-        share = self.driven_inertia / (self.drive_inertia + self.driven_inertia)
-        return (self.damping + self.engine_slope * share ** 2) / (2.0 * math.sqrt(self.stiffness * self.reduced_inertia))
+        return self._mode[1]
+
+    @property
+    def _mode(self) -> tuple[float, float]:
+        return coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia,
+                             self.engine_slope)
 
     def with_coupling(self, stiffness: float | None = None, damping: float | None = None) -> "TwoInertia":
         return TwoInertia(self.drive_inertia, self.driven_inertia, self.engine_slope,
@@ -127,11 +128,10 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
     from lever.physics import catalogue
     from lever.physics.parameters import check_all
 
-    roles = [scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft")]
+    roles = metrics.roles(scene)
     if not all(roles):
         raise NotADriveline(f"scene '{scene.name}' has no EngineShaft - LeverCoupling - LoadShaft chain")
-    engine, coupling, load = (
-        {k: scenes.quantity(v, f"{n}.{k}") for k, v in scene.components[n].parameters.items()} for n in roles)
+    engine, coupling, load = (metrics.parameters(scene, n) for n in roles)
     drive = check_all(catalogue.ENGINE, engine)
     driven = check_all(catalogue.LOAD, load)
     law = catalogue.coupling_from(coupling)

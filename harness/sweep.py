@@ -168,9 +168,9 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
     out = Path(out or RESULTS / "sweep")
     # Refuse a bad scene or assignment before anything runs.
     spec = scenes.load(scene).with_overrides(list(extra or []))
-    for case in plan(axes, scene, stop, extra, fmu_dir):
-        spec.with_overrides(case["overrides"])
     cases = plan(axes, scene, stop, extra, fmu_dir)
+    for case in cases:
+        spec.with_overrides(case["overrides"])
     fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
                    "extra": list(extra or []), "physics": _physics_version()}
     log = CaseLog(out, fingerprint, resume=resume)

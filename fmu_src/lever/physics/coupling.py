@@ -59,10 +59,19 @@ class LeverCoupling:
     def eigen_estimate(self, inertia_drive: float, inertia_driven: float) -> tuple[float, float]:
         """Undamped eigenfrequency [rad/s] and damping ratio of the two-inertia chain
         about U12 = 1, from the nominal stiffness: for step-size and stability advice."""
-        stiffness = self.law.nominal_stiffness
-        reduced = inertia_drive * inertia_driven / (inertia_drive + inertia_driven)
-        omega = math.sqrt(stiffness / reduced)
-        return omega, self.damping / (2.0 * math.sqrt(stiffness * reduced))
+        return coupling_mode(self.law.nominal_stiffness, self.damping, inertia_drive, inertia_driven)
+
+
+def coupling_mode(stiffness: float, damping: float, inertia_drive: float, inertia_driven: float,
+                  engine_slope: float = 0.0) -> tuple[float, float]:
+    """Undamped eigenfrequency ``omega_n = sqrt(c / I_red)`` [rad/s], ``I_red = I1*I2/(I1 + I2)``,
+    and modal damping ratio of the two-inertia chain's coupling mode about U12 = 1.  The
+    drive shaft moves ``I2/(I1 + I2)`` of the deflection, so an engine slope ``K1`` damps
+    the mode too: ``zeta = (b + K1 (I2/(I1 + I2))^2) / (2 sqrt(c I_red))``."""
+    reduced = inertia_drive * inertia_driven / (inertia_drive + inertia_driven)
+    share = inertia_driven / (inertia_drive + inertia_driven)
+    return (math.sqrt(stiffness / reduced),
+            (damping + engine_slope * share ** 2) / (2.0 * math.sqrt(stiffness * reduced)))
 
 
 class CouplingFamily:
@@ -122,4 +131,4 @@ def build_coupling(transfer_mode: str, alpha: float, support_deformation: float,
     return LeverCoupling(transfer, elastic_law(c, elastic_table), b)
 
 
-__all__ = ["LeverCoupling", "CouplingFamily", "CouplingResult", "build_coupling", "LinearElasticLaw", "TabulatedElasticLaw"]
+__all__ = ["LeverCoupling", "CouplingFamily", "CouplingResult", "build_coupling", "coupling_mode", "LinearElasticLaw", "TabulatedElasticLaw"]

@@ -16,6 +16,16 @@ class LinearCharacteristic:
         self.stall_torque = float(stall_torque)   # M1 [N.m]
         self.slope = float(slope)                 # K1 [N.m.s/rad]
 
+    @classmethod
+    def through(cls, speed: float, resistance: float, slope: float) -> "LinearCharacteristic":
+        """The line of slope ``K1`` whose steady speed under ``resistance`` is ``speed``:
+        ``M1 = Mc + K1 * w``."""
+        return cls(resistance + slope * speed, slope)
+
+    def steady_speed(self, resistance: float) -> float:
+        """The speed at which the engine's torque balances ``resistance``: ``(M1 - Mc)/K1``."""
+        return (self.stall_torque - resistance) / self.slope
+
     def torque(self, t, phi, w):
         return self.stall_torque - self.slope * w
 

@@ -230,6 +230,14 @@ class FreewheelRectifier:
             out.append(fly * y[7])
         return out
 
+    def deflection_rates(self, t: float, y, disc: int, fly: int, ext: float) -> tuple[tuple, tuple]:
+        """Speeds and accelerations of the three gapped deflections ``(e, phi3 - phi4,
+        phi4 - phi5)``: the derivatives of the gap-edge functions (``EVENTS``, two edges
+        a deflection)."""
+        a2, a3, a4, a5, *_ = self.forces(t, y, disc, fly, ext)
+        _, w1, a1 = self.rocker(t)
+        return (w1 - y[1], y[3] - y[5], y[5] - y[7]), (a1 - a2, a3 - a4, a4 - a5)
+
     def disc_mode_at(self, t: float, y, fly: int, ext: float) -> int:
         """The disc mode for a state where the half-couplings and the driven parts turn at
         the same speed: stick if the discs can pass the torque that takes, else slip the

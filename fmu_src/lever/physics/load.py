@@ -11,7 +11,6 @@ exactly the same load.
 """
 from __future__ import annotations
 
-import bisect
 import cmath
 import csv
 import math
@@ -21,6 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from .parameters import TABLE_LIMIT, ParameterError, parse_table
+from .signals import TimeTable
 
 LOAD_KINDS = ("constant", "random", "fourier", "table")
 
@@ -108,13 +108,8 @@ class TabulatedLoad(_TimeLoad):
     values held outside."""
 
     def __init__(self, points: Sequence[tuple[float, float]], name: str = "table"):
-        pts = [(float(t), float(m)) for t, m in points]
-        if len(pts) < 2:
-            raise ParameterError(name, f"parameter '{name}' needs at least 2 (time, torque) points, got {len(pts)}")
-        if any(b[0] <= a[0] for a, b in zip(pts, pts[1:])):
-            raise ParameterError(name, f"parameter '{name}': times must be strictly increasing")
-        self._t = [p[0] for p in pts]
-        self._m = [p[1] for p in pts]
+        self.table = TimeTable(points, name, "torque")
+        self._t, self._m = self.table._t, self.table._y
         self.mean = sum(self._m) / len(self._m)
 
     @classmethod
@@ -124,13 +119,7 @@ class TabulatedLoad(_TimeLoad):
     def resistance(self, t, phi, w):
         if isinstance(t, np.ndarray):
             return np.interp(t, self._t, self._m)
-        ts, ms = self._t, self._m
-        if t <= ts[0]:
-            return ms[0]
-        if t >= ts[-1]:
-            return ms[-1]
-        k = bisect.bisect_right(ts, t) - 1
-        return ms[k] + (ms[k + 1] - ms[k]) * (t - ts[k]) / (ts[k + 1] - ts[k])
+        return self.table.value(t)
 
     def integrals(self, t, h):
         """Exact integrals of the piecewise-linear function: ``int M`` and

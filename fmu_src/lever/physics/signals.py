@@ -1,4 +1,5 @@
-"""Prescribed signals of time, for inputs a scene drives (the coupling's misalignment)."""
+"""Prescribed signals of time: inputs a scene drives (the coupling's misalignment) and
+tabulated loads (``load.TabulatedLoad``)."""
 from __future__ import annotations
 
 import bisect
@@ -11,10 +12,10 @@ class TimeTable:
     """``y(t)`` from points ``(t_i, y_i)``: linear between points, the end values held
     outside; ``rate(t)`` its slope (0 outside, the right-hand slope at a point)."""
 
-    def __init__(self, points: Sequence[tuple[float, float]], name: str = "table"):
+    def __init__(self, points: Sequence[tuple[float, float]], name: str = "table", what: str = "value"):
         pts = [(float(t), float(y)) for t, y in points]
         if len(pts) < 2:
-            raise ParameterError(name, f"parameter '{name}' needs at least 2 (time, value) points, got {len(pts)}")
+            raise ParameterError(name, f"parameter '{name}' needs at least 2 (time, {what}) points, got {len(pts)}")
         if any(b[0] <= a[0] for a, b in zip(pts, pts[1:])):
             raise ParameterError(name, f"parameter '{name}': times must be strictly increasing")
         self.points = pts
