@@ -389,6 +389,14 @@ class LeverSlave(Fmi2Slave):
                                    f"({type(error).__name__}: {error})"}
 
     # -- model description -----------------------------------------------------------------
+    @classmethod
+    def dependencies(cls, output: Output) -> list[str]:
+        """The inputs ``output`` depends on directly (its ``depends_on``, else all inputs
+        with direct feedthrough, none without)."""
+        if output.depends_on is not None:
+            return list(output.depends_on)
+        return [p.name for p in cls.INPUTS] if cls.FEEDTHROUGH else []
+
     def to_xml(self, model_options=None) -> Element:
         """pythonfmu's description plus what it leaves out: units (with display units),
         min/max of parameters and inputs, and the output dependencies (outputs depend on
@@ -452,10 +460,7 @@ class LeverSlave(Fmi2Slave):
         outputs = SubElement(structure, "Outputs")
         initial = SubElement(structure, "InitialUnknowns")
         for o in self.OUTPUTS:
-            if o.depends_on is not None:
-                sources = list(o.depends_on)
-            else:
-                sources = [p.name for p in self.INPUTS] if self.FEEDTHROUGH else []
+            sources = self.dependencies(o)
             attrs = {"index": str(index_of[o.name]), "dependencies": " ".join(str(index_of[n]) for n in sources)}
             if sources:
                 attrs["dependenciesKind"] = " ".join("dependent" for _ in sources)
