@@ -166,11 +166,13 @@ class LeverSlave(Fmi2Slave):
                 self._error(f"parameter '{p.name}' is fixed: it cannot be changed after initialisation "
                             f"(the value {value!r} was not applied)")
                 return
-            message = p.problem(value)
-            if message:
-                self._error(f"{message}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r}")
+            # check() judges and converts in one pass: this runs at every input set of every step
+            try:
+                checked = p.check(value)
+            except ParameterError as error:
+                self._error(f"{error}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r}")
                 return
-            setattr(self, p.name, p.check(value))
+            setattr(self, p.name, checked)
             self._dirty = True
             if p.fixed:
                 self._model_stale = True
