@@ -2,7 +2,6 @@
 in ``results/<scene>/``."""
 from __future__ import annotations
 
-import csv
 import json
 import math
 import platform
@@ -12,15 +11,7 @@ import numpy as np
 
 from . import metrics
 from .run import RunResult
-
-def write_traces(path: Path, times: np.ndarray, traces: dict):
-    names = list(traces)
-    with open(path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["time"] + names)
-        columns = [traces[n] for n in names]
-        for i, t in enumerate(times):
-            writer.writerow([repr(float(t))] + [repr(float(c[i])) for c in columns])
+from .traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
 
 def summarize(result: RunResult, reference=None) -> dict:
