@@ -391,6 +391,21 @@ def engines(scene, engine_names, assignments, step, repeats, out):
     click.echo("written: " + ", ".join(str(p) for p in paths))
 
 
+def _export(scene, assignments, out, folder: str, suffix: str, export):
+    """Write SCENE (with the --set overrides) with ``export(spec, out, fmu_dir)`` to OUT,
+    by default results/<folder>/<scene>.<suffix>."""
+    from .system import SceneInvalid
+
+    spec = _scene(scene, assignments)
+    ensure_fmus(quiet=True)
+    out = out or RESULTS / folder / f"{spec.name}.{suffix}"
+    try:
+        path = export(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise UserError(str(error)) from None
+    click.echo(f"written: {path}")
+
+
 @main.command("export-ssp")
 @click.argument("scene", default="kavz685")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
@@ -402,16 +417,8 @@ def export_ssp(scene, assignments, out):
     descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
     libcosim and in `lever run`."""
     from . import ssp
-    from .system import SceneInvalid
 
-    spec = _scene(scene, assignments)
-    ensure_fmus(quiet=True)
-    out = out or RESULTS / "ssp" / f"{spec.name}.ssp"
-    try:
-        path = ssp.export(spec, out, spec.fmu_dir or FMUS)
-    except SceneInvalid as error:
-        raise UserError(str(error)) from None
-    click.echo(f"written: {path}")
+    _export(scene, assignments, out, "ssp", "ssp", ssp.export)
 
 
 @main.command("export-container")
@@ -425,16 +432,8 @@ def export_container(scene, assignments, out):
     parameters are the scene's values, its outputs the scene's recorded variables, its
     internal step the scene's step (Jacobi, as the harness's `jacobi` master)."""
     from . import container
-    from .system import SceneInvalid
 
-    spec = _scene(scene, assignments)
-    ensure_fmus(quiet=True)
-    out = out or RESULTS / "container" / f"{spec.name}.fmu"
-    try:
-        path = container.build_container(spec, out, spec.fmu_dir or FMUS)
-    except SceneInvalid as error:
-        raise UserError(str(error)) from None
-    click.echo(f"written: {path}")
+    _export(scene, assignments, out, "container", "fmu", container.build_container)
 
 
 @main.command()

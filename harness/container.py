@@ -37,8 +37,7 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
     from fmpy.container_fmu import Configuration
     from fmpy.container_fmu.cli import create_container_fmu
     from fmpy.container_fmu.config import Component, Connection
-    from fmpy.model_description import (CoSimulation, DefaultExperiment, ModelDescription, ModelVariable,
-                                        SimpleType, Unknown)
+    from fmpy.model_description import CoSimulation, DefaultExperiment, ModelDescription, ModelVariable, Unknown
 
     descriptions = descriptions_for(scene, fmu_dir)
     findings = scenes.validate(scene, descriptions)

@@ -2,7 +2,6 @@
 in ``results/<scene>/``."""
 from __future__ import annotations
 
-import csv
 import json
 import math
 import platform
@@ -12,15 +11,7 @@ import numpy as np
 
 from . import metrics
 from .run import RunResult
-
-def write_traces(path: Path, times: np.ndarray, traces: dict):
-    names = list(traces)
-    with open(path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["time"] + names)
-        columns = [traces[n] for n in names]
-        for i, t in enumerate(times):
-            writer.writerow([repr(float(t))] + [repr(float(c[i])) for c in columns])
+from .traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -183,16 +174,25 @@ def write(out: Path, result: RunResult, reference=None) -> dict:
     from . import freewheel
     if freewheel.component(result.scene):   # the rectifier scene has a report of its own
         return freewheel.write(out, result, reference)
+    return write_run(out, result, reference, summarize, write_report, plot)
+
+
+def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots) -> dict:
+    """A run's files in ``out``, with the summary, report and plots of its kind of scene
+    (``summary_of(result, reference)``, ``write_markdown(path, summary)``,
+    ``make_plots(out, result, reference)``): traces.csv (unless the run streamed it while
+    running), reference.csv, summary.json, report.md, the plots (scene feature ``plots``).
+    Returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
     if result.stream is None:             # a streamed run wrote its traces while it ran
         write_traces(out / "traces.csv", result.times, result.traces)
     if reference is not None:
         write_traces(out / "reference.csv", reference.times, reference.traces)
-    summary = summarize(result, reference)
+    summary = summary_of(result, reference)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    write_report(out / "report.md", summary)
+    write_markdown(out / "report.md", summary)
     if "plots" in result.scene.features and len(result.times) > 1:
-        plot(out, result, reference)
+        make_plots(out, result, reference)
     return summary
 
 

@@ -1,5 +1,5 @@
-"""Traces written while a run goes (``lever run --stream``), for runs too long to hold
-in memory.
+"""The trace CSV of a run (``traces.csv``): written at once (``write``) or while a run
+goes (``lever run --stream``, ``TraceStream``), for runs too long to hold in memory.
 
 Rows are appended to the trace CSV in chunks, each written with one call, flushed and
 synced before the run goes on, so a run killed part-way leaves a valid trace file up to
@@ -32,6 +32,28 @@ def integrals_for(scene) -> dict[str, str]:
     return {f"{coupling}.dissipated_power": f"{coupling}.dissipated_energy"} if coupling else {}
 
 
+def _header(names) -> str:
+    return ",".join(["time"] + list(names)) + "\n"
+
+
+def _lines(times: np.ndarray, block: np.ndarray) -> str:
+    """CSV lines of the rows ``block[i]`` at ``times[i]``; repr: the floats read back exactly."""
+    return "".join(",".join(map(repr, [t] + row)) + "\n" for t, row in zip(times.tolist(), block.tolist()))
+
+
+def write(path: Path, times: np.ndarray, traces: dict[str, np.ndarray]):
+    """Write a whole run's traces at once, in the format a stream writes (and ``read`` reads)."""
+    names = list(traces)
+    times = np.asarray(times, dtype=float)
+    block = np.empty((len(times), len(names)))
+    for j, name in enumerate(names):
+        block[:, j] = traces[name]
+    with open(path, "w", newline="") as f:
+        f.write(_header(names))
+        for start in range(0, len(times), CHUNK):
+            f.write(_lines(times[start:start + CHUNK], block[start:start + CHUNK]))
+
+
 def resident_bytes() -> int:
     """The process's resident memory now (Linux /proc; the peak elsewhere)."""
     try:
@@ -60,7 +82,7 @@ class TraceStream:
         self._last_kept_index = -1
         self.memory: list[tuple[float, int]] = []               # (t, resident bytes) after each chunk
         self._file = open(self.path, "w", newline="")
-        self._file.write(",".join(["time"] + self.names) + "\n")
+        self._file.write(_header(self.names))
         self._sync()
 
     def _sync(self):
@@ -72,8 +94,7 @@ class TraceStream:
         n = len(times)
         if n == 0:
             return
-        lines = [",".join(map(repr, [t] + row)) for t, row in zip(times.tolist(), block.tolist())]
-        self._file.write("\n".join(lines) + "\n")
+        self._file.write(_lines(times, block))
         self._sync()
         # Running integrals by trapezoids, continued from the last row of the previous chunk.
         extra = np.empty((n, len(self.integrate)))

@@ -61,6 +61,13 @@ def _restore(system, saved: dict[str, bytes], t: float):
         c.fmu.freeFMUstate(state)
 
 
+def _resume(system, driver, saved, t_mid, h, names):
+    """Restore the serialised states at ``t_mid`` and step on as far as the first run went."""
+    _restore(system, saved, t_mid)
+    driver.t = t_mid
+    return _advance(system, driver, 150, h, names)
+
+
 @pytest.mark.parametrize("master", ["jacobi", "gauss-seidel"])
 def test_serialised_state_restored_mid_run_continues_bit_identically(fmu_dir, master):
     """Masters without memory of their own: the FMUs' states are the whole state."""
@@ -74,18 +81,14 @@ def test_serialised_state_restored_mid_run_continues_bit_identically(fmu_dir, ma
         saved, t_mid = _serialised(system), driver.t
         reference = _advance(system, driver, 150, h, names)
         # Back to the middle in the same instances.
-        _restore(system, saved, t_mid)
-        driver.t = t_mid
-        again = _advance(system, driver, 150, h, names)
+        again = _resume(system, driver, saved, t_mid, h, names)
     finally:
         system.free()
     assert np.array_equal(again, reference)
     # Into fresh instances (another System), as a saved run would be resumed.
     fresh, driver = _stepper(spec, fmu_dir, master)
     try:
-        _restore(fresh, saved, t_mid)
-        driver.t = t_mid
-        resumed = _advance(fresh, driver, 150, h, names)
+        resumed = _resume(fresh, driver, saved, t_mid, h, names)
     finally:
         fresh.free()
     assert np.array_equal(resumed, reference)

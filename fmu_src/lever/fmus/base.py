@@ -166,11 +166,13 @@ class LeverSlave(Fmi2Slave):
                 self._error(f"parameter '{p.name}' is fixed: it cannot be changed after initialisation "
                             f"(the value {value!r} was not applied)")
                 return
-            message = p.problem(value)
-            if message:
-                self._error(f"{message}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r}")
+            # check() judges and converts in one pass: this runs at every input set of every step
+            try:
+                checked = p.check(value)
+            except ParameterError as error:
+                self._error(f"{error}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r}")
                 return
-            setattr(self, p.name, p.check(value))
+            setattr(self, p.name, checked)
             self._dirty = True
             if p.fixed:
                 self._model_stale = True
@@ -389,6 +391,14 @@ class LeverSlave(Fmi2Slave):
                                    f"({type(error).__name__}: {error})"}
 
     # -- model description -----------------------------------------------------------------
+    @classmethod
+    def dependencies(cls, output: Output) -> list[str]:
+        """The inputs ``output`` depends on directly (its ``depends_on``, else all inputs
+        with direct feedthrough, none without)."""
+        if output.depends_on is not None:
+            return list(output.depends_on)
+        return [p.name for p in cls.INPUTS] if cls.FEEDTHROUGH else []
+
     def to_xml(self, model_options=None) -> Element:
         """pythonfmu's description plus what it leaves out: units (with display units),
         min/max of parameters and inputs, and the output dependencies (outputs depend on
@@ -452,10 +462,7 @@ class LeverSlave(Fmi2Slave):
         outputs = SubElement(structure, "Outputs")
         initial = SubElement(structure, "InitialUnknowns")
         for o in self.OUTPUTS:
-            if o.depends_on is not None:
-                sources = list(o.depends_on)
-            else:
-                sources = [p.name for p in self.INPUTS] if self.FEEDTHROUGH else []
+            sources = self.dependencies(o)
             attrs = {"index": str(index_of[o.name]), "dependencies": " ".join(str(index_of[n]) for n in sources)}
             if sources:
                 attrs["dependenciesKind"] = " ".join("dependent" for _ in sources)

@@ -49,10 +49,9 @@ def documentation_html(model, requirements: list[str]) -> str:
     the Python packages the importing interpreter needs (``resources/requirements.txt``)."""
     name = model.__name__
     inputs = {p.name: p for p in model.INPUTS}
-    feedthrough_inputs = [p.name for p in model.INPUTS] if model.FEEDTHROUGH else []
     out_rows = []
     for o in model.OUTPUTS:
-        depends = list(o.depends_on) if o.depends_on is not None else feedthrough_inputs
+        depends = model.dependencies(o)
         out_rows.append([f"<code>{o.name}</code>", _unit(o), declared_type(o)[0], _e(o.description),
                          f"<code>{o.derivative_of}</code>" if o.derivative_of else "",
                          ", ".join(f"<code>{d}</code>" for d in depends) or "none (no direct feedthrough)"])
