@@ -9,7 +9,6 @@ with its own event location, restarted at every communication point.
 """
 from __future__ import annotations
 
-import json
 import math
 import time as clock
 
@@ -542,18 +541,8 @@ def plot(out, result, reference=None):
 
 
 def write(out, result, reference=None) -> dict:
-    from .report import _json_default, write_traces
-
-    out.mkdir(parents=True, exist_ok=True)
-    write_traces(out / "traces.csv", result.times, result.traces)
-    if reference is not None:
-        write_traces(out / "reference.csv", reference.times, reference.traces)
-    summary = summarize(result, reference)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    write_report(out / "report.md", summary)
-    if "plots" in result.scene.features and len(result.times) > 1:
-        plot(out, result, reference)
-    return summary
+    from .report import write_run
+    return write_run(out, result, reference, summarize, write_report, plot)
 
 
 __all__ = ["solve_reference", "integrate", "analyse", "errors", "summarize", "write"]
