@@ -113,14 +113,17 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     except RuntimeError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
-    for warning in stability_advice(spec, chosen, step or spec.experiment.step, FMUS):
-        click.echo(f"warning: {warning}", err=True)     # before the run; simulate keeps them too
+    fmu_dir = spec.fmu_dir or FMUS
+    warnings = stability_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
+    for warning in warnings:
+        click.echo(f"warning: {warning}", err=True)     # before the run, so a long run is not waited for
     out = out or RESULTS / spec.name
     try:
-        result = simulate(spec, master, step, fmu_dir=spec.fmu_dir or FMUS, progress=show_progress,
-                          options=options, stream=out / "traces.csv" if stream else None)
+        result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
+                          advise=False, stream=out / "traces.csv" if stream else None)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
+    result.warnings = warnings
     reference = None
     if "reference" in spec.features and not no_reference and not stream and result.ok:
         try:
