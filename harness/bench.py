@@ -101,18 +101,15 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
 def _judge(case: Case, scene: scenes.Scene, times, traces):
     """Errors and energy residual of a finished run against the tight reference."""
     ref = reference.solve(scene, times)
-    names = metrics.signals(scene)
-    scales = metrics.error_scales(scene, ref.traces)
-    chosen = [names[k] for k in ("tau1", "tau2", "w1", "w2")]
     transient = scene.experiment.start + scene.experiment.transient
     for suffix, after in (("", None), ("_after_transient", transient)):
-        e = metrics.errors(times, traces, ref.times, ref.traces, chosen, scales, after=after)
+        e = metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
         if len(e) < 4:
             continue
-        case.errors["tau_rms" + suffix] = max(e[names["tau1"]]["rms_relative"], e[names["tau2"]]["rms_relative"])
-        case.errors["tau_max" + suffix] = max(e[names["tau1"]]["max_relative"], e[names["tau2"]]["max_relative"])
-        case.errors["w_rms" + suffix] = max(e[names["w1"]]["rms_relative"], e[names["w2"]]["rms_relative"])
-        case.errors["w_max" + suffix] = max(e[names["w1"]]["max_relative"], e[names["w2"]]["max_relative"])
+        for kind in ("tau", "w"):
+            for measure in ("rms", "max"):
+                case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
+                                                               e[f"{kind}2"][f"{measure}_relative"])
     if all(n in traces for n in metrics.energy_variables(scene)):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 

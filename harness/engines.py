@@ -34,7 +34,6 @@ ENGINES = {
                       "as libcosim fixed step, with the step adapted to the power residual"),
 }
 ECCO_TOLERANCE = 1e-3
-SIGNALS = ("w1", "w2", "tau1", "tau2")
 
 
 def run_engine(engine: str, scene: scenes.Scene, step: float, fmu_dir: Path = FMUS) -> RunResult:
@@ -90,11 +89,8 @@ def reference_errors(scene: scenes.Scene, result: RunResult) -> dict:
     ref = reference.solve(scene, grid)
     keep = slice(1, None) if prepended else slice(None)
     ref_traces = {k: v[keep] for k, v in ref.traces.items()}
-    names = metrics.signals(scene)
-    wanted = [names[s] for s in SIGNALS]
-    errors = metrics.errors(times, result.traces, ref.times[keep], ref_traces, wanted,
-                            metrics.error_scales(scene, ref.traces))
-    return {short: errors[names[short]] for short in SIGNALS if names[short] in errors}
+    return metrics.driveline_errors(scene, times, result.traces, ref.times[keep], ref_traces,
+                                    scale_reference=ref.traces)
 
 
 def compare(scene: scenes.Scene, engines: list[str], step: float | None = None, repeats: int = 3,

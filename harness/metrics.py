@@ -123,6 +123,20 @@ def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, referen
     return out
 
 
+#: the driveline signals runs are judged by
+JUDGED = ("w1", "w2", "tau1", "tau2")
+
+
+def driveline_errors(scene: scenes.Scene, times, traces: dict, reference_times, reference: dict,
+                     after: float | None = None, scale_reference: dict | None = None) -> dict:
+    """``errors`` of the driveline's speeds and torques by short name (``JUDGED``), scaled
+    by ``error_scales`` of the reference (or of ``scale_reference``, a longer run of it)."""
+    names = signals(scene)
+    scales = error_scales(scene, reference if scale_reference is None else scale_reference)
+    full = errors(times, traces, reference_times, reference, [names[s] for s in JUDGED], scales, after)
+    return {s: full[names[s]] for s in JUDGED if names[s] in full}
+
+
 def error_scales(scene: scenes.Scene, reference: dict) -> dict[str, float]:
     """Torques are judged relative to the mean transmitted torque, speeds relative to
     the mean speed (both from the reference)."""

@@ -40,10 +40,8 @@ def summarize(result: RunResult, reference=None) -> dict:
     if "energy_balance" in scene.features and result.ok:
         summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
     if reference is not None and len(result.times):
-        scales = metrics.error_scales(scene, reference.traces)
-        errs = metrics.errors(result.times, result.traces, reference.times, reference.traces,
-                              [names[k] for k in ("w1", "w2", "tau1", "tau2")], scales)
-        summary["error_vs_reference"] = {short: errs[full] for short, full in names.items() if full in errs}
+        summary["error_vs_reference"] = metrics.driveline_errors(scene, result.times, result.traces,
+                                                                 reference.times, reference.traces)
         summary["reference"] = {"method": reference.method, "wall_time_s": reference.wall_time,
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
