@@ -231,6 +231,22 @@ def _outputs(instance):
         return error.status, None
 
 
+def _initialised(instance, values) -> bool:
+    """Set ``values`` and initialise; False when the FMU refused (having said why)."""
+    from fmpy.fmi1 import FMICallException
+    status = instance.set_all(values)
+    _no_fatal_and_errors_say_why(instance, status)
+    fmu2 = instance.slave.fmu
+    try:
+        fmu2.setupExperiment(startTime=0.0)
+        fmu2.enterInitializationMode()
+        fmu2.exitInitializationMode()
+    except FMICallException as error:
+        _no_fatal_and_errors_say_why(instance, error.status)
+        return False
+    return True
+
+
 @pytest.mark.parametrize("fmu,declared,inputs", [
     ("EngineShaft", catalogue.ENGINE, ("tau", "tau_rate")),
     ("LoadShaft", catalogue.LOAD, ("tau", "tau_rate")),
@@ -240,16 +256,7 @@ def _outputs(instance):
 def test_shaft_fmus_never_fail_fatally_and_report_finite_outputs(instances, fmu, declared, inputs, data):
     instance = instances[fmu]
     instance.reset()
-    status = instance.set_all(data.draw(parameters(declared)))
-    _no_fatal_and_errors_say_why(instance, status)
-    fmu2 = instance.slave.fmu
-    from fmpy.fmi1 import FMICallException
-    try:
-        fmu2.setupExperiment(startTime=0.0)
-        fmu2.enterInitializationMode()
-        fmu2.exitInitializationMode()
-    except FMICallException as error:
-        _no_fatal_and_errors_say_why(instance, error.status)
+    if not _initialised(instance, data.draw(parameters(declared))):
         return                         # refused (the values do not fit together): said why
     t = 0.0
     for _ in range(data.draw(st.integers(1, 4))):
@@ -272,16 +279,7 @@ def test_shaft_fmus_never_fail_fatally_and_report_finite_outputs(instances, fmu,
 def test_coupling_fmu_never_fails_fatally_and_reports_finite_outputs(instances, values, alpha, inputs):
     instance = instances["LeverCoupling"]
     instance.reset()
-    status = instance.set_all({**values, "misalignment": alpha})
-    _no_fatal_and_errors_say_why(instance, status)
-    from fmpy.fmi1 import FMICallException
-    fmu2 = instance.slave.fmu
-    try:
-        fmu2.setupExperiment(startTime=0.0)
-        fmu2.enterInitializationMode()
-        fmu2.exitInitializationMode()
-    except FMICallException as error:
-        _no_fatal_and_errors_say_why(instance, error.status)
+    if not _initialised(instance, {**values, "misalignment": alpha}):
         return
     for k, (phi1, w1, phi2, w2) in enumerate(inputs):
         status = instance.set_all({"phi1": phi1, "w1": w1, "phi2": phi2, "w2": w2})
