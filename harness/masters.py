@@ -28,7 +28,6 @@ import ctypes
 import math
 from collections import deque
 
-import numpy as np
 
 from .system import System
 
@@ -374,6 +373,31 @@ class MidpointPredictionMaster(JacobiMaster):
 
 # -- iterative coupling with rollback ------------------------------------------------------------
 
+def _solve_linear(matrix, rhs) -> list[float]:
+    """``x`` with ``matrix @ x = rhs`` (nested lists), by Gaussian elimination with partial
+    pivoting.  Plain Python: a driveline couples two or three torques, and at that size
+    numpy's call overhead is ten times the arithmetic (this runs on every step of an
+    iterating master)."""
+    n = len(rhs)
+    rows = [list(row) + [b] for row, b in zip(matrix, rhs)]
+    for k in range(n):
+        pivot = max(range(k, n), key=lambda i: abs(rows[i][k]))
+        rows[k], rows[pivot] = rows[pivot], rows[k]
+        head = rows[k]
+        if head[k] == 0.0:
+            raise ZeroDivisionError("singular interface matrix")
+        for row in rows[k + 1:]:
+            factor = row[k] / head[k]
+            if factor:
+                for j in range(k, n + 1):
+                    row[j] -= factor * head[j]
+    x = [0.0] * n
+    for k in range(n - 1, -1, -1):
+        row = rows[k]
+        x[k] = (row[n] - sum(row[j] * x[j] for j in range(k + 1, n))) / row[k]
+    return x
+
+
 class InterfaceJacobian:
     """The interface Jacobian ``dG/du`` of a coupling iteration as a function of the
     step ``h``, from finite-difference Jacobians taken at earlier steps.
@@ -384,32 +408,37 @@ class InterfaceJacobian:
     ``A`` and ``B``, so a step-size controller that changes ``h`` every step needs no new
     finite differences while the model serves (a shaft's own damping and a nonlinear
     coupling make it approximate; Newton's iteration and Broyden's updates absorb that).
-    With one Jacobian only the step it was taken at is served."""
+    With one Jacobian only the step it was taken at is served.  Matrices are nested
+    lists (see ``_solve_linear``)."""
 
     SAME_STEP = 0.02     # relative: steps closer than this are the same for the model
     DISTINCT = 0.3       # relative: two samples this far apart make a well-posed fit
 
     def __init__(self):
-        self._samples: list[tuple[float, np.ndarray]] = []   # the newest last
-        self._fit = None                                      # (A, B)
+        self._samples: list[tuple[float, list]] = []   # the newest last
+        self._fit = None                               # (A, B)
 
-    def add(self, h: float, jacobian: np.ndarray):
+    def add(self, h: float, jacobian):
         self._samples = [(x, j) for x, j in self._samples if abs(x - h) > self.SAME_STEP * h][-1:]
-        self._samples.append((h, jacobian.copy()))
+        self._samples.append((h, [[float(v) for v in row] for row in jacobian]))
         self._fit = None
         if len(self._samples) == 2:
             (h1, j1), (h2, j2) = self._samples
             if abs(h1 - h2) > self.DISTINCT * max(h1, h2):
                 determinant = h1 * h2 * (h2 - h1)
-                self._fit = ((j1 * h2 * h2 - j2 * h1 * h1) / determinant, (j2 * h1 - j1 * h2) / determinant)
+                self._fit = ([[(x1 * h2 * h2 - x2 * h1 * h1) / determinant for x1, x2 in zip(r1, r2)]
+                              for r1, r2 in zip(j1, j2)],
+                             [[(x2 * h1 - x1 * h2) / determinant for x1, x2 in zip(r1, r2)]
+                              for r1, r2 in zip(j1, j2)])
 
-    def at(self, h: float) -> np.ndarray | None:
+    def at(self, h: float) -> list | None:
         if self._fit is not None:
             a, b = self._fit
-            return a * h + b * h * h
+            hh = h * h
+            return [[x * h + y * hh for x, y in zip(ra, rb)] for ra, rb in zip(a, b)]
         for x, jacobian in self._samples:
             if abs(x - h) <= self.SAME_STEP * h:
-                return jacobian.copy()
+                return [list(row) for row in jacobian]
         return None
 
 
@@ -462,9 +491,10 @@ class IterativeMaster(Master):
     def counters(self) -> dict:
         return {**super().counters(), "jacobians": self.n_jacobians}
 
-    # u is a flat list over the coupled inputs, in the order of self._inputs
-    def _current_inputs(self) -> np.ndarray:
-        return np.array([v for _, _, values in self._inputs for v in values])
+    # u is a flat list over the coupled inputs, in the order of self._inputs (plain
+    # lists: see _solve_linear)
+    def _current_inputs(self) -> list[float]:
+        return [v for _, _, values in self._inputs for v in values]
 
     def _evaluate(self, u, t, h, states, start, rolled):
         """Step the stateful components from their saved ``states`` holding ``u`` and
@@ -480,7 +510,7 @@ class IterativeMaster(Master):
         self._step_stateful(t, h)
         self.system.propagate_with(self._held_plan)     # the inputs' buffers now hold tau(t + h)
         end = self._current_inputs()
-        return end if self.scheme == "implicit" else 0.5 * (start + end)
+        return end if self.scheme == "implicit" else [0.5 * (a + b) for a, b in zip(start, end)]
 
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
@@ -490,9 +520,12 @@ class IterativeMaster(Master):
 
     def _guess(self, t, h, start):
         if len(self._history) < 2:
-            return start.copy()
+            return list(start)
         (t0, u0), (t1, u1) = self._history
-        return u1 + (u1 - u0) * ((t + h - t1) / (t1 - t0)) if t1 > t0 else u1.copy()
+        if not t1 > t0:
+            return list(u1)
+        ratio = (t + h - t1) / (t1 - t0)
+        return [b + (b - a) * ratio for a, b in zip(u0, u1)]
 
     def _step_impl(self, t, h):
         start = self._current_inputs()
@@ -509,17 +542,18 @@ class IterativeMaster(Master):
         """Iterate the held torques of the step from ``t`` to convergence, starting from
         ``guess``; the stateful components end at ``t + h`` stepped with them.  Returns them."""
         u = guess
-        scale = max(1.0, float(np.max(np.abs(start))))
+        scale = max(1.0, max(abs(x) for x in start))
         tolerance = relative_tolerance * scale
+        newton = self.solver == "newton"
         g = self._evaluate(u, t, h, states, start, rolled=False)
-        residual = g - u
-        norm = float(np.max(np.abs(residual)))
+        residual = [b - a for a, b in zip(u, g)]
+        norm = max(abs(r) for r in residual)
         previous = math.inf
         iteration = 0
         for iteration in range(self.max_iterations):
             if norm <= tolerance:
                 break
-            if self.solver == "newton":
+            if newton:
                 # The Jacobian at this step size from the model fitted to earlier
                 # finite-difference ones; a new finite-difference one when there is none
                 # or the iteration stalls.  Broyden's secant updates keep it current
@@ -529,20 +563,32 @@ class IterativeMaster(Master):
                 if self._jacobian is None or norm > 0.5 * previous:
                     self._jacobian = self._finite_difference_jacobian(u, g, t, h, states, start, scale)
                     self._jacobians.add(h, self._jacobian)
-                change = -np.linalg.solve(self._jacobian - np.eye(len(u)), residual)
+                # (J - 1) change = -residual
+                shifted = [[x - (i == j) for j, x in enumerate(row)] for i, row in enumerate(self._jacobian)]
+                try:
+                    change = _solve_linear(shifted, [-r for r in residual])
+                except ZeroDivisionError:
+                    raise MasterFailure(f"{self.name}: the interface Jacobian is singular in the step from "
+                                        f"t = {t:.9g} s (h = {h:.3g} s); use a smaller step") from None
             else:
-                change = g - u
+                change = residual
             previous = norm
-            u_new = u + change
+            u_new = [a + d for a, d in zip(u, change)]
             g_new = self._evaluate(u_new, t, h, states, start, rolled=True)
             self.n_iterations += 1
-            if self.solver == "newton":
-                secant = g_new - g
-                self._jacobian = self._jacobian + np.outer(secant - self._jacobian @ change, change) / float(change @ change)
+            if newton:
+                # Broyden: J += (secant - J change) change^T / |change|^2
+                jacobian = self._jacobian
+                squared = sum(d * d for d in change)
+                if squared > 0.0:
+                    miss = [(b - a) - sum(x * d for x, d in zip(row, change))
+                            for a, b, row in zip(g, g_new, jacobian)]
+                    self._jacobian = [[x + m * d / squared for x, d in zip(row, change)]
+                                      for row, m in zip(jacobian, miss)]
             u, g = u_new, g_new
-            residual = g - u
-            norm = float(np.max(np.abs(residual)))
-            if not math.isfinite(norm) or (self.solver == "fixed-point" and iteration > 2 and norm > previous):
+            residual = [b - a for a, b in zip(u, g)]
+            norm = max(abs(r) for r in residual)
+            if not math.isfinite(norm) or (not newton and iteration > 2 and norm > previous):
                 break
         if not norm <= tolerance:
             hint = "use a newton master or a smaller step" if self.solver == "fixed-point" else "use a smaller step"
@@ -552,15 +598,17 @@ class IterativeMaster(Master):
         return u
 
     def _finite_difference_jacobian(self, u, g, t, h, states, start, scale):
+        """``dG/du`` by forward differences over rolled-back steps, as nested lists."""
         self.n_jacobians += 1
         columns = []
         for j in range(len(u)):
             delta = 1e-6 * max(abs(u[j]), scale)
-            shifted = u.copy()
+            shifted = list(u)
             shifted[j] += delta
-            columns.append((self._evaluate(shifted, t, h, states, start, rolled=True) - g) / delta)
+            g_shifted = self._evaluate(shifted, t, h, states, start, rolled=True)
+            columns.append([(b - a) / delta for a, b in zip(g, g_shifted)])
             self.n_iterations += 1
-        return np.array(columns).T
+        return [list(row) for row in zip(*columns)]
 
 
 class ImplicitFixedPointMaster(IterativeMaster):
@@ -671,26 +719,30 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
 
     def _step_impl(self, t, h):
         start = self._current_inputs()
-        self._scale = max(self._scale, float(np.max(np.abs(start))))
+        self._scale = max(self._scale, max(abs(x) for x in start))
         points = list(self._ends) + [(t, start)]
         times = [p[0] for p in points]
+        full = len(points) == 3
 
         def attempt(h, states):
-            predicted = sum(w * p[1] for w, p in zip(_lagrange_weights(times, t + h), points))
+            weights = _lagrange_weights(times, t + h)
+            predicted = [sum(w * p[1][i] for w, p in zip(weights, points)) for i in range(len(start))]
             try:      # from the held torques that the extrapolated end-of-step torques give
-                u = self._solve(t, h, states, start, self.iteration_tolerance, 0.5 * (start + predicted))
+                u = self._solve(t, h, states, start, self.iteration_tolerance,
+                                [0.5 * (a + b) for a, b in zip(start, predicted)])
             except MasterFailure:
                 if h <= self.min_step:
                     raise
                 return 1.0 / self.SHRINK ** 3, None      # not converged: shrink hard and retry
             end = self._current_inputs()                 # tau(t + h) with the converged torques
-            if len(points) == 3:
+            if full:
                 r = h ** 3 / (2.0 * math.prod(t + h - x for x in times))
                 fraction = r / (1.0 + r)
             else:
                 fraction = self.START_FRACTION
-            scale = max(self._scale, float(np.max(np.abs(end)))) or 1.0
-            return fraction * float(np.max(np.abs(end - predicted))) / (self.tolerance * scale), u
+            scale = max(self._scale, max(abs(x) for x in end)) or 1.0
+            difference = max(abs(a - b) for a, b in zip(end, predicted))
+            return fraction * difference / (self.tolerance * scale), u
 
         h, _, _ = self._controlled_step(t, self._clip(t, h), attempt)
         self._ends.append((t, start))

@@ -348,9 +348,9 @@ def iteration_contraction(model: TwoInertia, master: str, step: float, fmu_dir: 
     system.set_state(0.0, 0.0, 0.0, 0.0)
     start = driver._current_inputs()
     states = driver._save_states()
-    base = driver._evaluate(np.zeros_like(start), 0.0, step, states, start, rolled=True)
-    jacobian = np.array([driver._evaluate(np.eye(len(start))[j], 0.0, step, states, start, rolled=True) - base
-                         for j in range(len(start))]).T
+    base = np.array(driver._evaluate([0.0] * len(start), 0.0, step, states, start, rolled=True))
+    jacobian = np.array([np.array(driver._evaluate(list(np.eye(len(start))[j]), 0.0, step, states, start, rolled=True))
+                         - base for j in range(len(start))]).T
     return float(np.max(np.abs(np.linalg.eigvals(jacobian))))
 
 
