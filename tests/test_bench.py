@@ -35,6 +35,26 @@ def test_failed_runs_are_left_out_of_the_curves():
     assert bench.time_at_error([failed, _case(2.0, 1e-4)], 1e-3) == pytest.approx(2.0)
 
 
+def test_claims_compare_the_target_time_with_the_largest_stable_baseline_step():
+    spec = scene.load("kavz685_stiff")              # omega_n = 1184 rad/s
+    diverged = Case("jacobi", "master", 1e-4, wall_times=[0.8], failure="diverged")
+    stable = Case("jacobi", "master", 7e-5, wall_times=[8.0], errors={"tau_rms": 4e-2}, energy_residual=1e-6)
+    coarse = Case("adaptive-trapezoidal", "master", 1e-4, 2e-2, wall_times=[0.4], errors={"tau_rms": 2e-2},
+                  energy_residual=1e-5, largest_step=6e-3)
+    fine = Case("adaptive-trapezoidal", "master", 1e-4, 1e-2, wall_times=[1.0], errors={"tau_rms": 5e-3},
+                energy_residual=1e-6, largest_step=3e-3)
+    claims = bench.claims(spec, [diverged, stable, coarse, fine], {"target_error": 1e-2, "baseline": "jacobi"})
+    largest = claims["largest_stable_baseline_step"]
+    assert largest["step"] == 7e-5 and largest["wall_s"] == 8.0
+    at_target = bench.time_at_error([coarse, fine], 1e-2)
+    assert largest["time_fraction_at_target"] == {"adaptive-trapezoidal": pytest.approx(at_target / 8.0)}
+    # an adaptive run counts at h * omega_n >= 5 by the longest step it took (6e-3 s: 7.1)
+    runs = claims["at_h_omega_5_or_more"]["adaptive-trapezoidal"]
+    assert [(r["tolerance"], round(r["h_omega"], 1), r["stable"]) for r in runs] == [(2e-2, 7.1, True)]
+    text = bench.markdown({"claims": claims, "scene": spec.name, "repeats": 1, "floor_per_step_s": 5e-5}, [])
+    assert f"({8.0 / at_target:.1f}x faster)" in text and "longest step 0.006 s" in text
+
+
 def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.3", "experiment.transient=0.1"])
     spec.bench = {"steps": {"jacobi": [2e-3, 1e-3], "jacobi-quadratic": [2e-3]},
