@@ -132,6 +132,28 @@ def test_adaptive_trapezoidal_meets_its_tolerance_on_the_stiff_start():
     assert c["iterations"] <= 1.5 * c["steps"] and c["jacobians"] <= 4, c
 
 
+def test_adaptive_trapezoidal_keeps_its_step_where_the_stiff_mode_is_unresolved():
+    # Each change of step kicks the stiff mode, which the trapezoidal coupling does not damp
+    # at h * omega_n > 1: there the step is mostly kept; where the mode is resolved
+    # (h * omega_n well below 1) the step follows the controller.
+    spec = scene.load("kavz685_stiff").with_overrides(STIFF_SHORT)
+    result = run.simulate(spec, "adaptive-trapezoidal", 1e-3, options={"tolerance": 3e-3})
+    assert result.ok, result.failure
+    h = np.diff(result.times)
+    h_omega = h[:-1] * 1184.0
+    kept = np.isclose(h[1:], h[:-1], rtol=1e-12, atol=0.0)
+    assert np.mean(kept[h_omega > 1.5]) > 0.5
+    assert np.mean(kept[h_omega < 0.5]) < 0.2
+
+
+def test_adaptive_trapezoidal_steps_grow_back_after_an_event():
+    # The tiny-inertia scene's torque step shrinks the steps to nanoseconds; they must grow
+    # back by decades (a step-keeping rule that also held back growth took 100,000 steps).
+    result = run.simulate(scene.load("kavz685_step_tiny_inertia"))
+    assert result.ok, result.failure
+    assert result.counters["steps"] < 2000, result.counters
+
+
 def test_interface_jacobian_model_is_exact_for_a_linear_coupling_of_inertias():
     a, b = np.array([[0.3, -0.1], [0.2, 0.4]]), np.array([[50.0, -20.0], [-30.0, 60.0]])
     model = masters.InterfaceJacobian()
