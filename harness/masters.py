@@ -698,7 +698,8 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
     scale (the largest coupling torque so far) it is compared with ``tolerance``; a step
     above it is rolled back and retried shorter, and a PI controller proposes the next.
     Short steps where the stiff mode rings, long ones (h * omega_n >> 1) where the motion
-    is smooth: the trapezoidal coupling is stable at any step.
+    is smooth: the trapezoidal coupling is stable at any step.  Where the stiff mode is
+    unresolved the step changes seldom and by little (see ``KEEP``, ``UNRESOLVED``).
 
     The Newton iteration stops at ``iteration_tolerance`` relative to the same scale
     (default: a tenth of ``tolerance``: the iteration error stays below the step's own),
@@ -710,6 +711,7 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
     options = {"tolerance": 1e-3, "iteration_tolerance": None, "max_iterations": 30, "min_step": 1e-8,
                "max_step": None}
     ESTIMATE_ORDER = 3
+    START_FRACTION = 0.5    # while fewer than three points are known: a cautious share of the difference
     # Each change of the step shifts the trapezoidal coupling's small forced-response
     # error, which excites the stiff mode, and at h * omega_n > 1 the scheme does not damp
     # it: the unresolved mode rings on and the error estimate sees it.  So the step changes
@@ -717,8 +719,8 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
     # the usual factor 3 the stiff scene rang on at about 990 rad/s with 200 times the
     # reference's amplitude there.  And where the mode is unresolved, an accepted step is
     # kept while the controller's proposal lies within KEEP (RADAU5 keeps its step within
-    # 1.0-1.2 to save factorisations): it is not shortened while within tolerance, nor
-    # lengthened for a small gain.  Changing it at every step kept the stiff scene near
+    # 1.0-1.2 to save factorisations): no small cuts while within tolerance, no small
+    # gains.  Changing it at every step kept the stiff scene near
     # h * omega_n = 2.6 in a cycle of 10 % rises and drops, with 10-35 % more steps for the
     # same error (three load seeds); keeping it also where the mode is resolved cost 10 %
     # more steps there.  A wider upper bound (1.5) makes steps that must grow back by
@@ -736,8 +738,6 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
         jacobian = self._jacobian
         return (self.KEEP is not None and jacobian is not None
                 and max(sum(abs(x) for x in row) for row in jacobian) >= self.UNRESOLVED)
-
-    START_FRACTION = 0.5    # while fewer than three points are known: a cautious share of the difference
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
