@@ -409,12 +409,20 @@ def _export(scene, assignments, out, folder: str, suffix: str, export):
     click.echo(f"written: {path}")
 
 
-@main.command("export-ssp")
-@click.argument("scene", default="kavz685")
-@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
-              help="Override a parameter before exporting (as for `lever run`).")
-@click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="The archive to write (default results/ssp/<scene>.ssp).")
+def _export_command(name: str, written: str, default: str):
+    """A ``lever export-*`` command: SCENE, ``--set`` overrides and ``--out`` (the
+    ``written`` file; ``default``: where ``_export`` puts it without one)."""
+    def wrap(function):
+        function = click.option("--out", type=click.Path(path_type=Path), default=None,
+                                help=f"The {written} to write (default {default}).")(function)
+        function = click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+                                help="Override a parameter before exporting (as for `lever run`).")(function)
+        function = click.argument("scene", default="kavz685")(function)
+        return main.command(name)(function)
+    return wrap
+
+
+@_export_command("export-ssp", "archive", "results/ssp/<scene>.ssp")
 def export_ssp(scene, assignments, out):
     """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
     descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
@@ -424,12 +432,7 @@ def export_ssp(scene, assignments, out):
     _export(scene, assignments, out, "ssp", "ssp", ssp.export)
 
 
-@main.command("export-container")
-@click.argument("scene", default="kavz685")
-@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
-              help="Override a parameter before exporting (as for `lever run`).")
-@click.option("--out", type=click.Path(path_type=Path), default=None,
-              help="The FMU to write (default results/container/<scene>.fmu).")
+@_export_command("export-container", "FMU", "results/container/<scene>.fmu")
 def export_container(scene, assignments, out):
     """Write SCENE as one FMU (fmpy's container FMU holding the scene's FMUs): its
     parameters are the scene's values, its outputs the scene's recorded variables, its

@@ -28,7 +28,6 @@ import ctypes
 import math
 from collections import deque
 
-
 from .system import System
 
 
@@ -641,7 +640,7 @@ class _StepControl:
     KEEP: tuple[float, float] | None = None
 
     def _keeps_step(self) -> bool:
-        return self.KEEP is not None
+        return True
 
     def _init_control(self):
         if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
@@ -679,7 +678,7 @@ class _StepControl:
         bounded = max(error, 1e-10)
         factor = self.SAFETY * bounded ** (-0.3 / k) * (self._previous_error / bounded) ** (0.4 / k)
         self._previous_error = bounded
-        if self._keeps_step() and self.KEEP[0] <= factor <= self.KEEP[1]:
+        if self.KEEP is not None and self.KEEP[0] <= factor <= self.KEEP[1] and self._keeps_step():
             factor = 1.0
         self.h = min(self.max_step, h * min(self.GROWTH, max(self.SHRINK, factor)))
         return h, error, result
@@ -719,13 +718,12 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
     # the usual factor 3 the stiff scene rang on at about 990 rad/s with 200 times the
     # reference's amplitude there.  And where the mode is unresolved, an accepted step is
     # kept while the controller's proposal lies within KEEP (RADAU5 keeps its step within
-    # 1.0-1.2 to save factorisations): no small cuts while within tolerance, no small
-    # gains.  Changing it at every step kept the stiff scene near
-    # h * omega_n = 2.6 in a cycle of 10 % rises and drops, with 10-35 % more steps for the
-    # same error (three load seeds); keeping it also where the mode is resolved cost 10 %
-    # more steps there.  A wider upper bound (1.5) makes steps that must grow back by
-    # decades after an event creep (55 times the steps on kavz685_step_tiny_inertia, where
-    # this rule halves them).
+    # 1.0-1.2 to save factorisations): no small cuts while within tolerance, no small gains.
+    # Changing it at every step kept the stiff scene near h * omega_n = 2.6 in a cycle of
+    # 10 % rises and drops, with 10-35 % more steps for the same error (three load seeds);
+    # keeping it also where the mode is resolved cost 10 % more steps there.  A wider upper
+    # bound (1.5) makes steps that must grow back by decades after an event creep (55 times
+    # the steps on kavz685_step_tiny_inertia, where this rule halves them).
     GROWTH, SHRINK = 1.1, 0.5
     KEEP = (0.6, 1.2)
     # The interface Jacobian says how resolved the stiff mode is without knowing the
@@ -736,8 +734,7 @@ class AdaptiveTrapezoidalMaster(_StepControl, TrapezoidalNewtonMaster):
 
     def _keeps_step(self) -> bool:
         jacobian = self._jacobian
-        return (self.KEEP is not None and jacobian is not None
-                and max(sum(abs(x) for x in row) for row in jacobian) >= self.UNRESOLVED)
+        return jacobian is not None and max(sum(abs(x) for x in row) for row in jacobian) >= self.UNRESOLVED
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
