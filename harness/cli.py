@@ -647,6 +647,31 @@ def _print_validation(name, findings, result, out: Path):
     click.echo(f"  {name}: {verdict}; written to {out}/")
 
 
+@main.command("fingerprint")
+@click.argument("names", nargs=-1, metavar="[SCENES]...")
+@click.option("--master", "masters", multiple=True, help="Only this master (repeatable; default: every master).")
+@click.option("--stop", type=float, default=0.2, show_default=True,
+              help="Run each scene for at most this many seconds (0: each scene's own length).")
+def fingerprint_command(names, masters, stop):
+    """Print a SHA-256 of the traces of every committed scene (or SCENES) run with every
+    master: `lever fingerprint > before.txt`, change the code, run it again and `diff`
+    - a refactor that keeps behaviour leaves every line the same, bit for bit."""
+    from . import masters as family
+    from .fingerprint import fingerprints
+
+    unknown = [m for m in masters if m not in family.MASTERS]
+    if unknown:
+        raise UserError(f"master '{', '.join(unknown)}' is unknown (known: {', '.join(family.MASTERS)})")
+    if not (math.isfinite(stop) and stop >= 0):
+        raise UserError(f"--stop {stop}: must be >= 0 s (0: each scene's own length)")
+    ensure_fmus(quiet=True)
+    try:
+        for name, master, rows, digest in fingerprints(list(names) or None, list(masters) or None, stop or None):
+            click.echo(f"{name:28s} {master:24s} {rows:7d} {digest}")
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+
+
 @main.command("badinputs")
 @click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
 def bad_inputs(verbose):
