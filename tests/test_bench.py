@@ -8,8 +8,9 @@ import math
 
 import pytest
 
-from harness import bench, scene
-from harness.bench import Case
+from harness.studies import bench
+from harness.description import scene
+from harness.studies.bench import Case
 
 
 @pytest.fixture(autouse=True)

@@ -3,7 +3,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from harness.cli import main
-from harness.fingerprint import trace_hash
+from harness.studies.fingerprint import trace_hash
 
 
 def test_trace_hash_sees_one_bit_and_a_failure():

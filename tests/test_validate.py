@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness import crosscheck, validate
-from harness import scene as scenes
+from harness.formats import reference_traces as crosscheck
+from harness.judges import validation as validate
+from harness.description import scene as scenes
 from harness.cli import main
 
 LEVER = validate.TOLERANCES["lever"]

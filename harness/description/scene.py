@@ -20,9 +20,12 @@ from typing import Any
 
 from lever.physics.parameters import UNITS
 
-from .paths import DATA, SCENES
+from harness.description.tables import MeasuredDataError, load_series, read_table
+from harness.paths import DATA, SCENES
 
 FEATURES = ("reference", "energy_balance", "plots")
+#: the ``[limits]`` a scene may set for the divergence guard (harness.engine.guard)
+LIMIT_KEYS = ("speed", "torque", "margin")
 
 
 class SceneError(ValueError):
@@ -140,7 +143,6 @@ def quantity(value, name: str = "value"):
     ``{samples = "monograph/torque_driven_7V-14MVS.csv", cycle = "mean"}``, the series
     through a measured torque table's ordinates (harness.measured)."""
     if isinstance(value, dict) and "samples" in value:
-        from .measured import samples_parameter
         return samples_parameter(value, name)
     if isinstance(value, dict) and "harmonics" in value:
         from lever.physics.load import read_harmonics
@@ -158,6 +160,16 @@ def quantity(value, name: str = "value"):
     return value
 
 
+def samples_parameter(value: dict, name: str) -> str:
+    """A scene's ``fourier = {samples = "<table>.csv", cycle = "mean"}``: the load series
+    through a measured table's ordinates (path relative to resources/data)."""
+    path = DATA / value["samples"]
+    try:
+        return load_series(read_table(path), value.get("cycle", "mean")).to_text()
+    except MeasuredDataError as error:
+        raise SceneError(f"{name}: {error}") from None
+
+
 def resolve(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.suffix == ".toml" and path.exists():
@@ -170,10 +182,10 @@ def resolve(name_or_path: str | Path) -> Path:
 
 
 def load(name_or_path: str | Path) -> Scene:
-    """A scene by name (resources/scenes), from a .toml file, or from an SSP archive (.ssp)."""
+    """A scene by name (resources/scenes) or from a .toml file."""
     if str(name_or_path).endswith(".ssp"):
-        from . import ssp
-        return ssp.load(name_or_path)
+        raise SceneError(f"{name_or_path}: an SSP archive - read it with harness.formats.ssp.read_scene "
+                         "(the lever commands take one as SCENE)")
     path = resolve(name_or_path)
     try:
         data = tomllib.loads(path.read_text())
@@ -260,8 +272,6 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
 
 def _check_limits(limits: dict) -> list[str]:
     """The ``[limits]`` table: speed [rad/s], torque [N*m], margin, each > 0 (inf allowed)."""
-    from .divergence import LIMIT_KEYS
-
     findings = []
     for key, raw in limits.items():
         if key not in LIMIT_KEYS:

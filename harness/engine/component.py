@@ -23,6 +23,8 @@ from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, 
 from fmpy.fmi1 import FMICallException
 from fmpy.logging import addLoggerProxy
 
+from harness.engine.interface import RawCalls
+
 _STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
 
 # FMU log messages are printf-style with variadic arguments, which ctypes cannot read:
@@ -44,6 +46,16 @@ def _dispatch(env, instance, status, category, message):
         route.append(f"[{label}] {text}")
     elif not _listeners:
         print(f"[{label}] {name}: {text}", file=sys.stderr)
+
+
+def route_messages(instance_name: str, messages: deque):
+    """Append the log messages of the FMU instance ``instance_name`` to ``messages`` (for
+    code that instantiates FMUs itself, with ``log_callbacks()``), until ``unroute``."""
+    _routes[instance_name] = messages
+
+
+def unroute(instance_name: str):
+    _routes.pop(instance_name, None)
 
 
 def add_log_listener(listener):
@@ -129,13 +141,12 @@ class Component:
                              modelIdentifier=self.description.coSimulation.modelIdentifier,
                              instanceName=self.instance_name)
         self.fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
-        self._get_real = self.fmu._functions["fmi2GetReal"]
-        self._set_real = self.fmu._functions["fmi2SetReal"]
-        self._do_step = self.fmu._functions["fmi2DoStep"]
+        functions = self.fmu._functions
+        self.raw = RawCalls(self.fmu.component, functions["fmi2GetReal"], functions["fmi2SetReal"],
+                            functions["fmi2DoStep"])
         self._get_state = self.fmu._functions["fmi2GetFMUstate"]
         self._set_state = self.fmu._functions["fmi2SetFMUstate"]
         self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
-        self._handle = self.fmu.component
         self._freed = False
 
     # -- helpers ---------------------------------------------------------------------------
@@ -149,7 +160,8 @@ class Component:
     def vr(self, name: str) -> int:
         return self.variable(name).valueReference
 
-    def _fail(self, call: str, status: int):
+    def fail(self, call: str, status: int):
+        """Raise ``FmuCallError`` for ``call`` that returned ``status``, with the last messages logged."""
         messages = [m for m in self.messages if not m.startswith("[ok]")][-5:]
         self.messages.clear()
         raise FmuCallError(self.name, call, status, self.time, messages)
@@ -158,7 +170,7 @@ class Component:
         try:
             return function(*args)
         except FMICallException as error:
-            self._fail(call, error.status)
+            self.fail(call, error.status)
 
     # -- set-up ------------------------------------------------------------------------------
     def set_parameters(self, values: dict):
@@ -196,21 +208,21 @@ class Component:
 
     def read(self, vrs, values):
         self.calls += 1
-        status = self._get_real(self._handle, vrs, len(vrs), values)
+        status = self.raw.get_real(self.raw.handle, vrs, len(vrs), values)
         if status > 1:
-            self._fail("fmi2GetReal", status)
+            self.fail("fmi2GetReal", status)
 
     def write(self, vrs, values):
         self.calls += 1
-        status = self._set_real(self._handle, vrs, len(vrs), values)
+        status = self.raw.set_real(self.raw.handle, vrs, len(vrs), values)
         if status > 1:
-            self._fail("fmi2SetReal", status)
+            self.fail("fmi2SetReal", status)
 
     def do_step(self, t: float, h: float):
         self.calls += 1
-        status = self._do_step(self._handle, t, h, 1)
+        status = self.raw.do_step(self.raw.handle, t, h, 1)
         if status > 1:
-            self._fail(f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})", status)
+            self.fail(f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})", status)
         self.time = t + h
 
     def get(self, names: Sequence[str]) -> list[float]:
@@ -224,23 +236,23 @@ class Component:
     def save_state(self) -> ctypes.c_void_p:
         self.calls += 1
         state = ctypes.c_void_p()
-        status = self._get_state(self._handle, ctypes.byref(state))
+        status = self._get_state(self.raw.handle, ctypes.byref(state))
         if status > 1:
-            self._fail("fmi2GetFMUstate", status)
+            self.fail("fmi2GetFMUstate", status)
         return state
 
     def restore_state(self, state, time: float):
         self.calls += 1
-        status = self._set_state(self._handle, state)
+        status = self._set_state(self.raw.handle, state)
         if status > 1:
-            self._fail("fmi2SetFMUstate", status)
+            self.fail("fmi2SetFMUstate", status)
         self.time = time
 
     def free_state(self, state):
         self.calls += 1
-        status = self._free_state(self._handle, ctypes.byref(state))
+        status = self._free_state(self.raw.handle, ctypes.byref(state))
         if status > 1:
-            self._fail("fmi2FreeFMUstate", status)
+            self.fail("fmi2FreeFMUstate", status)
 
     # -- tear-down ---------------------------------------------------------------------------
     def free(self):

@@ -37,12 +37,11 @@ from lever.physics.engine import LinearCharacteristic
 from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad
 from lever.physics.parameters import ParameterError
 
-from . import metrics
-from . import scene as scenes
+from harness.description import kinds
+from harness.description import scene as scenes
 
 #: default factor between the plausible speeds of a scene and its speed bound
 MARGIN = 10.0
-LIMIT_KEYS = ("speed", "torque", "margin")
 
 
 class Diverged(RuntimeError):
@@ -77,7 +76,7 @@ def load_range(load) -> tuple[float, float]:
 
 def plausible_speed(scene: scenes.Scene, engine_name: str, load_name: str) -> tuple[float, str]:
     """The largest speed the scene's parameters make plausible, and how it was found."""
-    e, l = metrics.parameters(scene, engine_name), metrics.parameters(scene, load_name)
+    e, l = kinds.parameters(scene, engine_name), kinds.parameters(scene, load_name)
     engine, load = catalogue.engine_from(e), catalogue.load_from(l)
     starts = [abs(catalogue.start_state(e, catalogue.ENGINE)[1]), abs(catalogue.start_state(l, catalogue.LOAD)[1])]
     low, high = load_range(load.external)
@@ -113,7 +112,7 @@ def _deflection_at_energy(law, energy: float) -> float:
 def bounds(scene: scenes.Scene) -> list[Bound]:
     """The bounds a run of ``scene`` is held to (see the module docstring): speeds and
     coupling torques of the driveline, when the scene has one; nothing otherwise."""
-    engine_name, coupling_name, load_name = metrics.roles(scene)
+    engine_name, coupling_name, load_name = kinds.roles(scene)
     if not (engine_name and coupling_name and load_name):
         return []
     limits = {k: float(scenes.quantity(v, f"limits.{k}")) for k, v in scene.limits.items()}
@@ -121,9 +120,9 @@ def bounds(scene: scenes.Scene) -> list[Bound]:
     out = []
     try:
         plausible, which = plausible_speed(scene, engine_name, load_name)
-        engine = catalogue.engine_from(metrics.parameters(scene, engine_name))
-        load = catalogue.load_from(metrics.parameters(scene, load_name))
-        coupling = catalogue.coupling_from(metrics.parameters(scene, coupling_name))
+        engine = catalogue.engine_from(kinds.parameters(scene, engine_name))
+        load = catalogue.load_from(kinds.parameters(scene, load_name))
+        coupling = catalogue.coupling_from(kinds.parameters(scene, coupling_name))
     except ParameterError:
         return []    # the FMUs will refuse the parameters with the proper message
     if "speed" in limits:

@@ -11,12 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import masters as master_family
-from . import scene as scenes
-from .component import FmuCallError
-from .divergence import Diverged, Guard
-from .paths import FMUS
-from .system import System
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.description import scene as scenes
+from harness.engine.component import FmuCallError
+from harness.engine.guard import Diverged, Guard
+from harness.paths import FMUS
+from harness.engine.system import System
 
 
 @dataclass
@@ -56,7 +57,7 @@ class Recorder:
         # Streaming (harness.traces.TraceStream): hold one chunk, hand it on when full.
         self.stream = stream
         if stream is not None:
-            from .traces import CHUNK
+            from harness.engine.traces import CHUNK
             n_rows = min(n_rows, CHUNK)
         # Record whole component buffers (a superset of the names), pick the names at the end.
         self._columns = {}
@@ -127,18 +128,17 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
     """What a run records: the scene's list, plus what its features need."""
     names = list(scene.record)
     if "energy_balance" in scene.features:
-        from .metrics import energy_variables
-        names += [n for n in energy_variables(scene) if n not in names]
+        names += [n for n in kinds.energy_variables(scene) if n not in names]
     return names
 
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
-             advise: bool = True, stream: Path | None = None) -> RunResult:
+             stream: Path | None = None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master.  ``advise``:
-    check the master and step against the linear stability analysis first (the findings
-    go to ``RunResult.warnings``; the run goes ahead regardless).  ``stream``: a trace CSV
+    (for an adaptive master: its first step); ``options`` go to the master.  The stability
+    advice is not computed here: whoever shows it (``lever run``) asks
+    ``harness.judges.stability.run_advice`` and may keep it in ``RunResult.warnings``.  ``stream``: a trace CSV
     written while the run goes, the result keeping every k-th row (harness.traces)."""
     e = scene.experiment
     master = master or e.master
@@ -147,7 +147,6 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     if master not in master_family.MASTERS:
         raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
-    warnings = stability_advice(scene, master, step, fmu_dir) if advise else []
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = diagnosis = None
@@ -195,7 +194,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     warnings, recorder.stream.report() if recorder and recorder.stream else None)
+                     [], recorder.stream.report() if recorder and recorder.stream else None)
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
@@ -217,19 +216,10 @@ def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, 
     return out
 
 
-def stability_advice(scene, master, step, fmu_dir) -> list[str]:
-    """The stability advisor's findings; advice must never stop a run."""
-    from .stability import advise
-    try:
-        return advise(scene, master, step, fmu_dir)
-    except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
-        return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
-
-
 def _stream(path: Path | None, scene: scenes.Scene, names: list[str], rows: int):
     if path is None:
         return None
-    from .traces import TraceStream, integrals_for
+    from harness.engine.traces import TraceStream, integrals_for
     return TraceStream(path, names, rows, integrate=integrals_for(scene))
 
 

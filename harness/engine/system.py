@@ -16,9 +16,10 @@ from pathlib import Path
 
 from fmpy import read_model_description
 
-from . import scene as scenes
-from .component import Component
-from .paths import FMUS
+from harness.description import scene as scenes
+from harness.engine.component import Component
+from harness.engine.interface import CoSimComponent
+from harness.paths import FMUS
 
 
 class SceneInvalid(ValueError):
@@ -74,7 +75,7 @@ class System:
         findings = scenes.validate(scene, descriptions_for(scene, fmu_dir))
         if findings:
             raise SceneInvalid(scene.name, findings)
-        self.components: dict[str, Component] = {}
+        self.components: dict[str, CoSimComponent] = {}
         try:
             for name, spec in scene.components.items():
                 self.components[name] = Component(name, fmu_path(spec.fmu, fmu_dir), logging_on)
@@ -153,11 +154,11 @@ class System:
         for name in self.order:
             component = self.components[name]
             vrs, values = self.buffers[name]
-            writes = tuple((target, target._set_real, target._handle, t_vrs, len(t_vrs), t_values,
+            writes = tuple((target, target.raw.set_real, target.raw.handle, t_vrs, len(t_vrs), t_values,
                             tuple(enumerate(positions)))
                            for target, t_vrs, t_values, positions in self.writes[name])
             # the last field: buffers filled but not sent (see held_plan)
-            self._plan_of[name] = (component, component._get_real, component._handle, vrs, len(vrs), values, writes,
+            self._plan_of[name] = (component, component.raw.get_real, component.raw.handle, vrs, len(vrs), values, writes,
                                    ())
         self._full_plan = [self._plan_of[n] for n in self.order]
         self._partial_plans = {}
@@ -170,7 +171,7 @@ class System:
         # Plans again: reading them (entries without writes), and - for masters whose last
         # propagation only filled the buffers - first sending their connected inputs from
         # those buffers (one entry that reads nothing, with writes that copy nothing).
-        self._dependent_reads = [self._plan_of[name][:6] + ((), ()) for name in dependent]
+        self.dependent_reads = [self._plan_of[name][:6] + ((), ()) for name in dependent]
         sends = tuple(w[:6] + ((),) for name in self.order for w in self._plan_of[name][6]
                       if w[0].name in dependent)
         self._dependent_sends = [(None, None, None, None, 0, None, sends, ())] if sends else []
@@ -194,7 +195,7 @@ class System:
                 component.calls += 1
                 status = get_real(handle, vrs, n, values)
                 if status > 1:
-                    component._fail("fmi2GetReal", status)
+                    component.fail("fmi2GetReal", status)
             for t_values, pairs in copied:
                 for k, i in pairs:
                     t_values[k] = values[i]
@@ -204,15 +205,15 @@ class System:
                 target.calls += 1
                 status = set_real(target_handle, t_vrs, t_n, t_values)
                 if status > 1:
-                    target._fail("fmi2SetReal", status)
+                    target.fail("fmi2SetReal", status)
 
     def refresh_dependent(self, send: bool = False):
         """Read again the outputs that depend on inputs written since they were read (see
-        ``_dependent_reads``), after sending those inputs from their buffers first when
+        ``dependent_reads``), after sending those inputs from their buffers first when
         ``send`` (the last propagation was a held plan)."""
         if send:
             self.propagate_with(self._dependent_sends)
-        self.propagate_with(self._dependent_reads)
+        self.propagate_with(self.dependent_reads)
 
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""

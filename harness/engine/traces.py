@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.description import kinds
+
 #: rows a chunk holds: ~4 s of a 1 ms run, ~0.5 MB of CSV
 CHUNK = 4096
 
@@ -27,8 +29,7 @@ def integrals_for(scene) -> dict[str, str]:
     dissipated power -> its dissipated energy (the name the reference uses too)."""
     if "energy_balance" not in scene.features:
         return {}
-    from .metrics import roles
-    coupling = roles(scene)[1]
+    coupling = kinds.roles(scene)[1]
     return {f"{coupling}.dissipated_power": f"{coupling}.dissipated_energy"} if coupling else {}
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from lever.physics import catalogue
 from lever.physics.parameters import Parameter
 
-from .paths import FMUS
+from harness.paths import FMUS
 
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = range(5)
 REFUSED = (FMI2_DISCARD, FMI2_ERROR)
@@ -254,7 +254,7 @@ _listening = False
 def _listen():
     global _listening
     if not _listening:
-        from .component import add_log_listener
+        from harness.engine.component import add_log_listener
         add_log_listener(lambda name, status, category, text: _LOG.setdefault(name, []).append((status, text)))
         _listening = True
 
@@ -267,8 +267,8 @@ class _Slave:
     def __init__(self, fmu: str, fmu_dir: Path):
         import fmpy
         from fmpy.fmi2 import FMU2Slave
-        from .component import log_callbacks
-        from .component import unzipped as extracted
+        from harness.engine.component import log_callbacks
+        from harness.engine.component import unzipped as extracted
 
         path = Path(fmu_dir) / f"{fmu}.fmu"
         if str(path) not in self._descriptions:

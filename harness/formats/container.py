@@ -23,9 +23,9 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-from . import scene as scenes
-from .paths import FMUS
-from .system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
+from harness.description import scene as scenes
+from harness.paths import FMUS
+from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
 
 
 def _container_name(item: str) -> str:

@@ -10,9 +10,9 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import scene as scenes
-from .paths import FMUS
-from .system import fmu_path
+from harness.description import scene as scenes
+from harness.paths import FMUS
+from harness.engine.system import fmu_path
 
 SYSTEM_NAMESPACE = "http://opensimulationplatform.com/MSMI/OSPSystemStructure"
 #: OSP-IS bond groups: kind -> (effort group, flow group)
@@ -113,7 +113,7 @@ def system_structure(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str:
     """The scene as an ``OspSystemStructure.xml`` (FMUs by absolute path, so the file may
     be written anywhere): parameters as initial values, connections flange to flange
     where the FMUs declare ports, variable to variable elsewhere."""
-    from .system import descriptions_for
+    from harness.engine.system import descriptions_for
 
     descriptions = descriptions_for(scene, fmu_dir)
     root = ET.Element("OspSystemStructure", {"xmlns": SYSTEM_NAMESPACE, "version": "0.1"})

@@ -75,11 +75,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import component as harness_component
-from . import scene as scenes
-from .paths import FMUS, ROOT
-from .run import RunResult, recorded_names
-from .system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
+from harness.engine import component as harness_component
+from harness.description import scene as scenes
+from harness.paths import FMUS, ROOT
+from harness.engine.run import RunResult, recorded_names
+from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
 
 PEERS = {
     "fmpy-jacobi": "fixed-step Jacobi on fmpy's FMU2Slave API (getReal/setReal/doStep per call)",
@@ -208,7 +208,7 @@ class _SceneSetup:
         each pair of components joined by a flow one way and an effort the other way:
         the connected ports of the OSP model descriptions, or (FMUs without one) a
         flow unit one way and an effort unit back."""
-        from . import osp
+        from harness.formats import osp
 
         groups = osp.scene_groups(self.scene, self.fmu_dir)
         if any(groups.values()):
@@ -276,7 +276,7 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
             instance = f"{name}@fmpy-jacobi"
             # The harness's process-wide logger routes messages by instance name: keep
             # this peer's, to say in a failure what the FMU said.
-            harness_component._routes[instance] = messages
+            harness_component.route_messages(instance, messages)
             fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped[-1],
                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance)
             fmu.instantiate(callbacks=harness_component.log_callbacks())
@@ -315,7 +315,7 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
                 pass
             fmu.freeInstance()
         for name in setup.order:
-            harness_component._routes.pop(f"{name}@fmpy-jacobi", None)
+            harness_component.unroute(f"{name}@fmpy-jacobi")
     table = np.array(rows, dtype=float).reshape(len(rows), len(setup.record))
     traces = {item: table[:, k].copy() for k, item in enumerate(setup.record)}
     return RunResult(scene, "fmpy-jacobi", step, grid[:len(rows)].copy(), traces, wall,
@@ -341,7 +341,7 @@ def _simulate_fmpy_ssp(setup: _SceneSetup, step: float) -> RunResult:
     from fmpy.ssp.simulation import simulate_ssp
     from fmpy.ssp.ssd import Parameter, ParameterSet
 
-    from . import ssp
+    from harness.formats import ssp
 
     scene, e = setup.scene, setup.scene.experiment
     refused = []
@@ -416,7 +416,7 @@ def _libcosim_preflight(setup: _SceneSetup, peer: str):
 # libcosim runs in a child process: libcosim 0.11 lets an exception escape its worker
 # threads while initialising (std::terminate: an FMU refusing a parameter aborts the
 # whole process), and pythonfmu FMUs can corrupt the heap at interpreter exit.
-_CHILD = "import sys; sys.path.insert(0, sys.argv[1]); from harness.peers import _libcosim_child; " \
+_CHILD = "import sys; sys.path.insert(0, sys.argv[1]); from harness.formats.peers import _libcosim_child; " \
          "_libcosim_child(sys.argv[2], sys.argv[3])"
 
 
@@ -581,7 +581,8 @@ def _execution_from_file(setup: _SceneSetup, step: float, peer: str):
 
     from libcosimpy.CosimExecution import CosimExecution
 
-    from . import osp, ssp
+    from harness.formats import osp
+    from harness.formats import ssp
 
     scene = replace(setup.scene, experiment=replace(setup.scene.experiment, step=step))
     folder = Path(tempfile.mkdtemp(prefix=f"{peer}-"))

@@ -37,8 +37,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import scene as scenes
-from .paths import FMUS, RESOURCES, SCENES
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESOURCES, SCENES
 
 REFERENCE_DIR = RESOURCES / "reference"
 DIGITS = 9
@@ -346,7 +346,7 @@ def scene_grid(scene: scenes.Scene) -> np.ndarray:
 
 
 def generate_scene(scene: scenes.Scene) -> Reference:
-    from . import reference as monolithic
+    from harness.judges import monolithic
 
     if "reference" not in scene.features:
         raise monolithic.ReferenceUnavailable(f"scene '{scene.name}' does not declare the 'reference' feature")
@@ -492,7 +492,7 @@ def run_fmu(name: str, reference: Reference, start_values: dict | None = None, f
 
 def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None = None,
               fmu_dir: Path = FMUS) -> Result:
-    from .run import simulate
+    from harness.engine.run import simulate
 
     run = simulate(scene, master, step, fmu_dir)
     how = f"master {run.master}, step {run.step:g} s, {scene.experiment.start:g}...{scene.experiment.stop:g} s"

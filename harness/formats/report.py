@@ -2,16 +2,14 @@
 in ``results/<scene>/``."""
 from __future__ import annotations
 
-import json
-import math
 import platform
 from pathlib import Path
 
-import numpy as np
-
-from . import metrics
-from .run import RunResult
-from .traces import write as write_traces     # one writer: a streamed and a plain run write the same file
+from harness.description import kinds
+from harness.judges import metrics
+from harness.engine.run import RunResult
+from harness.formats import rectifier_report
+from harness.formats.run_files import fmt, reference_error_lines, write_run
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -46,33 +44,8 @@ def summarize(result: RunResult, reference=None) -> dict:
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
                                     scene, reference.times, reference.traces,
-                                    reference.traces[f"{metrics.roles(scene)[1]}.dissipated_energy"])}
+                                    reference.traces[f"{kinds.roles(scene)[1]}.dissipated_energy"])}
     return summary
-
-
-def reference_error_lines(summary: dict, title: str, scales: str) -> list[str]:
-    """The report's section on the error against the monolithic reference (none without one)."""
-    errs = summary.get("error_vs_reference")
-    if not errs:
-        return []
-    ref = summary["reference"]
-    lines = ["", f"## {title}", "",
-             f"Reference: {ref['method']} ({ref['rhs_evaluations']} right-hand-side evaluations, "
-             f"{ref['wall_time_s']:.2f} s; its own energy residual "
-             f"{ref['energy_balance']['residual_relative']:.1e}).", "",
-             "| signal | RMS error | max error | RMS / scale | max / scale | scale |", "|---|---|---|---|---|---|"]
-    for signal, e in errs.items():
-        lines.append(f"| {signal} | {_fmt(e['rms'])} | {_fmt(e['max'])} | {100 * e['rms_relative']:.3g} % | "
-                     f"{100 * e['max_relative']:.3g} % | {_fmt(e['scale'])} |")
-    return lines + ["", f"Scales: {scales}."]
-
-
-def _fmt(x, digits=4):
-    if x is None:
-        return "-"
-    if isinstance(x, float) and (abs(x) >= 1e4 or (0 < abs(x) < 1e-3)):
-        return f"{x:.{digits - 1}e}"
-    return f"{x:.{digits}g}"
 
 
 def write_report(path: Path, summary: dict):
@@ -94,8 +67,8 @@ def write_report(path: Path, summary: dict):
                   "|---|---|---|---|"]
         for short, s in stats.items():
             if s:
-                lines.append(f"| {short} | {_fmt(s['mean'])} | {_fmt(s['amplitude'])} | "
-                             f"{_fmt(s.get('unevenness'))} |")
+                lines.append(f"| {short} | {fmt(s['mean'])} | {fmt(s['amplitude'])} | "
+                             f"{fmt(s.get('unevenness'))} |")
         lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
                   "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
     lines += reference_error_lines(summary, "Error against the monolithic reference",
@@ -168,35 +141,15 @@ def plot(out: Path, result: RunResult, reference=None):
         plt.close(fig)
 
 
-def write(out: Path, result: RunResult, reference=None) -> dict:
-    from . import freewheel
-    if freewheel.component(result.scene):   # the rectifier scene has a report of its own
-        return freewheel.write(out, result, reference)
+def write_driveline(out: Path, result: RunResult, reference=None) -> dict:
     return write_run(out, result, reference, summarize, write_report, plot)
 
 
-def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots) -> dict:
-    """A run's files in ``out``, with the summary, report and plots of its kind of scene
-    (``summary_of(result, reference)``, ``write_markdown(path, summary)``,
-    ``make_plots(out, result, reference)``): traces.csv (unless the run streamed it while
-    running), reference.csv, summary.json, report.md, the plots (scene feature ``plots``).
-    Returns the summary."""
-    out.mkdir(parents=True, exist_ok=True)
-    if result.stream is None:             # a streamed run wrote its traces while it ran
-        write_traces(out / "traces.csv", result.times, result.traces)
-    if reference is not None:
-        write_traces(out / "reference.csv", reference.times, reference.traces)
-    summary = summary_of(result, reference)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    write_markdown(out / "report.md", summary)
-    if "plots" in result.scene.features and len(result.times) > 1:
-        make_plots(out, result, reference)
-    return summary
+#: the run files' writer of each kind of scene (harness.description.kinds)
+WRITERS = {"driveline": write_driveline, "rectifier": rectifier_report.write}
 
 
-def _json_default(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    return str(x)
+def write(out: Path, result: RunResult, reference=None) -> dict:
+    """A run's files in ``out`` (see ``harness.formats.run_files.write_run``), written by
+    its kind of scene's writer; a scene of no known kind gets the driveline's."""
+    return WRITERS.get(kinds.kind_of(result.scene), write_driveline)(out, result, reference)

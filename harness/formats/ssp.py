@@ -28,9 +28,9 @@ from pathlib import Path
 
 from lever.physics.parameters import UNITS
 
-from . import scene as scenes
-from .paths import FMUS, RESULTS
-from .system import SceneInvalid, descriptions_for, fmu_path
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESULTS
+from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -198,7 +198,7 @@ def unpack(path: Path) -> Path:
     return target
 
 
-def load(path: str | Path) -> scenes.Scene:
+def read_scene(path: str | Path) -> scenes.Scene:
     """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``)."""
     path = Path(path)
     where = unpack(path)

@@ -8,15 +8,12 @@ import numpy as np
 from lever.physics import catalogue
 from lever.physics.parameters import check_all
 
-from . import scene as scenes
+from harness.description import scene as scenes
+from harness.description.kinds import parameters, roles
 
 
 def _trapezoid(y, x):
     return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x))) if len(x) > 1 else 0.0
-
-
-def roles(scene: scenes.Scene) -> tuple[str | None, str | None, str | None]:
-    return tuple(scene.component_of(f) for f in ("EngineShaft", "LeverCoupling", "LoadShaft"))
 
 
 def signals(scene: scenes.Scene) -> dict[str, str]:
@@ -24,20 +21,6 @@ def signals(scene: scenes.Scene) -> dict[str, str]:
     engine, coupling, load = roles(scene)
     return {"w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
             "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12"}
-
-
-def energy_variables(scene: scenes.Scene) -> list[str]:
-    engine, coupling, load = roles(scene)
-    if not (engine and coupling and load):
-        return []
-    return [f"{engine}.w", f"{engine}.engine_work", f"{load}.w", f"{load}.load_work",
-            f"{coupling}.elastic_energy", f"{coupling}.dissipated_power"]
-
-
-def parameters(scene: scenes.Scene, name: str) -> dict:
-    """The parameter values the scene gives component ``name`` (quantities with units
-    converted; the catalogue's defaults are not filled in)."""
-    return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
 
 
 def inertias(scene: scenes.Scene) -> tuple[float, float]:

@@ -4,51 +4,33 @@ tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue
 For the driveline (engine shaft - lever coupling - load shaft) the state is
 ``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
 energy dissipated in the coupling, so the reference's own energy balance is exact up to
-the integrator's tolerance.  Results are cached by a hash of everything they depend on.
+the integrator's tolerance.  Results are cached (harness.judges.solution).  ``solve``
+picks the solver of the scene's kind (``SOLVERS``).
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import time as clock
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from lever.physics import catalogue
 
-from . import metrics
-from . import scene as scenes
-from .paths import RESULTS
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.judges import rectifier
+from harness.judges.solution import Reference, ReferenceUnavailable, cache_path, load_cached, store
 
 RTOL = 1e-10
 ATOL = 1e-10
-CACHE = RESULTS / ".cache"
-
-
-class ReferenceUnavailable(ValueError):
-    pass
-
-
-@dataclass
-class Reference:
-    times: np.ndarray
-    traces: dict[str, np.ndarray]
-    wall_time: float
-    n_rhs: int
-    method: str
-    status: str = "ok"
-    info: dict = field(default_factory=dict)
 
 
 def _roles(scene: scenes.Scene):
-    engine, coupling, load = metrics.roles(scene)
-    if not (engine and coupling and load):
-        raise ReferenceUnavailable(f"scene '{scene.name}': the monolithic reference covers the engine - coupling - "
-                                   "load driveline (EngineShaft, LeverCoupling, LoadShaft)")
-    return engine, coupling, load
+    try:
+        names = kinds.driveline(scene)
+    except kinds.NotADriveline as error:
+        raise ReferenceUnavailable(f"{error}: the monolithic reference has no solver for it") from None
+    return names.engine, names.coupling, names.load
 
 
 def _misalignment_source(scene: scenes.Scene, coupling_name: str):
@@ -59,7 +41,7 @@ def _misalignment_source(scene: scenes.Scene, coupling_name: str):
     if scene.components[driver.source].fmu != "MisalignmentSource" or driver.output != "misalignment":
         raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
                                    f"MisalignmentSource, not from {driver}")
-    return catalogue.misalignment_source_from(metrics.parameters(scene, driver.source))
+    return catalogue.misalignment_source_from(kinds.parameters(scene, driver.source))
 
 
 def _shaft_rates(shaft, t, phi, w, tau):
@@ -75,45 +57,30 @@ def _shaft_rates(shaft, t, phi, w, tau):
     return np.array(a), np.array(external)
 
 
-def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float = RTOL, atol: float = ATOL,
-              method: str = "DOP853") -> str:
-    payload = {
-        "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in sorted(scene.components.items())},
-        "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
-        "rtol": rtol, "atol": atol, "method": method,
-        "physics": _physics_hash(),
-    }
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-def _physics_hash() -> str:
-    root = Path(catalogue.__file__).parent
-    digest = hashlib.sha256()
-    for path in sorted(root.glob("*.py")):
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
 def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
           atol: float = ATOL, method: str = "DOP853") -> Reference:
     """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
     Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
     benchmark compares the masters with."""
-    from . import freewheel
-    if freewheel.component(scene):      # the rectifier scene: its own event-aware reference
-        return freewheel.solve_reference(scene, times, use_cache, rtol, atol, method)
+    solver = SOLVERS.get(kinds.kind_of(scene), solve_driveline)
+    return solver(scene, times, use_cache, rtol, atol, method)
+
+
+def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+                    atol: float = ATOL, method: str = "DOP853") -> Reference:
+    """``solve`` for a driveline scene (engine - coupling - load, a misalignment source perhaps)."""
     engine_name, coupling_name, load_name = _roles(scene)
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
 
-    engine = catalogue.engine_from(metrics.parameters(scene, engine_name))
-    load = catalogue.load_from(metrics.parameters(scene, load_name))
-    coupling_params = metrics.parameters(scene, coupling_name)
+    engine = catalogue.engine_from(kinds.parameters(scene, engine_name))
+    load = catalogue.load_from(kinds.parameters(scene, load_name))
+    coupling_params = kinds.parameters(scene, coupling_name)
     coupling = catalogue.coupling_from(coupling_params)
     misalignment = _misalignment_source(scene, coupling_name)
-    phi1, w1 = catalogue.start_state(metrics.parameters(scene, engine_name), catalogue.ENGINE)
-    phi2, w2 = catalogue.start_state(metrics.parameters(scene, load_name), catalogue.LOAD)
+    phi1, w1 = catalogue.start_state(kinds.parameters(scene, engine_name), catalogue.ENGINE)
+    phi2, w2 = catalogue.start_state(kinds.parameters(scene, load_name), catalogue.LOAD)
     drive_rates, driven_rates = engine.rates, load.rates
 
     if misalignment is not None:
@@ -169,23 +136,6 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     return reference
 
 
-def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
-    return CACHE / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
-
-
-def load_cached(path: Path) -> Reference | None:
-    """A stored reference (its ``info`` as stored, marked cached), or None."""
-    if not path.exists():
-        return None
-    data = np.load(path, allow_pickle=False)
-    meta = json.loads(str(data["meta"]))
-    traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
-    return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
-                     info={**meta.get("info", {}), "cached": True})
-
-
-def store(path: Path, reference: Reference):
-    CACHE.mkdir(parents=True, exist_ok=True)
-    meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
-                       "info": reference.info})
-    np.savez_compressed(path, times=reference.times, meta=np.array(meta), **reference.traces)
+#: the reference solver of each kind of scene (harness.description.kinds); the rectifier
+#: scene has its own event-aware one
+SOLVERS = {"driveline": solve_driveline, "rectifier": rectifier.solve_reference}

@@ -50,16 +50,19 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
+from lever.physics import catalogue
 from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.load import ConstantLoad
+from lever.physics.parameters import check_all
 from lever.physics.shaft import Shaft
 
-from . import masters as master_family
-from . import metrics
-from . import scene as scenes
-from .paths import FMUS
-from .system import System, feedthrough_components
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.description import scene as scenes
+from harness.paths import FMUS
+from harness.engine.interface import RawCalls
+from harness.engine.system import System, feedthrough_components
 
 #: A spectral radius above 1 + this is unstable (rounding of the map stays far below).
 RHO_TOLERANCE = 1e-7
@@ -118,20 +121,12 @@ class TwoInertia:
         return np.linalg.eigvals(a)
 
 
-class NotADriveline(ValueError):
-    """The scene has no engine - coupling - load chain to linearise."""
-
-
 def model_of(scene: scenes.Scene) -> TwoInertia:
     """The two-inertia model of ``scene`` from its parameter values (defaults where the
-    scene sets none)."""
-    from lever.physics import catalogue
-    from lever.physics.parameters import check_all
+    scene sets none); ``kinds.NotADriveline`` for a scene of another kind."""
 
-    roles = metrics.roles(scene)
-    if not all(roles):
-        raise NotADriveline(f"scene '{scene.name}' has no EngineShaft - LeverCoupling - LoadShaft chain")
-    engine, coupling, load = (metrics.parameters(scene, n) for n in roles)
+    names = kinds.driveline(scene)
+    engine, coupling, load = (kinds.parameters(scene, n) for n in (names.engine, names.coupling, names.load))
     drive = check_all(catalogue.ENGINE, engine)
     driven = check_all(catalogue.LOAD, load)
     law = catalogue.coupling_from(coupling)
@@ -164,8 +159,8 @@ def _descriptions(fmu_dir: Path) -> dict:
 
 class _LinearComponent:
     """One component of the stand-in: the FMU's model description, values by value
-    reference, and the calls the masters and ``System`` make (raw ``_get_real``/
-    ``_set_real`` with the C signature included)."""
+    reference, and the interface the masters and ``System`` use
+    (``harness.engine.interface.CoSimComponent``, its raw calls included)."""
 
     def __init__(self, name: str, description):
         self.name = name
@@ -175,9 +170,7 @@ class _LinearComponent:
         self._vr = {v.name: v.valueReference for v in description.modelVariables}
         self.calls = 0
         self.time = 0.0
-        self._handle = None
-        self._get_real = self._get
-        self._set_real = self._set
+        self.raw = RawCalls(None, self._get, self._set, self._raw_step)
 
     def variable(self, name):
         return self.variables[name]
@@ -223,8 +216,16 @@ class _LinearComponent:
         self._advance(t, h)
         self.time = t + h
 
+    def _raw_step(self, handle, t, h, no_set_prior_state):
+        self._advance(t, h)
+        self.time = t + h
+        return 0
+
     def _advance(self, t, h):
         pass
+
+    def fail(self, call, status):
+        raise RuntimeError(f"linear stand-in {self.name}: {call} returned status {status}")
 
     def save_state(self):
         return dict(self.values)
@@ -535,7 +536,7 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
         return None
     try:
         model = model_of(scene)
-    except NotADriveline:
+    except kinds.NotADriveline:
         return None
     rho = spectral_radius(model, master, step, fmu_dir)
     if is_stable(rho):
@@ -565,3 +566,12 @@ def advise(scene: scenes.Scene, master: str | None = None, step: float | None = 
     if assessment is None or assessment.stable:
         return []
     return [assessment.finding()]
+
+
+def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS) -> list[str]:
+    """``advise`` for a run about to start: advice must never stop a run, so a scene the
+    analysis cannot read gets a finding saying so instead of an exception."""
+    try:
+        return advise(scene, master, step, fmu_dir)
+    except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
+        return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]

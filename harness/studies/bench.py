@@ -25,13 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
-from . import masters as master_family
-from . import metrics, reference
-from .cases import FAILED, CaseLog, case_key
-from . import scene as scenes
-from .paths import FMUS, RESULTS
-from .run import RunResult, recorded_names, simulate
-from .system import System
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESULTS
+from harness.engine.run import RunResult, recorded_names, simulate
+from harness.engine.system import System
 
 
 @dataclass
@@ -111,7 +113,7 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
             for measure in ("rms", "max"):
                 case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
                                                                e[f"{kind}2"][f"{measure}_relative"])
-    if all(n in traces for n in metrics.energy_variables(scene)):
+    if all(n in traces for n in kinds.energy_variables(scene)):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
 
@@ -145,7 +147,7 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
 
 
 def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
-    from . import peers
+    from harness.formats import peers
     case = Case(name, "peer", step, tolerance)
     reason = peers.available(name)
     if reason:
@@ -179,16 +181,16 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
     try:
         system.initialize()
         order = [system.components[n] for n in system.order]
-        stepping = [(c._do_step, c._handle) for c in order]
+        stepping = [(c.raw.do_step, c.raw.handle) for c in order]
         moves = []
         for name in system.order:
             c = system.components[name]
             vrs, values = system.buffers[name]
-            moves.append((c._get_real, c._handle, vrs, len(vrs), values,
-                          [(t._set_real, t._handle, t_vrs, len(t_vrs), t_values)
+            moves.append((c.raw.get_real, c.raw.handle, vrs, len(vrs), values,
+                          [(t.raw.set_real, t.raw.handle, t_vrs, len(t_vrs), t_values)
                            for t, t_vrs, t_values, _ in system.writes[name]]))
         rereads = [(get_real, handle, vrs, n, values)
-                   for _, get_real, handle, vrs, n, values, _, _ in system._dependent_reads]
+                   for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
         h = scene.experiment.step
         t = scene.experiment.start
         started = clock.perf_counter()
@@ -294,7 +296,7 @@ def eigenfrequency(scene: scenes.Scene) -> float | None:
     if coupling is None:
         return None
     i1, i2 = metrics.inertias(scene)
-    return catalogue.coupling_from(metrics.parameters(scene, coupling)).eigen_estimate(i1, i2)[0]
+    return catalogue.coupling_from(kinds.parameters(scene, coupling)).eigen_estimate(i1, i2)[0]
 
 
 def _line(case: Case) -> str:

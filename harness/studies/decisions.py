@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import metrics
-from . import scene as scenes
-from .run import simulate
+from harness.judges import metrics
+from harness.description import scene as scenes
+from harness.engine.run import simulate
 
 # What the monograph reports at alpha = 15 deg (section 3.3, Fig. 3.15): load point ->
 # {signal: amplitude}.  Units rad/s, rad/s^2, N*m.

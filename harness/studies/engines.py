@@ -15,10 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics, peers, reference
-from . import scene as scenes
-from .paths import FMUS, RESULTS
-from .run import RunResult, recorded_names, simulate
+from harness.judges import metrics
+from harness.formats import peers
+from harness.judges import monolithic as reference
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESULTS
+from harness.engine.run import RunResult, recorded_names, simulate
 
 #: engine -> (what runs, how its master errs)
 ENGINES = {
@@ -56,7 +58,7 @@ def _run_container(scene: scenes.Scene, step: float, fmu_dir: Path) -> RunResult
 
     import fmpy
 
-    from .container import _container_name, build_container
+    from harness.formats.container import _container_name, build_container
 
     e = scene.experiment
     names = recorded_names(scene)

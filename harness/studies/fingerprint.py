@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import masters as master_family
-from . import scene as scenes
-from .paths import FMUS, SCENES
-from .run import simulate
+from harness.engine import masters as master_family
+from harness.description import scene as scenes
+from harness.paths import FMUS, SCENES
+from harness.engine.run import simulate
 
 
 def trace_hash(times: np.ndarray, traces: dict[str, np.ndarray], failure: str | None) -> str:
@@ -48,5 +48,5 @@ def fingerprints(names: list[str] | None = None, masters: list[str] | None = Non
     for name in names:
         scene = shortened(scenes.load(name), stop)
         for master in masters:
-            result = simulate(scene, master, fmu_dir=scene.fmu_dir or fmu_dir, advise=False)
+            result = simulate(scene, master, fmu_dir=scene.fmu_dir or fmu_dir)
             yield name, master, len(result.times), trace_hash(result.times, result.traces, result.failure)

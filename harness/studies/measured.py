@@ -44,7 +44,6 @@ and listed in every report.  What is compared, per grade:
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
 import re
@@ -56,11 +55,12 @@ import numpy as np
 from lever.physics import catalogue
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.kinematics import TransferFunction
-from lever.physics.load import fourier_from_samples
 from lever.physics.parameters import ParameterError
 
-from . import scene as scenes
-from .paths import DATA, RESULTS
+from harness.description import scene as scenes
+from harness.description.tables import (MeasuredDataError, Table, cycle_of, load_series,
+                                        read_table)
+from harness.paths import DATA, RESULTS
 
 #: The monograph's stated model-experiment difference (Fig. 4.8): 6.5-8.5 %.  A grade
 #: passes when the prediction's relative RMS error is at or below the upper end.
@@ -93,74 +93,6 @@ READINGS = {
 }
 DEFAULT_READING = "transmitted"
 
-_STIFFNESS = re.compile(r"stiffness[^:\n]*:\s*([0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?)\s*N\s*[*.]?\s*m\s*/\s*rad",
-                        re.IGNORECASE)
-_NAME = re.compile(r"torque_(drive|driven)_(.+)\.csv$", re.IGNORECASE)
-
-
-class MeasuredDataError(ValueError):
-    """A measurement file that cannot be read as the format above."""
-
-
-@dataclass
-class Table:
-    """One shaft's measured torque: ``cycles[k, i]`` at ``angles_deg[i]`` [N*m]."""
-    path: Path
-    shaft: str                     # "drive" or "driven"
-    grade: str
-    angles_deg: np.ndarray
-    cycles: np.ndarray
-    stiffness: float | None        # N*m/rad, when the file states it
-
-    @property
-    def mean_curve(self) -> np.ndarray:
-        return self.cycles.mean(axis=0)
-
-
-def read_table(path: Path | str) -> Table:
-    path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as error:
-        raise MeasuredDataError(f"{path}: cannot read ({error.strerror})") from None
-    comments = "\n".join(line.lstrip("# ") for line in lines if line.lstrip().startswith("#"))
-    rows = list(csv.DictReader(line for line in lines if line.strip() and not line.lstrip().startswith("#")))
-    if not rows:
-        raise MeasuredDataError(f"{path}: no table rows")
-    columns = [c for c in rows[0] if c and c.strip().startswith("cycle_")]
-    if "angle_deg" not in rows[0] or not columns:
-        raise MeasuredDataError(f"{path}: expected columns angle_deg and cycle_1, cycle_2, ... "
-                                f"(found {', '.join(c for c in rows[0] if c)})")
-    try:
-        angles = np.array([float(r["angle_deg"]) for r in rows])
-        cycles = np.array([[float(r[c]) for r in rows] for c in sorted(columns, key=_cycle_number)])
-    except (TypeError, ValueError) as error:
-        raise MeasuredDataError(f"{path}: a value is not a number ({error})") from None
-    spacing = 360.0 / len(angles)
-    if len(angles) < 4 or not np.allclose(angles, np.arange(len(angles)) * spacing, atol=1e-6):
-        raise MeasuredDataError(f"{path}: angle_deg must run 0, {spacing:g}, ... in equal steps over one "
-                                f"revolution (at least 4 ordinates), got {angles.tolist()}")
-    if not np.all(np.isfinite(cycles)):
-        raise MeasuredDataError(f"{path}: non-finite torque values")
-    name = _NAME.search(path.name)
-    text = comments.lower()
-    if name:
-        shaft, grade = name.group(1).lower(), name.group(2)
-    elif "driven shaft" in text or "drive shaft" in text:
-        shaft = "driven" if "driven shaft" in text else "drive"
-        grade = path.stem
-    else:
-        raise MeasuredDataError(f"{path}: cannot tell the shaft: name the file torque_drive_<grade>.csv or "
-                                "torque_driven_<grade>.csv, or say 'drive shaft'/'driven shaft' in a # line")
-    match = _STIFFNESS.search(comments)
-    return Table(path, shaft, grade, angles, cycles, float(match.group(1)) if match else None)
-
-
-def _cycle_number(column: str) -> int:
-    try:
-        return int(column.strip().split("_", 1)[1])
-    except ValueError:
-        return 10 ** 6
 
 
 def pair_tables(files) -> tuple[list[tuple[Table, Table]], list[str]]:
@@ -340,31 +272,6 @@ def scene_for(drive: Table, driven: Table, conditions: Conditions, cycle: int | 
                    description=f"grade {drive.grade}, driven torque of cycle {cycle}")
 
 
-def load_series(table: Table, cycle: int | str = "mean"):
-    """The series (4.4) through a table's cycle (1-based) or through the mean of its cycles."""
-    return fourier_from_samples(cycle_of(table, cycle))
-
-
-def cycle_of(table: Table, cycle: int | str = "mean") -> np.ndarray:
-    """A table's ordinates of one cycle (1-based) or the mean of its cycles."""
-    if cycle == "mean":
-        return table.mean_curve
-    k = int(cycle)
-    if not 1 <= k <= len(table.cycles):
-        raise MeasuredDataError(f"{table.path}: no cycle {k} (it has {len(table.cycles)})")
-    return table.cycles[k - 1]
-
-
-def samples_parameter(value: dict, name: str) -> str:
-    """A scene's ``fourier = {samples = "<table>.csv", cycle = "mean"}``: the load series
-    through a measured table's ordinates (path relative to resources/data)."""
-    path = DATA / value["samples"]
-    try:
-        return load_series(read_table(path), value.get("cycle", "mean")).to_text()
-    except MeasuredDataError as error:
-        raise scenes.SceneError(f"{name}: {error}") from None
-
-
 # ----------------------------------------------------------------------------------------
 # Prediction and comparison
 
@@ -403,7 +310,7 @@ def predict(scene: scenes.Scene, angles_deg: np.ndarray) -> Prediction:
     """The brake reading: run the scene and read the drive-shaft torque (the torque the
     drive shaft transmits to the coupling, -tau1) over its last full revolution of the
     driven shaft."""
-    from .run import simulate
+    from harness.engine.run import simulate
 
     result = simulate(scene)
     if not result.ok:

@@ -37,12 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import masters as master_family
-from . import metrics
-from . import scene as scenes
-from . import stability
-from .cases import FAILED, CaseLog, case_key
-from .paths import FMUS, RESULTS
+from harness.engine import masters as master_family
+from harness.judges import metrics
+from harness.description import scene as scenes
+from harness.judges import stability
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
 GROWTH_DRIFT = 1.25
@@ -208,7 +208,7 @@ def unstable(result: dict) -> bool:
 
 def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) -> dict:
     """Run one case on the FMUs and classify it (an exception is the caller's to record)."""
-    from .run import simulate
+    from harness.engine.run import simulate
 
     coupling = scene.component_of("LeverCoupling")
     spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
@@ -218,7 +218,7 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     spec = replace(spec, experiment=replace(spec.experiment, start=0.0, stop=n * step, transient=0.0),
                    features=set(spec.features) | {"energy_balance"})
     started = clock.perf_counter()
-    result = simulate(spec, case.master, step, fmu_dir=fmu_dir, advise=False)
+    result = simulate(spec, case.master, step, fmu_dir=fmu_dir)
     wall = clock.perf_counter() - started
     tau = result.traces.get(metrics.signals(spec)["tau2"], np.empty(0))
     growth = amplitude_growth(tau)

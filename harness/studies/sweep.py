@@ -21,10 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics
-from . import scene as scenes
-from .cases import FAILED, CaseLog, case_key
-from .paths import DATA, FMUS, RESULTS
+from harness.judges import metrics
+from harness.judges.solution import physics_hash
+from harness.description import scene as scenes
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.paths import DATA, FMUS, RESULTS
 
 SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
 
@@ -100,7 +101,7 @@ def default_axes() -> list[Axis]:
 def measured_amplitudes() -> dict:
     """A of the measured mean drive and driven torque curves per grade, from the data
     files (for the Fig. 4.8 overlay): {"A_tau1": [(c, A)], "A_tau2": [...]}."""
-    from .measured import amplitude, pair_tables
+    from harness.studies.measured import amplitude, pair_tables
 
     pairs, _ = pair_tables([DATA / "monograph"])
     out = {"A_tau1": [], "A_tau2": []}
@@ -118,7 +119,7 @@ def measured_amplitudes() -> dict:
 def run_case(case: dict) -> dict:
     """Simulate one case and return its statistics, or its failure with a diagnosis.
     Never raises: a worker's exception would lose the diagnosis on the way back."""
-    from .run import simulate
+    from harness.engine.run import simulate
 
     started = clock.perf_counter()
     try:
@@ -172,7 +173,7 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
     for case in cases:
         spec.with_overrides(case["overrides"])
     fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
-                   "extra": list(extra or []), "physics": _physics_version()}
+                   "extra": list(extra or []), "physics": physics_hash()}
     log = CaseLog(out, fingerprint, resume=resume)
     pending = [c for c in cases if c["key"] not in log]
     pending = list({c["key"]: c for c in pending}.values())         # one run per distinct case
@@ -193,11 +194,6 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
     write(out, axes, report)
     return report
-
-
-def _physics_version() -> str:
-    from .reference import _physics_hash
-    return _physics_hash()
 
 
 def _bar(total, done, dask):
