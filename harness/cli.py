@@ -51,6 +51,16 @@ def _scene(name: str, assignments=()) -> scenes.Scene:
         raise UserError(str(error)) from None
 
 
+def _check_masters(*names: str):
+    """End the command with exit code 2 when one of ``names`` is not a master."""
+    from harness.engine import masters as family
+
+    try:
+        family.check(*names)
+    except family.UnknownMaster as error:
+        raise UserError(str(error)) from None
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 def main():
     """Co-simulation of lever-articulated drive-shaft couplings (FMI 2.0, fmpy)."""
@@ -106,8 +116,7 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
 
     spec = _scene(scene, assignments)
     chosen = master or spec.experiment.master
-    if chosen not in family.MASTERS:
-        raise UserError(f"master '{chosen}' is unknown (known: {', '.join(family.MASTERS)})")
+    _check_masters(chosen)
     if step is not None and not (math.isfinite(step) and step > 0):
         raise UserError(f"--step {step}: the communication step must be > 0 s")
     options = {}
@@ -618,14 +627,13 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
                 raise UserError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
             result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
         else:
-            from harness.engine import masters as family
             from harness.engine.system import SceneInvalid
             try:
                 spec = scenes.load(name).with_overrides(list(assignments))
             except scenes.SceneError as error:
                 raise UserError(str(error)) from None
-            if master and master not in family.MASTERS:
-                raise UserError(f"master '{master}' is unknown (known: {', '.join(family.MASTERS)})")
+            if master:
+                _check_masters(master)
             try:
                 result = crosscheck.run_scene(spec, master, step)
             except SceneInvalid as error:
@@ -666,12 +674,9 @@ def fingerprint_command(names, masters, stop):
     """Print a SHA-256 of the traces of every committed scene (or SCENES) run with every
     master: `lever fingerprint > before.txt`, change the code, run it again and `diff`
     - a refactor that keeps behaviour leaves every line the same, bit for bit."""
-    from harness.engine import masters as family
     from harness.studies.fingerprint import fingerprints
 
-    unknown = [m for m in masters if m not in family.MASTERS]
-    if unknown:
-        raise UserError(f"master '{', '.join(unknown)}' is unknown (known: {', '.join(family.MASTERS)})")
+    _check_masters(*masters)
     if not (math.isfinite(stop) and stop >= 0):
         raise UserError(f"--stop {stop}: must be >= 0 s (0: each scene's own length)")
     ensure_fmus(quiet=True)

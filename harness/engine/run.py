@@ -144,8 +144,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     master = master or e.master
     step = float(step or e.step)
     options = dict(options or {})
-    if master not in master_family.MASTERS:
-        raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
+    master_family.check(master)
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)

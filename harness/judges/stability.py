@@ -309,8 +309,7 @@ class LinearDriveline(System):
 # -- one-step maps -------------------------------------------------------------------------------
 
 def fixed_step_master(master: str) -> str:
-    if master not in master_family.MASTERS:
-        raise ValueError(f"unknown master '{master}' (known: {', '.join(master_family.MASTERS)})")
+    master_family.check(master)
     return FIXED_STEP_EQUIVALENT.get(master, master)
 
 

@@ -76,13 +76,12 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
     tolerances = {name: [float(x) for x in values] for name, values in table.get("tolerances", {}).items()}
     if not steps and not tolerances:
         steps = {name: [scene.experiment.step] for name, m in master_family.MASTERS.items() if not m.adaptive}
-    unknown = [n for n in list(steps) + list(tolerances) if n not in master_family.MASTERS]
-    if unknown:
-        raise ValueError(f"scene '{scene.name}' [bench]: unknown master(s) {', '.join(unknown)}")
+    try:
+        master_family.check(*steps, *tolerances)
+    except master_family.UnknownMaster as error:
+        raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
     if only:
-        unknown = [n for n in only if n not in master_family.MASTERS]
-        if unknown:
-            raise ValueError(f"unknown master(s) {', '.join(unknown)} (known: {', '.join(master_family.MASTERS)})")
+        master_family.check(*only)
         steps = {k: v for k, v in steps.items() if k in only}
         tolerances = {k: v for k, v in tolerances.items() if k in only}
     return {
