@@ -181,16 +181,65 @@ def resolve(name_or_path: str | Path) -> Path:
     raise SceneError(f"no scene '{name_or_path}' (a .toml path or one of: {known})")
 
 
-def load(name_or_path: str | Path) -> Scene:
-    """A scene by name (resources/scenes) or from a .toml file."""
-    if str(name_or_path).endswith(".ssp"):
-        raise SceneError(f"{name_or_path}: an SSP archive - read it with harness.formats.ssp.read_scene "
-                         "(the lever commands take one as SCENE)")
-    path = resolve(name_or_path)
+#: what a variant (``extends = "base"``) does not take from its base: its identity
+OWN = ("name", "description", "extends")
+#: tables a variant merges key by key into its base's (components: each one's ``fmu`` and
+#: ``parameters``); any other table or value a variant states replaces its base's whole
+#: (an empty ``[bench]`` says: no benchmark plan)
+MERGED = ("experiment", "limits")
+
+
+def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
+    """The TOML table of the scene file ``path``, with what it inherits when it names a
+    base scene (``extends = "kavz685"``: a scene beside it or in resources/scenes, or a
+    .toml path relative to it) and states only what differs."""
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: {error}") from None
+    base_name = data.get("extends")
+    if base_name is None:
+        return data
+    if not isinstance(base_name, str) or not base_name:
+        raise SceneError(f"{path}: extends = {base_name!r}: expected the name or .toml path of a scene")
+    beside = path.parent / (base_name if base_name.endswith(".toml") else f"{base_name}.toml")
+    base_path = (beside if beside.exists() else resolve(base_name)).resolve()
+    chain = extending + (path.resolve(),)
+    if base_path in chain:
+        raise SceneError(f"{path}: extends {base_name}, which extends it back "
+                         f"({' -> '.join(p.stem for p in chain + (base_path,))})")
+    return extend(read_data(base_path, chain), data)
+
+
+def extend(base: dict, variant: dict) -> dict:
+    """The scene table of ``variant`` on top of ``base`` (see ``OWN`` and ``MERGED``)."""
+    merged = {key: value for key, value in base.items() if key not in OWN}
+    for key, value in variant.items():
+        if key == "extends":
+            continue
+        if key in MERGED:
+            merged[key] = {**base.get(key, {}), **value}
+        elif key == "components":
+            components = {name: {**spec, "parameters": dict(spec.get("parameters", {}))}
+                          for name, spec in base.get("components", {}).items()}
+            for name, spec in value.items():
+                old = components.get(name, {})
+                components[name] = {**old, **spec,
+                                    "parameters": {**old.get("parameters", {}), **spec.get("parameters", {})}}
+            merged[key] = components
+        else:
+            merged[key] = value
+    return merged
+
+
+def load(name_or_path: str | Path) -> Scene:
+    """A scene by name (resources/scenes) or from a .toml file (a variant with what it
+    takes from its base, ``read_data``)."""
+    if str(name_or_path).endswith(".ssp"):
+        raise SceneError(f"{name_or_path}: an SSP archive - read it with harness.formats.ssp.read_scene "
+                         "(the lever commands take one as SCENE)")
+    path = resolve(name_or_path)
+    data = read_data(path)
     try:
         components = {name: ComponentSpec(spec["fmu"], dict(spec.get("parameters", {})))
                       for name, spec in data["components"].items()}
