@@ -1,6 +1,7 @@
 """The ``lever`` command line."""
 from __future__ import annotations
 
+import copy
 import importlib.util
 import math
 import os
@@ -461,9 +462,9 @@ def export_container(scene, assignments, out):
     _export(scene, assignments, out, "container", "fmu", container.build_container)
 
 
-@main.command()
+@main.command("compliance")
 @click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
-def check(fmus):
+def compliance_command(fmus):
     """Compliance checks on FMU files (default: the built ones): fmpy's validation plus
     ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
     when there are findings."""
@@ -504,7 +505,7 @@ def reference_command(names, update):
             click.echo(f"{name}: no reference ({error})")
             continue
         try:
-            committed = crosscheck.load(name)
+            committed = crosscheck.read(name)
         except crosscheck.TraceFileError:
             committed = None
         diff = crosscheck.difference(committed, fresh)
@@ -613,7 +614,7 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
     all_passed = True
     for name in chosen:
         try:
-            ref = crosscheck.load(name)
+            ref = crosscheck.read(name)
         except crosscheck.TraceFileError as error:
             raise UserError(str(error)) from None
         if result_csv is not None:
@@ -690,7 +691,7 @@ def fingerprint_command(names, masters, stop):
 @main.command("badinputs")
 @click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
 def bad_inputs(verbose):
-    """Run the bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built
+    """Run the bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave on the built
     FMUs: every case must be refused with an FMI error naming the variable and its range."""
     from harness.formats import badinputs
 
@@ -702,6 +703,18 @@ def bad_inputs(verbose):
     click.echo(badinputs.summary(outcomes))
     if not all(o.passed for o in outcomes):
         sys.exit(1)
+
+
+def _alias(name: str, command: click.Command):
+    """``lever NAME``: an older name of ``command``, kept so scripts that use it go on working."""
+    alias = copy.copy(command)
+    alias.name = name
+    alias.help = f"The older name of `lever {command.name}`.\n\n" + (command.help or "")
+    alias.short_help = f"older name of `lever {command.name}`"
+    main.add_command(alias, name)
+
+
+_alias("check", compliance_command)
 
 
 def entry():

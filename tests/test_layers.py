@@ -129,3 +129,12 @@ def test_the_physics_never_imports_the_harness():
     offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "fmu_src").rglob("*.py")
                  if re.search(r"^\s*(from|import)\s+harness\b", p.read_text(), re.M)]
     assert offenders == []
+
+
+def test_the_cli_keeps_every_command_and_the_older_names():
+    from harness.cli import main
+
+    before_the_layers = {"badinputs", "bench", "build", "check", "engines", "export-container", "export-ssp",
+                         "measured", "reference", "run", "scenes", "stability", "study", "sweep", "validate"}
+    assert before_the_layers <= set(main.commands)
+    assert main.commands["check"].callback is main.commands["compliance"].callback

@@ -135,7 +135,7 @@ def read_opt(path: Path) -> Options:
 
 
 @dataclass
-class Reference:
+class ReferenceTraces:
     """One name's reference: its outputs, options and (FMUs) inputs."""
     name: str
     kind: str                       # "fmu" or "scene"
@@ -150,7 +150,7 @@ def paths(name: str, root: Path | None = None) -> dict[str, Path]:
     return {"in": folder / f"{name}_in.csv", "ref": folder / f"{name}_ref.csv", "opt": folder / f"{name}_ref.opt"}
 
 
-def write(reference: Reference, root: Path | None = None) -> list[Path]:
+def write(reference: ReferenceTraces, root: Path | None = None) -> list[Path]:
     p = paths(reference.name, root)
     written = []
     if reference.inputs is not None:
@@ -161,13 +161,13 @@ def write(reference: Reference, root: Path | None = None) -> list[Path]:
     return written + [p["ref"], p["opt"]]
 
 
-def load(name: str, root: Path | None = None) -> Reference:
+def read(name: str, root: Path | None = None) -> ReferenceTraces:
     p = paths(name, root)
     if not p["ref"].exists():
         raise TraceFileError(f"no committed reference for '{name}' ({p['ref']} is missing; "
                              f"`lever reference --update {name}` makes it)")
     inputs = read_csv(p["in"]) if p["in"].exists() else None
-    return Reference(name, "fmu" if name in FMU_CASES else "scene", read_csv(p["ref"]), read_opt(p["opt"]), inputs)
+    return ReferenceTraces(name, "fmu" if name in FMU_CASES else "scene", read_csv(p["ref"]), read_opt(p["opt"]), inputs)
 
 
 def rounded(traces: Traces) -> Traces:
@@ -325,10 +325,10 @@ FMU_CASES = {
 }
 
 
-def generate_fmu(name: str) -> Reference:
+def generate_fmu(name: str) -> ReferenceTraces:
     case = FMU_CASES[name]
     t = case.grid()
-    return Reference(name, "fmu", Traces(t, case.exact(t)), Options(case.step, case.start, case.stop, RTOL),
+    return ReferenceTraces(name, "fmu", Traces(t, case.exact(t)), Options(case.step, case.start, case.stop, RTOL),
                      case.input_traces(), case.description)
 
 
@@ -345,7 +345,7 @@ def scene_grid(scene: scenes.Scene) -> np.ndarray:
     return np.minimum(e.start + points * e.step, e.stop)
 
 
-def generate_scene(scene: scenes.Scene) -> Reference:
+def generate_scene(scene: scenes.Scene) -> ReferenceTraces:
     from harness.judges import monolithic
 
     if "reference" not in scene.features:
@@ -361,7 +361,7 @@ def generate_scene(scene: scenes.Scene) -> Reference:
         raise monolithic.ReferenceUnavailable(f"scene '{scene.name}': the reference does not compute "
                                               + ", ".join(left_out))
     e = scene.experiment
-    return Reference(scene.name, "scene", Traces(solved.times, signals), Options(e.step, e.start, e.stop, RTOL),
+    return ReferenceTraces(scene.name, "scene", Traces(solved.times, signals), Options(e.step, e.start, e.stop, RTOL),
                      None, scene.description)
 
 
@@ -382,7 +382,7 @@ def all_names() -> list[str]:
     return list(FMU_CASES) + scene_names()
 
 
-def generate(name: str) -> Reference:
+def generate(name: str) -> ReferenceTraces:
     if name in FMU_CASES:
         return generate_fmu(name)
     return generate_scene(scenes.load(name))
@@ -434,7 +434,7 @@ def _diff_traces(label: str, old: Traces, new: Traces, diff: Difference):
         diff.changes.append(Change(prefix + name, float(delta[i]), float(delta[i]) / scale, float(new.times[i])))
 
 
-def difference(committed: Reference | None, fresh: Reference) -> Difference:
+def difference(committed: ReferenceTraces | None, fresh: ReferenceTraces) -> Difference:
     """What changes from the committed reference to the freshly generated one (compared as
     the files store it, 9 significant digits)."""
     diff = Difference(fresh.name)
@@ -465,7 +465,7 @@ class Result:
     failure: str | None = None
 
 
-def run_fmu(name: str, reference: Reference, start_values: dict | None = None, fmu_dir: Path = FMUS) -> Result:
+def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None, fmu_dir: Path = FMUS) -> Result:
     """The FMU stand-alone under fmpy's ``simulate_fmu``, driven by the reference's inputs,
     at the ``_ref.opt`` step, recording at every communication point."""
     from fmpy import simulate_fmu
@@ -502,7 +502,7 @@ def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None
 
 # -- writing a validation's results -----------------------------------------------------------
 
-def write_validation(out: Path, findings, bands: dict, result: Result, reference: Reference,
+def write_validation(out: Path, findings, bands: dict, result: Result, reference: ReferenceTraces,
                      write_result: bool = True) -> list[Path]:
     """``validation.json``, the result as ``<NAME>_out.csv`` (cross-check naming; unless
     ``write_result`` is false) and one plot per failing signal with its band, in ``out``."""
@@ -529,7 +529,7 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
     return written
 
 
-def plot_signal(out: Path, reference: Reference, result: Result, finding, band, tolerance) -> Path:
+def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
     """The reference, its band, the result and the samples outside the band: the whole span
     above, a close-up around the first sample outside below."""
     import matplotlib

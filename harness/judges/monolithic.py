@@ -19,7 +19,7 @@ from lever.physics import catalogue
 from harness.description import kinds
 from harness.description import scene as scenes
 from harness.judges import rectifier
-from harness.judges.solution import Reference, ReferenceUnavailable, cache_path, load_cached, store
+from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
 RTOL = 1e-10
 ATOL = 1e-10
@@ -58,7 +58,7 @@ def _shaft_rates(shaft, t, phi, w, tau):
 
 
 def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
-          atol: float = ATOL, method: str = "DOP853") -> Reference:
+          atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
     """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
     Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
     benchmark compares the masters with."""
@@ -67,7 +67,7 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
 
 
 def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
-                    atol: float = ATOL, method: str = "DOP853") -> Reference:
+                    atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
     """``solve`` for a driveline scene (engine - coupling - load, a misalignment source perhaps)."""
     engine_name, coupling_name, load_name = _roles(scene)
     path = cache_path(scene, times, rtol, atol, method)
@@ -130,7 +130,7 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         source = next(c.source for c in scene.connections if c.target == coupling_name and c.input == "misalignment")
         traces[f"{source}.misalignment"] = np.array([misalignment.value(x) for x in t])
         traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
-    reference = Reference(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
+    reference = MonolithicSolution(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
         store(path, reference)
     return reference

@@ -21,7 +21,7 @@ from lever.physics.freewheel import EVENTS, N_EDGES
 
 from harness.description import kinds
 from harness.description import scene as scenes
-from harness.judges.solution import Reference, ReferenceUnavailable, cache_path, load_cached, store
+from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
 FMU = "FreewheelRectifier"
 RTOL = 1e-10
@@ -50,7 +50,7 @@ def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     # ``events`` counts the events the integrator located: bookkeeping of each solver, not
     # a signal a co-simulation could match (the reference's own count is in ``info``).
     traces = {f"{name}.{k}": np.array([r[k] for r in rows]) for k in rows[0] if k != "events"}
-    reference = Reference(np.asarray(times, dtype=float)[:len(rows)], traces, wall, n_rhs,
+    reference = MonolithicSolution(np.asarray(times, dtype=float)[:len(rows)], traces, wall, n_rhs,
                           f"{method} rtol={rtol:g} atol={atol:g}, restarted at {len(events)} located events",
                           info={"events": len(events), "bookkeeping": [f"{name}.events"]})
     if use_cache:

@@ -24,7 +24,7 @@ class ReferenceUnavailable(ValueError):
 
 
 @dataclass
-class Reference:
+class MonolithicSolution:
     times: np.ndarray
     traces: dict[str, np.ndarray]
     wall_time: float
@@ -56,18 +56,18 @@ def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
     return CACHE / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
 
 
-def load_cached(path: Path) -> Reference | None:
+def load_cached(path: Path) -> MonolithicSolution | None:
     """A stored reference (its ``info`` as stored, marked cached), or None."""
     if not path.exists():
         return None
     data = np.load(path, allow_pickle=False)
     meta = json.loads(str(data["meta"]))
     traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
-    return Reference(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
+    return MonolithicSolution(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
                      info={**meta.get("info", {}), "cached": True})
 
 
-def store(path: Path, reference: Reference):
+def store(path: Path, reference: MonolithicSolution):
     CACHE.mkdir(parents=True, exist_ok=True)
     meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
                        "info": reference.info})
