@@ -118,8 +118,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     spec = _scene(scene, assignments)
     chosen = master or spec.experiment.master
     _check_masters(chosen)
-    if step is not None and not (math.isfinite(step) and step > 0):
-        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    if step is not None and (problem := scenes.step_problem(step, "--step")):
+        raise UserError(problem)
     options = {}
     if tolerance is not None:
         if "tolerance" not in family.MASTERS[chosen].options:
@@ -603,8 +603,8 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
     if result_csv is not None and len(chosen) != 1:
         raise UserError("--result: name exactly one reference the CSV is to be compared with "
                         "(e.g. lever validate --result run.csv kavz685)")
-    if step is not None and not (math.isfinite(step) and step > 0):
-        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    if step is not None and (problem := scenes.step_problem(step, "--step")):
+        raise UserError(problem)
     tol = judge.TOLERANCES[tolerance]
     if result_csv is None:
         try:

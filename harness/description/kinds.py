@@ -76,6 +76,12 @@ def energy_variables(scene: scenes.Scene) -> list[str]:
             f"{coupling}.elastic_energy", f"{coupling}.dissipated_power"]
 
 
+def rectifier_model(scene: scenes.Scene):
+    """The freewheel rectifier's physics object from the scene's values (the scene must
+    have one: ``rectifier``)."""
+    return catalogue.freewheel_from(parameters(scene, rectifier(scene)))
+
+
 @dataclass(frozen=True)
 class DrivelinePhysics:
     """A driveline scene's physics objects, as its FMUs build them (lever.physics.catalogue)."""

@@ -304,18 +304,30 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             findings.append(f"record '{item}': no component '{comp}'")
         elif comp in variables and var not in variables[comp]:
             findings.append(f"record '{item}': {comp} has no variable '{var}'")
-    e = scene.experiment
-    if not (math.isfinite(e.step) and e.step > 0):
-        findings.append(f"experiment.step = {e.step} must be > 0 s")
+    findings += experiment_findings(scene.experiment)
+    findings += _check_limits(scene.limits)
+    for feature in scene.features - set(FEATURES):
+        findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
+    return findings
+
+
+def step_problem(step: float, label: str = "experiment.step") -> str | None:
+    """The one check of a communication step (a scene's, ``--step``, a master's): finite
+    and > 0 s.  None when it is."""
+    if not (math.isfinite(step) and step > 0):
+        return f"{label} = {step} must be > 0 s"
+    return None
+
+
+def experiment_findings(e: Experiment) -> list[str]:
+    """Findings about an experiment's values (empty when they are sound)."""
+    findings = [problem for problem in [step_problem(e.step)] if problem]
     if not (math.isfinite(e.stop) and e.stop > e.start):
         findings.append(f"experiment.stop = {e.stop} must be > experiment.start = {e.start} s")
     elif e.step > e.stop - e.start:
         findings.append(f"experiment.step = {e.step} s is longer than the experiment ({e.stop - e.start} s)")
     if not 0.0 <= e.transient < e.stop - e.start:
         findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
-    findings += _check_limits(scene.limits)
-    for feature in scene.features - set(FEATURES):
-        findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
     return findings
 
 

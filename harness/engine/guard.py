@@ -74,10 +74,10 @@ def load_range(load) -> tuple[float, float]:
     raise TypeError(f"unknown load model {type(load).__name__}")
 
 
-def plausible_speed(scene: scenes.Scene, engine_name: str, load_name: str) -> tuple[float, str]:
+def plausible_speed(scene: scenes.Scene, physics: kinds.DrivelinePhysics) -> tuple[float, str]:
     """The largest speed the scene's parameters make plausible, and how it was found."""
-    e, l = kinds.parameters(scene, engine_name), kinds.parameters(scene, load_name)
-    engine, load = catalogue.engine_from(e), catalogue.load_from(l)
+    e, l = kinds.parameters(scene, physics.roles.engine), kinds.parameters(scene, physics.roles.load)
+    engine, load = physics.engine, physics.load
     starts = [abs(catalogue.start_state(e, catalogue.ENGINE)[1]), abs(catalogue.start_state(l, catalogue.LOAD)[1])]
     low, high = load_range(load.external)
     char = engine.external
@@ -112,19 +112,18 @@ def _deflection_at_energy(law, energy: float) -> float:
 def bounds(scene: scenes.Scene) -> list[Bound]:
     """The bounds a run of ``scene`` is held to (see the module docstring): speeds and
     coupling torques of the driveline, when the scene has one; nothing otherwise."""
-    engine_name, coupling_name, load_name = kinds.roles(scene)
-    if not (engine_name and coupling_name and load_name):
+    if not kinds.is_driveline(scene):
         return []
     limits = {k: float(scenes.quantity(v, f"limits.{k}")) for k, v in scene.limits.items()}
     margin = limits.get("margin", MARGIN)
     out = []
     try:
-        plausible, which = plausible_speed(scene, engine_name, load_name)
-        engine = catalogue.engine_from(kinds.parameters(scene, engine_name))
-        load = catalogue.load_from(kinds.parameters(scene, load_name))
-        coupling = catalogue.coupling_from(kinds.parameters(scene, coupling_name))
+        built = kinds.physics(scene)
+        plausible, which = plausible_speed(scene, built)
     except ParameterError:
         return []    # the FMUs will refuse the parameters with the proper message
+    engine, load, coupling = built.engine, built.load, built.coupling
+    engine_name, coupling_name, load_name = built.roles.engine, built.roles.coupling, built.roles.load
     if "speed" in limits:
         speed, why = limits["speed"], "set in the scene's [limits]"
     else:

@@ -77,6 +77,7 @@ import numpy as np
 
 from harness.engine import component as harness_component
 from harness.description import scene as scenes
+from harness.description.scene import step_problem
 from harness.paths import FMUS, ROOT
 from harness.engine.run import RunResult, recorded_names
 from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
@@ -151,8 +152,8 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
     reason = available(name)
     if reason:
         raise ValueError(f"peer '{name}' is not available: {reason}")
-    if not step > 0.0:
-        raise ValueError(f"communication step must be > 0, got {step}")
+    if problem := step_problem(step, "communication step"):
+        raise ValueError(problem)
     names = list(recorded_names(scene) if record is None else record)
     setup = _SceneSetup(scene, Path(fmu_dir), names)
     if name == "fmpy-jacobi":

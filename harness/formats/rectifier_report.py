@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import math
 
-from lever.physics import catalogue
-
 from harness.description import kinds
 from harness.formats.run_files import reference_error_lines, write_run
-from harness.judges.rectifier import analyse, component, errors
+from harness.judges.rectifier import analyse, errors
 
 
 def summarize(result, reference=None) -> dict:
@@ -172,7 +170,7 @@ def plot(out, result, reference=None):
     import matplotlib.pyplot as plt
 
     scene = result.scene
-    name = component(scene)
+    name = kinds.rectifier(scene)
     t = result.times
     tr = {k.split(".", 1)[1]: v for k, v in result.traces.items() if k.startswith(name + ".")}
     title = f"{scene.name} - {result.master}, h = {result.step:g} s"
@@ -193,7 +191,7 @@ def plot(out, result, reference=None):
     fig.savefig(out / "kinematics.png", dpi=110)
     plt.close(fig)
 
-    model = catalogue.freewheel_from(kinds.parameters(scene, name))
+    model = kinds.rectifier_model(scene)
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
     for ax, (var, gap, label) in zip(axes, (("msm_deflection", model.z1, "e = phi1 - phi2 (gap z1)"),
                                             ("torsion_twist", model.z2, "phi3 - phi4 (gap z2)"),

@@ -74,10 +74,9 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
 
-    engine = catalogue.engine_from(kinds.parameters(scene, engine_name))
-    load = catalogue.load_from(kinds.parameters(scene, load_name))
+    built = kinds.physics(scene)
+    engine, load, coupling = built.engine, built.load, built.coupling
     coupling_params = kinds.parameters(scene, coupling_name)
-    coupling = catalogue.coupling_from(coupling_params)
     misalignment = _misalignment_source(scene, coupling_name)
     phi1, w1 = catalogue.start_state(kinds.parameters(scene, engine_name), catalogue.ENGINE)
     phi2, w2 = catalogue.start_state(kinds.parameters(scene, load_name), catalogue.LOAD)

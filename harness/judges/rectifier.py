@@ -16,34 +16,28 @@ import time as clock
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from lever.physics import catalogue
 from lever.physics.freewheel import EVENTS, N_EDGES
 
 from harness.description import kinds
 from harness.description import scene as scenes
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
-FMU = "FreewheelRectifier"
 RTOL = 1e-10
 ATOL = 1e-12
-
-
-def component(scene: scenes.Scene) -> str | None:
-    return scene.component_of(FMU)
 
 
 # -- the monolithic reference --------------------------------------------------------------------
 
 def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
                     atol: float = ATOL, method: str = "DOP853"):
-    name = component(scene)
+    name = kinds.rectifier(scene)
     if len(scene.components) != 1 or scene.connections:
         raise ReferenceUnavailable(f"scene '{scene.name}': the rectifier's reference covers the rectifier alone "
                                    "(its port unconnected, tau = 0)")
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
-    model = catalogue.freewheel_from(kinds.parameters(scene, name))
+    model = kinds.rectifier_model(scene)
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
     wall = clock.perf_counter() - started
@@ -146,8 +140,8 @@ def _transitions(contact: np.ndarray) -> dict:
 
 def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
     """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
-    name = component(scene)
-    model = catalogue.freewheel_from(kinds.parameters(scene, name))
+    name = kinds.rectifier(scene)
+    model = kinds.rectifier_model(scene)
 
     def tr(var):
         return np.asarray(traces[f"{name}.{var}"])
@@ -265,7 +259,7 @@ COMPARED = ("half_coupling_speed", "driven_speed", "torsion_end_speed", "torsion
 def errors(scene: scenes.Scene, times, traces, reference) -> dict:
     """RMS and max error of the main signals against the reference, relative to the
     reference's peak magnitude of each (speeds to the rocker's peak speed)."""
-    name = component(scene)
+    name = kinds.rectifier(scene)
     n = min(len(times), len(reference.times))
     if n == 0 or not np.allclose(times[:n], reference.times[:n], rtol=0, atol=1e-9):
         return {}

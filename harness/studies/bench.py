@@ -290,12 +290,13 @@ def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: lis
 
 
 def eigenfrequency(scene: scenes.Scene) -> float | None:
-    from lever.physics import catalogue
-    coupling = scene.component_of("LeverCoupling")
-    if coupling is None:
+    """The coupling mode's eigenfrequency estimate [rad/s]; None for a scene of another kind."""
+    try:
+        built = kinds.physics(scene)
+    except kinds.NotADriveline:
         return None
     i1, i2 = metrics.inertias(scene)
-    return catalogue.coupling_from(kinds.parameters(scene, coupling)).eigen_estimate(i1, i2)[0]
+    return built.coupling.eigen_estimate(i1, i2)[0]
 
 
 def _line(case: Case) -> str:

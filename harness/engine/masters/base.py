@@ -31,6 +31,7 @@ rollback), the adaptive ones (``adaptive``: error-controlled steps), and the reg
 """
 from __future__ import annotations
 
+from harness.description.scene import step_problem
 from harness.engine.system import System
 
 
@@ -47,8 +48,8 @@ class Master:
     options: dict = {}
 
     def __init__(self, system: System, step: float, **options):
-        if not step > 0.0:
-            raise ValueError(f"communication step must be > 0, got {step}")
+        if problem := step_problem(step, "communication step"):
+            raise ValueError(problem)
         unknown = set(options) - set(self.options)
         if unknown:
             raise ValueError(f"master '{self.name}' takes no option {', '.join(sorted(unknown))}"
