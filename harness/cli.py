@@ -537,7 +537,7 @@ def _reference_names(names) -> list[str]:
     return list(names) or known
 
 
-def _fmu_start_values(model: str, assignments) -> dict:
+def fmu_start_values(model: str, assignments) -> dict:
     """``--set name=value`` for an FMU run stand-alone: its parameters (and inputs not in
     the ``_in.csv``), checked against the model description."""
     from fmpy import read_model_description
@@ -554,10 +554,10 @@ def _fmu_start_values(model: str, assignments) -> dict:
             known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
             raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
         try:
-            value = scenes.quantity(scenes._coerce(raw), key)
+            value = scenes.quantity(scenes.coerce(raw), key)
         except scenes.SceneError as error:
             raise UserError(str(error)) from None
-        problems = scenes._check_value(f"{model}.{name}", var, value)
+        problems = scenes.value_findings(f"{model}.{name}", var, value)
         if problems:
             raise UserError("; ".join(problems))
         values[name] = value
@@ -626,7 +626,7 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
         elif ref.kind == "fmu":
             if master or step:
                 raise UserError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+            result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
         else:
             from harness.engine.system import SceneInvalid
             try:

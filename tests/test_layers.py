@@ -138,3 +138,22 @@ def test_the_cli_keeps_every_command_and_the_older_names():
                          "measured", "reference", "run", "scenes", "stability", "study", "sweep", "validate"}
     assert before_the_layers <= set(main.commands)
     assert main.commands["check"].callback is main.commands["compliance"].callback
+
+
+def test_no_private_name_is_used_outside_its_module():
+    """``from harness.x import _y`` and ``x._y`` (x a harness module) in harness code."""
+    offenders = []
+    for module, path in modules().items():
+        tree = ast.parse(path.read_text())
+        harness_names = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("harness")):
+                for alias in node.names:
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        offenders.append(f"{module} imports {node.module}.{alias.name}")
+                    harness_names.add(alias.asname or alias.name)
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in harness_names
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                offenders.append(f"{module} uses {node.value.id}.{node.attr}")
+    assert offenders == []

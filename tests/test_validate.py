@@ -149,8 +149,8 @@ def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monke
 def _validate(name, assignments=()):
     ref = crosscheck.read(name)
     if ref.kind == "fmu":
-        from harness.cli import _fmu_start_values
-        result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+        from harness.cli import fmu_start_values
+        result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
     else:
         result = crosscheck.run_scene(scenes.load(name).with_overrides(list(assignments)))
     assert result.failure is None, result.failure

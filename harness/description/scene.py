@@ -91,7 +91,7 @@ class Scene:
             if "=" not in assignment:
                 raise SceneError(f"--set {assignment!r}: expected name=value")
             key, raw = (s.strip() for s in assignment.split("=", 1))
-            value = _coerce(raw)
+            value = coerce(raw)
             if key.startswith("limits."):
                 limits[key.split(".", 1)[1]] = value
                 continue
@@ -122,7 +122,8 @@ class Scene:
         return replace(self, components=components, experiment=experiment, limits=limits)
 
 
-def _coerce(raw: str):
+def coerce(raw: str):
+    """A ``--set`` value as written: an integer, a number, or a string (quotes stripped)."""
     try:
         return int(raw)
     except ValueError:
@@ -283,7 +284,7 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             elif var.causality not in ("parameter", "input"):
                 findings.append(f"component '{name}': '{param}' is an {var.causality}, not a parameter or input")
             else:
-                findings += _check_value(f"{name}.{param}", var, quantity(value, f"{name}.{param}"))
+                findings += value_findings(f"{name}.{param}", var, quantity(value, f"{name}.{param}"))
     driven = {}
     for c in scene.connections:
         for comp, var, causality in ((c.source, c.output, "output"), (c.target, c.input, "input")):
@@ -348,7 +349,8 @@ def _check_limits(limits: dict) -> list[str]:
     return findings
 
 
-def _check_value(label: str, var, value) -> list[str]:
+def value_findings(label: str, var, value) -> list[str]:
+    """Findings about ``value`` for the model variable ``var`` (its type and its [min, max])."""
     if var.type == "String":
         return [] if isinstance(value, str) else [f"{label}: expected a string, got {value!r}"]
     if isinstance(value, str):

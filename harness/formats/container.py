@@ -28,7 +28,8 @@ from harness.paths import FMUS
 from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
 
 
-def _container_name(item: str) -> str:
+def container_name(item: str) -> str:
+    """The container FMU's variable name for the scene's ``component.variable``."""
     return re.sub(r"[^A-Za-z0-9_]", "_", item)
 
 
@@ -61,7 +62,7 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
             value = scenes.quantity(raw, f"{name}.{param}")
             start = repr(float(value)) if inner.type == "Real" else (
                 str(int(value)) if inner.type in ("Integer", "Enumeration") else str(value))
-            outer = ModelVariable(name=_container_name(f"{name}.{param}"), type=inner.type, causality="parameter",
+            outer = ModelVariable(name=container_name(f"{name}.{param}"), type=inner.type, causality="parameter",
                                   variability="fixed", initial="exact", description=f"{name}: {inner.description}")
             outer.start = start
             outer.unit = inner.unit
@@ -70,7 +71,7 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
     for item in scene.record:
         comp, _, var = item.partition(".")
         inner = variables[comp][var]
-        outer = ModelVariable(name=_container_name(item), type="Real", causality="output", variability="continuous",
+        outer = ModelVariable(name=container_name(item), type="Real", causality="output", variability="continuous",
                               initial="calculated", description=f"{comp}: {inner.description}")
         outer.unit = inner.unit
         model_variables.append(outer)

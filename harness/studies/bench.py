@@ -380,7 +380,8 @@ COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "repeats", "s
            "w_rms_after_transient", "energy_residual", "failure"]
 
 
-def _row(case: Case) -> dict:
+def table_row(case: Case) -> dict:
+    """A case as a row of the benchmark's tables (CSV and report)."""
     overhead = (case.wall / case.floor_time - 1.0) if case.floor_time and case.stable else None
     return {"engine": case.engine, "kind": case.kind, "step": case.step, "tolerance": case.tolerance,
             "wall_median_s": case.wall, "repeats": len(case.wall_times), "steps": case.steps,
@@ -393,7 +394,7 @@ def _row(case: Case) -> dict:
 
 def write(out: Path, result: dict) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    rows = [_row(c) for c in result["cases"]]
+    rows = [table_row(c) for c in result["cases"]]
     with open(out / "bench.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)
         writer.writeheader()

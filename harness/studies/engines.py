@@ -58,7 +58,7 @@ def _run_container(scene: scenes.Scene, step: float, fmu_dir: Path) -> RunResult
 
     import fmpy
 
-    from harness.formats.container import _container_name, build_container
+    from harness.formats.container import container_name, build_container
 
     e = scene.experiment
     names = recorded_names(scene)
@@ -69,14 +69,14 @@ def _run_container(scene: scenes.Scene, step: float, fmu_dir: Path) -> RunResult
         failure = None
         try:
             table = fmpy.simulate_fmu(str(fmu), start_time=e.start, stop_time=e.stop, output_interval=step,
-                                      output=[_container_name(n) for n in names])
+                                      output=[container_name(n) for n in names])
         except Exception as error:  # noqa: BLE001 - reported as the run's failure
             table, failure = None, f"{type(error).__name__}: {error} (container, step {step:g} s)"
         wall = clock.perf_counter() - started
     if table is None:
         return RunResult(scene, "container", step, np.empty(0), {n: np.empty(0) for n in names}, wall, {},
                          failure, "stepping")
-    traces = {n: np.asarray(table[_container_name(n)], dtype=float) for n in names}
+    traces = {n: np.asarray(table[container_name(n)], dtype=float) for n in names}
     return RunResult(scene, "container", step, np.asarray(table["time"], dtype=float), traces, wall,
                      {"steps": len(table) - 1})
 
