@@ -138,22 +138,13 @@ def _transitions(contact: np.ndarray) -> dict:
             "opened": int(np.sum((before != 0) & (after == 0)))}
 
 
-def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
-    """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
-    name = kinds.rectifier(scene)
-    model = kinds.rectifier_model(scene)
-
-    def tr(var):
-        return np.asarray(traces[f"{name}.{var}"])
-
-    period = 2.0 * math.pi / model.omega
+def _phases(times, tr, period: float, n_cycles: int) -> list[dict]:
+    """Per rocker cycle: the main engagement (the longest contact of the ramps) and the
+    short contacts before it, where the half-couplings bounce across the gap."""
     engaged = tr("msm_contact") > 0.5
     slipping = tr("disc_slip") != 0.0
     contacts = _intervals(times, engaged)
-    # Per rocker cycle: the main engagement (the longest contact of the ramps) and the
-    # short contacts before it, where the half-couplings bounce across the gap.
     phases = []
-    n_cycles = int(math.ceil(times[-1] / period - 1e-9))
     for c in range(n_cycles):
         mine = [iv for iv in contacts if c * period <= iv[0] < (c + 1) * period]
         if not mine:
@@ -174,9 +165,12 @@ def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
             "largest_rocker_torque_while_slipping_Nm": float(np.max(tr("rocker_torque")[slip])) if slip.any() else 0.0,
             "complete": (c + 1) * period <= times[-1] + 1e-9,
         })
-    # torque impulse on the torsion shaft: from the first to the last instant it carries
-    # more than 5 % of its peak, per complete cycle
-    torsion = tr("torsion_torque")
+    return phases
+
+
+def _impulses(times, torsion, period: float, n_cycles: int) -> list[dict]:
+    """The torque impulse on the torsion shaft: from the first to the last instant it
+    carries more than 5 % of its peak, per complete cycle."""
     impulses = []
     for c in range(n_cycles):
         if (c + 1) * period > times[-1] + 1e-9:
@@ -188,11 +182,12 @@ def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
         above = times[keep][torsion[keep] > 0.05 * peak]
         impulses.append({"cycle": c + 1, "peak_Nm": peak, "duration_s": float(above[-1] - above[0]),
                          "impulse_Nms": float(np.trapezoid(np.clip(torsion[keep], 0.0, None), times[keep]))})
-    gaps = {"msm (z1)": _transitions(tr("msm_contact")), "torsion splines (z2)": _transitions(tr("torsion_contact")),
-            "gear mesh (z3)": _transitions(tr("mesh_contact"))}
-    time_open = {label: float(np.mean(tr(var) == 0.0)) for label, var in
-                 (("msm (z1)", "msm_contact"), ("torsion splines (z2)", "torsion_contact"),
-                  ("gear mesh (z3)", "mesh_contact"))}
+    return impulses
+
+
+def _energy_balance(tr) -> dict:
+    """Input work = output work + change of stored energy + dissipated + residual, at the
+    end and (the worst residual) at any recorded time."""
     work_in = tr("input_work")
     stored = tr("kinetic_energy") + tr("elastic_energy")
     balance = {
@@ -211,7 +206,11 @@ def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
                     "residual_relative": float(abs(residual) / scale),
                     "worst_residual_relative": float(np.max(np.abs(history)) / scale),
                     "relative_to": "the largest work the rocker had put in at any time"})
+    return balance
 
+
+def _kinematics(tr) -> dict:
+    """Angle amplitude and range, peak speed and acceleration of elements 1-4."""
     def amplitude(var):
         y = tr(var)
         return float((np.max(y) - np.min(y)) / 2.0)
@@ -226,17 +225,35 @@ def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
             "peak_speed_rad_s": float(np.max(np.abs(tr(f"{prefix}_speed")))),
             "peak_acceleration_rad_s2": float(np.max(np.abs(tr(f"{prefix}_acceleration")))),
         }
+    return kinematics
+
+
+def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
+    """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
+    name = kinds.rectifier(scene)
+    model = kinds.rectifier_model(scene)
+
+    def tr(var):
+        return np.asarray(traces[f"{name}.{var}"])
+
+    period = 2.0 * math.pi / model.omega
+    n_cycles = int(math.ceil(times[-1] / period - 1e-9))
+    gaps = {"msm (z1)": _transitions(tr("msm_contact")), "torsion splines (z2)": _transitions(tr("torsion_contact")),
+            "gear mesh (z3)": _transitions(tr("mesh_contact"))}
+    time_open = {label: float(np.mean(tr(var) == 0.0)) for label, var in
+                 (("msm (z1)", "msm_contact"), ("torsion splines (z2)", "torsion_contact"),
+                  ("gear mesh (z3)", "mesh_contact"))}
     tan_a, nf = model.self_locking()
     return {
         "period_s": period,
-        "phases": phases,
-        "engaged_fraction": float(np.mean(engaged)),
-        "torque_impulses": impulses,
+        "phases": _phases(times, tr, period, n_cycles),
+        "engaged_fraction": float(np.mean(tr("msm_contact") > 0.5)),
+        "torque_impulses": _impulses(times, tr("torsion_torque"), period, n_cycles),
         "gap_transitions": gaps,
         "fraction_of_time_gap_open": time_open,
         "events_located": float(tr("events")[-1]) if f"{name}.events" in traces else None,
-        "energy_balance": balance,
-        "kinematics": kinematics,
+        "energy_balance": _energy_balance(tr),
+        "kinematics": _kinematics(tr),
         "self_locking": {"tan_alpha": tan_a, "n_f_s": nf, "f_min": tan_a / model.p["friction_pairs"],
                          "holds": tan_a <= nf},
         "derived": {"axial_stiffness_N_per_m": model.axial_stiffness(),
