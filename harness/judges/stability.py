@@ -124,13 +124,11 @@ class TwoInertia:
 def model_of(scene: scenes.Scene) -> TwoInertia:
     """The two-inertia model of ``scene`` from its parameter values (defaults where the
     scene sets none); ``kinds.NotADriveline`` for a scene of another kind."""
-
-    names = kinds.driveline(scene)
-    engine, coupling, load = (kinds.parameters(scene, n) for n in (names.engine, names.coupling, names.load))
-    drive = check_all(catalogue.ENGINE, engine)
-    driven = check_all(catalogue.LOAD, load)
-    law = catalogue.coupling_from(coupling)
-    characteristic = catalogue.engine_from(engine).external
+    built = kinds.physics(scene)
+    drive = check_all(catalogue.ENGINE, kinds.parameters(scene, built.roles.engine))
+    driven = check_all(catalogue.LOAD, kinds.parameters(scene, built.roles.load))
+    law = built.coupling
+    characteristic = built.engine.external
     if isinstance(characteristic, LinearCharacteristic):
         slope = characteristic.slope
     else:   # tabulated: its slope at the starting speed
