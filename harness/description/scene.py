@@ -69,12 +69,12 @@ class Scene:
     features: set[str]
     path: Path | None = None
     notes: str = ""
-    #: the work-precision benchmark's plan for this scene (``[bench]`` table; see harness.bench)
+    #: the work-precision benchmark's plan for this scene (``[bench]`` table; see harness.studies.bench)
     bench: dict = field(default_factory=dict)
     #: where the scene's FMUs are when not in build/fmus (a scene loaded from an SSP archive)
     fmu_dir: Path | None = None
     #: overrides of the divergence guard's physical bounds (``[limits]``: speed, torque,
-    #: margin; see harness.divergence)
+    #: margin; see harness.engine.guard)
     limits: dict = field(default_factory=dict)
 
     def component_of(self, fmu: str) -> str | None:
@@ -142,7 +142,7 @@ def quantity(value, name: str = "value"):
     A table ``{harmonics = "monograph/harmonics_driven.csv", cycle = "mean"}`` becomes
     the load's Fourier series text (file relative to resources/data); so does
     ``{samples = "monograph/torque_driven_7V-14MVS.csv", cycle = "mean"}``, the series
-    through a measured torque table's ordinates (harness.measured)."""
+    through a measured torque table's ordinates (harness.studies.measured)."""
     if isinstance(value, dict) and "samples" in value:
         return samples_parameter(value, name)
     if isinstance(value, dict) and "harmonics" in value:

@@ -33,11 +33,11 @@ class RunResult:
     #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
     failure_stage: str | None = None
     #: a failed run's diagnosis: kind (bound, non-finite, fmu-error, master), component,
-    #: fmu, variable, value, bound, time, master, step, step_index (see harness.divergence)
+    #: fmu, variable, value, bound, time, master, step, step_index (see harness.engine.guard)
     diagnosis: dict | None = None
     #: findings of the checks made before the run (the stability advisor)
     warnings: list[str] = field(default_factory=list)
-    #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.traces)
+    #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.engine.traces)
     stream: dict | None = None
 
     @property
@@ -54,7 +54,7 @@ class Recorder:
 
     def __init__(self, system: System, names: list[str], n_rows: int, stream=None):
         self.names = names
-        # Streaming (harness.traces.TraceStream): hold one chunk, hand it on when full.
+        # Streaming (harness.engine.traces.TraceStream): hold one chunk, hand it on when full.
         self.stream = stream
         if stream is not None:
             from harness.engine.traces import CHUNK
@@ -139,7 +139,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     (for an adaptive master: its first step); ``options`` go to the master.  The stability
     advice is not computed here: whoever shows it (``lever run``) asks
     ``harness.judges.stability.run_advice`` and may keep it in ``RunResult.warnings``.  ``stream``: a trace CSV
-    written while the run goes, the result keeping every k-th row (harness.traces)."""
+    written while the run goes, the result keeping every k-th row (harness.engine.traces)."""
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)

@@ -1,7 +1,7 @@
 """Peers: the same scene run by other co-simulation engines, for benchmarks.
 
 Each peer loads the scene's FMUs as they are, applies the scene's parameters and
-connections, and returns a ``harness.run.RunResult`` like the harness's own masters:
+connections, and returns a ``harness.engine.run.RunResult`` like the harness's own masters:
 traces keyed ``component.variable`` (Real variables), one row per communication point
 from start to stop, and a failed run keeps the rows recorded before the failure.
 
@@ -16,7 +16,7 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   applied), starts every connected input at 0.0 instead of propagating the initial
   outputs, and labels each row with the start time of the step that produced it.
 * ``fmpy-ssp`` - fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp``, on the scene
-  exported as an SSP archive (``harness.ssp``), as an fmpy user runs an SSP.  Its
+  exported as an SSP archive (``harness.formats.ssp``), as an fmpy user runs an SSP.  Its
   limitations (above) are worked around where that is honest and refused where not: the
   parameters are read from the archive's parameter sets and passed as its
   ``parameter_set``; a String parameter that differs from the FMU's default is refused
@@ -43,7 +43,7 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   parameter sets itself).
 * ``libcosim-osp`` - ``libcosim-fixed`` with the scene loaded from an
   ``OspSystemStructure.xml`` whose connections go flange to flange
-  (``VariableGroupConnection`` between the FMUs' OSP ports, ``harness.osp``).
+  (``VariableGroupConnection`` between the FMUs' OSP ports, ``harness.formats.osp``).
 
 ECCO's power bonds come from the OSP model descriptions next to the FMUs (each connected
 ``AngularMechanicalPort`` pair is a bond); for FMUs without one, from the units.
@@ -55,7 +55,7 @@ libcosim's wall time measures with these FMUs.
 
 ``wall_time`` runs from applying the parameters to the last communication point:
 initialisation, stepping and recording; loading and instantiating the FMUs (and
-starting the child process) are left out, as ``harness.run.simulate`` times it.
+starting the child process) are left out, as ``harness.engine.run.simulate`` times it.
 Loading or wiring failures raise (as the harness's instantiation failures do);
 failures while initialising or stepping are reported in ``RunResult.failure``.
 """
@@ -199,7 +199,7 @@ class _SceneSetup:
         return self.variables[component][variable].valueReference
 
     def time_grid(self, step: float) -> np.ndarray:
-        """The fixed-step communication points, as ``harness.run.simulate`` steps them."""
+        """The fixed-step communication points, as ``harness.engine.run.simulate`` steps them."""
         e = self.scene.experiment
         n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
         return np.minimum(e.start + step * np.arange(n_steps + 1), e.stop)

@@ -9,7 +9,7 @@ with 9 significant digits.  A row repeated at the same time is a discontinuity o
 (left value first), as fmpy's ``Input`` reads it.
 
 Every trace is computed by the project from the physics (``lever.physics``) and the
-monolithic reference solver (``harness.reference``), never by running the FMU under test:
+monolithic reference solver (``harness.judges.monolithic``), never by running the FMU under test:
 
 * an FMU case drives the FMU with analytic input signals; its reference is the exact
   response: a shaft's motion integrated by scipy (DOP853, rtol = atol = 1e-10) under the
@@ -20,8 +20,8 @@ monolithic reference solver (``harness.reference``), never by running the FMU un
   step to ``t_k+1``, read the outputs - so the reference at ``t_k+1`` sees the inputs of
   ``t_k`` (an importer that sets the next inputs before it reads gets the coupling's
   outputs one step early: within the ``lever`` tolerance's horizontal step, see
-  ``harness.validate``);
-* a scene's reference is ``harness.reference.solve`` of the scene (its recorded signals),
+  ``harness.judges.validation``);
+* a scene's reference is ``harness.judges.monolithic.solve`` of the scene (its recorded signals),
   kept every ``k``-th communication step so that a 10 s scene keeps about 1000 rows.
 
 The traces are regenerated only on purpose (``lever reference --update``);

@@ -22,7 +22,7 @@ shaft moves ``I2/(I1 + I2)`` of the deflection, so the engine's slope damps it t
     zeta = (b + K1 * (I2/(I1 + I2))^2) / (2 * sqrt(c * I_red))
 
 The one-step map of each master is not written out by hand: ``LinearDriveline`` is a
-stand-in for ``harness.system.System`` whose three components carry the FMUs' own model
+stand-in for ``harness.engine.system.System`` whose three components carry the FMUs' own model
 descriptions (ports, derivative attributes, output dependencies) but compute the linear
 model above in Python, with the same exact shaft integrators the FMUs use.  The real
 master classes step it, so the map is the one of the masters as implemented: zero-order

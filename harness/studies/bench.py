@@ -241,7 +241,7 @@ def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: lis
           peers: bool = True, monolithic: bool = True, progress=None, out: Path | None = None,
           resume: bool = True) -> dict:
     """Run the scene's plan.  With ``out``, every finished case goes to ``out/cases.jsonl``
-    as it finishes (harness.cases): a benchmark killed part-way and run again resumes
+    as it finishes (harness.studies.cases): a benchmark killed part-way and run again resumes
     with the cases not yet done (``resume=False`` starts afresh)."""
     p = plan(scene, only)
     say = progress or (lambda text: None)

@@ -1,6 +1,6 @@
 """The stability map (``lever stability [SCENE]``): the scene run over coupling
 stiffness, coupling damping, communication step and master, each case classified, next
-to the edges the linear analysis (``harness.stability``) predicts.
+to the edges the linear analysis (``harness.judges.stability``) predicts.
 
 Each case is the scene with ``coupling.stiffness = c`` and ``coupling.damping = b``,
 run at ``h = x / omega_n`` (``x`` the swept ``h * omega_n``) for ``max(min_steps,
@@ -22,7 +22,7 @@ energy residual:
 For comparing with the linear prediction a case counts as *unstable* when it is
 divergent or its amplitude grew more than ``GROWTH_DRIFT`` times (the energy residual
 measures accuracy, not the growth the spectral radius predicts).  Finished and failed
-cases are kept in a ``harness.cases.CaseLog``; a re-run resumes.
+cases are kept in a ``harness.studies.cases.CaseLog``; a re-run resumes.
 """
 from __future__ import annotations
 

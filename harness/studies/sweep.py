@@ -8,7 +8,7 @@ A sweep is a set of *axes*; each varies one quantity of a base scene (default
 mirrors, and records means and amplitudes ``A = (max - min)/2`` of the shafts' speeds,
 accelerations and torques after the start-up transient.  Cases run on local processes
 (``concurrent.futures``) or on a Dask cluster (``address``); each finished or failed case
-is kept in a :class:`harness.cases.CaseLog`, so a killed sweep resumes where it stopped
+is kept in a :class:`harness.studies.cases.CaseLog`, so a killed sweep resumes where it stopped
 and one failing case (recorded with its diagnosis) does not cost the others.
 """
 from __future__ import annotations
