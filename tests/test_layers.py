@@ -162,3 +162,14 @@ def test_no_private_name_is_used_outside_its_module():
                     and node.attr.startswith("_") and not node.attr.startswith("__")):
                 offenders.append(f"{module} uses {node.value.id}.{node.attr}")
     assert offenders == []
+
+
+def test_the_flat_harness_module_names_still_import():
+    import importlib
+
+    import harness
+
+    for old, new in harness.MOVED.items():
+        assert getattr(harness, old) is importlib.import_module(new)
+    from harness import masters
+    assert {"MASTERS", "make", "MasterFailure", "extrapolation_weights"} <= set(dir(masters))
