@@ -1,6 +1,7 @@
 """The ``lever`` command line."""
 from __future__ import annotations
 
+import copy
 import importlib.util
 import math
 import os
@@ -9,8 +10,9 @@ from pathlib import Path
 
 import click
 
-from . import scene as scenes
-from .paths import BUILD, FMUS, RESULTS, SCENES
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.paths import BUILD, FMUS, RESULTS, SCENES
 
 
 class UserError(click.ClickException):
@@ -33,12 +35,30 @@ def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):
         build.build(fmu_dir, force=force, log=(lambda *_: None) if quiet else click.echo)
 
 
+def open_scene(name: str | Path) -> scenes.Scene:
+    """The scene NAME: a name in resources/scenes, a .toml file or an SSP archive (.ssp)."""
+    if str(name).endswith(".ssp"):
+        from harness.formats import ssp
+        return ssp.read_scene(name)
+    return scenes.load(name)
+
+
 def _scene(name: str, assignments=()) -> scenes.Scene:
     """The scene NAME (a name, a .toml or an .ssp) with the --set overrides; bad input ends
     the command with exit code 2 and the scene's message."""
     try:
-        return scenes.load(name).with_overrides(list(assignments))
+        return open_scene(name).with_overrides(list(assignments))
     except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+
+
+def _check_masters(*names: str):
+    """End the command with exit code 2 when one of ``names`` is not a master."""
+    from harness.engine import masters as family
+
+    try:
+        family.check(*names)
+    except family.UnknownMaster as error:
         raise UserError(str(error)) from None
 
 
@@ -88,18 +108,18 @@ def list_scenes():
 def run(scene, assignments, master, step, tolerance, out, no_reference, progress, stream):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
-    from . import masters as family
-    from . import reference as references
-    from . import report
-    from .run import simulate, stability_advice
-    from .system import SceneInvalid
+    from harness.engine import masters as family
+    from harness.judges import monolithic as references
+    from harness.formats import report
+    from harness.engine.run import simulate
+    from harness.judges.stability import run_advice
+    from harness.engine.system import SceneInvalid
 
     spec = _scene(scene, assignments)
     chosen = master or spec.experiment.master
-    if chosen not in family.MASTERS:
-        raise UserError(f"master '{chosen}' is unknown (known: {', '.join(family.MASTERS)})")
-    if step is not None and not (math.isfinite(step) and step > 0):
-        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    _check_masters(chosen)
+    if step is not None and (problem := scenes.step_problem(step, "--step")):
+        raise UserError(problem)
     options = {}
     if tolerance is not None:
         if "tolerance" not in family.MASTERS[chosen].options:
@@ -114,13 +134,13 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     show_progress = sys.stderr.isatty() if progress is None else progress
     fmu_dir = spec.fmu_dir or FMUS
-    warnings = stability_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
+    warnings = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
     for warning in warnings:
         click.echo(f"warning: {warning}", err=True)     # before the run, so a long run is not waited for
     out = out or RESULTS / spec.name
     try:
         result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
-                          advise=False, stream=out / "traces.csv" if stream else None)
+                          stream=out / "traces.csv" if stream else None)
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     result.warnings = warnings
@@ -179,10 +199,10 @@ def _print_summary(summary: dict, out: Path):
 def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     """Error against run time for every master (and peers) on SCENE: writes bench.csv,
     bench.md, bench.json and work_precision.png."""
-    from . import bench as benchmark
+    from harness.studies import bench as benchmark
 
     try:
-        spec = scenes.load(scene)
+        spec = open_scene(scene)
         benchmark.plan(spec, list(only))      # refuses unknown masters before anything runs
     except (scenes.SceneError, ValueError) as error:
         raise UserError(str(error)) from None
@@ -230,13 +250,13 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     """The stability map of SCENE: every case classified (stable / energy-drifting /
     divergent) against the edges the linear analysis predicts; writes stability.md,
     stability.csv, stability_map.png and the resumable case log cases.jsonl."""
-    from . import stability as analysis
-    from . import stabilitymap
+    from harness.judges import stability as analysis
+    from harness.studies import stabilitymap
 
     try:
-        spec = scenes.load(scene)
+        spec = open_scene(scene)
         plan = stabilitymap.default_plan(spec, dense)
-    except (scenes.SceneError, analysis.NotADriveline, ValueError) as error:
+    except (scenes.SceneError, kinds.NotADriveline, ValueError) as error:
         raise UserError(str(error)) from None
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:
@@ -271,7 +291,7 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
 @click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "studies", show_default=True)
 def study(name, out):
     """Recompute the numbers behind a documented decision (docs/decisions.md)."""
-    from . import studies
+    from harness.studies import decisions as studies
 
     ensure_fmus(quiet=True)
     click.echo(studies.transfer_modes(out))
@@ -283,7 +303,7 @@ def _measured_report(files, out: Path, stiffness: float | None = None, cycles: b
     line per grade and the findings; exit 1 when there are findings."""
     import json
 
-    from . import measured
+    from harness.studies import measured
 
     if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
         raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
@@ -336,11 +356,11 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
     curves with its reported points overlaid, and a trend report (sweep.md, sweep.json,
     sweep_<axis>.png).  Finished and failed cases are kept in OUT/cases.jsonl; a re-run
     resumes."""
-    from . import sweep as sweeps
+    from harness.studies import sweep as sweeps
 
     try:
         chosen = sweeps.thin(sweeps.select(list(axes)), thin)
-        scenes.load(scene).with_overrides(list(assignments))
+        open_scene(scene).with_overrides(list(assignments))
     except (ValueError, scenes.SceneError) as error:
         raise UserError(str(error)) from None
     if stop is not None and not (math.isfinite(stop) and stop > 0):
@@ -381,7 +401,7 @@ def engines(scene, engine_names, assignments, step, repeats, out):
     """SCENE in every engine that runs our FMUs (ours, fmpy.ssp, libcosim, the container
     FMU): error against the monolithic reference and run time; writes engines.md and
     engines.json."""
-    from . import engines as comparison
+    from harness.studies import engines as comparison
 
     spec = _scene(scene, assignments)
     chosen = list(engine_names) or list(comparison.ENGINES)
@@ -397,7 +417,7 @@ def engines(scene, engine_names, assignments, step, repeats, out):
 def _export(scene, assignments, out, folder: str, suffix: str, export):
     """Write SCENE (with the --set overrides) with ``export(spec, out, fmu_dir)`` to OUT,
     by default results/<folder>/<scene>.<suffix>."""
-    from .system import SceneInvalid
+    from harness.engine.system import SceneInvalid
 
     spec = _scene(scene, assignments)
     ensure_fmus(quiet=True)
@@ -427,7 +447,7 @@ def export_ssp(scene, assignments, out):
     """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
     descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
     libcosim and in `lever run`."""
-    from . import ssp
+    from harness.formats import ssp
 
     _export(scene, assignments, out, "ssp", "ssp", ssp.export)
 
@@ -437,18 +457,18 @@ def export_container(scene, assignments, out):
     """Write SCENE as one FMU (fmpy's container FMU holding the scene's FMUs): its
     parameters are the scene's values, its outputs the scene's recorded variables, its
     internal step the scene's step (Jacobi, as the harness's `jacobi` master)."""
-    from . import container
+    from harness.formats import container
 
     _export(scene, assignments, out, "container", "fmu", container.build_container)
 
 
-@main.command()
+@main.command("compliance")
 @click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
-def check(fmus):
+def compliance_command(fmus):
     """Compliance checks on FMU files (default: the built ones): fmpy's validation plus
     ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
     when there are findings."""
-    from .compliance import check_fmu
+    from harness.compliance import check_fmu
 
     if not fmus:
         ensure_fmus(quiet=True)
@@ -473,8 +493,8 @@ def reference_command(names, update):
 
     NAMES are FMUs (LeverCoupling, EngineShaft, LoadShaft) or scenes; default: all.
     Exit code without --update: 0 when every trace is current, 1 otherwise."""
-    from . import crosscheck
-    from .reference import ReferenceUnavailable
+    from harness.formats import reference_traces as crosscheck
+    from harness.judges.monolithic import ReferenceUnavailable
 
     chosen = _reference_names(names)
     stale = []
@@ -485,7 +505,7 @@ def reference_command(names, update):
             click.echo(f"{name}: no reference ({error})")
             continue
         try:
-            committed = crosscheck.load(name)
+            committed = crosscheck.read(name)
         except crosscheck.TraceFileError:
             committed = None
         diff = crosscheck.difference(committed, fresh)
@@ -508,7 +528,7 @@ def reference_command(names, update):
 
 
 def _reference_names(names) -> list[str]:
-    from . import crosscheck
+    from harness.formats import reference_traces as crosscheck
 
     known = crosscheck.all_names()
     unknown = [n for n in names if n not in known]
@@ -517,7 +537,7 @@ def _reference_names(names) -> list[str]:
     return list(names) or known
 
 
-def _fmu_start_values(model: str, assignments) -> dict:
+def fmu_start_values(model: str, assignments) -> dict:
     """``--set name=value`` for an FMU run stand-alone: its parameters (and inputs not in
     the ``_in.csv``), checked against the model description."""
     from fmpy import read_model_description
@@ -534,10 +554,10 @@ def _fmu_start_values(model: str, assignments) -> dict:
             known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
             raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
         try:
-            value = scenes.quantity(scenes._coerce(raw), key)
+            value = scenes.quantity(scenes.coerce(raw), key)
         except scenes.SceneError as error:
             raise UserError(str(error)) from None
-        problems = scenes._check_value(f"{model}.{name}", var, value)
+        problems = scenes.value_findings(f"{model}.{name}", var, value)
         if problems:
             raise UserError("; ".join(problems))
         values[name] = value
@@ -572,8 +592,8 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
 
     Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
     2 on bad input."""
-    from . import crosscheck
-    from . import validate as judge
+    from harness.formats import reference_traces as crosscheck
+    from harness.judges import validation as judge
 
     if measured:
         _measured_report([Path(n) for n in names], out or RESULTS / "validate" / "measured")
@@ -583,8 +603,8 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
     if result_csv is not None and len(chosen) != 1:
         raise UserError("--result: name exactly one reference the CSV is to be compared with "
                         "(e.g. lever validate --result run.csv kavz685)")
-    if step is not None and not (math.isfinite(step) and step > 0):
-        raise UserError(f"--step {step}: the communication step must be > 0 s")
+    if step is not None and (problem := scenes.step_problem(step, "--step")):
+        raise UserError(problem)
     tol = judge.TOLERANCES[tolerance]
     if result_csv is None:
         try:
@@ -594,7 +614,7 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
     all_passed = True
     for name in chosen:
         try:
-            ref = crosscheck.load(name)
+            ref = crosscheck.read(name)
         except crosscheck.TraceFileError as error:
             raise UserError(str(error)) from None
         if result_csv is not None:
@@ -606,16 +626,15 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
         elif ref.kind == "fmu":
             if master or step:
                 raise UserError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+            result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
         else:
-            from . import masters as family
-            from .system import SceneInvalid
+            from harness.engine.system import SceneInvalid
             try:
                 spec = scenes.load(name).with_overrides(list(assignments))
             except scenes.SceneError as error:
                 raise UserError(str(error)) from None
-            if master and master not in family.MASTERS:
-                raise UserError(f"master '{master}' is unknown (known: {', '.join(family.MASTERS)})")
+            if master:
+                _check_masters(master)
             try:
                 result = crosscheck.run_scene(spec, master, step)
             except SceneInvalid as error:
@@ -647,12 +666,34 @@ def _print_validation(name, findings, result, out: Path):
     click.echo(f"  {name}: {verdict}; written to {out}/")
 
 
+@main.command("fingerprint")
+@click.argument("names", nargs=-1, metavar="[SCENES]...")
+@click.option("--master", "masters", multiple=True, help="Only this master (repeatable; default: every master).")
+@click.option("--stop", type=float, default=0.2, show_default=True,
+              help="Run each scene for at most this many seconds (0: each scene's own length).")
+def fingerprint_command(names, masters, stop):
+    """Print a SHA-256 of the traces of every committed scene (or SCENES) run with every
+    master: `lever fingerprint > before.txt`, change the code, run it again and `diff`
+    - a refactor that keeps behaviour leaves every line the same, bit for bit."""
+    from harness.studies.fingerprint import fingerprints
+
+    _check_masters(*masters)
+    if not (math.isfinite(stop) and stop >= 0):
+        raise UserError(f"--stop {stop}: must be >= 0 s (0: each scene's own length)")
+    ensure_fmus(quiet=True)
+    try:
+        for name, master, rows, digest in fingerprints(list(names) or None, list(masters) or None, stop or None):
+            click.echo(f"{name:28s} {master:24s} {rows:7d} {digest}")
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
+
+
 @main.command("badinputs")
 @click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
 def bad_inputs(verbose):
-    """Run the bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built
+    """Run the bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave on the built
     FMUs: every case must be refused with an FMI error naming the variable and its range."""
-    from . import badinputs
+    from harness.formats import badinputs
 
     ensure_fmus(quiet=True)
     outcomes = badinputs.run()
@@ -664,6 +705,18 @@ def bad_inputs(verbose):
         sys.exit(1)
 
 
+def _alias(name: str, command: click.Command):
+    """``lever NAME``: an older name of ``command``, kept so scripts that use it go on working."""
+    alias = copy.copy(command)
+    alias.name = name
+    alias.help = f"The older name of `lever {command.name}`.\n\n" + (command.help or "")
+    alias.short_help = f"older name of `lever {command.name}`"
+    main.add_command(alias, name)
+
+
+_alias("check", compliance_command)
+
+
 def entry():
     """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
     the process tears down, after all results are written; so flush and leave without
@@ -673,7 +726,7 @@ def entry():
         status = 0
     except SystemExit as done:
         status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
-    from .component import remove_extractions
+    from harness.engine.component import remove_extractions
     remove_extractions()
     sys.stdout.flush()
     sys.stderr.flush()

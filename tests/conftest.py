@@ -35,7 +35,7 @@ def pytest_sessionfinish(session, exitstatus):
 def pytest_unconfigure(config):
     status = getattr(config, "_lever_exit_status", None)
     if status is not None:
-        from harness.component import remove_extractions
+        from harness.engine.component import remove_extractions
         remove_extractions()
         sys.stdout.flush()
         sys.stderr.flush()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from harness import badinputs
+from harness.formats import badinputs
 
 CORPUS = badinputs.corpus()
 

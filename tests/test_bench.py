@@ -8,8 +8,9 @@ import math
 
 import pytest
 
-from harness import bench, scene
-from harness.bench import Case
+from harness.studies import bench
+from harness.description import scene
+from harness.studies.bench import Case
 
 
 @pytest.fixture(autouse=True)
@@ -111,7 +112,7 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
     assert lines[0].startswith("resuming: 4 case(s) already in")
-    assert [bench._row(c) for c in again["cases"]] == [bench._row(c) for c in first["cases"]]
+    assert [bench.table_row(c) for c in again["cases"]] == [bench.table_row(c) for c in first["cases"]]
     assert again["floor_per_step_s"] == first["floor_per_step_s"]
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.

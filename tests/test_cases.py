@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from harness.cases import FAILED, CaseLog, case_key
+from harness.studies.cases import FAILED, CaseLog, case_key
 
 
 def test_cases_are_kept_and_reused(tmp_path):

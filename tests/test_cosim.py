@@ -10,7 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import metrics, reference, run, scene
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.judges import solution
+from harness.engine import run
+from harness.description import scene
 
 REPO = Path(__file__).resolve().parents[1]
 LEVER = REPO / ".venv" / "bin" / "lever"
@@ -96,7 +100,7 @@ def test_masters_converge_to_the_reference_at_first_order(master):
 
 
 def test_reference_cache_returns_what_was_solved(tmp_path, monkeypatch):
-    monkeypatch.setattr(reference, "CACHE", tmp_path)
+    monkeypatch.setattr(solution, "CACHE", tmp_path)
     spec = kavz(*SHORT)
     times = np.linspace(0.0, 1.0, 201)
     fresh = reference.solve(spec, times, use_cache=False)
@@ -111,7 +115,7 @@ def test_reference_cache_returns_what_was_solved(tmp_path, monkeypatch):
 
 
 def test_reference_cache_distinguishes_time_grids_of_the_same_length(tmp_path, monkeypatch):
-    monkeypatch.setattr(reference, "CACHE", tmp_path)
+    monkeypatch.setattr(solution, "CACHE", tmp_path)
     spec = kavz(*SHORT)
     grid_a = np.array([0.0, 0.3, 0.6, 0.9, 1.0])   # what --step 0.3 records
     grid_b = np.linspace(0.0, 1.0, 5)              # what --step 0.25 records
@@ -237,7 +241,7 @@ def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
 
     from harness import cli
 
-    monkeypatch.setattr(reference, "CACHE", tmp_path / "cache")   # keep the repository clean
+    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")   # keep the repository clean
     out = tmp_path / "out"
     result = CliRunner().invoke(cli.main, ["run", "--set", "experiment.stop=0.5", "--set", "experiment.transient=0.1",
                                            "--out", str(out), "--no-progress"])

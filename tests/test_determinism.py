@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness import masters, scene
-from harness.run import recorded_names, simulate
-from harness.system import System
+from harness.engine import masters
+from harness.description import scene
+from harness.engine.run import recorded_names, simulate
+from harness.engine.system import System
 
 SHORT = ["experiment.stop=0.4", "experiment.transient=0.1"]
 

@@ -20,9 +20,16 @@ import pytest
 from click.testing import CliRunner
 from fmpy import read_model_description
 
-from harness import compliance, engines, osp, peers, reference, run, scene, ssp
+from harness import compliance
+from harness.studies import engines
+from harness.formats import osp
+from harness.formats import peers
+from harness.judges import monolithic as reference
+from harness.engine import run
+from harness.description import scene
+from harness.formats import ssp
 from harness.cli import main as cli
-from harness.component import Component
+from harness.engine.component import Component
 from lever.physics import catalogue
 
 REPO = Path(__file__).resolve().parents[1]
@@ -210,7 +217,7 @@ def test_ssp_export_loads_back_as_the_same_scene_and_validates_in_fmpy(fmu_dir, 
     assert {"SystemStructure.ssd", "resources/engine.ssv", "resources/coupling.ssv", "resources/load.ssv",
             "resources/LeverCoupling.fmu", "resources/LeverCoupling_OspModelDescription.xml"} <= names
     read_ssd(str(archive), validate=True)     # fmpy checks the SSD and the SSVs against the SSP schemas
-    back = scene.load(archive)
+    back = ssp.read_scene(archive)
     assert back.name == spec.name and back.connections == spec.connections and back.record == spec.record
     assert back.features == spec.features and back.experiment == spec.experiment
     for name, component in spec.components.items():
@@ -279,7 +286,7 @@ def test_the_container_fmu_is_the_driveline_as_one_block(fmu_dir, tmp_path):
     assert np.array_equal(result.times, ours.times)
     for name in ("engine.w", "load.w", "coupling.tau1", "coupling.tau2"):
         assert np.allclose(result.traces[name], ours.traces[name], rtol=1e-12, atol=1e-9), name
-    from harness.container import build_container
+    from harness.formats.container import build_container
     assert validate_fmu(str(build_container(spec, tmp_path / "k.fmu", fmu_dir))) == []
 
 

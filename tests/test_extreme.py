@@ -12,7 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import divergence, metrics, reference, run, scene
+from harness.engine import guard as divergence
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.engine import run
+from harness.description import scene
 from lever.physics import catalogue
 
 REPO = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ import fmpy
 import pytest
 from fmpy.validation import validate_fmu
 
-from harness.component import Component, FmuCallError
+from harness.engine.component import Component, FmuCallError
 from lever.physics import catalogue
 
 DEG = math.pi / 180.0

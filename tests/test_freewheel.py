@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-from harness import freewheel as fw_harness
-from harness import reference, scene as scenes
-from harness.component import Component, FmuCallError
-from harness.run import simulate
+from harness.judges import rectifier as fw_harness
+from harness.judges import monolithic as reference
+from harness.description import scene as scenes
+from harness.engine.component import Component, FmuCallError
+from harness.engine.run import simulate
 from lever.physics import catalogue
 from lever.physics.freewheel import contact_side
 from lever.physics.parameters import ParameterError
@@ -307,7 +308,7 @@ def test_scene_reproduces_the_stop_mode_test(short_scene_run):
     spec, result, ref, out = short_scene_run
     assert result.ok, result.failure
     assert spec.components["rectifier"].parameters["input_speed"] == 42.41
-    from harness import report
+    from harness.formats import report
     summary = report.write(out, result, ref)
     fw = summary["freewheel"]
     assert fw["phases"] and fw["phases"][0]["peak_torsion_torque_Nm"] > 200.0
@@ -337,7 +338,7 @@ def test_fmu_agrees_with_the_monolithic_reference(short_scene_run):
 
 
 def test_scene_refuses_a_value_out_of_range_before_running():
-    from harness.system import SceneInvalid
+    from harness.engine.system import SceneInvalid
 
     spec = scenes.load("freewheel_rectifier").with_overrides(["rectifier.msm_gap=5 deg", "rectifier.mesh_gap=2"])
     with pytest.raises(SceneInvalid) as info:

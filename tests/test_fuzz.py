@@ -194,7 +194,7 @@ class Instance:
     """One FMU2Slave instance per FMU for a whole test, reset (fmi2Reset) for every example."""
 
     def __init__(self, fmu_dir: Path, fmu: str):
-        from harness import badinputs
+        from harness.formats import badinputs
         self.slave = badinputs._Slave(fmu, fmu_dir)
         badinputs._listen()
 

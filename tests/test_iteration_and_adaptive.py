@@ -8,9 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from harness import masters, metrics, reference, run, scene
-from harness.component import Component
-from harness.system import System
+from harness.engine import masters
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.engine import run
+from harness.description import scene
+from harness.engine.component import Component
+from harness.engine.system import System
 
 STIFF_SHORT = ["experiment.stop=0.5", "experiment.transient=0.2"]
 

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness import masters, metrics, reference, run, scene
+from harness.engine import masters
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.engine import run
+from harness.description import scene
 
 SMOOTH = ["experiment.stop=1", "experiment.transient=0", "load.load_kind=constant"]
 

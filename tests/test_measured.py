@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness import measured
-from harness import scene as scenes
+from harness.studies import measured
+from harness.description import scene as scenes
 from harness.cli import main
 from harness.paths import DATA
 from lever.physics.load import fourier_from_samples, read_harmonics

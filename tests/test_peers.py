@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness import metrics, peers, reference, run, scene
+from harness.judges import metrics
+from harness.formats import peers
+from harness.judges import monolithic as reference
+from harness.engine import run
+from harness.description import scene
 
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 

@@ -9,9 +9,9 @@ import tempfile
 import fmpy
 from fmpy.fmi2 import FMU2Slave
 
-from harness import component
-from harness.component import Component
-from harness.traces import resident_bytes
+from harness.engine import component
+from harness.engine.component import Component
+from harness.engine.traces import resident_bytes
 
 
 def open_files() -> int:

@@ -28,7 +28,7 @@ import pytest
 fmpy = pytest.importorskip("fmpy")
 from fmpy.fmi1 import FMICallException  # noqa: E402
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions  # noqa: E402
-from harness.component import add_log_listener, log_callbacks  # noqa: E402
+from harness.engine.component import add_log_listener, log_callbacks  # noqa: E402
 from pythonfmu.builder import FmuBuilder  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness import cases, masters, run, scene, stability, stabilitymap
+from harness.studies import cases
+from harness.engine import masters
+from harness.engine import run
+from harness.description import scene
+from harness.judges import stability
+from harness.studies import stabilitymap
 from harness.cli import main
 
 KAVZ = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35)
@@ -129,7 +134,7 @@ def test_stand_in_steps_like_the_real_fmus(name):
     step, n = model.step_for(0.4), 60
     options = {"tolerance": 1e-12} if "tolerance" in masters.MASTERS[name].options else {}
     spec = spec.with_overrides([f"experiment.stop={n * step!r}"])
-    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options, advise=False)
+    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options)
             for extra in ([], ["engine.phi_start=0.002", "load.w_start=39.5"])]
     assert all(r.ok for r in runs), [r.failure for r in runs]
     real = runs[1].traces["coupling.tau2"][1:] - runs[0].traces["coupling.tau2"][1:]
@@ -218,11 +223,12 @@ def test_advisor_warns_and_proposes_stable_choices(name, step):
     assert any(master == name and h < step for master, h in assessment.proposals)
 
 
-def test_simulate_carries_the_advice_and_still_runs():
+def test_the_run_advice_warns_and_simulate_leaves_it_to_its_caller():
     spec = scene.load("kavz685_stiff").with_overrides(["experiment.stop=0.005", "experiment.transient=0"])
-    result = run.simulate(spec, "jacobi", 1e-4)
-    assert result.ok and len(result.warnings) == 1 and "jacobi" in result.warnings[0]
-    assert run.simulate(spec, "jacobi", 1e-4, advise=False).warnings == []
+    warnings = stability.run_advice(spec, "jacobi", 1e-4)
+    assert len(warnings) == 1 and "jacobi" in warnings[0]
+    result = run.simulate(spec, "jacobi", 1e-4)     # the run goes ahead; simulate analyses nothing
+    assert result.ok and result.warnings == []
 
 
 def test_lever_run_prints_the_advice(tmp_path):

@@ -8,7 +8,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from harness import sweep as sweeps
+from harness.studies import sweep as sweeps
 from harness.cli import main
 
 # Short runs: 0.6 s simulated, amplitudes after 0.2 s.

@@ -12,8 +12,10 @@ import time
 import numpy as np
 import pytest
 
-from harness import metrics, scene, traces
-from harness.run import simulate
+from harness.judges import metrics
+from harness.description import scene
+from harness.engine import traces
+from harness.engine.run import simulate
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

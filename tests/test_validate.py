@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness import crosscheck, validate
-from harness import scene as scenes
+from harness.formats import reference_traces as crosscheck
+from harness.judges import validation as validate
+from harness.description import scene as scenes
 from harness.cli import main
 
 LEVER = validate.TOLERANCES["lever"]
@@ -131,7 +132,7 @@ def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monke
     for name in ("LeverCoupling", "EngineShaft"):
         shutil.copytree(crosscheck.paths(name)["ref"].parent, tmp_path / name)
     monkeypatch.setattr(crosscheck, "REFERENCE_DIR", tmp_path)
-    ref = crosscheck.load("LeverCoupling")
+    ref = crosscheck.read("LeverCoupling")
     ref.outputs.signals["tau1"][500] += 2.5
     crosscheck.write(ref)
     checked = _invoke("reference", "LeverCoupling", "EngineShaft")
@@ -146,10 +147,10 @@ def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monke
 # -- every FMU and scene validates; perturbed parameters fail where they should -----------------
 
 def _validate(name, assignments=()):
-    ref = crosscheck.load(name)
+    ref = crosscheck.read(name)
     if ref.kind == "fmu":
-        from harness.cli import _fmu_start_values
-        result = crosscheck.run_fmu(name, ref, _fmu_start_values(name, assignments))
+        from harness.cli import fmu_start_values
+        result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
     else:
         result = crosscheck.run_scene(scenes.load(name).with_overrides(list(assignments)))
     assert result.failure is None, result.failure
@@ -162,7 +163,7 @@ def _validate(name, assignments=()):
 def test_every_fmu_and_scene_validates_against_its_reference(fmu_dir, name):
     findings, _ = _validate(name)
     assert findings.passed, (findings.problems, findings.failed_signals)
-    assert [s.name for s in findings.signals] == list(crosscheck.load(name).outputs.signals)
+    assert [s.name for s in findings.signals] == list(crosscheck.read(name).outputs.signals)
 
 
 def test_stiffer_coupling_fails_the_torques_and_energy_not_the_kinematics(fmu_dir):
@@ -210,7 +211,7 @@ def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp
 
 
 def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
-    ref = crosscheck.load("EngineShaft")
+    ref = crosscheck.read("EngineShaft")
     run = crosscheck.run_fmu("EngineShaft", ref)
     path = tmp_path / "engine.csv"
     crosscheck.write_csv(path, crosscheck.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))

@@ -1,0 +1,366 @@
+"""Scenes: declarative descriptions of a co-simulation (``resources/scenes/*.toml``).
+
+A scene names its components (which FMU, which parameter values), its connections
+(``"engine.phi -> coupling.phi1"``), the experiment (start, stop, step, master), what to
+record, and the features it wants (``reference``: solve the same equations unsplit;
+``energy_balance``: account for every joule).  Only what a scene declares is
+instantiated, computed and recorded.
+
+Values may carry a unit, ``"15 deg"`` or ``"374.8 rpm"``; they are converted to SI.
+``validate`` is a pure function returning findings (empty when the scene is sound).
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from lever.physics.parameters import UNITS
+
+from harness.description.tables import MeasuredDataError, load_series, read_table
+from harness.paths import DATA, SCENES
+
+FEATURES = ("reference", "energy_balance", "plots")
+#: the ``[limits]`` a scene may set for the divergence guard (harness.engine.guard)
+LIMIT_KEYS = ("speed", "torque", "margin")
+
+
+class SceneError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class Connection:
+    source: str
+    output: str
+    target: str
+    input: str
+
+    def __str__(self):
+        return f"{self.source}.{self.output} -> {self.target}.{self.input}"
+
+
+@dataclass
+class ComponentSpec:
+    fmu: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Experiment:
+    stop: float = 10.0
+    step: float = 1e-3
+    start: float = 0.0
+    master: str = "gauss-seidel"
+    transient: float = 2.0    # start-up time left out of amplitude statistics [s]
+
+
+@dataclass
+class Scene:
+    name: str
+    description: str
+    components: dict[str, ComponentSpec]
+    connections: list[Connection]
+    experiment: Experiment
+    record: list[str]
+    features: set[str]
+    path: Path | None = None
+    notes: str = ""
+    #: the work-precision benchmark's plan for this scene (``[bench]`` table; see harness.studies.bench)
+    bench: dict = field(default_factory=dict)
+    #: where the scene's FMUs are when not in build/fmus (a scene loaded from an SSP archive)
+    fmu_dir: Path | None = None
+    #: overrides of the divergence guard's physical bounds (``[limits]``: speed, torque,
+    #: margin; see harness.engine.guard)
+    limits: dict = field(default_factory=dict)
+
+    def component_of(self, fmu: str) -> str | None:
+        """Name of the (first) component built from FMU ``fmu``."""
+        return next((n for n, c in self.components.items() if c.fmu == fmu), None)
+
+    def with_overrides(self, assignments: list[str]) -> "Scene":
+        """Apply ``component.parameter=value`` (or ``parameter=value`` when exactly one
+        component has it) and ``experiment.field=value`` assignments."""
+        components = {n: ComponentSpec(c.fmu, dict(c.parameters)) for n, c in self.components.items()}
+        experiment = replace(self.experiment)
+        limits = dict(self.limits)
+        for assignment in assignments:
+            if "=" not in assignment:
+                raise SceneError(f"--set {assignment!r}: expected name=value")
+            key, raw = (s.strip() for s in assignment.split("=", 1))
+            value = coerce(raw)
+            if key.startswith("limits."):
+                limits[key.split(".", 1)[1]] = value
+                continue
+            if key.startswith("experiment."):
+                attr = key.split(".", 1)[1]
+                if not hasattr(experiment, attr):
+                    raise SceneError(f"--set {key}: the experiment has no field '{attr}'")
+                if attr == "master":
+                    setattr(experiment, attr, str(value))
+                    continue
+                try:
+                    setattr(experiment, attr, float(quantity(value, key)))
+                except (TypeError, ValueError):
+                    raise SceneError(f"--set {key}={raw}: expected a number (seconds)") from None
+                continue
+            if "." in key:
+                comp, param = key.split(".", 1)
+                if comp not in components:
+                    raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name} "
+                                     f"(components: {', '.join(components)})")
+                components[comp].parameters[param] = value
+            else:
+                components_with = [n for n, c in components.items() if key in c.parameters]
+                if len(components_with) != 1:
+                    raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
+                                     f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
+                components[components_with[0]].parameters[key] = value
+        return replace(self, components=components, experiment=experiment, limits=limits)
+
+
+def coerce(raw: str):
+    """A ``--set`` value as written: an integer, a number, or a string (quotes stripped)."""
+    try:
+        return int(raw)
+    except ValueError:
+        pass
+    try:
+        return float(raw)
+    except ValueError:
+        return raw.strip("'\"")
+
+
+_QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/.0-9]+)\s*$")
+
+
+def quantity(value, name: str = "value"):
+    """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is.
+    A table ``{harmonics = "monograph/harmonics_driven.csv", cycle = "mean"}`` becomes
+    the load's Fourier series text (file relative to resources/data); so does
+    ``{samples = "monograph/torque_driven_7V-14MVS.csv", cycle = "mean"}``, the series
+    through a measured torque table's ordinates (harness.studies.measured)."""
+    if isinstance(value, dict) and "samples" in value:
+        return samples_parameter(value, name)
+    if isinstance(value, dict) and "harmonics" in value:
+        from lever.physics.load import read_harmonics
+        path = DATA / value["harmonics"]
+        if not path.exists():
+            raise SceneError(f"{name}: no harmonics file {path}")
+        return read_harmonics(path, value.get("cycle", "mean")).to_text()
+    if isinstance(value, str):
+        m = _QUANTITY.match(value)
+        if m and m.group(2) in UNITS:
+            try:
+                return float(m.group(1)) * UNITS[m.group(2)][1]
+            except ValueError:
+                raise SceneError(f"{name}: {value!r} is not a number with a unit") from None
+    return value
+
+
+def samples_parameter(value: dict, name: str) -> str:
+    """A scene's ``fourier = {samples = "<table>.csv", cycle = "mean"}``: the load series
+    through a measured table's ordinates (path relative to resources/data)."""
+    path = DATA / value["samples"]
+    try:
+        return load_series(read_table(path), value.get("cycle", "mean")).to_text()
+    except MeasuredDataError as error:
+        raise SceneError(f"{name}: {error}") from None
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    path = Path(name_or_path)
+    if path.suffix == ".toml" and path.exists():
+        return path
+    candidate = SCENES / f"{name_or_path}.toml"
+    if candidate.exists():
+        return candidate
+    known = ", ".join(sorted(p.stem for p in SCENES.glob("*.toml")))
+    raise SceneError(f"no scene '{name_or_path}' (a .toml path or one of: {known})")
+
+
+#: what a variant (``extends = "base"``) does not take from its base: its identity
+OWN = ("name", "description", "extends")
+#: tables a variant merges key by key into its base's (components: each one's ``fmu`` and
+#: ``parameters``); any other table or value a variant states replaces its base's whole
+#: (an empty ``[bench]`` says: no benchmark plan)
+MERGED = ("experiment", "limits")
+
+
+def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
+    """The TOML table of the scene file ``path``, with what it inherits when it names a
+    base scene (``extends = "kavz685"``: a scene beside it or in resources/scenes, or a
+    .toml path relative to it) and states only what differs."""
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path}: {error}") from None
+    base_name = data.get("extends")
+    if base_name is None:
+        return data
+    if not isinstance(base_name, str) or not base_name:
+        raise SceneError(f"{path}: extends = {base_name!r}: expected the name or .toml path of a scene")
+    beside = path.parent / (base_name if base_name.endswith(".toml") else f"{base_name}.toml")
+    base_path = (beside if beside.exists() else resolve(base_name)).resolve()
+    chain = extending + (path.resolve(),)
+    if base_path in chain:
+        raise SceneError(f"{path}: extends {base_name}, which extends it back "
+                         f"({' -> '.join(p.stem for p in chain + (base_path,))})")
+    return extend(read_data(base_path, chain), data)
+
+
+def extend(base: dict, variant: dict) -> dict:
+    """The scene table of ``variant`` on top of ``base`` (see ``OWN`` and ``MERGED``)."""
+    merged = {key: value for key, value in base.items() if key not in OWN}
+    for key, value in variant.items():
+        if key == "extends":
+            continue
+        if key in MERGED:
+            merged[key] = {**base.get(key, {}), **value}
+        elif key == "components":
+            components = {name: {**spec, "parameters": dict(spec.get("parameters", {}))}
+                          for name, spec in base.get("components", {}).items()}
+            for name, spec in value.items():
+                old = components.get(name, {})
+                components[name] = {**old, **spec,
+                                    "parameters": {**old.get("parameters", {}), **spec.get("parameters", {})}}
+            merged[key] = components
+        else:
+            merged[key] = value
+    return merged
+
+
+def load(name_or_path: str | Path) -> Scene:
+    """A scene by name (resources/scenes) or from a .toml file (a variant with what it
+    takes from its base, ``read_data``)."""
+    if str(name_or_path).endswith(".ssp"):
+        raise SceneError(f"{name_or_path}: an SSP archive - read it with harness.formats.ssp.read_scene "
+                         "(the lever commands take one as SCENE)")
+    path = resolve(name_or_path)
+    data = read_data(path)
+    try:
+        components = {name: ComponentSpec(spec["fmu"], dict(spec.get("parameters", {})))
+                      for name, spec in data["components"].items()}
+        connections = [parse_connection(text) for text in data.get("connections", [])]
+        experiment = Experiment(**{k: (v if k == "master" else float(quantity(v, k)))
+                                   for k, v in data.get("experiment", {}).items()})
+    except (KeyError, TypeError) as error:
+        raise SceneError(f"{path}: malformed scene ({error})") from None
+    return Scene(name=data.get("name", path.stem), description=data.get("description", ""),
+                 components=components, connections=connections, experiment=experiment,
+                 record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
+                 notes=data.get("notes", ""), bench=dict(data.get("bench", {})),
+                 limits=dict(data.get("limits", {})))
+
+
+def parse_connection(text: str) -> Connection:
+    try:
+        left, right = (s.strip() for s in text.split("->"))
+        source, output = left.split(".", 1)
+        target, input_ = right.split(".", 1)
+    except ValueError:
+        raise SceneError(f"connection {text!r}: expected 'component.output -> component.input'") from None
+    return Connection(source, output, target, input_)
+
+
+def validate(scene: Scene, descriptions: dict) -> list[str]:
+    """Findings about ``scene`` given the model descriptions of its FMUs (by FMU name).
+    Empty when the scene can run."""
+    findings = []
+    variables = {}
+    for name, spec in scene.components.items():
+        md = descriptions.get(spec.fmu)
+        if md is None:
+            findings.append(f"component '{name}': unknown FMU '{spec.fmu}' (known: {', '.join(descriptions)})")
+            continue
+        variables[name] = {v.name: v for v in md.modelVariables}
+        for param, value in spec.parameters.items():
+            var = variables[name].get(param)
+            if var is None:
+                findings.append(f"component '{name}': {spec.fmu} has no variable '{param}'")
+            elif var.causality not in ("parameter", "input"):
+                findings.append(f"component '{name}': '{param}' is an {var.causality}, not a parameter or input")
+            else:
+                findings += value_findings(f"{name}.{param}", var, quantity(value, f"{name}.{param}"))
+    driven = {}
+    for c in scene.connections:
+        for comp, var, causality in ((c.source, c.output, "output"), (c.target, c.input, "input")):
+            if comp not in scene.components:
+                findings.append(f"connection '{c}': no component '{comp}'")
+            elif comp in variables and var not in variables[comp]:
+                findings.append(f"connection '{c}': {comp} has no variable '{var}'")
+            elif comp in variables and variables[comp][var].causality != causality:
+                findings.append(f"connection '{c}': {comp}.{var} is an {variables[comp][var].causality}, "
+                                f"expected an {causality}")
+        key = (c.target, c.input)
+        if key in driven:
+            findings.append(f"connection '{c}': {c.target}.{c.input} is already driven by '{driven[key]}'")
+        driven[key] = c
+    for item in scene.record:
+        comp, _, var = item.partition(".")
+        if comp not in scene.components:
+            findings.append(f"record '{item}': no component '{comp}'")
+        elif comp in variables and var not in variables[comp]:
+            findings.append(f"record '{item}': {comp} has no variable '{var}'")
+    findings += experiment_findings(scene.experiment)
+    findings += _check_limits(scene.limits)
+    for feature in scene.features - set(FEATURES):
+        findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
+    return findings
+
+
+def step_problem(step: float, label: str = "experiment.step") -> str | None:
+    """The one check of a communication step (a scene's, ``--step``, a master's): finite
+    and > 0 s.  None when it is."""
+    if not (math.isfinite(step) and step > 0):
+        return f"{label} = {step} must be > 0 s"
+    return None
+
+
+def experiment_findings(e: Experiment) -> list[str]:
+    """Findings about an experiment's values (empty when they are sound)."""
+    findings = [problem for problem in [step_problem(e.step)] if problem]
+    if not (math.isfinite(e.stop) and e.stop > e.start):
+        findings.append(f"experiment.stop = {e.stop} must be > experiment.start = {e.start} s")
+    elif e.step > e.stop - e.start:
+        findings.append(f"experiment.step = {e.step} s is longer than the experiment ({e.stop - e.start} s)")
+    if not 0.0 <= e.transient < e.stop - e.start:
+        findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
+    return findings
+
+
+def _check_limits(limits: dict) -> list[str]:
+    """The ``[limits]`` table: speed [rad/s], torque [N*m], margin, each > 0 (inf allowed)."""
+    findings = []
+    for key, raw in limits.items():
+        if key not in LIMIT_KEYS:
+            findings.append(f"limits.{key}: unknown limit (known: {', '.join(LIMIT_KEYS)})")
+            continue
+        try:
+            value = float(quantity(raw, f"limits.{key}"))
+        except (TypeError, ValueError):
+            findings.append(f"limits.{key} = {raw!r}: expected a number")
+            continue
+        if not value > 0.0:
+            findings.append(f"limits.{key} = {value:g} must be > 0 (inf: check finiteness only)")
+    return findings
+
+
+def value_findings(label: str, var, value) -> list[str]:
+    """Findings about ``value`` for the model variable ``var`` (its type and its [min, max])."""
+    if var.type == "String":
+        return [] if isinstance(value, str) else [f"{label}: expected a string, got {value!r}"]
+    if isinstance(value, str):
+        return [f"{label}: expected a number (optionally with a unit, e.g. '15 deg'), got {value!r}"]
+    if not math.isfinite(float(value)):
+        return [f"{label} = {value} is not finite"]
+    low = float(var.min) if var.min is not None else -math.inf
+    high = float(var.max) if var.max is not None else math.inf
+    if not low <= float(value) <= high:
+        unit = f" {var.unit}" if var.unit else ""
+        return [f"{label} = {value:.6g}{unit} is outside its allowed range [{low:.6g}, {high:.6g}]{unit} "
+                f"({var.description})"]
+    return []

@@ -1,0 +1,270 @@
+"""One FMU instance in a co-simulation, loaded with fmpy.
+
+The stepping loop calls ``read``, ``write`` and ``do_step`` millions of times, so they go
+straight to the FMU's C functions with preallocated ctypes buffers (fmpy's ``getReal``
+allocates two arrays per call).  Every call's status is checked; a failing call raises
+``FmuCallError`` carrying the messages the FMU logged, so a failed run can say which
+FMU refused what, and why.
+"""
+from __future__ import annotations
+
+import atexit
+import ctypes
+import itertools
+import shutil
+import sys
+from collections import deque
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
+    fmi2CallbackFreeMemoryTYPE
+from fmpy.fmi1 import FMICallException
+from fmpy.logging import addLoggerProxy
+
+from harness.engine.interface import RawCalls
+
+_STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
+
+# FMU log messages are printf-style with variadic arguments, which ctypes cannot read:
+# fmpy's native proxy formats them and calls one Python function for the whole process.
+# So every component shares one callback struct, and messages are routed by instance name.
+_routes: dict[str, deque] = {}
+_listeners: list = []
+_instances = itertools.count(1)
+
+
+def _dispatch(env, instance, status, category, message):
+    name = instance.decode("utf-8", "replace") if instance else ""
+    text = message.decode("utf-8", "replace") if message else ""
+    label = _STATUS[status] if 0 <= status < 6 else str(status)
+    for listener in _listeners:
+        listener(name, status, category.decode("utf-8", "replace") if category else "", text)
+    route = _routes.get(name)
+    if route is not None:
+        route.append(f"[{label}] {text}")
+    elif not _listeners:
+        print(f"[{label}] {name}: {text}", file=sys.stderr)
+
+
+def route_messages(instance_name: str, messages: deque):
+    """Append the log messages of the FMU instance ``instance_name`` to ``messages`` (for
+    code that instantiates FMUs itself, with ``log_callbacks()``), until ``unroute``."""
+    _routes[instance_name] = messages
+
+
+def unroute(instance_name: str):
+    _routes.pop(instance_name, None)
+
+
+def add_log_listener(listener):
+    """Also send every FMU log message, as ``listener(instance, status, category,
+    text)``, to ``listener`` (for tools and tests that instantiate FMUs themselves with
+    ``log_callbacks()``)."""
+    _listeners.append(listener)
+
+
+def log_callbacks() -> fmi2CallbackFunctions:
+    """The one callback struct of this process (see above); pass it to
+    ``FMU2Slave.instantiate(callbacks=...)``."""
+    return _callbacks
+
+
+_libc = ctypes.CDLL(None)
+_logger = fmi2CallbackLoggerTYPE(_dispatch)
+_callbacks = fmi2CallbackFunctions()
+_callbacks.logger = _logger
+_callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(("calloc", _libc))
+_callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(("free", _libc))
+addLoggerProxy(ctypes.byref(_callbacks))
+
+
+# One extraction per FMU file and process.  Every instance of an FMU then loads the same
+# library file, which the dynamic loader maps once; a fresh directory per instance maps a
+# fresh copy of pythonfmu's library, which is never unmapped (about 0.3 MB per instance,
+# so sweeps of thousands of runs grew without bound).
+_extracted: dict[tuple, str] = {}
+
+
+def unzipped(fmu_path: Path | str) -> str:
+    """The directory this process extracted ``fmu_path`` to (extracted again when the
+    file changes: a rebuilt FMU is a new library)."""
+    path = Path(fmu_path).resolve()
+    stat = path.stat()
+    key = (str(path), stat.st_mtime_ns, stat.st_size)
+    folder = _extracted.get(key)
+    if folder is None or not Path(folder).is_dir():
+        folder = _extracted[key] = extract(str(path))
+    return folder
+
+
+def remove_extractions():
+    """Delete the extracted FMUs (at exit; entry points that leave by ``os._exit`` call it
+    themselves).  Libraries already loaded stay usable: their files are mapped."""
+    for folder in _extracted.values():
+        shutil.rmtree(folder, ignore_errors=True)
+    _extracted.clear()
+
+
+atexit.register(remove_extractions)
+
+
+class FmuCallError(RuntimeError):
+    """An FMI call returned error/fatal (or discard): which component, which call,
+    at what time, and what the FMU said."""
+
+    def __init__(self, component: str, call: str, status: int, time: float, messages: Sequence[str]):
+        self.component, self.call, self.status, self.time = component, call, status, time
+        self.messages = list(messages)
+        said = ("; FMU said: " + " | ".join(self.messages)) if self.messages else ""
+        super().__init__(f"{component}: {call} returned {_STATUS[status] if 0 <= status < 6 else status} "
+                         f"at t = {time:.6g} s{said}")
+
+
+class Component:
+    """An instantiated FMU: named variables, parameters applied, fast value access."""
+
+    def __init__(self, name: str, fmu_path: Path | str, logging_on: bool = False):
+        self.name = name
+        self.fmu_path = Path(fmu_path)
+        self.description = read_model_description(str(self.fmu_path))
+        self.variables = {v.name: v for v in self.description.modelVariables}
+        self._unzipped = unzipped(self.fmu_path)
+        self.messages: deque[str] = deque(maxlen=50)
+        self.calls = 0          # FMI calls made on the hot path (read, write, do_step)
+        self.time = 0.0
+        # A process-unique instance name routes this instance's log messages here.
+        self.instance_name = f"{name}#{next(_instances)}"
+        _routes[self.instance_name] = self.messages
+        self.fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
+                             modelIdentifier=self.description.coSimulation.modelIdentifier,
+                             instanceName=self.instance_name)
+        self.fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
+        functions = self.fmu._functions
+        self.raw = RawCalls(self.fmu.component, functions["fmi2GetReal"], functions["fmi2SetReal"],
+                            functions["fmi2DoStep"])
+        self._get_state = self.fmu._functions["fmi2GetFMUstate"]
+        self._set_state = self.fmu._functions["fmi2SetFMUstate"]
+        self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
+        self._freed = False
+
+    # -- helpers ---------------------------------------------------------------------------
+    def variable(self, name: str):
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise KeyError(f"{self.name} ({self.fmu_path.name}) has no variable '{name}'; it has: "
+                           + ", ".join(self.variables)) from None
+
+    def vr(self, name: str) -> int:
+        return self.variable(name).valueReference
+
+    def fail(self, call: str, status: int):
+        """Raise ``FmuCallError`` for ``call`` that returned ``status``, with the last messages logged."""
+        messages = [m for m in self.messages if not m.startswith("[ok]")][-5:]
+        self.messages.clear()
+        raise FmuCallError(self.name, call, status, self.time, messages)
+
+    def _checked(self, call: str, function, *args):
+        try:
+            return function(*args)
+        except FMICallException as error:
+            self.fail(call, error.status)
+
+    # -- set-up ------------------------------------------------------------------------------
+    def set_parameters(self, values: dict):
+        """Apply parameter values by name (numbers, integers, strings, booleans)."""
+        for name, value in values.items():
+            var = self.variable(name)
+            if var.type == "Real":
+                self._checked(f"fmi2SetReal({name} = {value!r})", self.fmu.setReal, [var.valueReference],
+                              [float(value)])
+            elif var.type in ("Integer", "Enumeration"):
+                if isinstance(value, float) and value != int(value):
+                    raise ValueError(f"{self.name}.{name} is an integer, got {value!r}")
+                self._checked(f"fmi2SetInteger({name} = {value!r})", self.fmu.setInteger, [var.valueReference],
+                              [int(value)])
+            elif var.type == "Boolean":
+                self._checked(f"fmi2SetBoolean({name})", self.fmu.setBoolean, [var.valueReference], [bool(value)])
+            elif var.type == "String":
+                self._checked(f"fmi2SetString({name})", self.fmu.setString, [var.valueReference],
+                              [str(value)])
+
+    def initialize(self, start: float, stop: float | None):
+        self.time = start
+        self._checked("fmi2SetupExperiment", self.fmu.setupExperiment, None, start, stop)
+        self._checked("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
+
+    def exit_initialization(self):
+        self._checked("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    # -- hot path ----------------------------------------------------------------------------
+    def real_buffer(self, names: Iterable[str]):
+        """A (value references, values) pair of ctypes arrays for ``read``/``write``."""
+        names = list(names)
+        vrs = (ctypes.c_uint * len(names))(*[self.vr(n) for n in names])
+        return vrs, (ctypes.c_double * len(names))()
+
+    def read(self, vrs, values):
+        self.calls += 1
+        status = self.raw.get_real(self.raw.handle, vrs, len(vrs), values)
+        if status > 1:
+            self.fail("fmi2GetReal", status)
+
+    def write(self, vrs, values):
+        self.calls += 1
+        status = self.raw.set_real(self.raw.handle, vrs, len(vrs), values)
+        if status > 1:
+            self.fail("fmi2SetReal", status)
+
+    def do_step(self, t: float, h: float):
+        self.calls += 1
+        status = self.raw.do_step(self.raw.handle, t, h, 1)
+        if status > 1:
+            self.fail(f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})", status)
+        self.time = t + h
+
+    def get(self, names: Sequence[str]) -> list[float]:
+        vrs, values = self.real_buffer(names)
+        self.read(vrs, values)
+        return list(values)
+
+    # -- state (for masters that roll back) --------------------------------------------------
+    # Raw calls like the hot path: an iterating master saves, restores and frees a state
+    # on every communication step.
+    def save_state(self) -> ctypes.c_void_p:
+        self.calls += 1
+        state = ctypes.c_void_p()
+        status = self._get_state(self.raw.handle, ctypes.byref(state))
+        if status > 1:
+            self.fail("fmi2GetFMUstate", status)
+        return state
+
+    def restore_state(self, state, time: float):
+        self.calls += 1
+        status = self._set_state(self.raw.handle, state)
+        if status > 1:
+            self.fail("fmi2SetFMUstate", status)
+        self.time = time
+
+    def free_state(self, state):
+        self.calls += 1
+        status = self._free_state(self.raw.handle, ctypes.byref(state))
+        if status > 1:
+            self.fail("fmi2FreeFMUstate", status)
+
+    # -- tear-down ---------------------------------------------------------------------------
+    def free(self):
+        if self._freed:
+            return
+        self._freed = True
+        try:
+            self.fmu.terminate()
+        except Exception:  # noqa: BLE001 - freeing must go on after a failed run
+            pass
+        try:
+            self.fmu.freeInstance()
+        finally:
+            _routes.pop(self.instance_name, None)
+

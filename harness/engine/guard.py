@@ -1,0 +1,189 @@
+"""Divergence handling: the physical bounds of a scene, and the per-step guard that stops
+a run within one communication step of going non-finite or past them.
+
+**The rule** (``bounds``).  For the engine - coupling - load driveline:
+
+* *speed bound* ``W`` for both shafts: ``margin`` (default 10) times the largest speed
+  the scene's parameters make plausible: the start speeds and the speeds the engine
+  characteristic allows under the scene's loads.  For the linear engine ``M1 - K1*w``
+  that is the no-load speed ``M1/K1`` and the steady speeds ``(M1 - Mc)/K1`` at the
+  load's smallest and largest resistance.  Where no steady speed exists (``K1 = 0``, a
+  tabulated characteristic, which holds its first torque below its first speed) the
+  speed the largest engine and load torques together could give the whole driveline from
+  rest over the run, ``(|Mg|max + |Mc|max) * (stop - start) / (I1 + I2)``, counts too.
+* *torque bound* for the coupling torques ``tau1, tau2``: the elastic torque at the
+  deflection whose elastic energy equals the kinetic energy of the driveline at the
+  speed bound, ``V(theta) = (I1 + I2) W^2 / 2`` (for a linear spring
+  ``W sqrt(c (I1 + I2))``), plus the damping torque at a relative speed of
+  ``(1 + U12max) W``, times ``U12max`` (``tau2 = U12 * T``).
+
+A scene overrides any of it in a ``[limits]`` table (``speed`` [rad/s], ``torque``
+[N*m], ``margin``), also with ``--set limits.speed=...``; ``inf`` leaves only the
+finiteness check.  Every other connected output is checked for being finite.
+
+The guard reads the values the last propagation left in the system's buffers (no FMI
+call): one comparison per checked value and step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lever.physics import catalogue
+from lever.physics.elastic import LinearElasticLaw
+from lever.physics.engine import LinearCharacteristic
+from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad
+from lever.physics.parameters import ParameterError
+
+from harness.description import kinds
+from harness.description import scene as scenes
+
+#: default factor between the plausible speeds of a scene and its speed bound
+MARGIN = 10.0
+
+
+class Diverged(RuntimeError):
+    """A run left its physical bounds or went non-finite; ``diagnosis`` says where."""
+
+    def __init__(self, message: str, diagnosis: dict | None = None):
+        super().__init__(message)
+        self.diagnosis = diagnosis or {}
+
+
+@dataclass
+class Bound:
+    variable: str        # "component.variable"
+    limit: float         # |value| <= limit; inf: finite only
+    unit: str
+    why: str             # how the limit was derived (for the diagnosis)
+
+
+def load_range(load) -> tuple[float, float]:
+    """Smallest and largest resistance a load model can give."""
+    if isinstance(load, ConstantLoad):
+        return load.mean, load.mean
+    if isinstance(load, RandomLoad):
+        return load.mean - load.amplitude, load.mean + load.amplitude
+    if isinstance(load, TabulatedLoad):
+        return min(load._m), max(load._m)
+    if isinstance(load, FourierLoad):
+        spread = sum(math.hypot(a, b) for a, b in zip(load.cosines, load.sines))
+        return load.mean - spread, load.mean + spread
+    raise TypeError(f"unknown load model {type(load).__name__}")
+
+
+def plausible_speed(scene: scenes.Scene, physics: kinds.DrivelinePhysics) -> tuple[float, str]:
+    """The largest speed the scene's parameters make plausible, and how it was found."""
+    e, l = kinds.parameters(scene, physics.roles.engine), kinds.parameters(scene, physics.roles.load)
+    engine, load = physics.engine, physics.load
+    starts = [abs(catalogue.start_state(e, catalogue.ENGINE)[1]), abs(catalogue.start_state(l, catalogue.LOAD)[1])]
+    low, high = load_range(load.external)
+    char = engine.external
+    candidates = {"start speed": max(starts)}
+    if isinstance(char, LinearCharacteristic) and char.slope > 0.0:
+        candidates["steady speed of the engine line"] = max(abs(char.steady_speed(m)) for m in (0.0, low, high))
+    else:
+        torques = [abs(m) for m in char._m] if hasattr(char, "_m") else [abs(char.stall_torque)]
+        if hasattr(char, "_w"):
+            candidates["speeds of the engine table"] = max(abs(w) for w in char._w)
+        span = scene.experiment.stop - scene.experiment.start
+        candidates["free acceleration over the run"] = (max(torques) + max(abs(low), abs(high))) * span / (
+            engine.inertia + load.inertia)
+    which = max(candidates, key=candidates.get)
+    return candidates[which], which
+
+
+def _deflection_at_energy(law, energy: float) -> float:
+    """The deflection theta >= 0 with ``V(theta) = energy`` (V is increasing)."""
+    if isinstance(law, LinearElasticLaw):
+        return math.sqrt(2.0 * energy / law.stiffness)
+    high = 1.0
+    while law.energy(high) < energy:
+        high *= 2.0
+    low = 0.0
+    for _ in range(100):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if law.energy(mid) < energy else (low, mid)
+    return high
+
+
+def bounds(scene: scenes.Scene) -> list[Bound]:
+    """The bounds a run of ``scene`` is held to (see the module docstring): speeds and
+    coupling torques of the driveline, when the scene has one; nothing otherwise."""
+    if not kinds.is_driveline(scene):
+        return []
+    limits = {k: float(scenes.quantity(v, f"limits.{k}")) for k, v in scene.limits.items()}
+    margin = limits.get("margin", MARGIN)
+    out = []
+    try:
+        built = kinds.physics(scene)
+        plausible, which = plausible_speed(scene, built)
+    except ParameterError:
+        return []    # the FMUs will refuse the parameters with the proper message
+    engine, load, coupling = built.engine, built.load, built.coupling
+    engine_name, coupling_name, load_name = built.roles.engine, built.roles.coupling, built.roles.load
+    if "speed" in limits:
+        speed, why = limits["speed"], "set in the scene's [limits]"
+    else:
+        speed = margin * plausible
+        why = f"{margin:g} x the largest plausible speed {plausible:.4g} rad/s ({which})"
+    out += [Bound(f"{engine_name}.w", speed, "rad/s", why), Bound(f"{load_name}.w", speed, "rad/s", why)]
+    if "torque" in limits:
+        torque, why = limits["torque"], "set in the scene's [limits]"
+    else:
+        ratio = float(np.max(coupling.transfer.ratio(2.0 * np.pi * np.arange(1024) / 1024)))
+        energy = 0.5 * (engine.inertia + load.inertia) * speed * speed
+        theta = _deflection_at_energy(coupling.law, energy) if math.isfinite(energy) else math.inf
+        torque = max(1.0, ratio) * (float(coupling.law.torque(theta)) + coupling.damping * (1.0 + ratio) * speed)
+        why = (f"elastic torque at the driveline's kinetic energy at {speed:.4g} rad/s "
+               f"({energy:.4g} J) plus damping torque")
+    out += [Bound(f"{coupling_name}.tau1", torque, "N.m", why), Bound(f"{coupling_name}.tau2", torque, "N.m", why)]
+    return out
+
+
+class Guard:
+    """Checks, after every communication step, the bounded variables and the finiteness
+    of every connected output, from the system's buffers.  ``check`` raises ``Diverged``
+    with a diagnosis: which component (and FMU), which variable, its value and bound,
+    the time, the master, its step size and the step's number."""
+
+    def __init__(self, system, scene: scenes.Scene, master: str, step: float):
+        self.master, self.step = master, step
+        limited = {b.variable: b for b in bounds(scene)}
+        missing = [v for v in limited if (v.partition(".")[0], v.partition(".")[2]) not in system.index]
+        if missing:
+            system.expose(missing)
+        checks, self._bounds = [], []
+        for (component, variable), i in system.index.items():
+            name = f"{component}.{variable}"
+            connected = any(c.source == component and c.output == variable for c in scene.connections)
+            if name not in limited and not connected:
+                continue
+            bound = limited.get(name) or Bound(name, math.inf, "", "finite")
+            checks.append((system.buffers[component][1], i, bound.limit, len(self._bounds)))
+            self._bounds.append((component, scene.components[component].fmu, variable, bound))
+        self._checks = tuple(checks)
+
+    def check(self, t: float, step_index: int):
+        for values, i, limit, k in self._checks:
+            if not -limit <= values[i] <= limit:       # NaN fails both comparisons
+                self._fail(k, values[i], t, step_index)
+
+    def _fail(self, k, value, t, step_index):
+        component, fmu, variable, bound = self._bounds[k]
+        unit = f" {bound.unit}" if bound.unit else ""
+        if math.isfinite(value):
+            what = (f"{component}.{variable} = {value:.6g}{unit} exceeds its physical bound "
+                    f"{bound.limit:.4g}{unit} ({bound.why})")
+            kind = "bound"
+        else:
+            what = f"{component}.{variable} = {value} is not finite"
+            kind = "non-finite"
+        # (the run appends the master, its step size and the number of steps taken)
+        message = f"diverged: {what}; component {component} (FMU {fmu}), at t = {t:.6g} s, communication step {step_index}"
+        raise Diverged(message, {"kind": kind, "component": component, "fmu": fmu, "variable": variable,
+                                 "value": float(value), "bound": bound.limit, "bound_rule": bound.why,
+                                 "time": t, "master": self.master, "step": self.step,
+                                 "step_index": step_index})

@@ -1,0 +1,53 @@
+"""The interface a component offers the system and the masters, declared once: the FMU
+components (``harness.engine.component.Component``) and the stability analysis's linear
+stand-ins (``harness.judges.stability``) both satisfy ``CoSimComponent``.
+
+The hot path goes through ``raw``: the C functions of a component and its instance
+handle, called by the system's compiled propagation without Python overhead; a status
+above 1 (FMI: error, fatal) is passed to ``fail``, which raises with what the component
+knows of the failure.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, Iterable, NamedTuple, Protocol, runtime_checkable
+
+
+class RawCalls(NamedTuple):
+    """``get_real(handle, vrs, n, values)``, ``set_real(handle, vrs, n, values)`` and
+    ``do_step(handle, t, h, no_set_prior_state)`` with FMI 2.0's C signatures, each
+    returning an FMI status."""
+    handle: Any
+    get_real: Callable
+    set_real: Callable
+    do_step: Callable
+
+
+@runtime_checkable
+class CoSimComponent(Protocol):
+    name: str
+    description: Any        # fmpy's ModelDescription
+    calls: int              # calls made on the hot path
+    time: float
+    raw: RawCalls
+
+    def variable(self, name: str) -> Any: ...
+
+    def vr(self, name: str) -> int: ...
+
+    def real_buffer(self, names: Iterable[str]) -> tuple[Any, Any]: ...
+
+    def read(self, vrs, values) -> None: ...
+
+    def write(self, vrs, values) -> None: ...
+
+    def do_step(self, t: float, h: float) -> None: ...
+
+    def fail(self, call: str, status: int) -> None: ...
+
+    def save_state(self) -> Any: ...
+
+    def restore_state(self, state, time: float) -> None: ...
+
+    def free_state(self, state) -> None: ...
+
+    def free(self) -> None: ...

@@ -1,0 +1,140 @@
+"""Co-simulation masters: how a system of FMUs is stepped from one communication point
+to the next.
+
+Like scipy's ``OdeSolver``, one base class states the contract and keeps the books, and
+each master implements one step in ``_step_impl``:
+
+* ``step(h)`` advances the system from ``t`` to ``t + h`` and leaves it *consistent*
+  at the new time: every connected input holds its source's current output, so a
+  recorder can read any exposed value.  It raises ``FmuCallError`` (from the component
+  that failed) and otherwise returns nothing.
+* Counters: ``n_steps`` (accepted steps), ``n_rollbacks``, ``n_iterations`` (coupled
+  evaluations beyond the first in a step, including those for Jacobians), ``n_rejected``;
+  ``fmu_calls`` counts the FMI calls on the hot path (read, write, doStep and the state
+  calls) of all components.
+* Variable steps: an ``adaptive`` master chooses its own step; ``step()`` without
+  arguments takes the step it proposes (``h``), clipped to ``t_end``.
+* A master that cannot make a step (an iteration that does not converge, a step size
+  that underflows) raises ``MasterFailure`` saying where, when and why.
+* ``order``: the global convergence order the master promises on smooth problems
+  (the tests check it against the monolithic reference).
+
+Masters know nothing of the models: only the system's stateful components (no direct
+feedthrough, stepped in scene order) and its propagation; the components offer them
+``harness.engine.interface.CoSimComponent``.
+
+The family: this contract (``base``), the explicit masters (``explicit``: zero-order
+hold, Gauss-Seidel, extrapolation, mid-step prediction), the iterative ones
+(``iterative``: implicit and trapezoidal coupling, fixed point or Newton, with
+rollback), the adaptive ones (``adaptive``: error-controlled steps), and the registry
+(``registry``), the one place a master's name is looked up and checked.
+"""
+from __future__ import annotations
+
+from harness.description.scene import step_problem
+from harness.engine.system import System
+
+
+class MasterFailure(RuntimeError):
+    """A master could not make a step; the system is left at the last accepted step."""
+
+
+class Master:
+    name = "abstract"
+    order = 0
+    description = ""
+    adaptive = False
+    #: options ``make`` accepts for this master, with their defaults
+    options: dict = {}
+
+    def __init__(self, system: System, step: float, **options):
+        if problem := step_problem(step, "communication step"):
+            raise ValueError(problem)
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise ValueError(f"master '{self.name}' takes no option {', '.join(sorted(unknown))}"
+                             + (f" (it takes: {', '.join(self.options)})" if self.options else ""))
+        for key, default in self.options.items():
+            setattr(self, key, options.get(key, default))
+        self.system = system
+        self.h = float(step)
+        self.t = system.scene.experiment.start
+        self.t_end = system.scene.experiment.stop
+        self.n_steps = 0
+        self.n_rollbacks = 0
+        self.n_iterations = 0
+        self.n_rejected = 0
+        self._stateful = [system.components[n] for n in system.stateful]
+        self._feedthrough = [n for n in system.order if n in system.feedthrough]
+        self._feedthrough_components = [system.components[n] for n in self._feedthrough]
+        #: set by a step that left the coupled inputs in their buffers only (a held plan)
+        self._inputs_unsent = False
+
+    @property
+    def fmu_calls(self) -> int:
+        return self.system.fmu_calls
+
+    def step(self, h: float | None = None, t_next: float | None = None):
+        """Advance by ``h`` (default: the master's step).  ``t_next`` may give the
+        target time exactly, to avoid accumulating rounding in ``t``."""
+        h = self.h if h is None else h
+        target = self.t + h if t_next is None else t_next
+        taken = self._step_impl(self.t, target - self.t)
+        if self.system.has_dependent_outputs:
+            # recorded outputs that depend on inputs (a shaft's acceleration on its torque)
+            # were read before the step's last inputs were written: read them with those
+            self.system.refresh_dependent(send=self._inputs_unsent)
+            self._inputs_unsent = False
+        # An adaptive master may take less than it was offered; it returns what it took.
+        self.t = target if taken is None else self.t + taken
+        self.n_steps += 1
+
+    def _step_impl(self, t: float, h: float):
+        """Advance the system from ``t`` by ``h``; return ``None``, or the step actually
+        taken if it is shorter (adaptive masters)."""
+        raise NotImplementedError
+
+    def counters(self) -> dict:
+        return {"steps": self.n_steps, "fmu_calls": self.fmu_calls, "rollbacks": self.n_rollbacks,
+                "iterations": self.n_iterations, "rejected": self.n_rejected}
+
+    # -- shared helpers ------------------------------------------------------------------------
+    def _coupled_inputs(self):
+        """The input buffers of stateful components that propagation fills (the coupling
+        torques), as the last propagation left them: ``[(component, vrs, values)]``."""
+        system = self.system
+        return [(target, vrs, values) for writes in system.writes.values()
+                for target, vrs, values, _ in writes if target.name in system.stateful]
+
+    def _rate_inputs(self, inputs):
+        """For each ``(component, vrs, values)`` of ``inputs``: the buffer of the inputs
+        declared as their time derivatives (FMI ``derivative`` attribute; a shaft's
+        ``tau_rate``), or None where a component has none for one of them."""
+        out = []
+        for target, vrs, _ in inputs:
+            rate_of = {v.derivative.valueReference: v.name for v in target.description.modelVariables
+                       if v.derivative is not None and v.causality == "input"}
+            names = [rate_of.get(vr) for vr in vrs]
+            out.append(target.real_buffer(names) if all(names) else None)
+        return out
+
+    # Full FMU states of the stateful components, for masters that roll back.
+    def _save_states(self) -> list:
+        return [component.save_state() for component in self._stateful]
+
+    def _restore_states(self, states, t):
+        for component, state in zip(self._stateful, states):
+            component.restore_state(state, t)
+        self.n_rollbacks += 1
+
+    def _free_states(self, states):
+        for component, state in zip(self._stateful, states):
+            component.free_state(state)
+
+    def _step_stateful(self, t, h):
+        for component in self._stateful:
+            component.do_step(t, h)
+
+    def _step_feedthrough(self, t, h):
+        for component in self._feedthrough_components:
+            component.do_step(t, h)

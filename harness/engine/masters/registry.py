@@ -1,0 +1,42 @@
+"""The registry of masters: the one place a master's name is looked up and checked
+(``master_class``, ``check``) and a master is made for a system (``make``)."""
+from __future__ import annotations
+
+from harness.engine.masters.adaptive import AdaptiveMaster, AdaptiveTrapezoidalMaster, StepControl
+from harness.engine.masters.base import Master, MasterFailure
+from harness.engine.masters.explicit import (GaussSeidelMaster, JacobiMaster, LinearExtrapolationMaster,
+                                             MidpointPredictionMaster, QuadraticExtrapolationMaster)
+from harness.engine.masters.iterative import (ImplicitFixedPointMaster, ImplicitNewtonMaster, IterativeMaster,
+                                              TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster)
+from harness.engine.system import System
+
+MASTERS = {cls.name: cls for cls in (JacobiMaster, GaussSeidelMaster, LinearExtrapolationMaster,
+                                     QuadraticExtrapolationMaster, MidpointPredictionMaster,
+                                     ImplicitFixedPointMaster, ImplicitNewtonMaster,
+                                     TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster, AdaptiveMaster,
+                                     AdaptiveTrapezoidalMaster)}
+
+
+class UnknownMaster(ValueError):
+    """A master name that is not in ``MASTERS``."""
+
+
+def check(*names: str):
+    """Raise ``UnknownMaster`` naming every one of ``names`` that is not a master, and the known ones."""
+    unknown = [name for name in names if name not in MASTERS]
+    if unknown:
+        raise UnknownMaster(f"master '{', '.join(unknown)}' is unknown (known: {', '.join(MASTERS)})")
+
+
+def master_class(name: str) -> type[Master]:
+    check(name)
+    return MASTERS[name]
+
+
+def make(name: str, system: System, step: float, **options) -> Master:
+    cls = master_class(name)
+    if issubclass(cls, (IterativeMaster, StepControl)) and not system.scene.connections:
+        # nothing to iterate on or to estimate an error from (e.g. the rectifier scene's one FMU)
+        raise MasterFailure(f"master '{name}' iterates on the values the scene's components exchange, and scene "
+                            f"'{system.scene.name}' connects none: use jacobi")
+    return cls(system, step, **options)

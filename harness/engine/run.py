@@ -1,0 +1,228 @@
+"""Running a scene: instantiate its system, step it with a master, record what the scene
+asks for.  A failed run keeps every row recorded before the failure and says what went
+wrong, where and when (``RunResult.failure``)."""
+from __future__ import annotations
+
+import math
+import re
+import time as clock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.description import scene as scenes
+from harness.engine.component import FmuCallError
+from harness.engine.guard import Diverged, Guard
+from harness.paths import FMUS
+from harness.engine.system import System
+
+
+@dataclass
+class RunResult:
+    scene: scenes.Scene
+    master: str
+    step: float
+    times: np.ndarray
+    traces: dict[str, np.ndarray]
+    wall_time: float
+    counters: dict = field(default_factory=dict)
+    failure: str | None = None
+    #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
+    failure_stage: str | None = None
+    #: a failed run's diagnosis: kind (bound, non-finite, fmu-error, master), component,
+    #: fmu, variable, value, bound, time, master, step, step_index (see harness.engine.guard)
+    diagnosis: dict | None = None
+    #: findings of the checks made before the run (the stability advisor)
+    warnings: list[str] = field(default_factory=list)
+    #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.engine.traces)
+    stream: dict | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.failure is None
+
+
+class Recorder:
+    """Preallocated rows of the recorded variables, filled from the system's buffers:
+    one numpy copy per component buffer and step, checked for non-finite values in
+    blocks (a non-finite row is found and reported with its time)."""
+
+    CHECK_EVERY = 256
+
+    def __init__(self, system: System, names: list[str], n_rows: int, stream=None):
+        self.names = names
+        # Streaming (harness.engine.traces.TraceStream): hold one chunk, hand it on when full.
+        self.stream = stream
+        if stream is not None:
+            from harness.engine.traces import CHUNK
+            n_rows = min(n_rows, CHUNK)
+        # Record whole component buffers (a superset of the names), pick the names at the end.
+        self._columns = {}
+        self._copies = []
+        offset = 0
+        for comp, (_, values) in system.buffers.items():
+            if not len(values):
+                continue
+            view = np.ctypeslib.as_array(values)
+            self._copies.append((offset, offset + len(values), view))
+            for var, i in ((v, system.index[(comp, v)]) for v in system.exposed[comp]):
+                self._columns[f"{comp}.{var}"] = offset + i
+            offset += len(values)
+        missing = [n for n in names if n not in self._columns]
+        if missing:
+            raise KeyError(f"not exposed by the system: {', '.join(missing)}")
+        self._selected = [self._columns[n] for n in names]      # the recorded names' columns
+        self.times = np.empty(n_rows)
+        self.rows = np.empty((n_rows, offset))
+        self.count = 0
+        self._checked = 0
+
+    def record(self, t: float):
+        if self.count == len(self.times) and self.stream is not None:
+            self._hand_on()
+        elif self.count == len(self.times):     # a variable-step run: grow
+            self.times = np.concatenate([self.times, np.empty(len(self.times))])
+            self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
+        row = self.rows[self.count]
+        for start, stop, view in self._copies:
+            row[start:stop] = view
+        self.times[self.count] = t
+        self.count += 1
+        if self.count - self._checked >= self.CHECK_EVERY:
+            self.check()
+
+    def check(self):
+        """Raise ``Diverged`` at the first non-finite recorded value since the last check
+        (the rows up to it are kept)."""
+        block = self.rows[self._checked:self.count, self._selected]
+        finite = np.isfinite(block)
+        if not finite.all():
+            first = int(np.argmin(finite.all(axis=1)))
+            row = self._checked + first
+            bad = [n for n, ok in zip(self.names, finite[first]) if not ok]
+            self.count = row + 1
+            raise Diverged(f"non-finite value of {', '.join(bad)} at t = {self.times[row]:.6g} s")
+        self._checked = self.count
+
+    def _hand_on(self, checked: bool = True):
+        """Pass the rows held so far to the stream (checked first, unless they are the
+        last rows of a run that already failed) and start a new chunk."""
+        if checked:
+            self.check()
+        self.stream.append(self.times[:self.count], self.rows[:self.count][:, self._selected])
+        self.count = self._checked = 0
+
+    def traces(self) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        if self.stream is not None:       # the rows since the last chunk (a failed run's included)
+            self._hand_on(checked=False)
+            self.stream.close()
+            return self.stream.traces()
+        n = self.count
+        return self.times[:n].copy(), {name: self.rows[:n, self._columns[name]].copy() for name in self.names}
+
+
+def recorded_names(scene: scenes.Scene) -> list[str]:
+    """What a run records: the scene's list, plus what its features need."""
+    names = list(scene.record)
+    if "energy_balance" in scene.features:
+        names += [n for n in kinds.energy_variables(scene) if n not in names]
+    return names
+
+
+def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
+             fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
+             stream: Path | None = None) -> RunResult:
+    """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
+    (for an adaptive master: its first step); ``options`` go to the master.  The stability
+    advice is not computed here: whoever shows it (``lever run``) asks
+    ``harness.judges.stability.run_advice`` and may keep it in ``RunResult.warnings``.  ``stream``: a trace CSV
+    written while the run goes, the result keeping every k-th row (harness.engine.traces)."""
+    e = scene.experiment
+    master = master or e.master
+    step = float(step or e.step)
+    options = dict(options or {})
+    master_family.check(master)
+    n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
+    names = recorded_names(scene)
+    system = System(scene, fmu_dir, record=names)
+    failure = stage = diagnosis = None
+    recorder = driver = None
+    started = stepping = clock.perf_counter()
+    try:
+        system.initialize()
+        guard = Guard(system, scene, master, step)     # before the master: it may expose outputs
+        driver = master_family.make(master, system, step, **options)
+        recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
+        recorder.record(e.start)
+        bar = _progress(e.stop - e.start, scene.name, master) if progress else None
+        stepping = clock.perf_counter()
+        if driver.adaptive:
+            while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
+                driver.step(min(driver.h, e.stop - driver.t))
+                recorder.record(driver.t)
+                guard.check(driver.t, driver.n_steps)
+                if bar is not None:
+                    bar.update(driver.t - bar.n)
+        else:
+            # Targets from the step count, not by summing steps: no drift in t.
+            stride = 500 if bar is not None else n_steps + 1
+            for n in range(1, n_steps + 1):
+                driver.step(t_next=min(e.start + n * step, e.stop))
+                recorder.record(driver.t)
+                guard.check(driver.t, n)
+                if n % stride == 0:
+                    bar.update(driver.t - bar.n)
+        recorder.check()
+        if bar is not None:
+            bar.close()
+    except (FmuCallError, Diverged, master_family.MasterFailure) as error:
+        stage = "stepping" if driver else "initialisation"
+        refused = scene.components.get(getattr(error, "component", None))
+        failure = ((f"FMU {refused.fmu} refused a call: " if refused else "")
+                   + f"{error} (master {master}, step {step:g} s"
+                   + (f", after {driver.n_steps} steps" if driver else ", during initialisation") + ")")
+        diagnosis = _diagnosis(error, scene, master, step, driver)
+    finally:
+        ended = clock.perf_counter()
+        counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
+        counters["setup_time"] = stepping - started
+        system.free()
+    times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
+    # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
+    return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
+                     [], recorder.stream.report() if recorder and recorder.stream else None)
+
+
+def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
+    """What a failed run reports in ``RunResult.diagnosis``: the guard's own, or one
+    built from an FMU's refusal (its log names the variable) or a master's failure."""
+    if isinstance(error, Diverged) and error.diagnosis:
+        return dict(error.diagnosis)
+    out = {"kind": "master", "master": master, "step": step,
+           "step_index": (driver.n_steps + 1) if driver else 0,
+           "time": driver.t if driver else None, "message": str(error)}
+    if isinstance(error, Diverged):
+        out["kind"] = "non-finite"
+    elif isinstance(error, FmuCallError):
+        named = re.search(r"(?:parameter|variable) '(\w+)'", " ".join(error.messages))
+        spec = scene.components.get(error.component)
+        out.update(kind="fmu-error", component=error.component, fmu=spec.fmu if spec else None,
+                   variable=named.group(1) if named else None, call=error.call, time=error.time,
+                   fmu_messages=error.messages)
+    return out
+
+
+def _stream(path: Path | None, scene: scenes.Scene, names: list[str], rows: int):
+    if path is None:
+        return None
+    from harness.engine.traces import TraceStream, integrals_for
+    return TraceStream(path, names, rows, integrate=integrals_for(scene))
+
+
+def _progress(span: float, scene: str, master: str):
+    from tqdm import tqdm
+    return tqdm(total=span, desc=f"{scene} [{master}]", unit="s", unit_scale=False, leave=False,
+                mininterval=0.5, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")

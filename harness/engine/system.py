@@ -1,0 +1,258 @@
+"""A scene's FMUs instantiated and wired: the object masters step.
+
+Values flow along the scene's connections by *propagation*: components are visited in
+an order where every component with direct feedthrough (its outputs depend on its
+inputs, as its model description declares) comes after the components feeding it; each
+visited component's outputs are read in one call and written to its targets in one call
+per target.  ``propagate(sources)`` re-propagates only downstream of the given
+components (what a Gauss-Seidel master needs after stepping one shaft).
+
+Only the scene's components are instantiated, and only the outputs that are connected
+or recorded are ever read.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from fmpy import read_model_description
+
+from harness.description import scene as scenes
+from harness.engine.component import Component
+from harness.engine.interface import CoSimComponent
+from harness.paths import FMUS
+
+
+class SceneInvalid(ValueError):
+    def __init__(self, scene_name: str, findings: list[str]):
+        self.findings = findings
+        super().__init__(f"scene '{scene_name}' is not valid:\n  - " + "\n  - ".join(findings))
+
+
+def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
+    return Path(fmu_dir) / f"{fmu}.fmu"
+
+
+def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
+    out = {}
+    for spec in scene.components.values():
+        path = fmu_path(spec.fmu, fmu_dir)
+        if spec.fmu not in out and path.exists():
+            out[spec.fmu] = read_model_description(str(path))
+    return out
+
+
+def feedthrough_components(scene: scenes.Scene, descriptions: dict) -> set[str]:
+    """Components (name -> model description) with direct feedthrough that matters: a
+    *connected* output depends on inputs (a shaft's acceleration depends on its torque,
+    but nothing is wired from it)."""
+    connected = {(c.source, c.output) for c in scene.connections}
+    return {name for name, md in descriptions.items()
+            if any(u.dependencies and (name, u.variable.name) in connected for u in md.outputs)}
+
+
+def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
+    """Components without direct feedthrough first (scene order), then each feedthrough
+    component after the components feeding it; an algebraic loop is a finding."""
+    order = [n for n in scene.components if n not in feedthrough]
+    pending = [n for n in scene.components if n in feedthrough]
+    while pending:
+        ready = [n for n in pending
+                 if all(c.source in order or c.source not in feedthrough
+                        for c in scene.connections if c.target == n)]
+        if not ready:
+            raise SceneInvalid(scene.name, [f"algebraic loop between direct-feedthrough components "
+                                            f"{', '.join(pending)}"])
+        order += ready
+        pending = [n for n in pending if n not in ready]
+    return order
+
+
+class System:
+    def __init__(self, scene: scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
+                 record: list[str] | None = None):
+        self.scene = scene
+        self.record = list(scene.record if record is None else record)
+        findings = scenes.validate(scene, descriptions_for(scene, fmu_dir))
+        if findings:
+            raise SceneInvalid(scene.name, findings)
+        self.components: dict[str, CoSimComponent] = {}
+        try:
+            for name, spec in scene.components.items():
+                self.components[name] = Component(name, fmu_path(spec.fmu, fmu_dir), logging_on)
+        except Exception:
+            self.free()
+            raise
+        self.feedthrough = feedthrough_components(
+            scene, {name: c.description for name, c in self.components.items()})
+        # Stateful components in scene order: the order a Gauss-Seidel master steps them.
+        self.stateful = [n for n in scene.components if n not in self.feedthrough]
+        self._plan()
+
+    def derivative_chain(self, component: str, output: str) -> list[str]:
+        """``[output, d/dt output, d2/dt2 output, ...]`` as far as the component's model
+        description declares them (FMI's ``derivative`` attribute)."""
+        of = {v.derivative.name: v.name for v in self.components[component].description.modelVariables
+              if v.derivative is not None}
+        chain = [output]
+        while chain[-1] in of and len(chain) < 4:
+            chain.append(of[chain[-1]])
+        return chain
+
+    def expose(self, items: list[str]):
+        """Also read the outputs ``component.variable`` on every propagation (for a master
+        that needs more than the connections carry)."""
+        new = [item for item in items if item not in self.record]
+        if new:
+            self.record += new
+            self._plan()
+
+    # -- wiring --------------------------------------------------------------------------------
+    def _plan(self):
+        scene = self.scene
+        exposed = {name: [] for name in self.components}
+        for c in scene.connections:
+            if c.output not in exposed[c.source]:
+                exposed[c.source].append(c.output)
+        for item in self.record:
+            comp, _, var = item.partition(".")
+            if var not in exposed[comp] and self.components[comp].variable(var).causality == "output":
+                exposed[comp].append(var)
+        self.exposed = exposed
+        self.buffers = {name: self.components[name].real_buffer(names) for name, names in exposed.items()}
+        self.index = {(name, var): i for name, names in exposed.items() for i, var in enumerate(names)}
+
+        order = self.order = dependency_order(scene, self.feedthrough)
+
+        # For each source: the writes to each target (target buffer and the copy map).
+        self.writes = {}
+        for name in order:
+            groups = {}
+            for c in scene.connections:
+                if c.source == name:
+                    groups.setdefault(c.target, []).append(c)
+            writes = []
+            for target, conns in groups.items():
+                vrs, values = self.components[target].real_buffer([c.input for c in conns])
+                writes.append((self.components[target], vrs, values,
+                               [self.index[(name, c.output)] for c in conns]))
+            self.writes[name] = writes
+        # Components downstream of each one (itself included), in propagation order.
+        self.downstream = {}
+        for name in order:
+            reach = {name}
+            for n in order:
+                if n in self.feedthrough and any(c.source in reach and c.target == n for c in scene.connections):
+                    reach.add(n)
+            self.downstream[name] = [n for n in order if n in reach]
+
+        self._compile()
+
+    def _compile(self):
+        """Flatten the plan into tuples of raw calls: propagation runs on every step, and
+        every Python attribute lookup on it shows in the harness's overhead."""
+        self._plan_of = {}
+        for name in self.order:
+            component = self.components[name]
+            vrs, values = self.buffers[name]
+            writes = tuple((target, target.raw.set_real, target.raw.handle, t_vrs, len(t_vrs), t_values,
+                            tuple(enumerate(positions)))
+                           for target, t_vrs, t_values, positions in self.writes[name])
+            # the last field: buffers filled but not sent (see held_plan)
+            self._plan_of[name] = (component, component.raw.get_real, component.raw.handle, vrs, len(vrs), values, writes,
+                                   ())
+        self._full_plan = [self._plan_of[n] for n in self.order]
+        self._partial_plans = {}
+        # Components without direct feedthrough whose exposed outputs still depend on their
+        # inputs (a shaft's acceleration on its torque): propagation reads them before their
+        # inputs are written, so such an output lags a step unless it is read again.
+        dependent = [name for name in self.order if name not in self.feedthrough
+                     and any(u.dependencies and u.variable.name in self.exposed[name]
+                             for u in self.components[name].description.outputs)]
+        # Plans again: reading them (entries without writes), and - for masters whose last
+        # propagation only filled the buffers - first sending their connected inputs from
+        # those buffers (one entry that reads nothing, with writes that copy nothing).
+        self.dependent_reads = [self._plan_of[name][:6] + ((), ()) for name in dependent]
+        sends = tuple(w[:6] + ((),) for name in self.order for w in self._plan_of[name][6]
+                      if w[0].name in dependent)
+        self._dependent_sends = [(None, None, None, None, 0, None, sends, ())] if sends else []
+        self.has_dependent_outputs = bool(dependent)
+
+    def held_plan(self, held: set[str]):
+        """A propagation plan that fills the input buffers of the components in ``held``
+        but does not send them: for a master that writes those inputs itself before the
+        next step (saves two FMI calls a step on a driveline)."""
+        plan = []
+        for component, get_real, handle, vrs, n, values, writes, _ in self._full_plan:
+            kept = tuple(w for w in writes if w[0].name not in held)
+            copied = tuple((w[5], w[6]) for w in writes if w[0].name in held)
+            plan.append((component, get_real, handle, vrs, n, values, kept, copied))
+        return plan
+
+    def propagate_with(self, plan):
+        """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
+        for component, get_real, handle, vrs, n, values, writes, copied in plan:
+            if n:
+                component.calls += 1
+                status = get_real(handle, vrs, n, values)
+                if status > 1:
+                    component.fail("fmi2GetReal", status)
+            for t_values, pairs in copied:
+                for k, i in pairs:
+                    t_values[k] = values[i]
+            for target, set_real, target_handle, t_vrs, t_n, t_values, pairs in writes:
+                for k, i in pairs:
+                    t_values[k] = values[i]
+                target.calls += 1
+                status = set_real(target_handle, t_vrs, t_n, t_values)
+                if status > 1:
+                    target.fail("fmi2SetReal", status)
+
+    def refresh_dependent(self, send: bool = False):
+        """Read again the outputs that depend on inputs written since they were read (see
+        ``dependent_reads``), after sending those inputs from their buffers first when
+        ``send`` (the last propagation was a held plan)."""
+        if send:
+            self.propagate_with(self._dependent_sends)
+        self.propagate_with(self.dependent_reads)
+
+    def propagate(self, sources=None):
+        """Read outputs and write them to connected inputs, in dependency order."""
+        if sources is None:
+            plan = self._full_plan
+        else:
+            key = tuple(sources)
+            plan = self._partial_plans.get(key)
+            if plan is None:
+                plan = self._partial_plans[key] = [self._plan_of[n] for n in self._downstream_of(sources)]
+        self.propagate_with(plan)
+
+    def _downstream_of(self, sources):
+        if len(sources) == 1:
+            return self.downstream[sources[0]]
+        reach = set().union(*(self.downstream[s] for s in sources))
+        return [n for n in self.order if n in reach]
+
+    def value(self, component: str, output: str) -> float:
+        vrs, values = self.buffers[component]
+        return values[self.index[(component, output)]]
+
+    # -- life cycle ------------------------------------------------------------------------------
+    def initialize(self):
+        e = self.scene.experiment
+        for name, spec in self.scene.components.items():
+            params = {k: scenes.quantity(v, f"{name}.{k}") for k, v in spec.parameters.items()}
+            self.components[name].set_parameters(params)
+        for c in self.components.values():
+            c.initialize(e.start, e.stop)
+        self.propagate()
+        for c in self.components.values():
+            c.exit_initialization()
+        self.propagate()
+
+    @property
+    def fmu_calls(self) -> int:
+        return sum(c.calls for c in self.components.values())
+
+    def free(self):
+        for c in self.components.values():
+            c.free()

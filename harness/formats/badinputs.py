@@ -1,0 +1,436 @@
+"""The bad-input corpus: values and call sequences an importer may throw at our FMUs,
+kept as data (a table of cases) and run through the FMI interface of the built FMUs
+with fmpy's ``FMU2Slave`` (``lever badinputs``, ``tests/test_badinputs.py``).
+
+Every case must end the same way: the offending call returns fmi2Error (or fmi2Discard),
+the FMU logs a message that names the variable (or the call) and what is allowed, a
+refused value is not applied, the instance stays usable where FMI lets it, nothing is
+ever fatal, and the instance is freed cleanly.  The importing process - the one running
+the corpus - survives all of it.
+
+Cases for the declared parameters and inputs are generated from the catalogue (every
+real: NaN, +inf, -inf and the nearest values outside its range; every fixed parameter:
+a change after initialisation), the rest are written out by hand.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lever.physics import catalogue
+from lever.physics.parameters import Parameter
+
+from harness.paths import FMUS
+
+FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = range(5)
+REFUSED = (FMI2_DISCARD, FMI2_ERROR)
+
+#: FMU -> (parameters, inputs), as the adapters declare them
+DECLARED = {
+    "LeverCoupling": (catalogue.COUPLING, ("phi1", "w1", "phi2", "w2", "misalignment")),
+    "EngineShaft": (catalogue.ENGINE, ("tau", "tau_rate")),
+    "LoadShaft": (catalogue.LOAD, ("tau", "tau_rate")),
+}
+PHASES = ("instantiated", "initialization", "stepping")
+DEG = math.pi / 180.0
+
+#: Well-formed values of the table parameters (for changing them after initialisation).
+_GOOD_TABLES = {"elastic_table": "0.1:10; 0.2:30", "characteristic": "0:600; 100:0", "fourier": "100; 1:2",
+                "table": "0:100; 1:110"}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input.
+
+    ``phase``: where the FMU is when the bad input arrives (``instantiated``,
+    ``initialization`` or ``stepping``, the last after one step).  ``setup``: good values
+    set first.  ``action``: ``("set", name, value)`` or ``("call", fmi_function, args)``.
+    ``refused_by``: the call that must return error/discard: the action itself
+    (``"action"``) or ``fmi2ExitInitializationMode`` (``"exit"``: values that are only
+    judged together, when the model is built).  ``expect``: fragments the logged error
+    message must contain (the variable and its allowed range).
+    """
+
+    fmu: str
+    category: str
+    label: str
+    phase: str
+    action: tuple
+    expect: tuple[str, ...]
+    setup: tuple[tuple[str, object], ...] = ()
+    refused_by: str = "action"
+
+    @property
+    def name(self) -> str:
+        return f"{self.fmu}: {self.label}"
+
+
+def _declared(fmu: str, name: str) -> Parameter:
+    parameters, inputs = DECLARED[fmu]
+    by_name = {p.name: p for p in parameters}
+    if name in by_name:
+        return by_name[name]
+    from lever.fmus.coupling import LeverCoupling
+    from lever.fmus.shafts import EngineShaft
+    cls = {"LeverCoupling": LeverCoupling, "EngineShaft": EngineShaft}.get(fmu)
+    if cls is None:
+        from lever.fmus.shafts import LoadShaft as cls
+    return {p.name: p for p in cls.INPUTS}[name]
+
+
+def _outside(p: Parameter) -> list[tuple[str, float]]:
+    """The nearest values outside a real parameter's range, with a label."""
+    values = []
+    if math.isfinite(p.low):
+        if p.low_open:
+            values.append(("zero" if p.low == 0 else "at the open lower bound", p.low))
+        elif p.low > 0:
+            values += [("zero", 0.0), ("below the range", p.low / 2)]
+        values.append(("negative" if p.low >= 0 else "below the range",
+                       -1.0 if p.low >= 0 else p.low - max(1.0, abs(p.low))))
+    if math.isfinite(p.high):
+        values.append(("at the open upper bound" if p.high_open else "above the range",
+                       p.high if p.high_open else p.high + max(1.0, abs(p.high))))
+    return values
+
+
+def _range_fragments(p: Parameter) -> tuple[str, ...]:
+    return (f"'{p.name}'", p.range_text())
+
+
+def _generated() -> list[Case]:
+    cases = []
+    for fmu, (parameters, inputs) in DECLARED.items():
+        reals = [(p, "instantiated") for p in parameters if p.kind == "real"]
+        reals += [(_declared(fmu, n), "stepping") for n in inputs]
+        for p, phase in reals:
+            kind = "input" if phase == "stepping" else "parameter"
+            for value in (math.nan, math.inf, -math.inf):
+                cases.append(Case(fmu, f"non-finite {kind}", f"{p.name} = {value}", phase, ("set", p.name, value),
+                                  _range_fragments(p)))
+            for label, value in _outside(p):
+                category = {"inertia": "non-positive inertia", "stiffness": "non-positive stiffness",
+                            "damping": "negative damping", "misalignment": "misalignment out of range"}.get(
+                    p.name, f"{kind} out of range")
+                cases.append(Case(fmu, category, f"{p.name} = {value!r} ({label})", phase, ("set", p.name, value),
+                                  _range_fragments(p)))
+        for p in parameters:
+            if p.kind == "integer":
+                for value in (int(p.low) - 1, int(p.high) + 1):
+                    if -2 ** 31 <= value < 2 ** 31:
+                        cases.append(Case(fmu, "parameter out of range", f"{p.name} = {value}", "instantiated",
+                                          ("set", p.name, value), _range_fragments(p)))
+            if p.choices:
+                for value in ("", "unknown", p.choices[0].upper()):
+                    cases.append(Case(fmu, "unknown mode", f"{p.name} = {value!r}", "instantiated",
+                                      ("set", p.name, value), (f"'{p.name}'",) + tuple(f"'{c}'" for c in p.choices)))
+        # Every fixed parameter, changed after initialisation (to a value it would accept).
+        for p in parameters:
+            if p.kind == "real":
+                good = p.default * 1.5 + 0.001 if p.default else 0.1
+                good = good if good < p.high else (p.default + p.high) / 2
+            elif p.kind == "integer":
+                good = p.default + 1
+            elif p.choices:
+                good = next(c for c in p.choices if c != p.default)
+            else:
+                good = _GOOD_TABLES[p.name]
+            assert p.problem(good) is None, (p.name, good)
+            cases.append(Case(fmu, "set after initialisation", f"{p.name} changed after initialisation", "stepping",
+                              ("set", p.name, good), (f"'{p.name}'", "fixed", "after initialisation")))
+    return cases
+
+
+#: Tables and combinations the range check alone cannot judge (written out by hand).
+_TABLES = [
+    # (fmu, parameter, text, fragments, extra setup)
+    ("LeverCoupling", "elastic_table", "0.1:10; 0.2:5", ("non-decreasing",), ()),
+    ("LeverCoupling", "elastic_table", "0.2:10; 0.1:20", ("strictly increasing",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:10", ("at least 2 points",), ()),
+    ("LeverCoupling", "elastic_table", "0:5; 0.1:10; 0.2:20", ("zero deflection",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:0; 0.2:0", ("no torque",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:ten; 0.2:20", ("not numeric",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:10:3; 0.2:20", ("2 values",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:nan; 0.2:20", ("non-finite",), ()),
+    ("LeverCoupling", "elastic_table", "0.1:10; 0.2:1e300", ("within",), ()),
+    ("EngineShaft", "characteristic", "40:500", ("at least 2",), ()),
+    ("EngineShaft", "characteristic", "40:500; 40:400", ("distinct",), ()),
+    ("EngineShaft", "characteristic", "40:500; fast:400", ("not numeric",), ()),
+    ("EngineShaft", "characteristic", "40:500; 60:inf", ("non-finite",), ()),
+    ("LoadShaft", "table", "0:100", ("at least 2",), (("load_kind", "table"),)),
+    ("LoadShaft", "table", "0:100; 2:120; 1:110", ("strictly increasing",), (("load_kind", "table"),)),
+    ("LoadShaft", "table", "0:100; 1:-inf", ("non-finite",), (("load_kind", "table"),)),
+    ("LoadShaft", "fourier", "100", ("at least one harmonic",), (("load_kind", "fourier"),)),
+    ("LoadShaft", "fourier", "mean; 1:2", ("mean torque",), (("load_kind", "fourier"),)),
+    ("LoadShaft", "fourier", "100; 1:2:3", ("2 values",), (("load_kind", "fourier"),)),
+]
+
+
+def _by_hand() -> list[Case]:
+    cases = []
+    for fmu, name, text, fragments, setup in _TABLES:
+        cases.append(Case(fmu, "malformed table", f"{name} = {text!r}", "instantiated", ("set", name, text),
+                          (f"'{name}'",) + fragments, setup=setup))
+    # Values that are each in range but do not fit together: refused when the model is built.
+    cases += [
+        Case("LeverCoupling", "misalignment out of range", "kinematic alpha + support tilt >= 45 deg",
+             "initialization", ("set", "misalignment", 44 * DEG), ("'misalignment'", "45 deg"),
+             setup=(("transfer_mode", "kinematic"), ("support_deformation", 0.1)), refused_by="exit"),
+        Case("LeverCoupling", "misalignment out of range", "scaled U12 reaching zero",
+             "initialization", ("set", "misalignment", 70 * DEG), ("'misalignment'",),
+             setup=(("transfer_mode", "scaled"),), refused_by="exit"),
+        Case("LoadShaft", "parameter out of range", "band_low above band_high", "instantiated",
+             ("set", "band_low", 500.0), ("'band_low'", "band_high"), refused_by="exit"),
+        Case("LoadShaft", "malformed table", "load_kind 'table' without a table", "instantiated",
+             ("set", "load_kind", "table"), ("'table'", "at least 2"), refused_by="exit"),
+        Case("LoadShaft", "malformed table", "load_kind 'fourier' without a series", "instantiated",
+             ("set", "load_kind", "fourier"), ("'fourier'", "harmonic"), refused_by="exit"),
+    ]
+    # Out-of-order and malformed FMI calls.
+    for fmu in DECLARED:
+        cases += [
+            Case(fmu, "out-of-order call", "fmi2DoStep before initialisation", "instantiated",
+                 ("call", "fmi2DoStep", (0.0, 1e-3)), ("fmi2DoStep", "initialis")),
+            Case(fmu, "out-of-order call", "fmi2DoStep in initialisation mode", "initialization",
+                 ("call", "fmi2DoStep", (0.0, 1e-3)), ("fmi2DoStep", "initialis")),
+            Case(fmu, "out-of-order call", "fmi2ExitInitializationMode without entering", "instantiated",
+                 ("call", "fmi2ExitInitializationMode", ()), ("fmi2ExitInitializationMode", "after")),
+            Case(fmu, "out-of-order call", "fmi2EnterInitializationMode twice", "initialization",
+                 ("call", "fmi2EnterInitializationMode", ()), ("fmi2EnterInitializationMode", "phase")),
+            Case(fmu, "out-of-order call", "fmi2EnterInitializationMode while stepping", "stepping",
+                 ("call", "fmi2EnterInitializationMode", ()), ("fmi2EnterInitializationMode", "phase")),
+            Case(fmu, "bad step", "negative step size", "stepping", ("call", "fmi2DoStep", (1e-3, -1e-3)),
+                 ("step size", "> 0")),
+            Case(fmu, "bad step", "zero step size", "stepping", ("call", "fmi2DoStep", (1e-3, 0.0)),
+                 ("step size", "> 0")),
+            Case(fmu, "bad step", "NaN step size", "stepping", ("call", "fmi2DoStep", (1e-3, math.nan)),
+                 ("step size", "finite")),
+            Case(fmu, "bad step", "infinite step size", "stepping", ("call", "fmi2DoStep", (1e-3, math.inf)),
+                 ("step size", "finite")),
+            Case(fmu, "bad step", "communication point ahead of the FMU", "stepping",
+                 ("call", "fmi2DoStep", (0.5, 1e-3)), ("communication point", "contiguous")),
+            Case(fmu, "bad step", "communication point behind the FMU", "stepping",
+                 ("call", "fmi2DoStep", (0.0, 1e-3)), ("communication point", "contiguous")),
+            Case(fmu, "bad step", "NaN communication point", "stepping",
+                 ("call", "fmi2DoStep", (math.nan, 1e-3)), ("communication point", "contiguous")),
+            Case(fmu, "out-of-order call", "fmi2DoStep after fmi2Terminate", "stepping",
+                 ("call", "terminate-then-step", ()), ("fmi2DoStep", "terminated")),
+            Case(fmu, "out-of-order call", "non-finite start time", "instantiated",
+                 ("call", "fmi2SetupExperiment", (math.nan,)), ("start time", "finite")),
+            Case(fmu, "bad state", "fmi2SetFMUstate of bytes that are no state", "stepping",
+                 ("call", "deserialize", (b"\x00garbage{",)), ("fmi2SetFMUstate", "not a state", "do not decode")),
+            Case(fmu, "bad state", "fmi2SetFMUstate of a state of another FMU", "stepping",
+                 ("call", "foreign-state", ()), ("fmi2SetFMUstate", "not a state of", "variables differ")),
+        ]
+    return cases
+
+
+def corpus() -> list[Case]:
+    return _generated() + _by_hand()
+
+
+# -- running a case ---------------------------------------------------------------------------------------
+
+@dataclass
+class Outcome:
+    case: Case
+    status: int | None = None          # status of the call that had to refuse
+    messages: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return not self.problems
+
+
+_counter = itertools.count(1)
+_LOG: dict[str, list[tuple[int, str]]] = {}
+_listening = False
+
+
+def _listen():
+    global _listening
+    if not _listening:
+        from harness.engine.component import add_log_listener
+        add_log_listener(lambda name, status, category, text: _LOG.setdefault(name, []).append((status, text)))
+        _listening = True
+
+
+class _Slave:
+    """One FMU2Slave instance of a built FMU with its own log."""
+
+    _descriptions: dict[str, object] = {}
+
+    def __init__(self, fmu: str, fmu_dir: Path):
+        import fmpy
+        from fmpy.fmi2 import FMU2Slave
+        from harness.engine.component import log_callbacks
+        from harness.engine.component import unzipped as extracted
+
+        path = Path(fmu_dir) / f"{fmu}.fmu"
+        if str(path) not in self._descriptions:
+            self._descriptions[str(path)] = fmpy.read_model_description(str(path))
+        self.md, unzipped = self._descriptions[str(path)], extracted(path)
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.instance = f"corpus-{fmu}-{next(_counter)}"
+        self.log = _LOG.setdefault(self.instance, [])
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=unzipped,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=self.instance)
+        self.fmu.instantiate(callbacks=log_callbacks(), loggingOn=False)
+        self.time = 0.0
+
+    def call(self, function: str, *args) -> int:
+        from fmpy.fmi1 import FMICallException
+        try:
+            getattr(self.fmu, function)(*args)
+        except FMICallException as error:
+            return error.status
+        return FMI2_OK
+
+    def set(self, name: str, value) -> int:
+        v = self.variables[name]
+        setter = {"Real": ("setReal", float), "Integer": ("setInteger", int), "String": ("setString", str)}[v.type]
+        return self.call(setter[0], [v.valueReference], [setter[1](value)])
+
+    def get(self, name: str):
+        v = self.variables[name]
+        getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger, "String": self.fmu.getString}[v.type]
+        value = getter([v.valueReference])[0]
+        return value.decode() if isinstance(value, bytes) else value
+
+    def advance(self, phase: str) -> int:
+        """Bring the instance from instantiated to ``phase``; the worst status seen."""
+        worst = FMI2_OK
+        if PHASES.index(phase) >= 1:
+            worst = max(worst, self.call("setupExperiment", None, 0.0, None))
+            worst = max(worst, self.call("enterInitializationMode"))
+        if PHASES.index(phase) >= 2:
+            worst = max(worst, self.call("exitInitializationMode"))
+            worst = max(worst, self.call("doStep", 0.0, 1e-3))
+            self.time = 1e-3
+        return worst
+
+    def step_ok(self) -> bool:
+        status = self.call("doStep", self.time, 1e-3)
+        self.time += 1e-3
+        outputs = [v.valueReference for v in self.md.modelVariables if v.causality == "output"]
+        return status <= FMI2_WARNING and all(math.isfinite(x) for x in self.fmu.getReal(outputs))
+
+    def free(self) -> list[str]:
+        problems = []
+        self.call("terminate")
+        try:
+            self.fmu.freeInstance()
+        except Exception as error:  # noqa: BLE001 - reported as the case's problem
+            problems.append(f"fmi2FreeInstance raised {error!r}")
+        return problems
+
+
+def _foreign_state_bytes(case: Case, fmu_dir: Path) -> bytes:
+    other = next(n for n in DECLARED if n != case.fmu)
+    slave = _Slave(other, fmu_dir)
+    try:
+        slave.advance("stepping")
+        return bytes(slave.fmu.serializeFMUstate(slave.fmu.getFMUstate()))
+    finally:
+        slave.free()
+
+
+def _act(slave: _Slave, case: Case, fmu_dir: Path) -> int:
+    kind, *rest = case.action
+    if kind == "set":
+        return slave.set(*rest)
+    function, args = rest
+    if function == "fmi2DoStep":
+        return slave.call("doStep", *args)
+    if function == "fmi2ExitInitializationMode":
+        return slave.call("exitInitializationMode")
+    if function == "fmi2EnterInitializationMode":
+        return slave.call("enterInitializationMode")
+    if function == "fmi2SetupExperiment":
+        return slave.call("setupExperiment", None, *args)
+    if function == "terminate-then-step":
+        slave.call("terminate")
+        return slave.call("doStep", slave.time, 1e-3)
+    if function in ("deserialize", "foreign-state"):
+        data = args[0] if function == "deserialize" else _foreign_state_bytes(case, fmu_dir)
+        from fmpy.fmi1 import FMICallException
+        try:
+            state = slave.fmu.deSerializeFMUstate(data)
+        except FMICallException as error:
+            return error.status
+        return slave.call("setFMUstate", state)
+    raise ValueError(f"unknown action {function}")
+
+
+def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
+    _listen()
+    outcome = Outcome(case)
+    slave = _Slave(case.fmu, fmu_dir)
+    try:
+        for name, value in case.setup:
+            if slave.set(name, value) > FMI2_WARNING:
+                outcome.problems.append(f"setting up {name} = {value!r} was refused")
+        if slave.advance(case.phase) > FMI2_WARNING:
+            outcome.problems.append(f"reaching phase {case.phase} failed: {slave.log[-1:]}")
+        before = slave.get(case.action[1]) if case.action[0] == "set" else None
+        seen = len(slave.log)
+        status = _act(slave, case, fmu_dir)
+        if case.refused_by == "exit":
+            if status > FMI2_WARNING:
+                outcome.problems.append(f"the value was refused when set (status {status}), not at initialisation")
+            if case.phase == "instantiated":
+                slave.advance("initialization")
+            status = slave.call("exitInitializationMode")
+        outcome.status = status
+        logged = slave.log[seen:]
+        outcome.messages = [text for level, text in logged if level >= FMI2_DISCARD]
+        if status not in REFUSED:
+            outcome.problems.append(f"status {status}, expected fmi2Error or fmi2Discard")
+        if any(level == FMI2_FATAL for level, _ in logged):
+            outcome.problems.append("a fatal status was logged")
+        text = " ".join(outcome.messages)
+        missing = [f for f in case.expect if f.lower() not in text.lower()]
+        if missing:
+            outcome.problems.append(f"the message does not say {missing}: {text!r}")
+        if case.refused_by == "action":
+            if before is not None:
+                after = slave.get(case.action[1])
+                if not (after == before or (isinstance(before, float) and math.isnan(before) and math.isnan(after))):
+                    outcome.problems.append(f"the refused value was applied: {before!r} -> {after!r}")
+            if case.phase == "stepping" and case.action[1] != "terminate-then-step" and not slave.step_ok():
+                outcome.problems.append(f"the instance did not step on after the refusal: {slave.log[-1:]}")
+    except Exception as error:  # noqa: BLE001 - a case that breaks the runner is a failed case
+        outcome.problems.append(f"the importer saw an exception: {error!r}")
+    finally:
+        outcome.problems += slave.free()
+        _LOG.pop(slave.instance, None)
+    return outcome
+
+
+def run(fmu_dir: Path = FMUS, cases: list[Case] | None = None) -> list[Outcome]:
+    return [run_case(case, fmu_dir) for case in (corpus() if cases is None else cases)]
+
+
+def summary(outcomes: list[Outcome]) -> str:
+    """Counts by FMU and category, and every failed case."""
+    passed = sum(o.passed for o in outcomes)
+    lines = [f"bad-input corpus: {len(outcomes)} cases through fmpy's FMU2Slave, {passed} pass, "
+             f"{len(outcomes) - passed} fail"]
+    table: dict[tuple[str, str], list[int]] = {}
+    for o in outcomes:
+        cell = table.setdefault((o.case.category, o.case.fmu), [0, 0])
+        cell[0] += 1
+        cell[1] += o.passed
+    fmus = list(DECLARED)
+    lines.append(f"  {'category':34s}" + "".join(f"{f:>15s}" for f in fmus))
+    for category in dict.fromkeys(c for c, _ in table):
+        cells = [table.get((category, f)) for f in fmus]
+        lines.append(f"  {category:34s}" + "".join(f"{'-' if c is None else f'{c[1]}/{c[0]}':>15s}" for c in cells))
+    for o in outcomes:
+        if not o.passed:
+            lines.append(f"FAIL {o.case.name}: " + "; ".join(o.problems))
+    return "\n".join(lines)

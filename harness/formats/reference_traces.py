@@ -1,0 +1,576 @@
+"""Reference traces in the FMI cross-check layout (``resources/reference/<NAME>/``):
+
+* ``<NAME>_in.csv``  the inputs that drive an FMU stand-alone (FMUs only),
+* ``<NAME>_ref.csv`` the outputs it must produce,
+* ``<NAME>_ref.opt`` ``StepSize, StartTime, StopTime, RelTol`` (one ``key,value`` per line).
+
+CSV: a header of quoted names, the first column ``time`` [s], one row per sample, numbers
+with 9 significant digits.  A row repeated at the same time is a discontinuity of an input
+(left value first), as fmpy's ``Input`` reads it.
+
+Every trace is computed by the project from the physics (``lever.physics``) and the
+monolithic reference solver (``harness.judges.monolithic``), never by running the FMU under test:
+
+* an FMU case drives the FMU with analytic input signals; its reference is the exact
+  response: a shaft's motion integrated by scipy (DOP853, rtol = atol = 1e-10) under the
+  continuous torque, the coupling's algebraic outputs.  An output that depends directly on
+  an input (the coupling's, a shaft's acceleration ``a``; the model descriptions declare
+  it) is taken with the input the FMU holds when the output is read.  That is the
+  cross-check's sampling, as fmpy's ``simulate_fmu`` does it: set the inputs at ``t_k``,
+  step to ``t_k+1``, read the outputs - so the reference at ``t_k+1`` sees the inputs of
+  ``t_k`` (an importer that sets the next inputs before it reads gets the coupling's
+  outputs one step early: within the ``lever`` tolerance's horizontal step, see
+  ``harness.judges.validation``);
+* a scene's reference is ``harness.judges.monolithic.solve`` of the scene (its recorded signals),
+  kept every ``k``-th communication step so that a 10 s scene keeps about 1000 rows.
+
+The traces are regenerated only on purpose (``lever reference --update``);
+``lever reference`` checks that the committed ones are what the project computes now.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESOURCES, SCENES
+
+REFERENCE_DIR = RESOURCES / "reference"
+DIGITS = 9
+#: relative change (to the signal's largest magnitude) below which a regenerated trace is
+#: the committed one. Regenerating on another x86-64 CPU moves the traces by up to 6e-7
+#: (numpy's and libm's SIMD paths round differently, events amplify it; measured on an AMD
+#: EPYC against traces made elsewhere), so 1e-5: a margin over that spread, still far below a
+#: physical change (a parameter moved by 1e-4 moves the torques by about that much)
+CURRENT_TOLERANCE = 1e-5
+#: a scene reference keeps about this many rows
+SCENE_ROWS = 1000
+RTOL = 1e-10
+
+
+# -- files ------------------------------------------------------------------------------------
+
+@dataclass
+class Traces:
+    times: np.ndarray
+    signals: dict[str, np.ndarray]
+
+
+@dataclass
+class Options:
+    """The ``_ref.opt`` file: the communication step the result is to be computed with,
+    the span, and the relative tolerance the reference was computed with."""
+    step: float
+    start: float
+    stop: float
+    rel_tol: float = RTOL
+
+
+def _number(x: float) -> str:
+    return f"{float(x):.{DIGITS}g}"
+
+
+def write_csv(path: Path, traces: Traces):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = list(traces.signals)
+    columns = [np.asarray(traces.signals[n], dtype=float) for n in names]
+    with open(path, "w", newline="") as f:
+        f.write(",".join(f'"{n}"' for n in ["time"] + names) + "\n")
+        for i, t in enumerate(traces.times):
+            f.write(",".join([_number(t)] + [_number(c[i]) for c in columns]) + "\n")
+
+
+class TraceFileError(ValueError):
+    pass
+
+
+def read_csv(path: Path) -> Traces:
+    """A CSV result or reference: a header row, the first column the time (named ``time``,
+    any case), every other column a signal.  Quoted names and blank lines are allowed."""
+    path = Path(path)
+    try:
+        with open(path, newline="") as f:
+            rows = [row for row in csv.reader(f) if row and any(cell.strip() for cell in row)]
+    except OSError as error:
+        raise TraceFileError(f"{path}: {error.strerror}") from None
+    if len(rows) < 2:
+        raise TraceFileError(f"{path}: expected a header row and at least one data row")
+    names = [cell.strip().strip('"').strip() for cell in rows[0]]
+    if names[0].lower() != "time":
+        raise TraceFileError(f"{path}: the first column must be 'time', not '{names[0]}'")
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise TraceFileError(f"{path}: duplicate column(s) {', '.join(duplicates)}")
+    try:
+        data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
+    except ValueError as error:
+        raise TraceFileError(f"{path}: not a number ({error})") from None
+    if data.ndim != 2 or data.shape[1] != len(names):
+        widths = sorted({len(row) for row in rows[1:]})
+        raise TraceFileError(f"{path}: rows have {widths} columns, the header {len(names)}")
+    return Traces(data[:, 0].copy(), {n: data[:, i].copy() for i, n in enumerate(names) if i})
+
+
+def write_opt(path: Path, opt: Options):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"StepSize,{opt.step!r}\nStartTime,{opt.start!r}\nStopTime,{opt.stop!r}\n"
+                    f"RelTol,{opt.rel_tol!r}\n")
+
+
+def read_opt(path: Path) -> Options:
+    values = {}
+    for line in Path(path).read_text().splitlines():
+        parts = line.split(",")
+        if len(parts) == 2:
+            values[parts[0].strip()] = float(parts[1])
+    missing = [k for k in ("StepSize", "StartTime", "StopTime", "RelTol") if k not in values]
+    if missing:
+        raise TraceFileError(f"{path}: missing {', '.join(missing)}")
+    return Options(values["StepSize"], values["StartTime"], values["StopTime"], values["RelTol"])
+
+
+@dataclass
+class ReferenceTraces:
+    """One name's reference: its outputs, options and (FMUs) inputs."""
+    name: str
+    kind: str                       # "fmu" or "scene"
+    outputs: Traces
+    opt: Options
+    inputs: Traces | None = None
+    description: str = ""
+
+
+def paths(name: str, root: Path | None = None) -> dict[str, Path]:
+    folder = (root or REFERENCE_DIR) / name
+    return {"in": folder / f"{name}_in.csv", "ref": folder / f"{name}_ref.csv", "opt": folder / f"{name}_ref.opt"}
+
+
+def write(reference: ReferenceTraces, root: Path | None = None) -> list[Path]:
+    p = paths(reference.name, root)
+    written = []
+    if reference.inputs is not None:
+        write_csv(p["in"], reference.inputs)
+        written.append(p["in"])
+    write_csv(p["ref"], reference.outputs)
+    write_opt(p["opt"], reference.opt)
+    return written + [p["ref"], p["opt"]]
+
+
+def read(name: str, root: Path | None = None) -> ReferenceTraces:
+    p = paths(name, root)
+    if not p["ref"].exists():
+        raise TraceFileError(f"no committed reference for '{name}' ({p['ref']} is missing; "
+                             f"`lever reference --update {name}` makes it)")
+    inputs = read_csv(p["in"]) if p["in"].exists() else None
+    return ReferenceTraces(name, "fmu" if name in FMU_CASES else "scene", read_csv(p["ref"]), read_opt(p["opt"]), inputs)
+
+
+def rounded(traces: Traces) -> Traces:
+    """The traces as the CSV stores them (9 significant digits)."""
+    r = lambda a: np.array([float(_number(x)) for x in np.asarray(a, dtype=float)])
+    return Traces(r(traces.times), {n: r(v) for n, v in traces.signals.items()})
+
+
+# -- FMU cases: analytic inputs and their exact responses --------------------------------------
+
+def _sines(t, terms):
+    """``sum a sin(w t + p)`` and its derivative for terms ``(a, w, p)``."""
+    t = np.asarray(t, dtype=float)
+    value = sum(a * np.sin(w * t + p) for a, w, p in terms)
+    rate = sum(a * w * np.cos(w * t + p) for a, w, p in terms)
+    return value, rate
+
+
+@dataclass(frozen=True)
+class FmuCase:
+    model: str
+    description: str
+    stop: float
+    step: float
+    outputs: tuple[str, ...]
+    #: (t, left=False) -> input columns; at ``events`` they jump (``left``: the value before)
+    inputs: Callable
+    #: times -> exact outputs
+    exact: Callable
+    events: tuple[float, ...] = ()
+    start: float = 0.0
+
+    def grid(self) -> np.ndarray:
+        n = int(round((self.stop - self.start) / self.step))
+        return self.start + self.step * np.arange(n + 1)
+
+    def input_traces(self) -> Traces:
+        """The inputs at every communication point; at an event two rows at the same
+        time, the left value first (fmpy's ``Input`` applies the right one from there on)."""
+        t = self.grid()
+        values = self.inputs(t)
+        for e in sorted(self.events, reverse=True):
+            i = int(np.searchsorted(t, e - 1e-9 * self.step))
+            if not math.isclose(t[i], e, rel_tol=0, abs_tol=1e-9 * self.step):
+                raise ValueError(f"{self.model}: input event at {e} s is not a communication point")
+            before = self.inputs(np.array([e]), left=True)
+            t = np.insert(t, i, e)
+            values = {k: np.insert(v, i, before[k][0]) for k, v in values.items()}
+        return Traces(t, values)
+
+
+# LeverCoupling: both flanges turning at about 38 rad/s (six revolutions of the transfer
+# function in 1 s), a deflection oscillating at 2 Hz and at the 74 rad/s ripple frequency,
+# the misalignment stepping from 15 to 20 deg at 0.5 s (the input may vary in time).
+_W0 = 38.0
+_DRIVE = ((0.12, 2 * math.pi * 2.0, 0.0), (0.03, 74.0, 0.0))
+_DRIVEN = ((-0.04, 2 * math.pi * 3.0, 0.5),)
+_ALPHA = (math.radians(15.0), math.radians(20.0))
+_STEP_AT = 0.5
+
+
+def _coupling_inputs(t, left=False):
+    p1, v1 = _sines(t, _DRIVE)
+    p2, v2 = _sines(t, _DRIVEN)
+    after = t > _STEP_AT if left else t >= _STEP_AT
+    return {"phi1": _W0 * t + p1, "w1": _W0 + v1, "phi2": _W0 * t + p2, "w2": _W0 + v2,
+            "misalignment": np.where(after, _ALPHA[1], _ALPHA[0])}
+
+
+def _held(t):
+    """When the importer last set the inputs, for outputs read at ``t``: the communication
+    point before (the cross-check's sampling: outputs are read after a step, before the
+    next inputs are set), the start itself at the start."""
+    t = np.asarray(t, dtype=float)
+    return np.concatenate([t[:1], t[:-1]])
+
+
+def _coupling_exact(t):
+    """The coupling has no state: its outputs are its algebraic function of the inputs it
+    holds when they are read (``_held``)."""
+    from lever.physics import catalogue
+
+    u = _coupling_inputs(_held(t))
+    out = {k: np.empty(len(t)) for k in ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power")}
+    for alpha in _ALPHA:
+        rows = u["misalignment"] == alpha
+        r = catalogue.coupling_from({}, misalignment=alpha).evaluate(
+            u["phi1"][rows], u["w1"][rows], u["phi2"][rows], u["w2"][rows])
+        for key, value in zip(out, (r.tau1, r.tau2, r.ratio, r.deflection, r.energy, r.dissipation)):
+            out[key][rows] = value
+    return out
+
+
+# Shafts: a coupling torque with a slow swing, the 74 rad/s ripple and a 420 rad/s
+# component (the oscillograms' high-frequency line); tau_rate is its exact derivative.
+_ENGINE_TAU = (-110.0, ((-25.0, 2 * math.pi * 2.0, 0.0), (-6.0, 74.0, 0.0), (-3.0, 420.0, 0.0)))
+_LOAD_TAU = (107.5, ((20.0, 2 * math.pi * 1.5, 0.3), (6.0, 74.0, 0.0), (3.0, 420.0, 0.0)))
+
+
+def _torque_inputs(spec):
+    mean, terms = spec
+
+    def inputs(t, left=False):
+        value, rate = _sines(t, terms)
+        return {"tau": mean + value, "tau_rate": rate}
+    return inputs
+
+
+def _shaft_exact(kind: str, spec):
+    """The shaft's exact response to the continuous torque, with its defaults."""
+    def exact(t):
+        from scipy.integrate import solve_ivp
+        from lever.physics import catalogue
+
+        declared = catalogue.ENGINE if kind == "engine" else catalogue.LOAD
+        shaft = (catalogue.engine_from if kind == "engine" else catalogue.load_from)({})
+        phi0, w0 = catalogue.start_state({}, declared)
+        torque = _torque_inputs(spec)
+        mean, terms = spec
+
+        def rhs(time, y):
+            tau = mean + sum(a * math.sin(w * time + p) for a, w, p in terms)
+            a, external = shaft.rates(time, y[0], y[1], tau)
+            return [y[1], a, external * y[1]]
+
+        sol = solve_ivp(rhs, (t[0], t[-1]), [phi0, w0, 0.0], method="DOP853", t_eval=t, rtol=RTOL, atol=RTOL)
+        if not sol.success:
+            raise RuntimeError(f"{kind} reference: {sol.message}")
+        phi, w, work = sol.y
+        tau = torque(_held(t))["tau"]     # the acceleration depends on the input: as read (``_held``)
+        a, external = zip(*(shaft.rates(ti, p, v, q) for ti, p, v, q in zip(t, phi, w, tau)))
+        external = np.array(external)
+        if kind == "engine":
+            return {"phi": phi, "w": w, "a": np.array(a), "engine_torque": external, "engine_work": work}
+        return {"phi": phi, "w": w, "a": np.array(a), "load_torque": -external, "load_work": -work}
+    return exact
+
+
+FMU_CASES = {
+    "LeverCoupling": FmuCase(
+        "LeverCoupling", "defaults (KAVZ-685); flanges at about 38 rad/s with a 2 Hz and a 74 rad/s deflection, "
+        "misalignment 15 deg stepping to 20 deg at 0.5 s", 1.0, 1e-3,
+        ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"),
+        _coupling_inputs, _coupling_exact, events=(_STEP_AT,)),
+    "EngineShaft": FmuCase(
+        "EngineShaft", "defaults (KAVZ-685, linear characteristic); coupling torque -110 N*m with a 2 Hz swing, "
+        "74 and 420 rad/s components", 1.0, 1e-3,
+        ("phi", "w", "a", "engine_torque", "engine_work"),
+        _torque_inputs(_ENGINE_TAU), _shaft_exact("engine", _ENGINE_TAU)),
+    "LoadShaft": FmuCase(
+        "LoadShaft", "defaults (KAVZ-685, random load 107.5 +- 8.8 N*m, seed 1); coupling torque 107.5 N*m with a "
+        "1.5 Hz swing, 74 and 420 rad/s components", 1.0, 1e-3,
+        ("phi", "w", "a", "load_torque", "load_work"),
+        _torque_inputs(_LOAD_TAU), _shaft_exact("load", _LOAD_TAU)),
+}
+
+
+def generate_fmu(name: str) -> ReferenceTraces:
+    case = FMU_CASES[name]
+    t = case.grid()
+    return ReferenceTraces(name, "fmu", Traces(t, case.exact(t)), Options(case.step, case.start, case.stop, RTOL),
+                     case.input_traces(), case.description)
+
+
+# -- scenes ----------------------------------------------------------------------------------
+
+def scene_grid(scene: scenes.Scene) -> np.ndarray:
+    """Every k-th communication point, k the smallest that keeps about ``SCENE_ROWS`` rows."""
+    e = scene.experiment
+    n_steps = int(round((e.stop - e.start) / e.step))
+    k = max(1, math.ceil(n_steps / SCENE_ROWS))
+    points = np.arange(0, n_steps + 1, k)
+    if points[-1] != n_steps:
+        points = np.append(points, n_steps)
+    return np.minimum(e.start + points * e.step, e.stop)
+
+
+def generate_scene(scene: scenes.Scene) -> ReferenceTraces:
+    from harness.judges import monolithic
+
+    if "reference" not in scene.features:
+        raise monolithic.ReferenceUnavailable(f"scene '{scene.name}' does not declare the 'reference' feature")
+    t = scene_grid(scene)
+    solved = monolithic.solve(scene, t)
+    signals = {n: solved.traces[n] for n in scene.record if n in solved.traces}
+    # a reference may name recorded outputs that are a solver's own bookkeeping (an event
+    # count): nothing to compare, so no trace
+    bookkeeping = set(solved.info.get("bookkeeping", ()))
+    left_out = [n for n in scene.record if n not in solved.traces and n not in bookkeeping]
+    if left_out:
+        raise monolithic.ReferenceUnavailable(f"scene '{scene.name}': the reference does not compute "
+                                              + ", ".join(left_out))
+    e = scene.experiment
+    return ReferenceTraces(scene.name, "scene", Traces(solved.times, signals), Options(e.step, e.start, e.stop, RTOL),
+                     None, scene.description)
+
+
+def scene_names() -> list[str]:
+    """The scenes that have a reference: those declaring the ``reference`` feature."""
+    names = []
+    for path in sorted(SCENES.glob("*.toml")):
+        try:
+            spec = scenes.load(path)
+        except scenes.SceneError:
+            continue
+        if "reference" in spec.features:
+            names.append(path.stem)
+    return names
+
+
+def all_names() -> list[str]:
+    return list(FMU_CASES) + scene_names()
+
+
+def generate(name: str) -> ReferenceTraces:
+    if name in FMU_CASES:
+        return generate_fmu(name)
+    return generate_scene(scenes.load(name))
+
+
+# -- is the committed reference current? --------------------------------------------------------
+
+@dataclass
+class Change:
+    signal: str
+    max_change: float
+    #: relative to the signal's largest magnitude
+    relative: float
+    at_time: float
+
+
+@dataclass
+class Difference:
+    """What regenerating a reference would change (empty: it is current)."""
+    name: str
+    changes: list[Change] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)     # structural: grid, names, options
+
+    @property
+    def current(self) -> bool:
+        return not self.problems and all(c.relative <= CURRENT_TOLERANCE for c in self.changes)
+
+
+def _diff_traces(label: str, old: Traces, new: Traces, diff: Difference):
+    added = [n for n in new.signals if n not in old.signals]
+    removed = [n for n in old.signals if n not in new.signals]
+    if added:
+        diff.problems.append(f"{label}: new signal(s) {', '.join(added)}")
+    if removed:
+        diff.problems.append(f"{label}: signal(s) no longer computed: {', '.join(removed)}")
+    same_grid = len(old.times) == len(new.times) and np.allclose(old.times, new.times, rtol=0, atol=1e-9)
+    if not same_grid:
+        diff.problems.append(f"{label}: time grid {len(old.times)} rows {old.times[0]:g}...{old.times[-1]:g} s -> "
+                             f"{len(new.times)} rows {new.times[0]:g}...{new.times[-1]:g} s")
+    for name in new.signals:
+        if name not in old.signals:
+            continue
+        y_new = new.signals[name]
+        y_old = old.signals[name] if same_grid else np.interp(new.times, old.times, old.signals[name])
+        delta = np.abs(y_new - y_old)
+        i = int(np.argmax(delta))
+        scale = max(float(np.max(np.abs(y_new))), 1e-12)
+        prefix = f"{label}:" if label != "outputs" else ""
+        diff.changes.append(Change(prefix + name, float(delta[i]), float(delta[i]) / scale, float(new.times[i])))
+
+
+def difference(committed: ReferenceTraces | None, fresh: ReferenceTraces) -> Difference:
+    """What changes from the committed reference to the freshly generated one (compared as
+    the files store it, 9 significant digits)."""
+    diff = Difference(fresh.name)
+    if committed is None:
+        diff.problems.append("no committed reference")
+        return diff
+    o, n = committed.opt, fresh.opt
+    if (o.step, o.start, o.stop, o.rel_tol) != (n.step, n.start, n.stop, n.rel_tol):
+        diff.problems.append(f"options: StepSize {o.step:g} -> {n.step:g}, StartTime {o.start:g} -> {n.start:g}, "
+                             f"StopTime {o.stop:g} -> {n.stop:g}, RelTol {o.rel_tol:g} -> {n.rel_tol:g}")
+    _diff_traces("outputs", committed.outputs, rounded(fresh.outputs), diff)
+    if (committed.inputs is None) != (fresh.inputs is None):
+        diff.problems.append("inputs file " + ("added" if committed.inputs is None else "removed"))
+    elif fresh.inputs is not None:
+        _diff_traces("inputs", committed.inputs, rounded(fresh.inputs), diff)
+    return diff
+
+
+# -- running what a reference describes ---------------------------------------------------------
+
+@dataclass
+class Result:
+    """What a run under validation produced, named like its reference's signals."""
+    times: np.ndarray
+    traces: dict[str, np.ndarray]
+    #: how it was produced, in words
+    how: str
+    failure: str | None = None
+
+
+def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None, fmu_dir: Path = FMUS) -> Result:
+    """The FMU stand-alone under fmpy's ``simulate_fmu``, driven by the reference's inputs,
+    at the ``_ref.opt`` step, recording at every communication point."""
+    from fmpy import simulate_fmu
+
+    opt = reference.opt
+    inputs = reference.inputs
+    signal = np.rec.fromarrays([inputs.times] + list(inputs.signals.values()), names=["time"] + list(inputs.signals))
+    outputs = list(reference.outputs.signals)
+    messages = []
+    how = f"fmpy.simulate_fmu, step {opt.step:g} s, {opt.start:g}...{opt.stop:g} s"
+    try:
+        result = simulate_fmu(str(fmu_dir / f"{name}.fmu"), start_time=opt.start, stop_time=opt.stop,
+                              step_size=opt.step, output_interval=opt.step, input=signal, output=outputs,
+                              start_values=dict(start_values or {}), relative_tolerance=opt.rel_tol,
+                              logger=lambda *args: messages.append(args[-1].decode("utf-8", "replace")
+                                                                   if isinstance(args[-1], bytes) else str(args[-1])),
+                              debug_logging=False)
+    except Exception as error:   # fmpy raises plain Exceptions for refused calls
+        said = f" (FMU said: {' | '.join(messages)})" if messages else ""
+        return Result(np.empty(0), {n: np.empty(0) for n in outputs}, how, f"{name}: {error}{said}")
+    return Result(np.asarray(result["time"], dtype=float), {n: np.asarray(result[n], dtype=float) for n in outputs},
+                  how)
+
+
+def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None = None,
+              fmu_dir: Path = FMUS) -> Result:
+    from harness.engine.run import simulate
+
+    run = simulate(scene, master, step, fmu_dir)
+    how = f"master {run.master}, step {run.step:g} s, {scene.experiment.start:g}...{scene.experiment.stop:g} s"
+    # what the scene records (not what its features add, e.g. the energy balance's variables)
+    return Result(run.times, {n: run.traces[n] for n in scene.record}, how, run.failure)
+
+
+# -- writing a validation's results -----------------------------------------------------------
+
+def write_validation(out: Path, findings, bands: dict, result: Result, reference: ReferenceTraces,
+                     write_result: bool = True) -> list[Path]:
+    """``validation.json``, the result as ``<NAME>_out.csv`` (cross-check naming; unless
+    ``write_result`` is false) and one plot per failing signal with its band, in ``out``."""
+    import json
+
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in out.glob("*.png"):
+        stale.unlink()
+    written = []
+    if write_result and len(result.times):
+        path = out / f"{reference.name}_out.csv"
+        write_csv(path, Traces(result.times, {n: result.traces[n] for n in reference.outputs.signals
+                                             if n in result.traces}))
+        written.append(path)
+    summary = findings.to_dict()
+    summary["run"] = {"how": result.how, "failure": result.failure}
+    path = out / "validation.json"
+    path.write_text(json.dumps(summary, indent=2, default=float))
+    written.append(path)
+    if len(result.times):
+        for signal in findings.signals:
+            if not signal.passed:
+                written.append(plot_signal(out, reference, result, signal, bands[signal.name], findings.tolerance))
+    return written
+
+
+def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
+    """The reference, its band, the result and the samples outside the band: the whole span
+    above, a close-up around the first sample outside below."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t_ref, y_ref = reference.outputs.times, reference.outputs.signals[finding.name]
+    column = next(c for c in (finding.name,) + tuple(k for k in result.traces if k.endswith("." + finding.name))
+                  if c in result.traces)
+    t, y = result.times, result.traces[column]
+    first = finding.outside_times[0] if finding.outside_times else finding.max_error_time
+    span = t_ref[-1] - t_ref[0]
+    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref))))
+    fig, axes = plt.subplots(2, 1, figsize=(10, 7))
+    for ax, window in zip(axes, (None, (first - half, first + half))):
+        ax.fill_between(band.t, band.low, band.high, color="tab:green", alpha=0.25, lw=0,
+                        label=f"band ({tolerance.name}: +-{band.width:.3g})")
+        ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
+        ax.plot(t, y, color="tab:blue", lw=0.8, label="result")
+        if finding.outside_times:
+            times = np.array(finding.outside_times)
+            ax.plot(times, np.interp(times, t, y), "x", color="tab:red", ms=5, label="outside the band")
+        if window:
+            window = (max(window[0], t_ref[0]), min(window[1], t_ref[-1]))
+            ax.set_xlim(*window)
+            inside = (t_ref >= window[0]) & (t_ref <= window[1])
+            shown = np.concatenate([band.low[(band.t >= window[0]) & (band.t <= window[1])],
+                                    band.high[(band.t >= window[0]) & (band.t <= window[1])],
+                                    y[(t >= window[0]) & (t <= window[1])], y_ref[inside]])
+            shown = shown[np.isfinite(shown)]
+            if shown.size:
+                pad = 0.05 * (shown.max() - shown.min() or 1.0)
+                ax.set_ylim(shown.min() - pad, shown.max() + pad)
+            ax.set_title(f"close-up at t = {first:.4g} s", fontsize=9)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(finding.name)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="best")
+    axes[0].set_title(f"{reference.name}: {finding.name} - {finding.problem}", fontsize=9)
+    fig.tight_layout()
+    path = out / f"{finding.name}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,288 @@
+"""Scenes as SSP archives (System Structure and Parameterization 1.0), the ecosystem's
+format for a system of FMUs: ``lever export-ssp SCENE`` writes one, ``lever run x.ssp``
+runs one.
+
+An exported archive holds
+
+* ``SystemStructure.ssd``: the components (``resources/<Fmu>.fmu``) with a connector for
+  each output and each connected input, the scene's connections, the units, and the default
+  experiment (start, stop; its step as OSP's ``FixedStepAlgorithm`` annotation, which
+  libcosim reads);
+* ``resources/<Fmu>.fmu`` and ``resources/<Fmu>_OspModelDescription.xml``;
+* ``resources/<component>.ssv``: each component's parameter set (the values the scene
+  gives, in SI), bound to its component (variable names relative to the component, as
+  libcosim reads them);
+* an annotation ``org.lever-cosim.scene`` with what SSP has no place for (master,
+  transient, recorded variables, features, notes), so an exported scene loads back
+  as the same scene.  An SSP from elsewhere loads too: it records its connected outputs
+  and asks for no features.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import shutil
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+from lever.physics.parameters import UNITS
+
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESULTS
+from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
+
+SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+LEVER = "https://lever-cosim.org/ssp/scene"
+LEVER_ANNOTATION = "org.lever-cosim.scene"
+OSP_ANNOTATION = "com.opensimulationplatform"
+# libcosim reads the SSD with fixed prefixes (boost property trees know no namespaces).
+PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
+for _prefix, _uri in PREFIXES.items():
+    ET.register_namespace(_prefix, _uri)
+
+#: where ``load`` unpacks archives (by content hash: loading the same archive twice
+#: reuses the unpacked FMUs)
+UNPACKED = RESULTS / ".cache" / "ssp"
+_BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+def _q(ns: str, tag: str) -> str:
+    return f"{{{PREFIXES[ns]}}}{tag}"
+
+
+def _number(x: float) -> str:
+    return repr(float(x))
+
+
+def is_ssp(path) -> bool:
+    return str(path).endswith(".ssp")
+
+
+# -- export -------------------------------------------------------------------------------------
+
+def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
+    """Write ``scene`` as the SSP archive ``out``; return its path.  Raises
+    ``SceneInvalid`` for a scene the FMUs cannot run."""
+    fmu_dir = Path(fmu_dir)
+    descriptions = descriptions_for(scene, fmu_dir)
+    findings = scenes.validate(scene, descriptions)
+    if findings:
+        raise SceneInvalid(scene.name, findings)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    files = {"SystemStructure.ssd": _ssd(scene, descriptions)}
+    for name, spec in scene.components.items():
+        files[f"resources/{name}.ssv"] = _ssv(name, spec, descriptions[spec.fmu])
+    tmp = out.with_name(out.name + ".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
+        for member, text in files.items():
+            archive.writestr(member, text)
+        for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values()):
+            source = fmu_path(fmu, fmu_dir)
+            archive.write(source, f"resources/{source.name}")
+            osp = source.with_name(f"{source.stem}_OspModelDescription.xml")
+            if osp.exists():
+                archive.write(osp, f"resources/{osp.name}")
+    tmp.replace(out)
+    return out
+
+
+def _xml(root: ET.Element) -> bytes:
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+
+
+def _ssd(scene: scenes.Scene, descriptions: dict) -> bytes:
+    root = ET.Element(_q("ssd", "SystemStructureDescription"), {"name": scene.name, "version": "1.0"})
+    system = ET.SubElement(root, _q("ssd", "System"), {"name": scene.name, "description": scene.description})
+    elements = ET.SubElement(system, _q("ssd", "Elements"))
+    used_units = set()
+    for name, spec in scene.components.items():
+        md = descriptions[spec.fmu]
+        component = ET.SubElement(elements, _q("ssd", "Component"), {
+            "name": name, "type": "application/x-fmu-sharedlibrary", "source": f"resources/{spec.fmu}.fmu"})
+        connectors = ET.SubElement(component, _q("ssd", "Connectors"))
+        # Inputs are connectors where the scene connects them; an unconnected input is
+        # set once from the parameter set (fmpy.ssp would set every input connector at
+        # every step, to the value a connection gives it or to 0).
+        wired = {c.input for c in scene.connections if c.target == name}
+        for var in md.modelVariables:
+            if not (var.causality == "output" or (var.causality == "input" and var.name in wired)):
+                continue
+            connector = ET.SubElement(connectors, _q("ssd", "Connector"), {"name": var.name, "kind": var.causality})
+            attrs = {}
+            if var.type == "Real" and var.unit:
+                attrs["unit"] = var.unit
+                used_units.add(var.unit)
+            ET.SubElement(connector, _q("ssc", var.type), attrs)
+        bindings = ET.SubElement(component, _q("ssd", "ParameterBindings"))
+        ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
+            "type": "application/x-ssp-parameter-set", "source": f"resources/{name}.ssv"})
+    connections = ET.SubElement(system, _q("ssd", "Connections"))
+    for c in scene.connections:
+        ET.SubElement(connections, _q("ssd", "Connection"), {
+            "startElement": c.source, "startConnector": c.output, "endElement": c.target, "endConnector": c.input})
+    if used_units:
+        units = ET.SubElement(root, _q("ssd", "Units"))
+        for name in sorted(used_units):
+            exponents, factor = UNITS[name]
+            unit = ET.SubElement(units, _q("ssc", "Unit"), {"name": name})
+            ET.SubElement(unit, _q("ssc", "BaseUnit"), {k: str(v) for k, v in exponents.items()})
+    e = scene.experiment
+    experiment = ET.SubElement(root, _q("ssd", "DefaultExperiment"),
+                               {"startTime": _number(e.start), "stopTime": _number(e.stop)})
+    annotation = ET.SubElement(ET.SubElement(experiment, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
+                               {"type": OSP_ANNOTATION})
+    ET.SubElement(ET.SubElement(annotation, _q("osp", "Algorithm")), _q("osp", "FixedStepAlgorithm"),
+                  {"baseStepSize": _number(e.step)})
+    annotation = ET.SubElement(ET.SubElement(root, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
+                               {"type": LEVER_ANNOTATION})
+    lever = ET.SubElement(annotation, _q("lever", "Scene"), {
+        "master": e.master, "step": _number(e.step), "transient": _number(e.transient),
+        "features": " ".join(sorted(scene.features))})
+    for item in scene.record:
+        ET.SubElement(lever, _q("lever", "Record"), {"variable": item})
+    if scene.notes:
+        ET.SubElement(lever, _q("lever", "Notes")).text = scene.notes
+    return _xml(root)
+
+
+def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
+    variables = {v.name: v for v in md.modelVariables}
+    root = ET.Element(_q("ssv", "ParameterSet"), {"version": "1.0", "name": name})
+    parameters = ET.SubElement(root, _q("ssv", "Parameters"))
+    for param, raw in spec.parameters.items():
+        var = variables[param]
+        value = scenes.quantity(raw, f"{name}.{param}")
+        parameter = ET.SubElement(parameters, _q("ssv", "Parameter"), {"name": param})
+        if var.type == "Real":
+            attrs = {"value": _number(value)}
+            if var.unit:
+                attrs["unit"] = var.unit
+            ET.SubElement(parameter, _q("ssv", "Real"), attrs)
+        elif var.type in ("Integer", "Enumeration"):
+            ET.SubElement(parameter, _q("ssv", "Integer"), {"value": str(int(value))})
+        elif var.type == "Boolean":
+            ET.SubElement(parameter, _q("ssv", "Boolean"), {"value": "true" if value else "false"})
+        else:
+            ET.SubElement(parameter, _q("ssv", "String"), {"value": str(value)})
+    return _xml(root)
+
+
+# -- load ---------------------------------------------------------------------------------------
+
+def unpack(path: Path) -> Path:
+    """The directory the archive ``path`` is unpacked in (once per content)."""
+    path = Path(path)
+    if not path.is_file():
+        raise scenes.SceneError(f"no SSP archive {path}")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    target = UNPACKED / f"{path.stem}-{digest}"
+    if not (target / "SystemStructure.ssd").exists():
+        partial = target.with_name(target.name + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        try:
+            with zipfile.ZipFile(path) as archive:
+                archive.extractall(partial)
+        except zipfile.BadZipFile as error:
+            raise scenes.SceneError(f"{path}: not an SSP archive ({error})") from None
+        if not (partial / "SystemStructure.ssd").exists():
+            shutil.rmtree(partial, ignore_errors=True)
+            raise scenes.SceneError(f"{path}: no SystemStructure.ssd in the archive")
+        shutil.rmtree(target, ignore_errors=True)
+        partial.rename(target)
+    return target
+
+
+def read_scene(path: str | Path) -> scenes.Scene:
+    """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``)."""
+    path = Path(path)
+    where = unpack(path)
+    try:
+        root = ET.parse(where / "SystemStructure.ssd").getroot()
+    except ET.ParseError as error:
+        raise scenes.SceneError(f"{path}: SystemStructure.ssd does not parse: {error}") from None
+    system = root.find(_q("ssd", "System"))
+    if system is None:
+        raise scenes.SceneError(f"{path}: SystemStructure.ssd has no System")
+    components, fmu_dirs = {}, set()
+    for element in system.iterfind(f"{_q('ssd', 'Elements')}/{_q('ssd', 'Component')}"):
+        name, source = element.get("name"), element.get("source", "")
+        fmu = (where / source).resolve()
+        if not fmu.is_file():
+            raise scenes.SceneError(f"{path}: component '{name}': no FMU {source} in the archive")
+        fmu_dirs.add(fmu.parent)
+        parameters = {}
+        for binding in element.iterfind(f"{_q('ssd', 'ParameterBindings')}/{_q('ssd', 'ParameterBinding')}"):
+            if binding.get("source"):
+                parameter_set = ET.parse(where / binding.get("source")).getroot()
+            else:
+                parameter_set = binding.find(f"{_q('ssd', 'ParameterValues')}/{_q('ssv', 'ParameterSet')}")
+            if parameter_set is not None:
+                parameters.update(parameter_values(parameter_set, binding.get("prefix", "")))
+        components[name] = scenes.ComponentSpec(fmu.stem, parameters)
+    if len(fmu_dirs) > 1:
+        raise scenes.SceneError(f"{path}: the harness runs FMUs from one folder; this SSP has them in "
+                                f"{', '.join(sorted(str(d.relative_to(where)) for d in fmu_dirs))}")
+    connections = [scenes.Connection(c.get("startElement"), c.get("startConnector"), c.get("endElement"),
+                                     c.get("endConnector"))
+                   for c in system.iterfind(f"{_q('ssd', 'Connections')}/{_q('ssd', 'Connection')}")]
+    experiment = scenes.Experiment(master="jacobi")
+    default = root.find(_q("ssd", "DefaultExperiment"))
+    if default is not None:
+        experiment.start = float(default.get("startTime", 0.0))
+        if default.get("stopTime") is not None:
+            experiment.stop = float(default.get("stopTime"))
+        fixed = default.find(f".//{_q('osp', 'FixedStepAlgorithm')}")
+        if fixed is not None:
+            experiment.step = float(fixed.get("baseStepSize"))
+    lever = root.find(f"{_q('ssd', 'Annotations')}/{_q('ssc', 'Annotation')}[@type='{LEVER_ANNOTATION}']/"
+                      f"{_q('lever', 'Scene')}")
+    if lever is not None:
+        experiment.master = lever.get("master", experiment.master)
+        experiment.step = float(lever.get("step", experiment.step))
+        experiment.transient = float(lever.get("transient", experiment.transient))
+        record = [r.get("variable") for r in lever.iterfind(_q("lever", "Record"))]
+        features = set((lever.get("features") or "").split())
+        notes = lever.findtext(_q("lever", "Notes"), "")
+    else:
+        record = list(dict.fromkeys(f"{c.source}.{c.output}" for c in connections))
+        features, notes = set(), ""
+        experiment.transient = min(experiment.transient, 0.2 * (experiment.stop - experiment.start))
+    name = root.get("name") or path.stem
+    return scenes.Scene(name=name, description=system.get("description", ""), components=components,
+                        connections=connections, experiment=experiment, record=record, features=features,
+                        path=path, notes=notes, fmu_dir=fmu_dirs.pop() if fmu_dirs else None)
+
+
+def parameter_values(parameter_set: ET.Element, prefix: str = "") -> dict:
+    """``{name: value}`` of an SSV parameter set (Real in SI: a unit other than the
+    variable's is converted when we know it)."""
+    values = {}
+    for parameter in parameter_set.iterfind(f"{_q('ssv', 'Parameters')}/{_q('ssv', 'Parameter')}"):
+        name = parameter.get("name")
+        if prefix and name.startswith(prefix):
+            name = name[len(prefix):]
+        typed = parameter[0] if len(parameter) else None
+        if typed is None:
+            continue
+        kind, raw = typed.tag.rsplit("}", 1)[-1], typed.get("value")
+        if kind == "Real":
+            value = float(raw)
+            unit = typed.get("unit")
+            if unit in UNITS:
+                value *= UNITS[unit][1]
+            if not math.isfinite(value):
+                raise scenes.SceneError(f"parameter {name} = {raw} is not finite")
+        elif kind in ("Integer", "Enumeration"):
+            value = int(raw)
+        elif kind == "Boolean":
+            value = raw in ("true", "1")
+        else:
+            value = raw
+        values[name] = value
+    return values

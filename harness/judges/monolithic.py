@@ -1,0 +1,140 @@
+"""The monolithic reference: the scene's equations solved unsplit with scipy at tight
+tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue``).
+
+For the driveline (engine shaft - lever coupling - load shaft) the state is
+``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
+energy dissipated in the coupling, so the reference's own energy balance is exact up to
+the integrator's tolerance.  Results are cached (harness.judges.solution).  ``solve``
+picks the solver of the scene's kind (``SOLVERS``).
+"""
+from __future__ import annotations
+
+import time as clock
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from lever.physics import catalogue
+
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.judges import rectifier
+from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
+
+RTOL = 1e-10
+ATOL = 1e-10
+
+
+def _roles(scene: scenes.Scene):
+    try:
+        names = kinds.driveline(scene)
+    except kinds.NotADriveline as error:
+        raise ReferenceUnavailable(f"{error}: the monolithic reference has no solver for it") from None
+    return names.engine, names.coupling, names.load
+
+
+def _misalignment_source(scene: scenes.Scene, coupling_name: str):
+    """alpha(t) when a source drives the coupling's misalignment input, else None."""
+    driver = next((c for c in scene.connections if c.target == coupling_name and c.input == "misalignment"), None)
+    if driver is None:
+        return None
+    if scene.components[driver.source].fmu != "MisalignmentSource" or driver.output != "misalignment":
+        raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
+                                   f"MisalignmentSource, not from {driver}")
+    return catalogue.misalignment_source_from(kinds.parameters(scene, driver.source))
+
+
+def _shaft_rates(shaft, t, phi, w, tau):
+    """``Shaft.rates`` over arrays; element by element where a torque model only takes
+    scalars (tabulated characteristics)."""
+    try:
+        a, external = shaft.rates(t, phi, w, tau)
+        if np.shape(a) == np.shape(t) and np.shape(external) == np.shape(t):
+            return np.asarray(a, dtype=float), np.asarray(external, dtype=float)
+    except (TypeError, ValueError):  # a scalar-only model fed arrays (e.g. bisect on an array)
+        pass
+    a, external = zip(*(shaft.rates(*row) for row in zip(t, phi, w, tau)))
+    return np.array(a), np.array(external)
+
+
+def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+          atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
+    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
+    Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
+    benchmark compares the masters with."""
+    solver = SOLVERS.get(kinds.kind_of(scene), solve_driveline)
+    return solver(scene, times, use_cache, rtol, atol, method)
+
+
+def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+                    atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
+    """``solve`` for a driveline scene (engine - coupling - load, a misalignment source perhaps)."""
+    engine_name, coupling_name, load_name = _roles(scene)
+    path = cache_path(scene, times, rtol, atol, method)
+    if use_cache and (cached := load_cached(path)) is not None:
+        return cached
+
+    built = kinds.physics(scene)
+    engine, load, coupling = built.engine, built.load, built.coupling
+    coupling_params = kinds.parameters(scene, coupling_name)
+    misalignment = _misalignment_source(scene, coupling_name)
+    phi1, w1 = catalogue.start_state(kinds.parameters(scene, engine_name), catalogue.ENGINE)
+    phi2, w2 = catalogue.start_state(kinds.parameters(scene, load_name), catalogue.LOAD)
+    drive_rates, driven_rates = engine.rates, load.rates
+
+    if misalignment is not None:
+        # the coupling at alpha(t), exactly as the coupling FMU evaluates it (CouplingFamily)
+        family = catalogue.coupling_family_from(coupling_params)
+        alpha_at = misalignment.value
+
+        def evaluate(p1, v1, p2, v2, t):
+            return family.at(alpha_at(t)).evaluate(p1, v1, p2, v2)
+    fixed = coupling.evaluate if misalignment is None else None
+
+    def rhs(t, y):
+        p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
+        r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
+        a1, m1 = drive_rates(t, p1, v1, r.tau1)
+        a2, m2 = driven_rates(t, p2, v2, r.tau2)
+        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation]
+
+    started = clock.perf_counter()
+    omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
+    solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), [phi1, w1, phi2, w2, 0.0, 0.0, 0.0],
+                         method=method, t_eval=times, rtol=rtol, atol=atol,
+                         first_step=min(1e-4, 0.1 / omega))
+    wall = clock.perf_counter() - started
+    if not solution.success:
+        raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
+    p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
+    t = solution.t
+    if misalignment is None:
+        r = coupling.evaluate(p1, v1, p2, v2)
+    else:
+        rows = [evaluate(*row) for row in zip(p1, v1, p2, v2, t)]
+        r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
+    a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
+    a2, m2 = _shaft_rates(load, t, p2, v2, np.asarray(r.tau2))
+    e, c, l = engine_name, coupling_name, load_name
+    traces = {
+        f"{e}.phi": p1, f"{e}.w": v1, f"{e}.a": a1, f"{e}.engine_torque": m1,
+        f"{e}.engine_work": work_in,
+        f"{l}.phi": p2, f"{l}.w": v2, f"{l}.a": a2, f"{l}.load_torque": -m2,
+        f"{l}.load_work": work_out,
+        f"{c}.tau1": np.asarray(r.tau1), f"{c}.tau2": np.asarray(r.tau2), f"{c}.U12": np.asarray(r.ratio),
+        f"{c}.theta": np.asarray(r.deflection), f"{c}.elastic_energy": np.asarray(r.energy),
+        f"{c}.dissipated_power": np.asarray(r.dissipation), f"{c}.dissipated_energy": dissipated,
+    }
+    if misalignment is not None:        # the source's outputs: known functions of time
+        source = next(c.source for c in scene.connections if c.target == coupling_name and c.input == "misalignment")
+        traces[f"{source}.misalignment"] = np.array([misalignment.value(x) for x in t])
+        traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
+    reference = MonolithicSolution(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
+    if use_cache:
+        store(path, reference)
+    return reference
+
+
+#: the reference solver of each kind of scene (harness.description.kinds); the rectifier
+#: scene has its own event-aware one
+SOLVERS = {"driveline": solve_driveline, "rectifier": rectifier.solve_reference}

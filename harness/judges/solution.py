@@ -1,0 +1,74 @@
+"""A monolithic reference solution (``Reference``: traces on the run's grid, how it was
+computed) and its cache: solutions are stored by a hash of everything they depend on -
+the scene's components and values, the time grid, the solver's settings and the physics
+code (``physics_hash``)."""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lever.physics import catalogue
+
+from harness.description import scene as scenes
+from harness.paths import RESULTS
+
+CACHE = RESULTS / ".cache"
+
+
+class ReferenceUnavailable(ValueError):
+    pass
+
+
+@dataclass
+class MonolithicSolution:
+    times: np.ndarray
+    traces: dict[str, np.ndarray]
+    wall_time: float
+    n_rhs: int
+    method: str
+    status: str = "ok"
+    info: dict = field(default_factory=dict)
+
+
+def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, method: str) -> str:
+    payload = {
+        "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in sorted(scene.components.items())},
+        "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
+        "rtol": rtol, "atol": atol, "method": method,
+        "physics": physics_hash(),
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def physics_hash() -> str:
+    root = Path(catalogue.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.glob("*.py")):
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
+    return CACHE / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
+
+
+def load_cached(path: Path) -> MonolithicSolution | None:
+    """A stored reference (its ``info`` as stored, marked cached), or None."""
+    if not path.exists():
+        return None
+    data = np.load(path, allow_pickle=False)
+    meta = json.loads(str(data["meta"]))
+    traces = {k: data[k] for k in data.files if k not in ("meta", "times")}
+    return MonolithicSolution(data["times"], traces, meta["wall_time"], meta["n_rhs"], meta["method"],
+                     info={**meta.get("info", {}), "cached": True})
+
+
+def store(path: Path, reference: MonolithicSolution):
+    CACHE.mkdir(parents=True, exist_ok=True)
+    meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
+                       "info": reference.info})
+    np.savez_compressed(path, times=reference.times, meta=np.array(meta), **reference.traces)

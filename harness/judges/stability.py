@@ -1,0 +1,574 @@
+"""Linear stability of the co-simulation masters on the two-inertia driveline, and the
+stability advisor that warns before a run.
+
+The model (linearised about the steady operating point):
+
+    I1 * dw1/dt = -K1 * w1 + tau1          drive shaft; K1 = -dMg/dw, the engine's slope
+    I2 * dw2/dt = tau2                     driven shaft; the loads here do not depend on w
+    T = c * (phi1 - phi2) + b * (w1 - w2), tau1 = -T, tau2 = T
+
+in deviations from the steady motion.  Linearisation: the transfer function is taken
+at its mean, ``U12 = 1`` and ``Phi(phi2) = phi2`` (the kinematic mode's ratio varies by
+under 1 % about it: a parametric modulation left out; the ``scaled`` mode's 14 % is not
+small and is only roughly covered), a tabulated elastic law by its nominal stiffness,
+a tabulated engine characteristic by its slope at the starting speed; the mean load and
+the engine's stall torque set the operating point and drop out of the deviations, the
+random and periodic parts of the load are forcing, not feedback.
+
+Coupling mode: ``omega_n = sqrt(c / I_red)`` with ``I_red = I1*I2/(I1 + I2)``, the
+undamped eigenfrequency, and the modal damping ratio of its mode shape (the drive
+shaft moves ``I2/(I1 + I2)`` of the deflection, so the engine's slope damps it too):
+
+    zeta = (b + K1 * (I2/(I1 + I2))^2) / (2 * sqrt(c * I_red))
+
+The one-step map of each master is not written out by hand: ``LinearDriveline`` is a
+stand-in for ``harness.engine.system.System`` whose three components carry the FMUs' own model
+descriptions (ports, derivative attributes, output dependencies) but compute the linear
+model above in Python, with the same exact shaft integrators the FMUs use.  The real
+master classes step it, so the map is the one of the masters as implemented: zero-order
+hold, the ramp (``tau_rate``) of the extrapolating masters with their torque history in
+the augmented state, Gauss-Seidel's order (its ``c*w*h`` torque bias is affine in the
+steady speed: it moves the operating point, not the map), the mid-step prediction from
+the accelerations of the last propagation (kept in the map's state, as the master reads
+them from its buffers), the implicit and trapezoidal couplings iterated to
+convergence (Newton to 1e-9).  A fixed-point master ends at the same torques where its
+iteration converges; it fails - spectral radius reported as infinite - where the
+contraction of ``u <- G(u)`` is too slow for its own tolerance and iteration limit
+(``fixed_point_limit``).  The map's columns are the images of unit perturbations of the
+augmented state (exact: the stand-in is linear); the common angle of both shafts, which
+nothing depends on (eigenvalue 1 for every master), is removed.  ``tests/test_stability.py``
+checks the stand-in against the masters on the real FMUs, step for step.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from fmpy import read_model_description
+
+from lever.physics import catalogue
+from lever.physics.coupling import build_coupling, coupling_mode
+from lever.physics.engine import LinearCharacteristic
+from lever.physics.load import ConstantLoad
+from lever.physics.parameters import check_all
+from lever.physics.shaft import Shaft
+
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.description import scene as scenes
+from harness.paths import FMUS
+from harness.engine.interface import RawCalls
+from harness.engine.system import System, feedthrough_components
+
+#: A spectral radius above 1 + this is unstable (rounding of the map stays far below).
+RHO_TOLERANCE = 1e-7
+
+#: Masters that choose their own steps, by the fixed-step master they step with.
+FIXED_STEP_EQUIVALENT = {"adaptive": "jacobi-quadratic", "adaptive-trapezoidal": "trapezoidal-newton"}
+
+#: Options that make the analysed iterative masters iterate to convergence.
+CONVERGED = {"tolerance": 1e-9, "max_iterations": 100}
+
+
+# -- the two-inertia model ---------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TwoInertia:
+    """The linearised driveline: inertias [kg*m^2], engine slope K1 [N*m*s/rad],
+    coupling stiffness c [N*m/rad] and damping b [N*m*s/rad]."""
+
+    drive_inertia: float
+    driven_inertia: float
+    engine_slope: float
+    stiffness: float
+    damping: float
+
+    @property
+    def omega_n(self) -> float:
+        """Undamped eigenfrequency of the coupling mode [rad/s]."""
+        return self._mode[0]
+
+    @property
+    def zeta(self) -> float:
+        """Modal damping ratio of the coupling mode (coupling damping and engine slope)."""
+        return self._mode[1]
+
+    @property
+    def _mode(self) -> tuple[float, float]:
+        return coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia,
+                             self.engine_slope)
+
+    def with_coupling(self, stiffness: float | None = None, damping: float | None = None) -> "TwoInertia":
+        return TwoInertia(self.drive_inertia, self.driven_inertia, self.engine_slope,
+                          self.stiffness if stiffness is None else float(stiffness),
+                          self.damping if damping is None else float(damping))
+
+    def step_for(self, h_omega: float) -> float:
+        """The communication step [s] at which ``h * omega_n`` is ``h_omega``."""
+        return h_omega / self.omega_n
+
+    def continuous_eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of the continuous model in (theta, w1, w2)."""
+        c, b, k1 = self.stiffness, self.damping, self.engine_slope
+        i1, i2 = self.drive_inertia, self.driven_inertia
+        a = np.array([[0.0, 1.0, -1.0],
+                      [-c / i1, -(b + k1) / i1, b / i1],
+                      [c / i2, b / i2, -b / i2]])
+        return np.linalg.eigvals(a)
+
+
+def model_of(scene: scenes.Scene) -> TwoInertia:
+    """The two-inertia model of ``scene`` from its parameter values (defaults where the
+    scene sets none); ``kinds.NotADriveline`` for a scene of another kind."""
+    built = kinds.physics(scene)
+    drive = check_all(catalogue.ENGINE, kinds.parameters(scene, built.roles.engine))
+    driven = check_all(catalogue.LOAD, kinds.parameters(scene, built.roles.load))
+    law = built.coupling
+    characteristic = built.engine.external
+    if isinstance(characteristic, LinearCharacteristic):
+        slope = characteristic.slope
+    else:   # tabulated: its slope at the starting speed
+        w, dw = drive["w_start"], max(1e-3, 1e-3 * abs(drive["w_start"]))
+        slope = -(characteristic.torque(0.0, 0.0, w + dw) - characteristic.torque(0.0, 0.0, w - dw)) / (2 * dw)
+    return TwoInertia(drive["inertia"], driven["inertia"], max(0.0, slope), law.law.nominal_stiffness,
+                      law.damping)
+
+
+# -- the stand-in system -----------------------------------------------------------------------
+
+@lru_cache(maxsize=8)
+def _description(path: str, mtime: float):
+    return read_model_description(path)
+
+
+def _descriptions(fmu_dir: Path) -> dict:
+    out = {}
+    for fmu in ("EngineShaft", "LeverCoupling", "LoadShaft"):
+        path = Path(fmu_dir) / f"{fmu}.fmu"
+        if not path.exists():
+            raise FileNotFoundError(f"{path} is missing: build the FMUs first (lever build)")
+        out[fmu] = _description(str(path), path.stat().st_mtime)
+    return out
+
+
+class _LinearComponent:
+    """One component of the stand-in: the FMU's model description, values by value
+    reference, and the interface the masters and ``System`` use
+    (``harness.engine.interface.CoSimComponent``, its raw calls included)."""
+
+    def __init__(self, name: str, description):
+        self.name = name
+        self.description = description
+        self.variables = {v.name: v for v in description.modelVariables}
+        self.values = {v.valueReference: 0.0 for v in description.modelVariables if v.type == "Real"}
+        self._vr = {v.name: v.valueReference for v in description.modelVariables}
+        self.calls = 0
+        self.time = 0.0
+        self.raw = RawCalls(None, self._get, self._set, self._raw_step)
+
+    def variable(self, name):
+        return self.variables[name]
+
+    def vr(self, name):
+        return self._vr[name]
+
+    def __getitem__(self, name):
+        return self.values[self._vr[name]]
+
+    def __setitem__(self, name, value):
+        self.values[self._vr[name]] = float(value)
+
+    def real_buffer(self, names):
+        import ctypes
+        names = list(names)
+        return (ctypes.c_uint * len(names))(*[self.vr(n) for n in names]), (ctypes.c_double * len(names))()
+
+    def _outputs(self):
+        """Recompute the outputs from the inputs and the state."""
+
+    def _get(self, handle, vrs, n, values):
+        self._outputs()
+        for i in range(n):
+            values[i] = self.values[vrs[i]]
+        return 0
+
+    def _set(self, handle, vrs, n, values):
+        for i in range(n):
+            self.values[vrs[i]] = values[i]
+        return 0
+
+    def read(self, vrs, values):
+        self.calls += 1
+        self._get(None, vrs, len(vrs), values)
+
+    def write(self, vrs, values):
+        self.calls += 1
+        self._set(None, vrs, len(vrs), values)
+
+    def do_step(self, t, h):
+        self.calls += 1
+        self._advance(t, h)
+        self.time = t + h
+
+    def _raw_step(self, handle, t, h, no_set_prior_state):
+        self._advance(t, h)
+        self.time = t + h
+        return 0
+
+    def _advance(self, t, h):
+        pass
+
+    def fail(self, call, status):
+        raise RuntimeError(f"linear stand-in {self.name}: {call} returned status {status}")
+
+    def save_state(self):
+        return dict(self.values)
+
+    def restore_state(self, state, time):
+        self.values = dict(state)
+        self.time = time
+
+    def free_state(self, state):
+        pass
+
+    def free(self):
+        pass
+
+
+class _LinearShaft(_LinearComponent):
+    def __init__(self, name, description, shaft: Shaft):
+        super().__init__(name, description)
+        self.shaft = shaft
+
+    def _outputs(self):
+        self["a"] = self.shaft.acceleration(self.time, self["phi"], self["w"], self["tau"])
+
+    def _advance(self, t, h):
+        phi, w, _ = self.shaft.advance(t, self["phi"], self["w"], self["tau"], h, self["tau_rate"])
+        self["phi"], self["w"] = phi, w
+
+
+class _LinearCoupling(_LinearComponent):
+    def __init__(self, name, description, stiffness, damping):
+        super().__init__(name, description)
+        self.coupling = build_coupling("synchronous", 0.0, 0.0, 0.0, stiffness, damping)
+
+    def _outputs(self):
+        self["tau1"], self["tau2"] = self.coupling.torques(self["phi1"], self["w1"], self["phi2"], self["w2"])
+
+
+DRIVELINE_CONNECTIONS = ("engine.phi -> coupling.phi1", "engine.w -> coupling.w1", "load.phi -> coupling.phi2",
+                         "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", "coupling.tau2 -> load.tau")
+
+
+class LinearDriveline(System):
+    """``System`` with the linear two-inertia model in place of the FMUs (same wiring,
+    same model descriptions, same propagation code)."""
+
+    def __init__(self, model: TwoInertia, step: float, fmu_dir: Path = FMUS):
+        descriptions = _descriptions(fmu_dir)
+        self.model = model
+        self.scene = scenes.Scene(
+            name="linear-driveline", description="linearised two-inertia driveline",
+            components={"engine": scenes.ComponentSpec("EngineShaft"), "coupling": scenes.ComponentSpec("LeverCoupling"),
+                        "load": scenes.ComponentSpec("LoadShaft")},
+            connections=[scenes.parse_connection(c) for c in DRIVELINE_CONNECTIONS],
+            experiment=scenes.Experiment(start=0.0, stop=1e9, step=step), record=[], features=set())
+        self.record = []
+        self.components = {
+            "engine": _LinearShaft("engine", descriptions["EngineShaft"],
+                                   Shaft(model.drive_inertia, LinearCharacteristic(0.0, model.engine_slope))),
+            "coupling": _LinearCoupling("coupling", descriptions["LeverCoupling"], model.stiffness, model.damping),
+            "load": _LinearShaft("load", descriptions["LoadShaft"], Shaft(model.driven_inertia, ConstantLoad(0.0))),
+        }
+        self.feedthrough = feedthrough_components(self.scene, {n: c.description for n, c in self.components.items()})
+        self.stateful = [n for n in self.scene.components if n not in self.feedthrough]
+        self._plan()
+
+    def set_state(self, phi1, w1, phi2, w2, t=0.0):
+        """Put the shafts in a state and make the system consistent (as after a step)."""
+        for component in self.components.values():
+            for vr in component.values:
+                component.values[vr] = 0.0
+            component.time = t
+        engine, load = self.components["engine"], self.components["load"]
+        engine["phi"], engine["w"], load["phi"], load["w"] = phi1, w1, phi2, w2
+        self.propagate()
+
+    def state(self) -> list[float]:
+        engine, load = self.components["engine"], self.components["load"]
+        return [engine["phi"], engine["w"], load["phi"], load["w"]]
+
+
+# -- one-step maps -------------------------------------------------------------------------------
+
+def fixed_step_master(master: str) -> str:
+    master_family.check(master)
+    return FIXED_STEP_EQUIVALENT.get(master, master)
+
+
+def _analysed_master(master: str, system: LinearDriveline, step: float):
+    name = fixed_step_master(master)
+    cls = master_family.MASTERS[name]
+    if getattr(cls, "solver", None) == "fixed-point":
+        # Where it converges, the fixed-point iteration ends where Newton's does.
+        name = f"{cls.scheme}-newton"
+        cls = master_family.MASTERS[name]
+    options = {k: v for k, v in CONVERGED.items() if k in cls.options}
+    return master_family.make(name, system, step, **options)
+
+
+def _history_slots(driver) -> int:
+    """How many past communication points the master's state carries (extrapolation)."""
+    if isinstance(driver, master_family.ExtrapolatingJacobiMaster):
+        return driver.degree
+    return 0
+
+
+class MapUndefined(RuntimeError):
+    """The master cannot make the step (an iteration that does not converge)."""
+
+
+def iteration_contraction(model: TwoInertia, master: str, step: float, fmu_dir: Path = FMUS) -> float:
+    """Spectral radius of ``d G / d u`` for an iterative master: the torques ``u`` held
+    over the step against what the coupling gives back, ``G(u)`` (end-of-step torques,
+    or their mean with the start's).  A fixed-point iteration ``u <- G(u)`` converges
+    if and only if it is below 1 (Newton's converges regardless, the map being linear)."""
+    cls = master_family.MASTERS[fixed_step_master(master)]
+    if not issubclass(cls, master_family.IterativeMaster):
+        raise ValueError(f"master '{master}' does not iterate")
+    system = LinearDriveline(model, step, fmu_dir)
+    driver = master_family.make(cls.name, system, step)
+    system.set_state(0.0, 0.0, 0.0, 0.0)
+    start = driver._current_inputs()
+    states = driver._save_states()
+    base = np.array(driver._evaluate([0.0] * len(start), 0.0, step, states, start, rolled=True))
+    jacobian = np.array([np.array(driver._evaluate(list(np.eye(len(start))[j]), 0.0, step, states, start, rolled=True))
+                         - base for j in range(len(start))]).T
+    return float(np.max(np.abs(np.linalg.eigvals(jacobian))))
+
+
+def fixed_point_limit(cls) -> float:
+    """The contraction above which a fixed-point master, as configured by default,
+    cannot reduce a first residual as large as the torques themselves to its relative
+    tolerance within its iterations: ``tolerance ** (1 / max_iterations)`` (0.58 for
+    1e-7 and 30).  Below 1, where the iteration would converge given time."""
+    return cls.options["tolerance"] ** (1.0 / cls.options["max_iterations"])
+
+
+def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FMUS) -> tuple[np.ndarray, list[str]]:
+    """The matrix of ``master``'s one-step map at communication step ``step`` [s] on the
+    augmented state ``(theta, w1, w2, buffered outputs..., past torques...)``, with the names of its
+    coordinates.  Raises ``MapUndefined`` where the master fails to make the step (a
+    fixed-point iteration whose contraction is not below 1)."""
+    cls = master_family.MASTERS[fixed_step_master(master)]
+    if getattr(cls, "solver", None) == "fixed-point":
+        kappa = iteration_contraction(model, master, step, fmu_dir)
+        limit = fixed_point_limit(cls)
+        if not kappa < limit:
+            raise MapUndefined(f"{master}: the fixed-point iteration cannot converge at h = {step:.3g} s "
+                               f"(contraction {kappa:.3g} >= {limit:.3g})")
+    system = LinearDriveline(model, step, fmu_dir)
+    driver = _analysed_master(master, system, step)
+    slots = _history_slots(driver)
+    inputs = driver._inputs if slots else []
+    width = sum(len(values) for _, _, values in inputs)       # torques per communication point
+    # Outputs of the shafts a master reads from the last propagation besides their states
+    # (jacobi-midpoint's accelerations): propagation reads them before it writes the new
+    # torques, so they carry the torque of the step before - state of the map, too.
+    buffered = [(system.buffers[name][1], system.index[(name, var)], f"{name}.{var}")
+                for name in system.stateful for var in system.exposed[name] if var not in ("phi", "w")]
+    names = (["phi1", "w1", "phi2", "w2"] + [label for _, _, label in buffered]
+             + [f"{target.name}.{vr}@t-{k + 1}h" for k in range(slots) for target, vrs, _ in inputs
+                for vr in range(len(vrs))])
+    first = 4 + len(buffered)                 # where the torque history starts in z
+    n = first + slots * width
+
+    def apply(z):
+        system.set_state(*z[:4])
+        for (values, index, _), value in zip(buffered, z[4:first]):
+            values[index] = value
+        if slots:
+            points = []
+            for k in reversed(range(slots)):       # oldest first, as the master keeps them
+                flat, values = list(z[first + k * width:first + (k + 1) * width]), []
+                for _, _, buffer in inputs:
+                    values.append(flat[:len(buffer)])
+                    flat = flat[len(buffer):]
+                points.append((-(k + 1) * step, values))
+            driver._history = deque(points, maxlen=slots)
+        elif hasattr(driver, "_history"):
+            driver._history.clear()          # an iterative master's first guess: converged anyway
+        driver.t = 0.0
+        try:
+            driver.step(step, t_next=step)
+        except master_family.MasterFailure as error:
+            raise MapUndefined(str(error)) from None
+        out = system.state() + [values[index] for values, index, _ in buffered]
+        if slots:
+            history = list(driver._history)  # oldest first; the newest is the step's start
+            for k in range(slots):
+                out += [v for values in history[-1 - k][1] for v in values]
+        return np.array(out)
+
+    # Unit perturbations; the map is linear, so its columns are the images.
+    full = np.array([apply(np.eye(n)[j]) for j in range(n)]).T
+    # New coordinates: theta = phi1 - phi2, w1, the common angle (phi1 = phi2 = 1), w2, ...
+    # Nothing depends on the common angle (its column is its own unit vector): drop it.
+    change = np.eye(n)
+    change[0, 2] = 1.0
+    mapped = np.linalg.solve(change, full @ change)
+    keep = [i for i in range(n) if i != 2]
+    return mapped[np.ix_(keep, keep)], ["theta", "w1", "w2"] + names[4:]
+
+
+def spectral_radius(model: TwoInertia, master: str, step: float, fmu_dir: Path = FMUS) -> float:
+    """Largest eigenvalue modulus of the master's one-step map (``inf`` where the master
+    cannot make the step)."""
+    return _radius(model, fixed_step_master(master), float(step), str(fmu_dir))
+
+
+@lru_cache(maxsize=65536)
+def _radius(model, master, step, fmu_dir):
+    fmu_dir = Path(fmu_dir)
+    try:
+        matrix, _ = one_step_map(model, master, step, fmu_dir)
+    except MapUndefined:
+        return math.inf
+    if not np.all(np.isfinite(matrix)):
+        return math.inf
+    return float(np.max(np.abs(np.linalg.eigvals(matrix))))
+
+
+def is_stable(rho: float) -> bool:
+    return rho <= 1.0 + RHO_TOLERANCE
+
+
+#: The h * omega_n range the edge search covers.
+EDGE_RANGE = (1e-3, 1e2)
+
+
+def stability_edge(model: TwoInertia, master: str, fmu_dir: Path = FMUS, scan: int = 36,
+                   bisections: int = 24, h_omega_range: tuple = EDGE_RANGE) -> float | None:
+    """The smallest ``h * omega_n`` in ``h_omega_range`` where the spectral radius of
+    ``master``'s map exceeds 1 (found on a log scan and refined by bisection); ``None``
+    when it stays within 1 over the whole range, the lower end when it is unstable there."""
+    return _edge(model, fixed_step_master(master), str(fmu_dir), scan, bisections, tuple(h_omega_range))
+
+
+@lru_cache(maxsize=4096)
+def _edge(model, master, fmu_dir, scan, bisections, h_omega_range):
+    low, high = h_omega_range
+    grid = np.geomspace(low, high, scan)
+    previous = None
+    for x in grid:
+        if not is_stable(spectral_radius(model, master, model.step_for(x), Path(fmu_dir))):
+            if previous is None:
+                return float(low)
+            a, b = math.log(previous), math.log(x)
+            for _ in range(bisections):
+                mid = 0.5 * (a + b)
+                if is_stable(spectral_radius(model, master, model.step_for(math.exp(mid)), Path(fmu_dir))):
+                    a = mid
+                else:
+                    b = mid
+            return float(math.exp(0.5 * (a + b)))
+        previous = x
+    return None
+
+
+# -- the advisor ---------------------------------------------------------------------------------
+
+#: Masters the advisor proposes, in order of preference (cheapest per step first).
+PREFERRED = ("jacobi-quadratic", "jacobi-linear", "jacobi-midpoint", "jacobi", "trapezoidal-newton",
+             "implicit-newton")
+#: Fraction of the predicted edge the advisor proposes as a step (margin for the neglected
+#: nonlinearity and the transfer function's modulation).
+MARGIN = 0.8
+
+
+@dataclass
+class Assessment:
+    """The advisor's view of one master and step on a scene's driveline."""
+
+    master: str
+    step: float
+    model: TwoInertia
+    rho: float
+    edge: float | None               # the master's predicted edge, h*omega_n
+    proposals: list                  # [(master, step)] predicted stable
+
+    @property
+    def h_omega(self) -> float:
+        return self.step * self.model.omega_n
+
+    @property
+    def stable(self) -> bool:
+        return is_stable(self.rho)
+
+    def finding(self) -> str:
+        mode = f"omega_n = {self.model.omega_n:.4g} rad/s, zeta = {self.model.zeta:.3g}"
+        why = ("its coupling iteration cannot converge at this step" if math.isinf(self.rho)
+               else f"spectral radius of its one-step map {self.rho:.6g} > 1")
+        own = (f"{self.master} is predicted stable up to h*omega_n = {self.edge:.3g} "
+               f"(h = {self.model.step_for(self.edge):.3g} s)" if self.edge is not None and self.edge > EDGE_RANGE[0]
+               else f"{self.master} is predicted unstable at any step here")
+        proposal = " or ".join(f"{m} at h = {h:.3g} s" for m, h in self.proposals) or "a smaller step"
+        return (f"stability: {self.master} at h = {self.step:.3g} s (h*omega_n = {self.h_omega:.3g}; coupling mode "
+                f"{mode}) is outside the predicted stable region: {why}; {own}.  Predicted stable: {proposal}.")
+
+
+def assess(scene: scenes.Scene, master: str | None = None, step: float | None = None,
+           fmu_dir: Path = FMUS) -> Assessment | None:
+    """The linear analysis of ``master`` at ``step`` (defaults: the scene's) on the
+    scene's driveline, with stable alternatives when it is unstable; None when the scene
+    has no driveline to linearise or the master chooses its own steps (adaptive)."""
+    master = master or scene.experiment.master
+    step = float(step or scene.experiment.step)
+    if master not in master_family.MASTERS or master_family.MASTERS[master].adaptive:
+        return None
+    try:
+        model = model_of(scene)
+    except kinds.NotADriveline:
+        return None
+    rho = spectral_radius(model, master, step, fmu_dir)
+    if is_stable(rho):
+        return Assessment(master, step, model, rho, None, [])
+    edge = stability_edge(model, master, fmu_dir)
+    proposals = []
+    # The same step with another master (cheapest first), and the same master shorter.
+    for candidate in PREFERRED:
+        if candidate != master and is_stable(spectral_radius(model, candidate, step, fmu_dir)):
+            proposals.append((candidate, step))
+            break
+    if edge is not None and edge > EDGE_RANGE[0]:
+        shorter = float(f"{MARGIN * model.step_for(edge):.3g}")
+        if is_stable(spectral_radius(model, master, shorter, fmu_dir)):
+            proposals.append((master, shorter))
+    return Assessment(master, step, model, rho, edge, proposals)
+
+
+def advise(scene: scenes.Scene, master: str | None = None, step: float | None = None,
+           fmu_dir: Path = FMUS) -> list[str]:
+    """Findings (empty when none) about running ``scene`` with ``master`` at ``step``
+    (defaults: the scene's): a warning when the linearised driveline's coupling mode
+    makes the master's one-step map unstable at that step, naming a master and a step
+    the same analysis finds stable.  Adaptive masters choose their own steps and get no
+    finding; a scene without an engine - coupling - load chain gets none either."""
+    assessment = assess(scene, master, step, fmu_dir)
+    if assessment is None or assessment.stable:
+        return []
+    return [assessment.finding()]
+
+
+def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS) -> list[str]:
+    """``advise`` for a run about to start: advice must never stop a run, so a scene the
+    analysis cannot read gets a finding saying so instead of an exception."""
+    try:
+        return advise(scene, master, step, fmu_dir)
+    except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
+        return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]

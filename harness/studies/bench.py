@@ -1,0 +1,504 @@
+"""The work-precision benchmark: error against run time for every way the harness can
+step a scene, next to other co-simulation engines on the same FMUs, the monolithic
+solution and the FMU-call floor (``lever bench [SCENE]``).
+
+Each case runs ``repeats`` times; the run time quoted is the median of the stepping
+loops (instantiation left out, for every engine alike).  Errors are measured once
+(runs are deterministic) against the tight monolithic reference on the run's own
+communication grid: time-averaged RMS and max of ``tau1, tau2, w1, w2`` relative to the
+mean torque and speed, over the whole run and after the scene's start-up transient, and
+the energy residual.
+
+The plan comes from the scene's ``[bench]`` table (steps per master, tolerances for
+adaptive ones, peers, monolithic tolerances, the target error); masters it does not
+name are left out.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import statistics as stats
+import time as clock
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.description import scene as scenes
+from harness.paths import FMUS, RESULTS
+from harness.engine.run import RunResult, recorded_names, simulate
+from harness.engine.system import System
+
+
+@dataclass
+class Case:
+    engine: str                 # a master's name, a peer's, or "monolithic"
+    kind: str                   # "master", "peer", "monolithic"
+    step: float | None          # communication step [s] (first step for adaptive runs)
+    tolerance: float | None = None
+    wall_times: list = field(default_factory=list)
+    steps: int = 0
+    fmu_calls: int = 0
+    rollbacks: int = 0
+    errors: dict = field(default_factory=dict)   # rms/max relative, whole run and after transient
+    energy_residual: float | None = None
+    floor_time: float | None = None
+    failure: str | None = None
+    largest_step: float | None = None           # the longest communication step taken [s]
+
+    @property
+    def wall(self) -> float:
+        return stats.median(self.wall_times) if self.wall_times else math.nan
+
+    @property
+    def stable(self) -> bool:
+        return self.failure is None and math.isfinite(self.errors.get("tau_rms", math.nan))
+
+    @property
+    def label(self) -> str:
+        if self.kind == "monolithic":
+            return f"monolithic rtol={self.tolerance:g}"
+        if self.tolerance is not None:
+            return f"{self.engine} tol={self.tolerance:g}"
+        return f"{self.engine} h={self.step:g}"
+
+
+def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
+    """The scene's benchmark plan, with defaults: every master at the scene's step."""
+    table = dict(scene.bench)
+    steps = {name: [float(h) for h in values] for name, values in table.get("steps", {}).items()}
+    tolerances = {name: [float(x) for x in values] for name, values in table.get("tolerances", {}).items()}
+    if not steps and not tolerances:
+        steps = {name: [scene.experiment.step] for name, m in master_family.MASTERS.items() if not m.adaptive}
+    try:
+        master_family.check(*steps, *tolerances)
+    except master_family.UnknownMaster as error:
+        raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
+    if only:
+        master_family.check(*only)
+        steps = {k: v for k, v in steps.items() if k in only}
+        tolerances = {k: v for k, v in tolerances.items() if k in only}
+    return {
+        "steps": steps,
+        "tolerances": tolerances,
+        "peers": {name: [float(h) for h in values] for name, values in table.get("peers", {}).items()},
+        # ECCO: (first step, tolerance) pairs, its tolerance in joules per step
+        "peer_tolerances": {name: [float(x) for x in values]
+                            for name, values in table.get("peer_tolerances", {}).items()},
+        "monolithic": [float(x) for x in table.get("monolithic_rtol", [1e-4, 1e-6, 1e-8])],
+        "target_error": float(table.get("target_error", 1e-3)),
+        "baseline": table.get("baseline", "jacobi"),
+        "repeats_limit_s": float(table.get("repeats_limit_s", 5.0)),
+    }
+
+
+# -- measuring -------------------------------------------------------------------------------------
+
+def _judge(case: Case, scene: scenes.Scene, times, traces):
+    """Errors and energy residual of a finished run against the tight reference."""
+    ref = reference.solve(scene, times)
+    transient = scene.experiment.start + scene.experiment.transient
+    for suffix, after in (("", None), ("_after_transient", transient)):
+        e = metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
+        if len(e) < 4:
+            continue
+        for kind in ("tau", "w"):
+            for measure in ("rms", "max"):
+                case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
+                                                               e[f"{kind}2"][f"{measure}_relative"])
+    if all(n in traces for n in kinds.energy_variables(scene)):
+        case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
+
+
+def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
+    """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
+    judge the first run (runs are deterministic), stop at a failure or a long run."""
+    for attempt in range(repeats):
+        result: RunResult = run_once()
+        case.wall_times.append(result.wall_time)
+        if attempt == 0:
+            # a master counts its accepted steps; a peer, its communication points
+            case.steps = (int(result.counters.get("steps", 0)) if case.kind == "master"
+                          else max(0, len(result.times) - 1))
+            case.fmu_calls = int(result.counters.get("fmu_calls", 0))
+            case.rollbacks = int(result.counters.get("rollbacks", 0))
+            if len(result.times) > 1:
+                case.largest_step = float(np.max(np.diff(result.times)))
+            if not result.ok:
+                case.failure = result.failure
+                break
+            _judge(case, scene, result.times, result.traces)
+        if result.wall_time > limit_s:     # long runs: one or two repeats say enough
+            break
+    return case
+
+
+def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
+    options = {"tolerance": tolerance} if tolerance is not None else {}
+    return _measure(Case(name, "master", step, tolerance), scene,
+                    lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s)
+
+
+def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
+    from harness.formats import peers
+    case = Case(name, "peer", step, tolerance)
+    reason = peers.available(name)
+    if reason:
+        case.failure = f"not run: {reason}"
+        return case
+    return _measure(case, scene, lambda: peers.simulate_peer(name, scene, step, fmu_dir, tolerance=tolerance),
+                    repeats, limit_s)
+
+
+def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
+    """The unsplit equations with scipy at a looser tolerance: the cost of not
+    co-simulating at all (same physics code, no FMU calls)."""
+    case = Case("monolithic", "monolithic", grid_step, rtol)
+    e = scene.experiment
+    times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / grid_step)) + 1)
+    solution = None
+    for _ in range(repeats):
+        solution = reference.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
+        case.wall_times.append(solution.wall_time)
+    case.steps = solution.n_rhs
+    _judge(case, scene, solution.times, solution.traces)
+    return case
+
+
+def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) -> float:
+    """Seconds per communication step of the FMI calls alone: every component steps once
+    and every connection is read and written once, straight through ctypes, in a bare
+    loop (no master, no recording), and recorded outputs that depend on inputs (a shaft's
+    acceleration) are read again after the writes.  What any master must pay at the least."""
+    system = System(scene, fmu_dir, record=recorded_names(scene))
+    try:
+        system.initialize()
+        order = [system.components[n] for n in system.order]
+        stepping = [(c.raw.do_step, c.raw.handle) for c in order]
+        moves = []
+        for name in system.order:
+            c = system.components[name]
+            vrs, values = system.buffers[name]
+            moves.append((c.raw.get_real, c.raw.handle, vrs, len(vrs), values,
+                          [(t.raw.set_real, t.raw.handle, t_vrs, len(t_vrs), t_values)
+                           for t, t_vrs, t_values, _ in system.writes[name]]))
+        rereads = [(get_real, handle, vrs, n, values)
+                   for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
+        h = scene.experiment.step
+        t = scene.experiment.start
+        started = clock.perf_counter()
+        for _ in range(n_steps):
+            for do_step, handle in stepping:
+                do_step(handle, t, h, 1)
+            for get_real, handle, vrs, n, values, writes in moves:
+                get_real(handle, vrs, n, values)
+                for set_real, target, t_vrs, t_n, t_values in writes:
+                    set_real(target, t_vrs, t_n, t_values)
+            for get_real, handle, vrs, n, values in rereads:
+                get_real(handle, vrs, n, values)
+            t += h
+        return (clock.perf_counter() - started) / n_steps
+    finally:
+        system.free()
+
+
+# -- the whole benchmark -------------------------------------------------------------------------------
+
+def fingerprint(scene: scenes.Scene, repeats: int, fmu_dir: Path = FMUS) -> dict:
+    """What a benchmark's results depend on: a case log with another fingerprint is set
+    aside, never mixed in (the scene with its bench plan, the repeats, the FMU build)."""
+    from lever import __version__
+    stamp = Path(fmu_dir) / "build-stamp.json"
+    return {"study": "bench", "scene": asdict(scene), "repeats": repeats, "lever": __version__,
+            "fmus": json.loads(stamp.read_text()).get("hash") if stamp.exists() else None}
+
+
+def _logged(log: CaseLog | None, case: Case, measure) -> tuple[Case, bool]:
+    """``measure()`` -> Case, through the case log: a case already in the log is taken
+    from it; a case that raises is recorded as failed with its diagnosis, and the
+    benchmark goes on with the others."""
+    if log is None:
+        try:
+            return measure(), False
+        except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
+            case.failure = f"{type(error).__name__}: {error}"
+            return case, False
+    key = case_key(case.kind, case.engine, case.step, case.tolerance)
+    entry, reused = log.run(key, lambda: asdict(measure()))
+    if entry.get("status") == FAILED:
+        case.failure = f"{entry['error']} (at {entry['where']})"
+        return case, reused
+    return Case(**{k: v for k, v in entry.items() if k in Case.__dataclass_fields__}), reused
+
+
+def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: list[str] | None = None,
+          peers: bool = True, monolithic: bool = True, progress=None, out: Path | None = None,
+          resume: bool = True) -> dict:
+    """Run the scene's plan.  With ``out``, every finished case goes to ``out/cases.jsonl``
+    as it finishes (harness.studies.cases): a benchmark killed part-way and run again resumes
+    with the cases not yet done (``resume=False`` starts afresh)."""
+    p = plan(scene, only)
+    say = progress or (lambda text: None)
+    log = CaseLog(out, fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
+    if log is not None and len(log):
+        say(f"resuming: {len(log)} case(s) already in {log.path}")
+    cases: list[Case] = []
+
+    def take(case: Case, measure, floor: float | None = None):
+        case, reused = _logged(log, case, measure)
+        if floor is not None and case.floor_time is None:
+            case.floor_time = floor * case.steps
+        cases.append(case)
+        say(_line(case) + ("  (from the case log)" if reused else ""))
+
+    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: Case(
+        "floor", "floor", scene.experiment.step, wall_times=[call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats)]))
+    floor_per_step = floor_case.wall
+    say(f"FMU-call floor: {floor_per_step * 1e6:.1f} us per communication step")
+    limit = p["repeats_limit_s"]
+    for name, steps in p["steps"].items():
+        for h in steps:
+            take(Case(name, "master", h), lambda name=name, h=h: run_master(scene, name, h, None, repeats, fmu_dir,
+                                                                            limit), floor_per_step)
+    for name, tolerances in p["tolerances"].items():
+        for tol in tolerances:
+            h = scene.experiment.step
+            take(Case(name, "master", h, tol),
+                 lambda name=name, tol=tol: run_master(scene, name, scene.experiment.step, tol, repeats, fmu_dir,
+                                                       limit), floor_per_step)
+    if peers:
+        for name, steps in p["peers"].items():
+            for h in steps:
+                take(Case(name, "peer", h), lambda name=name, h=h: run_peer(scene, name, h, repeats, fmu_dir, limit))
+        for name, tolerances in p["peer_tolerances"].items():
+            for tol in tolerances:
+                take(Case(name, "peer", scene.experiment.step, tol),
+                     lambda name=name, tol=tol: run_peer(scene, name, scene.experiment.step, repeats, fmu_dir,
+                                                         limit, tol))
+    if monolithic:
+        for rtol in p["monolithic"]:
+            take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
+                 lambda rtol=rtol: run_monolithic(scene, rtol, scene.experiment.step, repeats))
+    return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
+            "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases, "claims": claims(scene, cases, p)}
+
+
+def eigenfrequency(scene: scenes.Scene) -> float | None:
+    """The coupling mode's eigenfrequency estimate [rad/s]; None for a scene of another kind."""
+    try:
+        built = kinds.physics(scene)
+    except kinds.NotADriveline:
+        return None
+    i1, i2 = metrics.inertias(scene)
+    return built.coupling.eigen_estimate(i1, i2)[0]
+
+
+def _line(case: Case) -> str:
+    if case.failure:
+        return f"  {case.label:34s} FAILED: {case.failure[:150]}"
+    return (f"  {case.label:34s} {case.wall:8.3f} s  tau rms {100 * case.errors.get('tau_rms', math.nan):9.4f} %"
+            f"  ({case.steps} steps)")
+
+
+def time_at_error(cases: list[Case], target: float, key: str = "tau_rms") -> float | None:
+    """Run time at which a master's curve reaches ``target``: log-log interpolation
+    between the cheapest run at or below it and the dearest run above it (None when no
+    run reaches it)."""
+    points = sorted((c.wall, c.errors[key]) for c in cases if c.stable and key in c.errors)
+    good = [(w, e) for w, e in points if e <= target]
+    if not good:
+        return None
+    w1, e1 = min(good)
+    worse = [(w, e) for w, e in points if e > target and w < w1]
+    if not worse:
+        return w1
+    w0, e0 = max(worse)
+    if e0 <= e1:
+        return w1
+    x = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
+    return math.exp(math.log(w0) + x * (math.log(w1) - math.log(w0)))
+
+
+def claims(scene: scenes.Scene, cases: list[Case], p: dict) -> dict:
+    """What the benchmark shows, computed from the cases (not asserted)."""
+    target = p["target_error"]
+    by_engine: dict[str, list[Case]] = {}
+    for case in cases:
+        by_engine.setdefault(case.engine if case.kind != "monolithic" else "monolithic", []).append(case)
+    at_target = {name: time_at_error(group, target) for name, group in by_engine.items()}
+    baseline = p["baseline"]
+    base_time = at_target.get(baseline)
+    ranked = sorted(((t, n) for n, t in at_target.items() if t is not None and n in master_family.MASTERS))
+    out = {"target_error": target, "time_at_target_s": at_target, "baseline": baseline}
+    if ranked:
+        best_time, best = ranked[0]
+        out["best_master"] = best
+        out["speedup_over_baseline"] = (base_time / best_time) if base_time else None
+        out["peers_at_target_s"] = {n: t for n, t in at_target.items() if n not in master_family.MASTERS}
+    # Harness overhead above the FMU-call floor, fixed-step zero-order-hold masters.
+    overhead = {}
+    for case in cases:
+        if case.kind == "master" and case.stable and case.floor_time and case.tolerance is None:
+            overhead.setdefault(case.engine, []).append(case.wall / case.floor_time - 1.0)
+    out["overhead_above_floor"] = {n: stats.median(v) for n, v in overhead.items()}
+    # Stability: the largest stable step of the baseline, and which masters stay stable
+    # at h * omega_n >= 5 with a bounded energy residual.
+    omega = eigenfrequency(scene)
+    if omega:
+        stable_base = [c for c in by_engine.get(baseline, []) if c.stable]
+        if stable_base:
+            largest = max(stable_base, key=lambda c: c.step)
+            # the issue's bar for the stiff case: the target reached in a tenth of this
+            fractions = {n: t / largest.wall for n, t in at_target.items()
+                         if t is not None and n in master_family.MASTERS and n != baseline}
+            out["largest_stable_baseline_step"] = {"step": largest.step, "h_omega": largest.step * omega,
+                                                   "wall_s": largest.wall, "time_fraction_at_target": fractions}
+        large = {}
+        for c in cases:
+            if c.kind != "master":
+                continue
+            # a fixed-step run at its step; an adaptive one by the longest step it took
+            step = c.step if c.tolerance is None else c.largest_step
+            if step is not None and step * omega >= 5.0:
+                large.setdefault(c.engine, []).append(
+                    {"step": step, "h_omega": step * omega, "stable": c.stable, "tolerance": c.tolerance,
+                     "energy_residual": c.energy_residual, "tau_rms": c.errors.get("tau_rms")})
+        out["at_h_omega_5_or_more"] = large
+    return out
+
+
+# -- writing ------------------------------------------------------------------------------------------------
+
+COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "repeats", "steps", "fmu_calls", "rollbacks",
+           "floor_s", "overhead_above_floor", "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
+           "w_rms_after_transient", "energy_residual", "failure"]
+
+
+def table_row(case: Case) -> dict:
+    """A case as a row of the benchmark's tables (CSV and report)."""
+    overhead = (case.wall / case.floor_time - 1.0) if case.floor_time and case.stable else None
+    return {"engine": case.engine, "kind": case.kind, "step": case.step, "tolerance": case.tolerance,
+            "wall_median_s": case.wall, "repeats": len(case.wall_times), "steps": case.steps,
+            "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
+            "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
+                                                 ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
+                                                  "w_rms_after_transient")},
+            "energy_residual": case.energy_residual, "failure": case.failure}
+
+
+def write(out: Path, result: dict) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [table_row(c) for c in result["cases"]]
+    with open(out / "bench.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    payload = {k: v for k, v in result.items() if k != "cases"}
+    payload["cases"] = rows
+    (out / "bench.json").write_text(json.dumps(payload, indent=2, default=_json))
+    (out / "bench.md").write_text(markdown(result, rows))
+    paths = [out / "bench.csv", out / "bench.json", out / "bench.md"]
+    paths.append(plot(out / "work_precision.png", result))
+    return paths
+
+
+def _json(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, Case):
+        return asdict(x)
+    raise TypeError(type(x))
+
+
+def _pct(x):
+    return "" if x is None or not math.isfinite(x) else f"{100 * x:.4g} %"
+
+
+def markdown(result: dict, rows: list[dict]) -> str:
+    c = result["claims"]
+    lines = [f"# Work-precision benchmark: {result['scene']}", "",
+             f"Median of up to {result['repeats']} repeats of the stepping loop; errors against the monolithic "
+             f"reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
+             f"FMU-call floor: {result['floor_per_step_s'] * 1e6:.1f} us per communication step.", ""]
+    if result.get("eigenfrequency_rad_s"):
+        lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
+    lines += ["| engine | step / tol | run time | steps | above floor | tau RMS | tau max | w RMS | "
+              "tau RMS after transient | energy residual | note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
+        note = (r["failure"] or "")[:90]
+        lines.append(f"| {r['engine']} | {setting} | {r['wall_median_s']:.3f} s | {r['steps']} | "
+                     f"{_pct(r['overhead_above_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
+                     f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
+                     f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
+    lines += ["", f"## At an RMS torque error of {_pct(c['target_error'])}", "",
+              "| engine | run time (interpolated) |", "|---|---|"]
+    for name, t in sorted(c["time_at_target_s"].items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
+        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} |")
+    if c.get("best_master"):
+        speedup = c.get("speedup_over_baseline")
+        lines += ["", f"Best master: **{c['best_master']}**, "
+                  + (f"{speedup:.1f}x faster than {c['baseline']}." if speedup else
+                     f"({c['baseline']} does not reach the target).")]
+    if c.get("overhead_above_floor"):
+        lines += ["", "Harness overhead above the FMU-call floor (median over steps; masters that make more "
+                  "FMI calls per step than the floor's one step and one propagation show those calls here too): "
+                  + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_floor"].items()) + "."]
+    if c.get("largest_stable_baseline_step"):
+        s = c["largest_stable_baseline_step"]
+        lines += ["", f"Largest stable {c['baseline']} step: {s['step']:g} s (h*omega_n = {s['h_omega']:.3g}), "
+                  f"run time {s['wall_s']:.3f} s."]
+        for name, fraction in sorted(s.get("time_fraction_at_target", {}).items(), key=lambda kv: kv[1]):
+            lines.append(f"- {name} reaches {_pct(c['target_error'])} RMS torque error in {fraction:.3f} of that "
+                         f"run time ({1 / fraction:.1f}x faster).")
+    if c.get("at_h_omega_5_or_more"):
+        lines += ["", "At h*omega_n >= 5 (adaptive runs: their longest step):"]
+        for name, runs in c["at_h_omega_5_or_more"].items():
+            for r in runs:
+                setting = f"h = {r['step']:g} s" if r.get("tolerance") is None else \
+                    f"tol {r['tolerance']:g}, longest step {r['step']:.3g} s"
+                lines.append(f"- {name} {setting} (h*omega_n = {r['h_omega']:.2f}): "
+                             + (f"stable, energy residual {r['energy_residual']:.2e}, tau RMS {_pct(r['tau_rms'])}"
+                                if r["stable"] else "failed"))
+    return "\n".join(lines) + "\n"
+
+
+def plot(path: Path, result: dict) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 6))
+    groups: dict[str, list[Case]] = {}
+    for case in result["cases"]:
+        key = case.engine if case.kind != "monolithic" else "monolithic (scipy DOP853)"
+        groups.setdefault(key, []).append(case)
+    for name, group in groups.items():
+        points = sorted((c.wall, c.errors["tau_rms"]) for c in group if c.stable and "tau_rms" in c.errors)
+        if not points:
+            continue
+        kind = group[0].kind
+        style = {"master": "-o", "peer": "--s", "monolithic": ":^"}[kind]
+        ax.loglog([p[0] for p in points], [100 * p[1] for p in points], style, label=name, markersize=4)
+    target = result["claims"]["target_error"]
+    ax.axhline(100 * target, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("run time of the stepping loop [s] (median)")
+    ax.set_ylabel("RMS torque error [% of mean torque]")
+    ax.set_title(f"Work-precision, scene {result['scene']}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def default_out(scene: scenes.Scene) -> Path:
+    return RESULTS / "bench" / scene.name

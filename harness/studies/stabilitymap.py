@@ -1,0 +1,635 @@
+"""The stability map (``lever stability [SCENE]``): the scene run over coupling
+stiffness, coupling damping, communication step and master, each case classified, next
+to the edges the linear analysis (``harness.judges.stability``) predicts.
+
+Each case is the scene with ``coupling.stiffness = c`` and ``coupling.damping = b``,
+run at ``h = x / omega_n`` (``x`` the swept ``h * omega_n``) for ``max(min_steps,
+periods * 2*pi / x)`` steps (at most ``max_steps``).  The start-up (both shafts at the
+same speed, the coupling unloaded) rings the coupling mode; what a master makes of that
+ringing is what is classified, from the driven-shaft coupling torque ``tau2`` and the
+energy residual:
+
+* ``divergent``: the run failed (a non-finite value, an FMU refusing a value out of its
+  range, a coupling iteration that does not converge), or the torque's oscillation
+  amplitude (half its range) grew more than ``GROWTH_DIVERGENT`` times from the first
+  quarter of the run to the last;
+* ``energy-drifting``: not divergent, but the amplitude grew more than ``GROWTH_DRIFT``
+  times, or the energy residual exceeds ``ENERGY_DRIFT`` of the engine's work over the
+  run (the master creates or destroys energy at a steady rate - Gauss-Seidel's
+  ``c*w*h`` torque bias does);
+* ``stable``: neither.
+
+For comparing with the linear prediction a case counts as *unstable* when it is
+divergent or its amplitude grew more than ``GROWTH_DRIFT`` times (the energy residual
+measures accuracy, not the growth the spectral radius predicts).  Finished and failed
+cases are kept in a ``harness.studies.cases.CaseLog``; a re-run resumes.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import multiprocessing
+import time as clock
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from harness.description import kinds
+from harness.engine import masters as master_family
+from harness.judges import metrics
+from harness.description import scene as scenes
+from harness.judges import stability
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.paths import FMUS, RESULTS
+
+GROWTH_DIVERGENT = 10.0
+GROWTH_DRIFT = 1.25
+ENERGY_DRIFT = 1e-2
+STATUSES = ("stable", "energy-drifting", "divergent")
+
+#: Masters with a fixed communication step (the adaptive ones choose theirs).
+FIXED_STEP_MASTERS = [name for name, cls in master_family.MASTERS.items() if not cls.adaptive]
+#: The explicit masters: no iteration, a stability edge to compare.
+EXPLICIT = [name for name in FIXED_STEP_MASTERS
+            if not issubclass(master_family.MASTERS[name], master_family.IterativeMaster)]
+
+
+@dataclass
+class Plan:
+    stiffnesses: list            # N*m/rad
+    dampings: list               # N*m*s/rad
+    h_omegas: list               # h * omega_n
+    masters: list
+    min_steps: int = 500
+    periods: float = 4.0
+    max_steps: int = 4000
+    refine: bool = True          # also run at 0.9 and 1.1 (or more, see _above) times each predicted edge
+    #: a refinement case above the edge runs long enough for the predicted growth to
+    #: reach this factor (at most ``max_refine_steps``): near the edge growth is slow
+    refine_growth: float = 10.0
+    max_refine_steps: int = 6000
+
+    def steps_for(self, h_omega: float) -> int:
+        return int(min(self.max_steps, max(self.min_steps, math.ceil(self.periods * 2.0 * math.pi / h_omega))))
+
+    def fingerprint(self, scene: scenes.Scene) -> dict:
+        """What a case's result depends on besides its key (the grids are not in it: a
+        denser plan reuses the cases it shares with a coarser one)."""
+        return {"study": "stability", "criteria": 1, "scene": scene.name,
+                "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in scene.components.items()},
+                "connections": [str(c) for c in scene.connections],
+                "periods": self.periods, "refine_growth": self.refine_growth}
+
+
+def default_plan(scene: scenes.Scene, dense: bool = False) -> Plan:
+    """The default sweep (a few minutes on 2 cores): the scene's stiffness, 1e4, 1e5 and
+    1e6 N*m/rad; the scene's damping, a tenth of it and none; h*omega_n from 0.05 to 5;
+    every fixed-step master.  ``dense``: 7 stiffnesses, 5 dampings, 19 steps."""
+    model = stability.model_of(scene)
+    c0, b0 = model.stiffness, model.damping
+    if dense:
+        stiffnesses = sorted({float(f"{c:.4g}") for c in np.geomspace(c0, 1e6, 7)})
+        dampings = sorted({b0, b0 / 3.0, b0 / 10.0, b0 / 30.0, 0.0}, reverse=True)
+        h_omegas = [float(f"{x:.3g}") for x in np.geomspace(0.01, 10.0, 19)]
+    else:
+        stiffnesses = sorted({c0, 1e4, 1e5, 1e6})
+        dampings = sorted({b0, b0 / 10.0, 0.0}, reverse=True)
+        h_omegas = [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0]
+    return Plan([c for c in stiffnesses if c >= c0], dampings, h_omegas, list(FIXED_STEP_MASTERS))
+
+
+@dataclass(frozen=True)
+class Case:
+    master: str
+    stiffness: float
+    damping: float
+    h_omega: float
+    steps: int                   # communication steps the case runs
+
+    @property
+    def key(self) -> str:
+        return case_key(self.master, self.stiffness, self.damping, self.h_omega, self.steps)
+
+    @property
+    def row(self) -> tuple:
+        return self.master, self.stiffness, self.damping
+
+
+def predicted_growth(rho: float, steps: int) -> float:
+    """The growth of the torque amplitude the classification measures (last quarter of
+    the run against the first) for a spectral radius ``rho``: ``rho ** (3/4 steps)``."""
+    if not math.isfinite(rho):
+        return math.inf
+    exponent = 0.75 * steps * math.log(rho)
+    return math.exp(min(exponent, 700.0))
+
+
+def predictions(model: stability.TwoInertia, plan: Plan, fmu_dir: Path = FMUS) -> dict:
+    """Predicted edge ``h*omega_n`` (None: none in the analysed range) for each
+    ``(master, c, b)`` of the plan."""
+    return {(m, c, b): stability.stability_edge(model.with_coupling(c, b), m, fmu_dir)
+            for m in plan.masters for c in plan.stiffnesses for b in plan.dampings}
+
+
+def cases_of(plan: Plan, edges: dict, model: stability.TwoInertia, fmu_dir: Path = FMUS) -> list[Case]:
+    """The plan's cases, plus (``refine``) two about each predicted edge below the
+    largest swept step (at 0.9 times it and above it, see ``_above``), where the observed
+    edge is judged."""
+    out = []
+    high = max(plan.h_omegas)
+    for m in plan.masters:
+        for c in plan.stiffnesses:
+            for b in plan.dampings:
+                out += [Case(m, c, b, x, plan.steps_for(x)) for x in plan.h_omegas]
+                edge = edges.get((m, c, b))
+                if not (plan.refine and edge is not None and stability.EDGE_RANGE[0] < edge < high):
+                    continue
+                below = float(f"{0.9 * edge:.4g}")
+                out.append(Case(m, c, b, below, plan.steps_for(below)))
+                out.append(_above(plan, model.with_coupling(c, b), m, edge, fmu_dir))
+    return out
+
+
+def _above(plan: Plan, coupling: stability.TwoInertia, master: str, edge: float, fmu_dir) -> Case:
+    """The refinement case above ``edge``: at 1.1 times it, running until the predicted
+    growth reaches ``refine_growth``; where that takes more than ``max_refine_steps``
+    (slow growth just past the edge), further above it (1.25, 1.5, 2 times)."""
+    for factor in (1.1, 1.25, 1.5, 2.0):
+        x = float(f"{factor * edge:.4g}")
+        rho = stability.spectral_radius(coupling, master, coupling.step_for(x), fmu_dir)
+        steps = plan.steps_for(x)
+        if not (math.isfinite(rho) and rho > 1.0):
+            break                       # fails outright (an iteration): visible at once
+        needed = math.ceil(math.log(plan.refine_growth) / (0.75 * math.log(rho)))
+        steps = max(steps, min(plan.max_refine_steps, needed))
+        if needed <= plan.max_refine_steps:
+            break
+    return Case(master, coupling.stiffness, coupling.damping, x, steps)
+
+
+# -- one case -------------------------------------------------------------------------------------
+
+def amplitude_growth(tau: np.ndarray) -> float:
+    """Half-range of ``tau`` over the last quarter of the run over that of the first."""
+    tau = np.asarray(tau, dtype=float)
+    if len(tau) < 8:
+        return math.nan
+    q = len(tau) // 4
+    first, last = np.ptp(tau[:q]) / 2.0, np.ptp(tau[-q:]) / 2.0
+    if not (np.isfinite(first) and np.isfinite(last)):
+        return math.inf
+    return float(last / first) if first > 0 else (math.inf if last > 0 else 1.0)
+
+
+def classify(growth: float, energy_residual: float | None, failure: str | None) -> tuple[str, str]:
+    """``(status, why)`` from the torque amplitude growth, the energy residual (relative
+    to the engine's work) and the run's failure message (criteria: module docstring)."""
+    if failure:
+        return "divergent", f"the run failed: {failure}"
+    if not math.isfinite(growth) or growth > GROWTH_DIVERGENT:
+        return "divergent", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DIVERGENT:g}x)"
+    if growth > GROWTH_DRIFT:
+        return "energy-drifting", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DRIFT:g}x)"
+    if energy_residual is None or not math.isfinite(energy_residual):
+        return "energy-drifting", "no finite energy residual"
+    if energy_residual > ENERGY_DRIFT:
+        return "energy-drifting", f"energy residual {100 * energy_residual:.3g} % of the work in (> {100 * ENERGY_DRIFT:g} %)"
+    return "stable", f"amplitude x{growth:.3g}, energy residual {100 * energy_residual:.2g} %"
+
+
+def unstable(result: dict) -> bool:
+    """Observed linear instability: divergent, or growing (the energy residual aside)."""
+    if result.get("status") == FAILED:
+        return False
+    return result["class"] == "divergent" or (result.get("growth") or 0.0) > GROWTH_DRIFT
+
+
+def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) -> dict:
+    """Run one case on the FMUs and classify it (an exception is the caller's to record)."""
+    from harness.engine.run import simulate
+
+    coupling = kinds.driveline(scene).coupling
+    spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
+    model = stability.model_of(spec)
+    step = model.step_for(case.h_omega)
+    n = case.steps
+    spec = replace(spec, experiment=replace(spec.experiment, start=0.0, stop=n * step, transient=0.0),
+                   features=set(spec.features) | {"energy_balance"})
+    started = clock.perf_counter()
+    result = simulate(spec, case.master, step, fmu_dir=fmu_dir)
+    wall = clock.perf_counter() - started
+    tau = result.traces.get(metrics.signals(spec)["tau2"], np.empty(0))
+    growth = amplitude_growth(tau)
+    residual = None
+    if result.ok and len(result.times) > 1:
+        residual = metrics.energy_balance(spec, result.times, result.traces)["residual_relative"]
+    status, why = classify(growth, residual, result.failure)
+    return {"status": "ok", "class": status, "why": why, "growth": growth, "energy_residual": residual,
+            "failure": result.failure, "step_s": step, "steps_planned": n, "steps_done": max(0, len(result.times) - 1),
+            "omega_n": model.omega_n, "zeta": model.zeta, "wall_s": wall}
+
+
+def _worker(scene, case, plan, fmu_dir):
+    return run_case(scene, case, plan, fmu_dir)
+
+
+# -- the sweep ------------------------------------------------------------------------------------
+
+@dataclass
+class StabilityMap:
+    scene: scenes.Scene
+    plan: Plan
+    model: stability.TwoInertia
+    edges: dict                     # (master, c, b) -> predicted edge or None
+    results: dict = field(default_factory=dict)    # Case -> result dict
+    reused: int = 0
+    wall_s: float = 0.0
+
+
+def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: bool = True,
+          fmu_dir: Path = FMUS, progress=None) -> StabilityMap:
+    """Run every case of ``plan`` not yet in ``out/cases.jsonl`` (``jobs`` processes),
+    recording each as it finishes."""
+    say = progress or (lambda *_: None)
+    started = clock.perf_counter()
+    model = stability.model_of(scene)
+    edges = predictions(model, plan, fmu_dir)
+    cases = cases_of(plan, edges, model, fmu_dir)
+    log = CaseLog(out, plan.fingerprint(scene), resume=resume)
+    if log.set_aside:
+        say(f"the case log belonged to another set-up: moved to {log.set_aside}")
+    todo = [c for c in cases if c.key not in log]
+    say(f"{len(cases)} cases ({len(cases) - len(todo)} already done), {jobs} process(es)")
+    done = 0
+
+    def record(case, result):
+        nonlocal done
+        log.record(case.key, result)
+        done += 1
+        if done % 50 == 0 or done == len(todo):
+            say(f"  {done}/{len(todo)} cases run")
+
+    if jobs <= 1:
+        for case in todo:
+            log.run(case.key, lambda case=case: run_case(scene, case, plan, fmu_dir))
+            done += 1
+            if done % 50 == 0 or done == len(todo):
+                say(f"  {done}/{len(todo)} cases run")
+    else:
+        _run_pool(scene, plan, todo, jobs, log, record, fmu_dir)
+    result = StabilityMap(scene, plan, model, edges,
+                          {c: log.get(c.key) for c in cases if log.get(c.key) is not None},
+                          reused=len(cases) - len(todo), wall_s=clock.perf_counter() - started)
+    return result
+
+
+def _failed(error: BaseException, where: str) -> dict:
+    return {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": where}
+
+
+def _run_pool(scene, plan, todo, jobs, log, record, fmu_dir):
+    """Cases in worker processes (forked: each exits without the interpreter teardown
+    that pythonfmu's native library does not survive).  A worker that dies breaks the
+    pool: the rest are resubmitted to a single worker, where the case that kills it is
+    known and recorded as failed."""
+    context = multiprocessing.get_context("fork")
+    queue, workers = list(todo), jobs
+    while queue:
+        broken = False
+        with ProcessPoolExecutor(workers, mp_context=context) as pool:
+            futures = {pool.submit(_worker, scene, case, plan, fmu_dir): case for case in queue}
+            for future in as_completed(futures):
+                case = futures[future]
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    broken = True
+                    break
+                except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
+                    result = _failed(error, "stability case")
+                record(case, result)
+            if broken:
+                for future in futures:
+                    future.cancel()
+        remaining = [c for c in queue if c.key not in log]
+        if broken and workers == 1 and remaining:
+            record(remaining[0], _failed(RuntimeError("the worker process died running this case"), "worker"))
+            remaining = remaining[1:]
+        if broken:
+            workers = 1
+        queue = remaining
+
+
+# -- summaries ------------------------------------------------------------------------------------
+
+def predicted_radius(model, case: Case, fmu_dir: Path = FMUS) -> float:
+    m = model.with_coupling(case.stiffness, case.damping)
+    return stability.spectral_radius(m, case.master, m.step_for(case.h_omega), fmu_dir)
+
+
+def inconclusive(result: StabilityMap, case: Case, fmu_dir: Path = FMUS) -> bool:
+    """A run too short to show the growth its spectral radius (> 1) predicts."""
+    rho = predicted_radius(result.model, case, fmu_dir)
+    return rho > 1.0 + stability.RHO_TOLERANCE and predicted_growth(rho, case.steps) <= GROWTH_DRIFT
+
+
+def edge_rows(result: StabilityMap, fmu_dir: Path = FMUS) -> list[dict]:
+    """Per (master, c, b): the predicted edge and the observed bracket (the last
+    ``h*omega_n`` observed stable below the first observed unstable one), leaving out
+    the inconclusive runs."""
+    rows = []
+    for m in result.plan.masters:
+        for c in result.plan.stiffnesses:
+            for b in result.plan.dampings:
+                row_cases = sorted((case for case in result.results if case.row == (m, c, b)),
+                                   key=lambda case: case.h_omega)
+                runs = [(case.h_omega, result.results[case]) for case in row_cases
+                        if result.results[case].get("status") != FAILED and not inconclusive(result, case, fmu_dir)]
+                first_unstable = next((x for x, r in runs if unstable(r)), None)
+                last_stable = max((x for x, r in runs if first_unstable is None or x < first_unstable), default=None)
+                model = result.model.with_coupling(c, b)
+                edge = result.edges.get((m, c, b))
+                observed = (math.sqrt(first_unstable * last_stable) if first_unstable and last_stable else None)
+                rows.append({"master": m, "stiffness": c, "damping": b, "omega_n": model.omega_n, "zeta": model.zeta,
+                             "predicted_edge": edge, "last_stable": last_stable, "first_unstable": first_unstable,
+                             "observed_edge": observed,
+                             "bracketed": (edge is not None and last_stable is not None and first_unstable is not None
+                                           and last_stable <= edge <= first_unstable) if first_unstable else None,
+                             "ratio": observed / edge if observed and edge else None})
+    return rows
+
+
+def agreement(result: StabilityMap, fmu_dir: Path = FMUS) -> dict:
+    """Prediction against observation.
+
+    Case by case: a case is predicted to show instability when its spectral radius
+    gives a growth over the run (``predicted_growth``) above ``GROWTH_DRIFT`` - what the
+    classification can see in a finite run - and compared with observed *unstable*.
+    Growth rates: where both grow measurably, the observed growth per step against the
+    spectral radius.  Edges: the predicted edge against the observed bracket, per row."""
+    by_master, mismatches, rates = {}, [], []
+    for case, r in result.results.items():
+        if r.get("status") == FAILED:
+            continue
+        rho = predicted_radius(result.model, case, fmu_dir)
+        predicted = predicted_growth(rho, case.steps) > GROWTH_DRIFT
+        observed = unstable(r)
+        stats = by_master.setdefault(case.master, {"cases": 0, "agree": 0})
+        stats["cases"] += 1
+        if predicted == observed:
+            stats["agree"] += 1
+        else:
+            edge = result.edges.get(case.row)
+            mismatches.append({"case": case, "rho": rho, "observed": r["class"], "growth": r.get("growth"),
+                               "predicted_growth": predicted_growth(rho, case.steps), "edge": edge,
+                               "x_over_edge": case.h_omega / edge if edge else None})
+        growth = r.get("growth")
+        if not r.get("failure") and growth and math.isfinite(growth) and growth > GROWTH_DRIFT and math.isfinite(rho) and rho > 1.0:
+            rates.append({"case": case, "observed": math.log(growth) / (0.75 * case.steps),
+                          "predicted": math.log(rho)})
+    rows = edge_rows(result, fmu_dir)
+    explicit = [r for r in rows if r["master"] in EXPLICIT and r["predicted_edge"] is not None
+                and r["first_unstable"] is not None and r["last_stable"] is not None]
+    ratios = [r["ratio"] for r in explicit if r["ratio"]]
+    rate_ratios = [x["observed"] / x["predicted"] for x in rates]
+    n_inconclusive = sum(1 for case, r in result.results.items()
+                         if r.get("status") != FAILED and inconclusive(result, case, fmu_dir))
+    return {"by_master": by_master, "mismatches": mismatches, "edge_rows": rows, "rates": rates,
+            "inconclusive": n_inconclusive,
+            "explicit_bracketed": sum(1 for r in explicit if r["bracketed"]), "explicit_rows": len(explicit),
+            "explicit_ratio_median": float(np.median(ratios)) if ratios else None,
+            "explicit_ratio_range": (float(min(ratios)), float(max(ratios))) if ratios else None,
+            "rate_ratio_median": float(np.median(rate_ratios)) if rate_ratios else None,
+            "rate_ratio_range": (float(min(rate_ratios)), float(max(rate_ratios))) if rate_ratios else None}
+
+
+# -- output ---------------------------------------------------------------------------------------
+
+def default_out(scene: scenes.Scene) -> Path:
+    return RESULTS / "stability" / scene.name
+
+
+def write(out: Path, result: StabilityMap, fmu_dir: Path = FMUS, plots: bool = True) -> list[Path]:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    agreed = agreement(result, fmu_dir)
+    paths = [_write_csv(out / "stability.csv", result, fmu_dir), _write_markdown(out / "stability.md", result, agreed)]
+    if plots:
+        paths.append(_plot(out / "stability_map.png", result))
+    return paths
+
+
+def _write_csv(path: Path, result: StabilityMap, fmu_dir) -> Path:
+    fields = ["master", "stiffness", "damping", "h_omega", "steps", "omega_n", "zeta", "step_s", "predicted_rho",
+              "predicted_growth", "predicted_edge", "class", "growth", "energy_residual", "steps_planned", "steps_done", "wall_s", "why"]
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fields)
+        writer.writeheader()
+        for case in sorted(result.results, key=lambda c: (c.master, c.stiffness, -c.damping, c.h_omega)):
+            r = result.results[case]
+            model = result.model.with_coupling(case.stiffness, case.damping)
+            row = {"master": case.master, "stiffness": case.stiffness, "damping": case.damping, "h_omega": case.h_omega,
+                   "steps": case.steps,
+                   "omega_n": model.omega_n, "zeta": model.zeta, "step_s": model.step_for(case.h_omega),
+                   "predicted_rho": predicted_radius(result.model, case, fmu_dir),
+                   "predicted_growth": predicted_growth(predicted_radius(result.model, case, fmu_dir), case.steps),
+                   "predicted_edge": result.edges.get(case.row)}
+            if r.get("status") == FAILED:
+                row.update({"class": "failed", "why": f"{r['error']} ({r['where']})"})
+            else:
+                row.update({k: r.get(k) for k in ("class", "growth", "energy_residual", "steps_planned", "steps_done",
+                                                   "wall_s", "why")})
+            writer.writerow(row)
+    return path
+
+
+SYMBOL = {"stable": "S", "energy-drifting": "E", "divergent": "X", "failed": "!"}
+
+
+def _fmt(x, digits=3):
+    return "-" if x is None else f"{x:.{digits}g}"
+
+
+def summary_table(result: StabilityMap, agreed: dict) -> list[str]:
+    """The edges table: one row per master and coupling, predicted against observed."""
+    lines = ["| master | c [N*m/rad] | b [N*m*s/rad] | zeta | predicted edge h*w_n | observed: last stable | "
+             "first unstable | observed/predicted |", "|---|---|---|---|---|---|---|---|"]
+    for r in agreed["edge_rows"]:
+        lines.append(f"| {r['master']} | {r['stiffness']:.4g} | {r['damping']:.3g} | {r['zeta']:.3g} | "
+                     f"{_fmt(r['predicted_edge']) if r['predicted_edge'] is not None else 'none <= 100'} | "
+                     f"{_fmt(r['last_stable'])} | {_fmt(r['first_unstable']) if r['first_unstable'] else 'none'} | "
+                     f"{_fmt(r['ratio'])} |")
+    return lines
+
+
+def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
+    plan, model = result.plan, result.model
+    counts = {}
+    for r in result.results.values():
+        key = "failed" if r.get("status") == FAILED else r["class"]
+        counts[key] = counts.get(key, 0) + 1
+    lines = [f"# Stability map: {result.scene.name}", "",
+             f"Linearised two-inertia model: I1 = {model.drive_inertia:g}, I2 = {model.driven_inertia:g} kg*m^2, "
+             f"K1 = {model.engine_slope:g} N*m*s/rad, U12 = 1 (harness/stability.py states the linearisation). "
+             f"Scene coupling: c = {model.stiffness:g} N*m/rad, b = {model.damping:g} N*m*s/rad: "
+             f"omega_n = {model.omega_n:.4g} rad/s, zeta = {model.zeta:.3g}.", "",
+             f"Sweep: c in {', '.join(f'{c:.4g}' for c in plan.stiffnesses)} N*m/rad; b in "
+             f"{', '.join(f'{b:.3g}' for b in plan.dampings)} N*m*s/rad; h*omega_n in "
+             f"{', '.join(f'{x:g}' for x in plan.h_omegas)}" + (" plus 0.9 and 1.1 (where growth is slow: up to 2) times each predicted edge" if plan.refine else "")
+             + f"; masters {', '.join(plan.masters)}.  Each case runs max({plan.min_steps}, {plan.periods:g} periods) "
+             f"steps (at most {plan.max_steps}).  {len(result.results)} cases: "
+             + ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
+             + f" ({result.reused} reused from the case log; {result.wall_s:.0f} s).", "",
+             "Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
+             f"iteration did not converge) or the amplitude of the coupling torque tau2 grew > {GROWTH_DIVERGENT:g}x "
+             "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
+             f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
+             "**stable** - neither.  Compared with the prediction, a case is *unstable* when divergent or growing "
+             f"(> {GROWTH_DRIFT:g}x); the predicted edge is where the spectral radius of the master's one-step map "
+             "crosses 1.", ""]
+    lines += ["## Agreement", ""]
+    if agreed["explicit_rows"]:
+        low, high = agreed["explicit_ratio_range"]
+        lines.append(f"Explicit masters ({', '.join(m for m in EXPLICIT if m in plan.masters)}): the predicted edge "
+                     f"lies between the last observed stable and the first observed unstable h*omega_n in "
+                     f"**{agreed['explicit_bracketed']} of {agreed['explicit_rows']}** (master, c, b) rows with both "
+                     f"observed; observed edge (geometric mean of the bracket) / predicted: median "
+                     f"{agreed['explicit_ratio_median']:.3g}, range {low:.3g} ... {high:.3g}.  The brackets leave out "
+                     f"the {agreed['inconclusive']} inconclusive runs: spectral radius above 1 but a predicted growth "
+                     f"over the run below {GROWTH_DRIFT:g}x, which no run of that length can show.")
+    if agreed["rate_ratio_median"] is not None:
+        low, high = agreed["rate_ratio_range"]
+        lines.append("")
+        lines.append(f"Growth rates, in the {len(agreed['rates'])} cases that grew measurably (> {GROWTH_DRIFT:g}x) "
+                     "and ran to the end: the observed growth per step, ln(growth) / (3/4 steps), over the predicted "
+                     f"ln(spectral radius): median {agreed['rate_ratio_median']:.3g}, range {low:.3g} ... {high:.3g}.")
+    lines.append("")
+    lines.append("Case by case, predicted to grow visibly (spectral radius^(3/4 steps) > "
+                 f"{GROWTH_DRIFT:g}) against observed unstable:")
+    lines.append("")
+    lines.append("| master | cases | agree |")
+    lines.append("|---|---|---|")
+    for m in plan.masters:
+        s = agreed["by_master"].get(m)
+        if s:
+            lines.append(f"| {m} | {s['cases']} | {s['agree']} ({100 * s['agree'] / s['cases']:.0f} %) |")
+    lines.append("")
+    implicit = [m for m in plan.masters if m not in EXPLICIT]
+    for m in implicit:
+        bad = [(c, r) for c, r in result.results.items() if c.master == m and r.get("status") != FAILED and unstable(r)]
+        edges = sorted({e for (mm, _, _), e in result.edges.items() if mm == m and e is not None})
+        predicted = (f"predicted edge (its iteration stops converging) at h*omega_n = "
+                     f"{', '.join(f'{e:.3g}' for e in edges)}" if edges else "predicted stable at every swept step")
+        if bad:
+            where = ", ".join(f"c={c.stiffness:.3g} b={c.damping:.3g} x={c.h_omega:g}" for c, _ in sorted(
+                bad, key=lambda item: (item[0].stiffness, item[0].damping, item[0].h_omega))[:8])
+            lines.append(f"- {m}: {predicted}; observed unstable in {len(bad)} cases ({where}"
+                         + (", ..." if len(bad) > 8 else "") + ")")
+        else:
+            lines.append(f"- {m}: {predicted}; observed stable (not growing) in every swept case")
+    if agreed["mismatches"]:
+        lines += ["", "Cases where prediction and observation differ:", "",
+                  "| master | c | b | h*omega_n | steps | predicted rho | predicted growth | observed | growth | "
+                  "h*omega_n / predicted edge |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for mm in sorted(agreed["mismatches"], key=lambda m: (m["case"].master, m["case"].stiffness,
+                                                               -m["case"].damping, m["case"].h_omega)):
+            c = mm["case"]
+            lines.append(f"| {c.master} | {c.stiffness:.4g} | {c.damping:.3g} | {c.h_omega:g} | {c.steps} | "
+                         f"{mm['rho']:.6g} | {_fmt(mm['predicted_growth'])} | {mm['observed']} | {_fmt(mm['growth'])} | "
+                         f"{_fmt(mm['x_over_edge'])} |")
+    lines += ["", "## Edges", ""] + summary_table(result, agreed)
+    lines += ["", "## Cases", "",
+              "S stable, E energy-drifting, X divergent, ! failed (the case raised); columns h*omega_n "
+              "(refinement points in stability.csv).", ""]
+    xs = plan.h_omegas
+    at = {(*case.row, case.h_omega): r for case, r in result.results.items()}
+    lines.append("| master | c | b | zeta | " + " | ".join(f"{x:g}" for x in xs) + " |")
+    lines.append("|---|---|---|---|" + "---|" * len(xs))
+    for m in plan.masters:
+        for c in plan.stiffnesses:
+            for b in plan.dampings:
+                cells = []
+                for x in xs:
+                    r = at.get((m, c, b, x))
+                    cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
+                zeta = result.model.with_coupling(c, b).zeta
+                lines.append(f"| {m} | {c:.4g} | {b:.3g} | {zeta:.3g} | " + " | ".join(cells) + " |")
+    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
+    if failed:
+        lines += ["", "## Cases that raised", ""]
+        lines += [f"- {c.key}: {r['error']} ({r['where']})" for c, r in failed]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+COLOURS = {"stable": "#2e7d32", "energy-drifting": "#f9a825", "divergent": "#c62828", "failed": "#616161"}
+
+
+def edge_curves(result: StabilityMap, master: str, points: int = 9, fmu_dir: Path = FMUS) -> list:
+    """Predicted edge against zeta for each swept stiffness (damping from 0 to the
+    largest swept): ``[(c, zetas, edges)]``."""
+    curves = []
+    b_max = max(result.plan.dampings) or 1.0
+    for c in result.plan.stiffnesses:
+        zetas, edges = [], []
+        for b in np.linspace(0.0, b_max, points):
+            model = result.model.with_coupling(c, b)
+            edge = stability.stability_edge(model, master, fmu_dir)
+            if edge is not None:
+                zetas.append(model.zeta)
+                edges.append(edge)
+        if edges:
+            curves.append((c, zetas, edges))
+    return curves
+
+
+def _plot(path: Path, result: StabilityMap) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    masters = result.plan.masters
+    ncols = 3
+    nrows = math.ceil(len(masters) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.2 * nrows), squeeze=False,
+                             sharex=True, sharey=True)
+    zetas = [result.model.with_coupling(c.stiffness, c.damping).zeta for c in result.results]
+    for ax, master in zip(axes.flat, masters):
+        for case, r in result.results.items():
+            if case.master != master:
+                continue
+            status = "failed" if r.get("status") == FAILED else r["class"]
+            zeta = result.model.with_coupling(case.stiffness, case.damping).zeta
+            ax.scatter(case.h_omega, zeta, s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
+        for (m, c, b), edge in result.edges.items():
+            if m == master and edge is not None:
+                ax.plot(edge, result.model.with_coupling(c, b).zeta, marker="|", color="k", ms=16, mew=1.6)
+        for c, zs, es in edge_curves(result, master):
+            ax.plot(es, zs, "k-", lw=0.9, alpha=0.7)
+            ax.annotate(f"c={c:.0e}" if c >= 1e4 else f"c={c:.4g}", (es[-1], zs[-1]), fontsize=6, alpha=0.7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(master, fontsize=10)
+        ax.grid(True, which="both", alpha=0.2)
+    for ax in axes[-1]:
+        ax.set_xlabel("h * omega_n")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("damping ratio zeta")
+    for ax in list(axes.flat)[len(masters):]:
+        ax.axis("off")
+    if zetas:
+        axes[0, 0].set_ylim(min(zetas) / 1.5, max(zetas) * 1.5)
+    handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in COLOURS]
+    handles.append(Line2D([], [], color="k", lw=0.9, marker="|", ms=10,
+                          label="predicted edge (|: swept coupling; line: per stiffness, damping varied)"))
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

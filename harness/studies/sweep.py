@@ -1,0 +1,458 @@
+"""``lever sweep``: the monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12) rerun
+with the project's model, with what the monograph reports overlaid, and a trend report
+that says, with the numbers, which of its qualitative findings (MODEL.md section 6) the
+model reproduces.
+
+A sweep is a set of *axes*; each varies one quantity of a base scene (default
+``kavz685``) over the range MODEL.md section 6 gives, at the conditions of the figure it
+mirrors, and records means and amplitudes ``A = (max - min)/2`` of the shafts' speeds,
+accelerations and torques after the start-up transient.  Cases run on local processes
+(``concurrent.futures``) or on a Dask cluster (``address``); each finished or failed case
+is kept in a :class:`harness.studies.cases.CaseLog`, so a killed sweep resumes where it stopped
+and one failing case (recorded with its diagnosis) does not cost the others.
+"""
+from __future__ import annotations
+
+import json
+import time as clock
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from harness.judges import metrics
+from harness.judges.solution import physics_hash
+from harness.description import scene as scenes
+from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.paths import DATA, FMUS, RESULTS
+
+SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
+
+
+@dataclass
+class Axis:
+    """One study: ``quantity`` takes ``values``; ``overrides(value)`` are the scene
+    assignments of a case, on top of ``base`` (the figure's conditions)."""
+    name: str
+    figure: str
+    quantity: str                      # label with unit
+    values: list
+    base: list[str]
+    assign: str                        # "component.parameter" the value goes to ("load" pairs: mean, bound)
+    #: what the monograph reports: quantity key -> [(x, value or (low, high)), ...]
+    reported: dict = field(default_factory=dict)
+    note: str = ""
+
+    def overrides(self, value) -> list[str]:
+        if self.assign == "load":
+            mean, bound = value
+            return self.base + [f"load.mean_torque={mean}", f"load.random_amplitude={bound}"]
+        if self.assign == "coupling.misalignment":
+            return self.base + [f"coupling.misalignment={value} deg"]
+        return self.base + [f"{self.assign}={value}"]
+
+    def x(self, value) -> float:
+        return float(value[0]) if self.assign == "load" else float(value)
+
+
+FIG_317 = ["load.mean_torque=150", "load.random_amplitude=11"]     # Figs. 3.17-3.18: 150 +- 11 N*m, 15 deg
+#: Load points Mm +- dM the monograph names (sections 3.3, 4.2), chosen with dM growing with
+#: Mm as along its Fig. 3.15 (100 +- 8.8 ... 500 +- 21.9): the amplitudes follow dM too.
+LOADS = [(100.0, 8.8), (150.0, 11.5), (225.4, 18.3), (350.0, 21.0), (500.0, 21.9), (550.0, 24.1)]
+LOADS_412 = [(65.4, 5.3), (150.0, 11.5), (320.0, 12.0), (450.0, 21.5)]
+
+
+def default_axes() -> list[Axis]:
+    return [
+        Axis("load", "3.15, 3.16", "mean load Mc [N*m]", LOADS, [], "load",
+             {"A_w1": [(100, 0.65), (500, 3.94)], "A_w2": [(100, 0.92), (500, 5.18)],
+              "A_a1": [(150, 180.0), (500, 380.0)], "A_a2": [(150, 210.0), (500, 510.0)],
+              "A_tau1": [(500, 43.2)], "A_tau2": [(500, 49.4)],
+              "mean_w": [(100, 37.2), (550, 23.4)], "mean_tau": [(100, 78.0), (550, 484.0)]},
+             "alpha = 15 deg, load Mm +- dM as the monograph pairs them (dM growing with Mm)"),
+        Axis("inertia", "3.16", "driven inertia I2 [kg*m^2]", [0.08, 0.12, 0.161, 0.22, 0.30], [], "load.inertia",
+             {"mean_w": [(0.30, 33.9)], "mean_tau": [(0.30, 281.0)]},
+             "alpha = 15 deg, load 107.5 +- 8.8 N*m; the curve's start values are garbled in the source"),
+        Axis("stiffness", "3.17", "stiffness c [N*m/rad]", [200.0, 450.0, 715.4, 820.0, 1000.0, 1250.0], FIG_317,
+             "coupling.stiffness",
+             {"dA_w": [(200, 1.26), (820, 0.78)], "dA_a": [(200, 980.0), (820, 395.0)],
+              "dA_tau": [(200, 7.1), (820, 13.2)]},
+             "alpha = 15 deg, load 150 +- 11 N*m; the printed dA_M 'decreases from 7.1 to 13.2' is overlaid as printed"),
+        Axis("damping", "3.17", "damping b [N*m*s/rad]", [0.5, 2.0, 4.0, 6.35, 8.5, 10.0], FIG_317, "coupling.damping",
+             {"dA_w": [(10, 0.38)], "dA_a": [(10, 128.0)], "dA_tau": [(10, 12.8)]},
+             "alpha = 15 deg, load 150 +- 11 N*m"),
+        Axis("misalignment", "3.18", "misalignment alpha [deg]", [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0], FIG_317,
+             "coupling.misalignment",
+             {"dA_w": [(10, 0.28), (35, 1.37)], "dA_a": [(10, 225.0), (35, 98.0)], "dA_tau": [(10, 11.0), (35, 56.0)]},
+             "load 150 +- 11 N*m; the printed dA_a '(225 ... 98)' is overlaid as printed"),
+        Axis("stiffness_measured", "4.8", "stiffness c [N*m/rad]", [450.0, 650.0, 750.0, 900.0, 1200.0],
+             ["load.mean_torque=225.4", "load.random_amplitude=18.3", "coupling.misalignment=16 deg"],
+             "coupling.stiffness", {}, "alpha = 16 deg, load 225.4 +- 18.3 N*m; overlaid: the amplitudes of the "
+             "measured mean torque curves (Tables 4.2-4.11, about 220 N*m, angle-periodic load)"),
+        Axis("load_alpha0", "4.12", "mean load Mc [N*m]", LOADS_412, ["coupling.misalignment=0"], "load",
+             {"A_tau1": [(65.4, (6.3, 8.1)), (320, (7.5, 9.1))]}, "alpha = 0 (measured ranges, Fig. 4.11)"),
+        Axis("load_alpha5", "4.12", "mean load Mc [N*m]", LOADS_412, ["coupling.misalignment=5 deg"], "load",
+             {"A_tau1": [(450, (30.1, 39.3))], "A_tau2": [(320, (32.0, 34.2)), (420, (35.4, 46.1))]},
+             "alpha = 5 deg (measured ranges, Figs. 4.10-4.11)"),
+    ]
+
+
+def measured_amplitudes() -> dict:
+    """A of the measured mean drive and driven torque curves per grade, from the data
+    files (for the Fig. 4.8 overlay): {"A_tau1": [(c, A)], "A_tau2": [...]}."""
+    from harness.studies.measured import amplitude, pair_tables
+
+    pairs, _ = pair_tables([DATA / "monograph"])
+    out = {"A_tau1": [], "A_tau2": []}
+    for drive, driven in pairs:
+        if drive.stiffness:
+            out["A_tau1"].append((drive.stiffness, amplitude(drive.mean_curve)))
+            out["A_tau2"].append((drive.stiffness, amplitude(driven.mean_curve)))
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# One case (runs in a worker process or on a Dask worker: plain data in, plain data out)
+
+
+def run_case(case: dict) -> dict:
+    """Simulate one case and return its statistics, or its failure with a diagnosis.
+    Never raises: a worker's exception would lose the diagnosis on the way back."""
+    from harness.engine.run import simulate
+
+    started = clock.perf_counter()
+    try:
+        spec = scenes.load(case["scene"]).with_overrides(case["overrides"])
+        result = simulate(spec, fmu_dir=Path(case.get("fmu_dir", FMUS)))
+        if not result.ok:
+            return {"status": FAILED, "error": result.failure, "where": f"simulate ({result.failure_stage})"}
+        names = metrics.signals(spec)
+        stats = metrics.statistics(result.times, result.traces, [names[k] for k in SHORT], spec.experiment.transient)
+        out = {"status": "ok", "wall_s": clock.perf_counter() - started}
+        for k in SHORT:
+            out[f"A_{k}"] = stats[names[k]]["amplitude"]
+            out[f"mean_{k}"] = stats[names[k]]["mean"]
+        out["mean_w"] = 0.5 * (out["mean_w1"] + out["mean_w2"])
+        out["mean_tau"] = 0.5 * (abs(out["mean_tau1"]) + abs(out["mean_tau2"]))
+        for q in ("w", "a", "tau"):
+            out[f"dA_{q}"] = out[f"A_{q}2"] - out[f"A_{q}1"]
+        out["unevenness_1"] = stats[names["w1"]].get("unevenness")
+        out["unevenness_2"] = stats[names["w2"]].get("unevenness")
+        return out
+    except Exception as error:  # noqa: BLE001 - recorded as the case's diagnosis
+        frame = traceback.extract_tb(error.__traceback__)[-1]
+        return {"status": FAILED, "error": f"{type(error).__name__}: {error}",
+                "where": f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"}
+
+
+def plan(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, extra: list[str] | None = None,
+         fmu_dir: Path = FMUS) -> list[dict]:
+    """Every case of the sweep: axis, value, the scene assignments and the log key."""
+    cases = []
+    tail = list(extra or []) + ([f"experiment.stop={stop}"] if stop else [])
+    for axis in axes:
+        for value in axis.values:
+            overrides = axis.overrides(value) + tail
+            cases.append({"axis": axis.name, "value": list(value) if isinstance(value, tuple) else value,
+                          "x": axis.x(value), "scene": scene, "overrides": overrides, "fmu_dir": str(fmu_dir),
+                          "key": case_key(scene, *overrides)})
+    return cases
+
+
+def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = "kavz685",
+          stop: float | None = None, extra: list[str] | None = None, workers: int | None = None,
+          dask: str | None = None, progress: bool = True, resume: bool = True, fmu_dir: Path = FMUS) -> dict:
+    """Run (or resume) a sweep and write ``sweep.md``, ``sweep.json`` and a plot per axis
+    into ``out``.  Returns the results: {"cases": [...], "trends": [...]}."""
+    axes = axes or default_axes()
+    out = Path(out or RESULTS / "sweep")
+    # Refuse a bad scene or assignment before anything runs.
+    spec = scenes.load(scene).with_overrides(list(extra or []))
+    cases = plan(axes, scene, stop, extra, fmu_dir)
+    for case in cases:
+        spec.with_overrides(case["overrides"])
+    fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
+                   "extra": list(extra or []), "physics": physics_hash()}
+    log = CaseLog(out, fingerprint, resume=resume)
+    pending = [c for c in cases if c["key"] not in log]
+    pending = list({c["key"]: c for c in pending}.values())         # one run per distinct case
+    bar = _bar(len(cases), len(cases) - len(pending), dask) if progress else None
+    if pending:
+        if dask:
+            _run_dask(pending, log, dask, bar)
+        else:
+            _run_local(pending, log, workers, bar)
+    if bar is not None:
+        bar.close()
+    results = []
+    for case in cases:
+        entry = dict(case)
+        entry.pop("fmu_dir", None)
+        entry["result"] = log.get(case["key"]) or {"status": FAILED, "error": "not run"}
+        results.append(entry)
+    report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
+    write(out, axes, report)
+    return report
+
+
+def _bar(total, done, dask):
+    from tqdm import tqdm
+    return tqdm(total=total, initial=done, desc="sweep" + (" [dask]" if dask else ""), unit="case", leave=False)
+
+
+def _run_local(pending, log, workers, bar):
+    import concurrent.futures as cf
+    import multiprocessing
+    import os
+
+    workers = workers or max(1, min(len(pending), os.cpu_count() or 1))
+    # fork: the workers leave with os._exit, skipping pythonfmu's fragile native teardown.
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = {pool.submit(run_case, case): case for case in pending}
+        for future in cf.as_completed(futures):
+            case = futures[future]
+            try:
+                result = future.result()
+            except Exception as error:  # noqa: BLE001 - e.g. a worker killed by the OS
+                result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "worker process"}
+            log.record(case["key"], result)
+            if bar is not None:
+                bar.update(1)
+
+
+def _run_dask(pending, log, address, bar):
+    from distributed import Client, as_completed
+
+    with Client(address, timeout="30s") as client:
+        futures = {client.submit(run_case, case, pure=False, key=f"lever-sweep-{i}-{case['key'][:40]}"): case
+                   for i, case in enumerate(pending)}
+        for future in as_completed(list(futures)):
+            case = futures[future]
+            try:
+                result = future.result()
+            except Exception as error:  # noqa: BLE001 - a lost worker, a cancelled task
+                result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "dask worker"}
+            log.record(case["key"], result)
+            if bar is not None:
+                bar.update(1)
+
+
+# ----------------------------------------------------------------------------------------
+# Trends (MODEL.md section 6) - pure functions of the results
+
+
+def _series(axis: str, results: list[dict], quantity: str):
+    rows = [(r["x"], r["result"][quantity]) for r in results
+            if r["axis"] == axis and r["result"].get("status") == "ok"]
+    rows.sort()
+    return np.array([x for x, _ in rows]), np.array([y for _, y in rows])
+
+
+def _monotone(y, sign) -> bool:
+    return len(y) >= 2 and bool(np.all(sign * np.diff(y) > 0))
+
+
+def _nonlinearity(x, y) -> float:
+    """Largest deviation from the straight line through the end points, relative to the
+    rise between them."""
+    if len(x) < 3 or y[-1] == y[0]:
+        return float("nan")
+    line = y[0] + (y[-1] - y[0]) * (x - x[0]) / (x[-1] - x[0])
+    return float(np.max(np.abs(y - line)) / abs(y[-1] - y[0]))
+
+
+def _fmt_series(x, y, unit="") -> str:
+    return ", ".join(f"{xi:g}: {yi:.3g}" for xi, yi in zip(x, y)) + (f" {unit}" if unit else "")
+
+
+def _verdict(holds: list[str], of: list[str]) -> str:
+    return "yes" if len(holds) == len(of) else ("partly" if holds else "no")
+
+
+def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
+    """Each qualitative finding of MODEL.md section 6 (and Fig. 3.16's inertia curve),
+    judged on the sweep's numbers: "yes", "partly" (``holds_for`` says for which
+    quantities) or "no", with the numbers it rests on."""
+    names = {a.name for a in axes}
+    out = []
+
+    def add(trend, holds, of, numbers):
+        out.append({"trend": trend, "reproduced": _verdict(holds, of), "holds_for": holds, "numbers": numbers})
+
+    ok = [r for r in results if r["result"].get("status") == "ok"]
+    if ok:
+        lines, holds = [], []
+        for q, label in (("w", "speed"), ("a", "acceleration"), ("tau", "torque")):
+            less = sum(r["result"][f"A_{q}1"] < r["result"][f"A_{q}2"] for r in ok)
+            if less == len(ok):
+                holds.append(label)
+            lines.append(f"{label}: A1 < A2 in {less} of {len(ok)} cases")
+        worst = min(ok, key=lambda r: r["result"]["A_tau2"] - r["result"]["A_tau1"])
+        lines.append(f"smallest A_tau2 - A_tau1: {worst['result']['A_tau2'] - worst['result']['A_tau1']:.3g} N*m "
+                     f"({worst['axis']} = {worst['x']:g})")
+        add("the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's",
+            holds, ["speed", "acceleration", "torque"], "; ".join(lines))
+    amplitudes = ["A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2"]
+    for axis_name, label in (("load", "load"), ("misalignment", "alpha")):
+        if axis_name not in names:
+            continue
+        parts, holds = [], []
+        for q in amplitudes:
+            x, y = _series(axis_name, results, q)
+            curved = _nonlinearity(x, y)
+            if _monotone(y, +1) and curved > 0.05:
+                holds.append(q)
+            parts.append(f"{q} {_fmt_series(x, y)} (off a straight line by {100 * curved:.0f} % of the rise)")
+        add(f"fluctuation amplitudes grow non-linearly with {label}", holds, amplitudes, "; ".join(parts))
+    if "load" in names:
+        x, w = _series("load", results, "mean_w")
+        add("mean speed falls with load", ["mean w"] if _monotone(w, -1) else [], ["mean w"],
+            "mean w [rad/s] at " + _fmt_series(x, w))
+        x, t = _series("load", results, "mean_tau")
+        add("mean torque rises with load", ["mean torque"] if _monotone(t, +1) else [], ["mean torque"],
+            "mean torque [N*m] at " + _fmt_series(x, t))
+    for axis_name, label in (("stiffness", "stiffer"), ("damping", "more damped")):
+        if axis_name not in names:
+            continue
+        parts, holds = [], []
+        for q in ("dA_w", "dA_a", "dA_tau"):
+            x, y = _series(axis_name, results, q)
+            if _monotone(y, -1):
+                holds.append(q)
+            parts.append(f"{q} {_fmt_series(x, y)}")
+        add(f"a {label} elastic element shrinks the drive/driven amplitude difference (dA = A2 - A1)", holds,
+            ["dA_w", "dA_a", "dA_tau"], "; ".join(parts))
+    if "inertia" in names:
+        x, w = _series("inertia", results, "mean_w")
+        _, t = _series("inertia", results, "mean_tau")
+        holds = (["mean w"] if _monotone(w, -1) else []) + (["mean torque"] if _monotone(t, +1) else [])
+        add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16; not in "
+            "MODEL.md's list)", holds, ["mean w", "mean torque"],
+            f"mean w [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
+            "the steady means are set by the engine characteristic and the mean load alone; I2 enters only the "
+            "fluctuations")
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# Report
+
+
+def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.json").write_text(json.dumps(report, indent=2, default=str))
+    results = report["cases"]
+    failed = [r for r in results if r["result"].get("status") != "ok"]
+    lines = [f"# Parameter sweep of the {report['scene']} scene against the monograph's figures", "",
+             "Amplitudes A = (max - min)/2 and means after the start-up transient; index 1 the drive shaft, 2 the "
+             "driven shaft; dA = A2 - A1 (the monograph's difference).  Each axis varies one quantity at the "
+             "conditions of the figure it mirrors.", "", "## Trends (MODEL.md section 6)", "",
+             "| trend | reproduced | numbers |", "|---|---|---|"]
+    for t in report["trends"]:
+        verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**"}[t["reproduced"]]
+        lines.append(f"| {t['trend']} | {verdict} | {t['numbers']} |")
+    for axis in axes:
+        rows = [r for r in results if r["axis"] == axis.name]
+        lines += ["", f"## {axis.name} (Fig. {axis.figure}): {axis.quantity}", "", axis.note, "",
+                  f"![{axis.name}](sweep_{axis.name}.png)", "",
+                  "| value | A w1 | A w2 | A a1 | A a2 | A tau1 | A tau2 | mean w | mean torque | status |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            res = r["result"]
+            if res.get("status") == "ok":
+                cells = " | ".join(f"{res[k]:.4g}" for k in ("A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2",
+                                                             "mean_w", "mean_tau"))
+                lines.append(f"| {r['x']:g} | {cells} | ok |")
+            else:
+                lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {res.get('error')} ({res.get('where')}) |")
+        reported = dict(axis.reported)
+        if axis.name == "stiffness_measured":
+            reported.update(measured_amplitudes())
+        if reported:
+            lines += ["", "Reported by the monograph: " + "; ".join(
+                f"{k} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts) for k, pts in reported.items())]
+        _plot(out / f"sweep_{axis.name}.png", axis, rows, reported)
+    if failed:
+        lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {r['result'].get('error')} "
+                                                f"({r['result'].get('where')})" for r in failed]
+    (out / "sweep.md").write_text("\n".join(lines) + "\n")
+    return [out / "sweep.md", out / "sweep.json"]
+
+
+def _range(v) -> str:
+    return f"{v[0]:g}-{v[1]:g}" if isinstance(v, (tuple, list)) else f"{v:g}"
+
+
+def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = sorted((r for r in rows if r["result"].get("status") == "ok"), key=lambda r: r["x"])
+    x = np.array([r["x"] for r in ok])
+    panels = [("w", "speed amplitude [rad/s]"), ("a", "acceleration amplitude [rad/s^2]"),
+              ("tau", "torque amplitude [N*m]")]
+    fig, grid = plt.subplots(2, 3, figsize=(13, 7))
+    for col, (q, label) in enumerate(panels):
+        ax = grid[0, col]
+        for i, style in ((1, "-o"), (2, "--s")):
+            key = f"A_{q}{i}"
+            ax.plot(x, [r["result"][key] for r in ok], style, label=f"model {('drive', 'driven')[i - 1]}")
+            _overlay(ax, reported.get(key), f"reported {('drive', 'driven')[i - 1]}", ("k", "tab:red")[i - 1])
+        ax.set_ylabel(label)
+        ax.legend(fontsize=7)
+        ax = grid[1, col]
+        key = f"dA_{q}"
+        ax.plot(x, [r["result"][key] for r in ok], "-o", color="tab:green", label="model A2 - A1")
+        _overlay(ax, reported.get(key), "reported", "k")
+        ax.axhline(0, color="0.6", lw=0.8)
+        ax.set_ylabel(f"dA {q}")
+        ax.legend(fontsize=7)
+    if axis.name in ("load", "inertia"):
+        ax = grid[1, 2].twinx()
+        ax.plot(x, [r["result"]["mean_w"] for r in ok], ":", color="tab:purple", label="model mean w")
+        _overlay(ax, reported.get("mean_w"), "reported mean w", "tab:purple")
+        ax.set_ylabel("mean speed [rad/s]", color="tab:purple")
+        ax.legend(fontsize=7, loc="lower right")
+    for ax in grid.flat:
+        ax.set_xlabel(axis.quantity)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _overlay(ax, points, label, color):
+    if not points:
+        return
+    for i, (x, v) in enumerate(points):
+        if isinstance(v, (tuple, list)):
+            ax.errorbar([x], [0.5 * (v[0] + v[1])], yerr=[[0.5 * (v[1] - v[0])]], fmt="x", color=color,
+                        capsize=3, label=label if i == 0 else None)
+        else:
+            ax.plot([x], [v], "x", color=color, ms=9, mew=2, label=label if i == 0 else None)
+
+
+def select(names: list[str] | None) -> list[Axis]:
+    axes = default_axes()
+    if not names:
+        return axes
+    known = {a.name: a for a in axes}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"unknown sweep axis {', '.join(unknown)} (known: {', '.join(known)})")
+    return [known[n] for n in names]
+
+
+def thin(axes: list[Axis], every: int) -> list[Axis]:
+    """Every ``every``-th value of each axis, always keeping both ends (quick looks)."""
+    from dataclasses import replace
+    if every <= 1:
+        return axes
+    return [replace(a, values=[v for i, v in enumerate(a.values) if i % every == 0 or i == len(a.values) - 1])
+            for a in axes]
+
+
+__all__ = ["Axis", "default_axes", "plan", "run_case", "sweep", "trends", "select", "thin"]
