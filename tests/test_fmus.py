@@ -380,3 +380,71 @@ def test_shaft_fmus_step_like_the_physics(components):
             got = run_shaft(c, tau, 1, h=2e-3, t0=n * 2e-3)[-1]
             phi, w, _ = shaft.advance(n * 2e-3, phi, w, tau, 2e-3)
             assert got[:2] == (phi, w), fmu
+
+
+# --------------------------------------------------------------------------------------
+# The model code on the standard library alone (issue 13)
+# --------------------------------------------------------------------------------------
+
+# Runs an FMU's own Python (its resources folder): "bare", in an interpreter started with
+# -I -S (no site-packages) and numpy made unimportable, else with site-packages and numpy
+# loaded; initialise, 50 steps with moving inputs, every output after each step, printed
+# as repr-exact JSON.
+_BARE_RUN = r'''
+import json, math, sys
+resources, model, bare = sys.argv[1], sys.argv[2], sys.argv[3] == "bare"
+if bare:
+    sys.modules["numpy"] = None        # "import numpy" anywhere in the model now fails
+else:
+    import numpy                       # noqa: F401 - present, as in our environment
+sys.path.insert(0, resources)
+cls = getattr(__import__(open(resources + "/slavemodule.txt").read().strip()), model)
+errors = []
+slave = cls(instance_name="bare", resources=resources)
+slave.log = lambda message, status=None, *rest: errors.append(message) if status and int(status) >= 3 else None
+vr = {v.name: ref for ref, v in slave.vars.items()}
+inputs = [p.name for p in cls.INPUTS if p.kind == "real"]
+outputs = [vr[o.name] for o in cls.OUTPUTS]
+slave.setup_experiment(0.0)
+slave.enter_initialization_mode()
+slave.exit_initialization_mode()
+rows, t = [], 0.0
+for k in range(50):
+    values = {"tau": 80.0 * math.sin(0.3 * k), "tau_rate": 24.0 * math.cos(0.3 * k), "phi1": 0.04 * k + 0.01,
+              "w1": 40.0, "phi2": 0.038 * k, "w2": 38.0, "misalignment": 0.26}
+    slave.set_real([vr[n] for n in inputs], [values[n] for n in inputs])
+    assert slave.do_step(t, 1e-3), errors
+    t += 1e-3
+    rows.append(slave.get_real(outputs))
+print(json.dumps({"rows": rows, "errors": errors, "third_party": sorted(
+    m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] not in sys.stdlib_module_names
+    and not m.startswith(("_lever_", "pythonfmu", model)) and m != "__main__")}))
+'''
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("FreewheelRectifier",))
+def test_the_model_runs_on_the_standard_library_alone(fmu_dir, fmu, tmp_path):
+    """The FMU's Python (model and pythonfmu's Python part, both inside the FMU) in a bare
+    interpreter without numpy steps exactly as in our environment, which has numpy."""
+    import json
+    import subprocess
+    import sys
+    import zipfile
+
+    with zipfile.ZipFile(Path(fmu_dir) / f"{fmu}.fmu") as archive:
+        archive.extractall(tmp_path)
+        shipped = [r for r in archive.read("resources/requirements.txt").decode().splitlines()
+                   if r.strip() and not r.startswith("#")]
+    assert shipped == []
+    script = tmp_path / "bare_run.py"
+    script.write_text(_BARE_RUN)
+    runs = {}
+    for label, flags in (("bare", ["-I", "-S"]), ("with numpy", ["-I"])):
+        done = subprocess.run([sys.executable, *flags, str(script), str(tmp_path / "resources"), fmu, label],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, (label, done.stderr[-2000:])
+        runs[label] = json.loads(done.stdout)
+    bare = runs["bare"]
+    assert bare["errors"] == [] and bare["third_party"] == []
+    assert all(math.isfinite(x) for row in bare["rows"] for x in row)
+    assert bare["rows"] == runs["with numpy"]["rows"]
