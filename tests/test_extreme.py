@@ -236,7 +236,10 @@ def test_load_above_stall_torque_reverses_the_drive_without_nan():
 def test_step_load_on_a_tiny_inertia():
     result = run.simulate(load("kavz685_step_tiny_inertia"))
     assert result.ok, result.failure
-    assert result.traces["coupling.tau2"][-1] == pytest.approx(300.0, rel=1e-3)
+    # The trapezoidal rule rings step to step by +-0.3-0.4 N*m at the long steps it ends
+    # with (A- but not L-stable): its last sample alone sits anywhere in that band (the last
+    # bits of U12 decide where), the mean of the last ten is the load.
+    assert np.mean(result.traces["coupling.tau2"][-10:]) == pytest.approx(300.0, rel=1e-4)
     assert residual(result) < 1e-3
     errs = rms_errors(result)
     assert max(errs.values()) < 2e-3, errs
