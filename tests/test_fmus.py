@@ -448,3 +448,96 @@ def test_the_model_runs_on_the_standard_library_alone(fmu_dir, fmu, tmp_path):
     assert bare["errors"] == [] and bare["third_party"] == []
     assert all(math.isfinite(x) for row in bare["rows"] for x in row)
     assert bare["rows"] == runs["with numpy"]["rows"]
+
+
+# --------------------------------------------------------------------------------------
+# Serialized states restored into a fresh instance, after fmi2Reset, into another instance
+# --------------------------------------------------------------------------------------
+
+#: per FMU: parameters of the run that is saved, parameters of the "other" instance, and
+#: the inputs at step k (moving, so that a stale output or input would show)
+RESTORE_RUNS = {
+    "LeverCoupling": ({"stiffness": 900.0, "support_deformation": 0.04}, {"stiffness": 500.0},
+                      lambda k: {"phi1": 0.04 * k + 0.02, "w1": 40.0 + 0.1 * k, "phi2": 0.039 * k, "w2": 38.0,
+                                 "misalignment": 0.26 + 0.0007 * k}),
+    "EngineShaft": ({"inertia": 0.15}, {"inertia": 0.3},
+                    lambda k: {"tau": -100.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+    "LoadShaft": ({"seed": 3, "load_kind": "random"}, {"seed": 4},
+                  lambda k: {"tau": 110.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+    "MisalignmentSource": ({"table": "0:0.2; 1:0.3"}, {"table": "0:0.1; 1:0.1"}, lambda k: {}),
+    "FreewheelRectifier": ({}, {}, lambda k: {"tau": 0.5 * math.sin(0.2 * k)}),
+}
+
+
+class _Fmi:
+    """One fmpy FMU2Slave instance, driven by variable names."""
+
+    def __init__(self, fmu_dir, fmu: str, name: str):
+        from fmpy.fmi2 import FMU2Slave
+        from harness.component import unzipped
+
+        path = Path(fmu_dir) / f"{fmu}.fmu"
+        self.md = fmpy.read_model_description(str(path))
+        self.vr = {v.name: v for v in self.md.modelVariables}
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=unzipped(path),
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.slave.instantiate(loggingOn=False)
+        self.outputs = [v.valueReference for v in self.md.modelVariables if v.causality == "output"]
+
+    def set(self, values: dict):
+        for name, value in values.items():
+            v = self.vr[name]
+            if v.type == "Real":
+                self.slave.setReal([v.valueReference], [float(value)])
+            elif v.type == "Integer":
+                self.slave.setInteger([v.valueReference], [int(value)])
+            else:
+                self.slave.setString([v.valueReference], [str(value)])
+
+    def start(self, parameters: dict):
+        self.set(parameters)
+        self.slave.setupExperiment(startTime=0.0)
+        self.slave.enterInitializationMode()
+        self.slave.exitInitializationMode()
+
+    def run(self, inputs, first: int, steps: int, h: float = 1e-3) -> list:
+        rows = []
+        for k in range(first, first + steps):
+            self.set(inputs(k))
+            self.slave.doStep(k * h, h)
+            rows.append(self.slave.getReal(self.outputs))
+        return rows
+
+    def free(self):
+        self.slave.terminate()
+        self.slave.freeInstance()
+
+
+@pytest.mark.parametrize("defaults", [True, False], ids=["default parameters", "parameters set"])
+@pytest.mark.parametrize("into", ["a fresh instance", "an instance after fmi2Reset", "another running instance"])
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("FreewheelRectifier",))
+def test_a_serialized_state_continues_exactly_wherever_it_is_restored(fmu_dir, fmu, into, defaults):
+    """FMI 2.0 lets an importer restore a serialized state into any instance of the FMU
+    (fmi2Instantiate, fmi2DeSerializeFMUstate, fmi2SetFMUstate, fmi2DoStep): the run goes
+    on exactly as the uninterrupted one, outputs bit for bit.  With default parameters a
+    fresh instance has nothing to rebuild from them: the model must still be built."""
+    parameters, other_parameters, inputs = RESTORE_RUNS[fmu]
+    if defaults:
+        parameters = {}
+    saved = _Fmi(fmu_dir, fmu, "saved")
+    target = _Fmi(fmu_dir, fmu, "target")
+    try:
+        saved.start(parameters)
+        saved.run(inputs, 0, 30)
+        data = saved.slave.serializeFMUstate(saved.slave.getFMUstate())
+        uninterrupted = saved.run(inputs, 30, 30)
+        if into != "a fresh instance":
+            target.start(other_parameters)
+            target.run(lambda k: inputs(k + 7), 0, 12)
+            if into == "an instance after fmi2Reset":
+                target.slave.reset()
+        target.slave.setFMUstate(target.slave.deSerializeFMUstate(data))
+        assert target.run(inputs, 30, 30) == uninterrupted
+    finally:
+        saved.free()
+        target.free()
