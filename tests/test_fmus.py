@@ -382,6 +382,33 @@ def test_shaft_fmus_step_like_the_physics(components):
             assert got[:2] == (phi, w), fmu
 
 
+def test_a_shafts_acceleration_follows_every_torque_written_between_steps(components):
+    # Only the acceleration depends on the torque: after a write it is recomputed alone,
+    # from the external torque of this time and state, and equals the physics' exactly.
+    params = {"seed": 5, "w_start": 35.0}
+    c = start(components("LoadShaft"), params)
+    shaft = catalogue.load_from(params)
+    vrs, values = c.real_buffer(["tau"])
+    c.do_step(0.0, 1e-3)
+    phi, w = c.get(["phi", "w"])
+    for tau in (100.0, -40.0, 1e12, 250.5):
+        values[0] = tau
+        c.write(vrs, values)
+        assert c.get(["a", "load_torque"]) == [shaft.rates(1e-3, phi, w, tau)[0], -shaft.rates(1e-3, phi, w, tau)[1]]
+
+
+def test_an_input_at_its_bound_is_taken_and_the_next_float_refused(components):
+    c = start(components("EngineShaft"))
+    vrs, values = c.real_buffer(["tau"])
+    values[0] = 1e12                      # the upper bound of tau, closed
+    c.write(vrs, values)
+    assert c.get(["tau"]) == [1e12]
+    values[0] = math.nextafter(1e12, math.inf)
+    with pytest.raises(FmuCallError):
+        c.write(vrs, values)
+    assert c.get(["tau"]) == [1e12]
+
+
 # --------------------------------------------------------------------------------------
 # The model code on the standard library alone (issue 13)
 # --------------------------------------------------------------------------------------

@@ -104,6 +104,28 @@ def test_random_load_stays_within_its_bound(seed, tones, band):
     assert len(load.frequencies) == tones
 
 
+def test_random_load_integrals_with_per_step_constants_are_the_direct_formula_bit_for_bit():
+    # integrals() takes what depends on the step size alone from a cache (the hot path of
+    # the load shaft): the same operations in the same order, so the same bits - also
+    # across the cache's overflow (more step sizes than it keeps).
+    load = RandomLoad(107.5, 8.8, seed=2, tones=9)
+
+    def direct(t, h):
+        from lever.physics.load import _one_minus_sinc_over_y, _sinc
+        impulse, second = load.mean * h, 0.5 * load.mean * h * h
+        for a, f, p in zip(load.weights, load.frequencies, load.phases):
+            x, start = f * h, f * t + p
+            impulse += a * h * math.sin(start + 0.5 * x) * _sinc(0.5 * x)
+            second += 0.5 * a * h * h * (math.sin(start + 0.25 * x) * _sinc(0.25 * x)
+                                         + math.cos(start + 0.5 * x) * _one_minus_sinc_over_y(0.5 * x))
+        return impulse, second
+
+    steps = [1e-3, 2.5e-4, 1e-6, 0.05] + [1e-4 * (1.0 + k / 97.0) for k in range(RandomLoad.STEP_CACHE + 5)]
+    for k, h in enumerate(steps * 2):
+        t = 0.37 * k
+        assert load.integrals(t, h) == direct(t, h), (t, h)
+
+
 def test_random_load_bad_band_is_refused():
     with pytest.raises(ParameterError):
         RandomLoad(100.0, 5.0, band_low=500.0, band_high=100.0)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import operator
 import re
 import traceback
 from pathlib import Path
@@ -170,6 +171,13 @@ def _nan_values(self, vrs):
     return [math.nan] * len(vrs)
 
 
+# What must be recomputed before outputs are read (``LeverSlave._dirty``).
+_CLEAN = 0
+_INPUTS_CHANGED = 1      # only outputs that depend on inputs (``_compute_input_outputs``)
+_ALL = 2                 # everything: time, state or model changed
+_LIVE = ("initialization", "stepping")
+
+
 class LeverSlave(Fmi2Slave):
     """Base of our FMUs.  Subclasses declare
 
@@ -203,7 +211,7 @@ class LeverSlave(Fmi2Slave):
         self.description = self.DESCRIPTION
         self._phase = "instantiated"   # -> initialization -> stepping (-> terminated)
         self._time = 0.0
-        self._dirty = True             # outputs must be recomputed before they are read
+        self._dirty = _ALL             # what must be recomputed before outputs are read
         self._build_error = None
         self._declared = {}
         for p in self.PARAMETERS:
@@ -221,6 +229,18 @@ class LeverSlave(Fmi2Slave):
         self._settable = {vr: self._declared[v.name] for vr, v in self.vars.items()
                           if isinstance(self._declared.get(v.name), Parameter)}
         self._built_with = None        # the parameter values the model was built with
+        # The hot path, mapped once: value reference -> attribute name of each Real, and
+        # of each real input its name and closed bounds (open ones moved in by an ulp), so
+        # that a good value costs one comparison; anything else takes _set_values's path,
+        # which says what is wrong.
+        self._real_names = {vr: v.name for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._fast_inputs = {}
+        for vr, p in self._settable.items():
+            if p.kind == "real" and not p.fixed:
+                low = math.nextafter(p.low, math.inf) if p.low_open else p.low
+                high = math.nextafter(p.high, -math.inf) if p.high_open else p.high
+                self._fast_inputs[vr] = (p.name, low, high)
+        self._outputs_of = operator.attrgetter(*(o.name for o in self.OUTPUTS)) if self.OUTPUTS else None
 
     # -- declaration ----------------------------------------------------------------------
     def _declare(self, p: Parameter, causality):
@@ -281,7 +301,7 @@ class LeverSlave(Fmi2Slave):
             setattr(self, p.name, value)
             if p.fixed:
                 self._model_stale = True
-        self._dirty = True
+        self._dirty = _ALL if any(p.fixed for p, _ in checked) else max(self._dirty, _INPUTS_CHANGED)
 
     def _error(self, message: str):
         self.log(message, Fmi2Status.error)
@@ -340,7 +360,7 @@ class LeverSlave(Fmi2Slave):
             self._error(f"fmi2DoStep at t = {current_time:.9g} s, h = {step_size:.3g} s: {failure}")
             return False
         self._time = current_time + step_size
-        self._dirty = True
+        self._dirty = _ALL
         return True
 
     @guarded()
@@ -349,12 +369,32 @@ class LeverSlave(Fmi2Slave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        if self._dirty and self._phase in ("initialization", "stepping"):
+        if self._dirty and self._phase in _LIVE:
             self._refresh()
-        return super().get_real(vrs)
+        names = self._real_names
+        try:
+            return [float(getattr(self, names[vr])) for vr in vrs]
+        except KeyError:
+            unknown = next(vr for vr in vrs if vr not in names)
+            self._error(f"fmi2GetReal: value reference {unknown} is no Real variable of {type(self).__name__}")
+            return _nan_values(self, vrs)
 
     @guarded()
     def set_real(self, vrs, values):
+        # The hot path: inputs in range while the FMU runs, applied without further ado;
+        # anything else is judged (and refused with its reason) by _set_values.
+        fast = self._fast_inputs
+        if self._phase != "terminated" and len(vrs) == len(values):
+            for vr, x in zip(vrs, values):
+                entry = fast.get(vr)
+                if entry is None or not entry[1] <= x <= entry[2]:
+                    break
+            else:
+                for vr, x in zip(vrs, values):
+                    setattr(self, fast[vr][0], x)
+                if not self._dirty:
+                    self._dirty = _INPUTS_CHANGED
+                return
         self._set_values("fmi2SetReal", Real, vrs, values)
 
     @guarded(default=_nan_values)
@@ -399,16 +439,26 @@ class LeverSlave(Fmi2Slave):
             if report:
                 self._error(str(error))
         self._model_stale = False
-        self._dirty = True
+        self._dirty = _ALL
 
     def _refresh(self):
         if self._build_error is None and not self._model_stale:
-            self._compute_outputs()
-            self._dirty = False
+            if self._dirty == _ALL:
+                self._compute_outputs()
+            else:
+                self._compute_input_outputs()
+            self._dirty = _CLEAN
+            # One test for all outputs: their sum is finite unless one is not (or the sum
+            # overflows, which the test below sorts out).
+            if self._outputs_of is None:
+                return
+            total = sum(self._outputs_of(self)) if len(self.OUTPUTS) > 1 else self._outputs_of(self)
+            if total - total == 0.0:
+                return
             bad = [o.name for o in self.OUTPUTS if not math.isfinite(getattr(self, o.name))]
             if bad:
                 # Reported at every read until the inputs change: never a silent NaN.
-                self._dirty = True
+                self._dirty = _ALL
                 inputs = ", ".join(f"{p.name} = {getattr(self, p.name)!r}" for p in self.INPUTS)
                 self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with inputs "
                             f"{inputs}: the inputs are beyond what the model can represent")
@@ -421,6 +471,10 @@ class LeverSlave(Fmi2Slave):
 
     def _compute_outputs(self):
         raise NotImplementedError
+
+    def _compute_input_outputs(self):
+        """Recompute what depends on the inputs after only they changed (default: all)."""
+        self._compute_outputs()
 
     def _advance(self, t, h):
         raise NotImplementedError
@@ -524,6 +578,15 @@ class LeverSlave(Fmi2Slave):
             if problem:
                 self._error(f"fmi2SetFMUstate: {problem}; the FMU's state is unchanged")
                 return
+        elif state["phase"] == self._phase == "stepping" and not self._model_stale and self._build_error is None:
+            # Its own state while stepping: the parameters are fixed since, the model was
+            # built for them and nothing can fail (an iterating master's every step).
+            for name, value in state["variables"].items():
+                setattr(self, name, value)
+            self._time = state["time"]
+            self._restore_internal_state(state["internal"])
+            self._dirty = _ALL
+            return
         # Applied as one transaction: should the model not build from the state's
         # parameters, the instance is put back as it was.
         before = dict(self.__dict__)
@@ -545,7 +608,7 @@ class LeverSlave(Fmi2Slave):
             self._error(f"fmi2SetFMUstate: the model does not build from the state ({why}); the FMU's state "
                         "is unchanged")
             return
-        self._dirty = True
+        self._dirty = _ALL
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:

@@ -87,6 +87,23 @@ class RandomLoad(_TimeLoad):
         total = pairwise_sum(weights)
         self.weights = [self.amplitude * w / total for w in weights]
         self._tones = list(zip(self.weights, self.frequencies, self.phases))
+        self._per_step: dict[float, list] = {}   # step size -> what integrals() needs of each tone
+
+    #: step sizes whose per-tone constants are kept (an adaptive master takes many)
+    STEP_CACHE = 64
+
+    def _step_constants(self, h: float) -> list:
+        """Per tone what ``integrals`` needs that depends on the step size only, computed
+        once per step size: the same operations, so the same numbers."""
+        constants = self._per_step.get(h)
+        if constants is None:
+            if len(self._per_step) >= self.STEP_CACHE:
+                self._per_step.clear()
+            constants = self._per_step[h] = [
+                (f, p, a * h, 0.5 * a * h * h, 0.5 * (f * h), 0.25 * (f * h), _sinc(0.5 * (f * h)),
+                 _sinc(0.25 * (f * h)), _one_minus_sinc_over_y(0.5 * (f * h)))
+                for a, f, p in self._tones]
+        return constants
 
     def resistance(self, t, phi, w):
         return self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._tones)
@@ -94,12 +111,10 @@ class RandomLoad(_TimeLoad):
     def integrals(self, t, h):
         impulse = self.mean * h
         second = 0.5 * self.mean * h * h
-        for a, f, p in self._tones:
-            x = f * h
+        for f, p, ah, aah, half, quarter, sinc_half, sinc_quarter, rest_half in self._step_constants(h):
             start = f * t + p
-            impulse += a * h * math.sin(start + 0.5 * x) * _sinc(0.5 * x)
-            second += 0.5 * a * h * h * (math.sin(start + 0.25 * x) * _sinc(0.25 * x)
-                                         + math.cos(start + 0.5 * x) * _one_minus_sinc_over_y(0.5 * x))
+            impulse += ah * math.sin(start + half) * sinc_half
+            second += aah * (math.sin(start + quarter) * sinc_quarter + math.cos(start + half) * rest_half)
         return impulse, second
 
 
