@@ -36,8 +36,9 @@ OUTPUT = HERE / "fmus"
 STAGING = HERE / "tmp"
 
 #: The packages our model code imports on the importing machine (pythonfmu's Python part
-#: travels inside each FMU, in resources/pythonfmu); pinned as in constraints.txt.
-RUNTIME_PACKAGES = ("numpy",)
+#: travels inside each FMU, in resources/pythonfmu); pinned as in constraints.txt.  None:
+#: the model runs on the standard library alone (issue 13), so a bare CPython suffices.
+RUNTIME_PACKAGES: tuple[str, ...] = ()
 
 #: model identifier -> module of lever.fmus that defines the class of that name
 MODELS = {
@@ -81,9 +82,9 @@ def runtime_requirements() -> list[str]:
 
 
 REQUIREMENTS_HEADER = """\
-# Python packages this FMU's model imports in the importer's Python interpreter
-# (CPython >= 3.11 with a shared libpython; pythonfmu's Python part is in resources/pythonfmu).
-# Install with:  python -m pip install -r requirements.txt
+# Python packages this FMU's model imports in the importer's Python interpreter, beyond the
+# standard library (CPython >= 3.11 with a shared libpython; pythonfmu's Python part is in
+# resources/pythonfmu).  Empty: the model runs on the standard library alone.
 # Non-Python hosts: see documentation/_main.html, "Host requirements".
 """
 

@@ -21,14 +21,19 @@ def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     categories = {(c.fmu, c.category) for c in CORPUS}
     for fmu in badinputs.DECLARED:
         for category in ("non-finite parameter", "non-finite input", "set after initialisation",
-                         "out-of-order call", "bad step", "bad state", "malformed table"):
+                         "out-of-order call", "bad step", "bad state", "malformed table", "set on an output",
+                         "set in a wrong state", "wrong type or reference"):
             assert (fmu, category) in categories, (fmu, category)
     for fmu in ("EngineShaft", "LoadShaft"):
         assert (fmu, "non-positive inertia") in categories
     for category in ("non-positive stiffness", "negative damping", "misalignment out of range"):
         assert ("LeverCoupling", category) in categories
     assert ("LeverCoupling", "unknown mode") in categories and ("LoadShaft", "unknown mode") in categories
-    assert len({c.name for c in CORPUS}) == len(CORPUS) > 200
+    # every kind of damage to a serialized state, for every FMU
+    for fmu in badinputs.DECLARED:
+        edits = {c.action[2][0] for c in CORPUS if c.fmu == fmu and c.action[:2] == ("call", "edited-state")}
+        assert edits == set(badinputs._STATE_EDITS), fmu
+    assert len({c.name for c in CORPUS}) == len(CORPUS) > 340
 
 
 def test_the_summary_counts_cases_and_names_failures(fmu_dir):

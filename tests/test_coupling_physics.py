@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import quad, simpson
 
 from lever.physics import catalogue
-from lever.physics.coupling import LeverCoupling, build_coupling
+from lever.physics.coupling import CouplingResult, LeverCoupling, build_coupling
 from lever.physics.elastic import LinearElasticLaw, TabulatedElasticLaw, elastic_law
 from lever.physics.kinematics import TransferFunction
 from lever.physics.parameters import ParameterError
@@ -18,6 +18,18 @@ DEG = math.pi / 180.0
 # MODEL.md section 7: the cam-shaped characteristic with two plateaus.
 TABLE = "0.05:10; 0.1:16; 0.2:16.5; 0.3:26.5; 0.45:50"
 TABLE_POINTS = [(0.0, 0.0), (0.05, 10.0), (0.1, 16.0), (0.2, 16.5), (0.3, 26.5), (0.45, 50.0)]
+
+
+def over(method):
+    """A scalar method of the physics mapped over numpy arrays (the physics takes scalars:
+    it runs in the FMUs on the standard library alone)."""
+    return np.vectorize(method)
+
+
+def evaluate_over(coupling, *arrays) -> CouplingResult:
+    """``coupling.evaluate`` element by element: a CouplingResult of arrays."""
+    rows = [coupling.evaluate(*row) for row in zip(*np.broadcast_arrays(*arrays))]
+    return CouplingResult(*(np.array(column) for column in zip(*rows)))
 
 
 def trajectory(seed: int, n: int = 40001, duration: float = 1.0):
@@ -65,7 +77,7 @@ def test_power_balance_along_a_trajectory(name, seed):
     """int (tau1*w1 + tau2*w2) dt = -(V(end) - V(start)) - int b*thetadot^2 dt."""
     coupling = COUPLINGS[name]
     t, phi1, w1, phi2, w2 = trajectory(seed)
-    r = coupling.evaluate(phi1, w1, phi2, w2)
+    r = evaluate_over(coupling, phi1, w1, phi2, w2)
     power_in = r.tau1 * w1 + r.tau2 * w2
     stored = r.energy[-1] - r.energy[0]
     dissipated = simpson(r.dissipation, x=t)
@@ -74,7 +86,7 @@ def test_power_balance_along_a_trajectory(name, seed):
     assert abs(stored) > 1e-3 * scale  # the test sees the elastic energy, not only the damping
     assert abs(exchanged - (-stored - dissipated)) <= 1e-6 * scale
     # The same balance point by point: P_in + b*thetadot^2 = -T_el(theta) * thetadot = -dV/dt.
-    elastic = coupling.law.torque(r.deflection)
+    elastic = over(coupling.law.torque)(r.deflection)
     np.testing.assert_allclose(power_in + r.dissipation, -elastic * r.deflection_rate,
                                rtol=1e-9, atol=1e-9 * np.max(np.abs(power_in)))
 
@@ -83,7 +95,7 @@ def test_power_balance_along_a_trajectory(name, seed):
 def test_deflection_rate_is_the_time_derivative_of_the_deflection(name):
     coupling = COUPLINGS[name]
     t, phi1, w1, phi2, w2 = trajectory(5, n=200001)
-    r = coupling.evaluate(phi1, w1, phi2, w2)
+    r = evaluate_over(coupling, phi1, w1, phi2, w2)
     derivative = np.gradient(r.deflection, t)
     inner = slice(2, -2)
     np.testing.assert_allclose(derivative[inner], r.deflection_rate[inner], rtol=0, atol=1e-5)
@@ -93,19 +105,19 @@ def test_deflection_rate_is_the_time_derivative_of_the_deflection(name):
 def test_torques_are_minus_t_and_u12_t(name):
     coupling = COUPLINGS[name]
     t, phi1, w1, phi2, w2 = trajectory(3, n=2001)
-    r = coupling.evaluate(phi1, w1, phi2, w2)
+    r = evaluate_over(coupling, phi1, w1, phi2, w2)
     # Independently from the parts: theta = phi1 - Phi(phi2), thetadot = w1 - U12*w2.
-    position, ratio = coupling.transfer.evaluate(phi2)
+    position, ratio = over(coupling.transfer.evaluate)(phi2)
     theta = phi1 - position
     theta_dot = w1 - ratio * w2
-    torque = coupling.law.torque(theta) + coupling.damping * theta_dot
+    torque = over(coupling.law.torque)(theta) + coupling.damping * theta_dot
     assert np.array_equal(r.ratio, ratio)
     assert np.array_equal(r.deflection, theta)
     assert np.array_equal(r.deflection_rate, theta_dot)
     assert np.array_equal(r.torque, torque)
     assert np.array_equal(r.tau1, -torque)
     assert np.array_equal(r.tau2, ratio * torque)
-    assert np.array_equal(r.energy, coupling.law.energy(theta))
+    assert np.array_equal(r.energy, over(coupling.law.energy)(theta))
     np.testing.assert_allclose(r.dissipation, coupling.damping * theta_dot ** 2, rtol=1e-14, atol=0)
     # Scalar evaluation and the hot-path torques() agree with it.
     for k in range(0, len(t), 250):
@@ -178,19 +190,19 @@ def test_tabulated_law_passes_through_its_points(law):
 
 def test_tabulated_law_is_monotone(law):
     theta = np.linspace(-0.8, 0.8, 64001)
-    torque = law.torque(theta)
+    torque = over(law.torque)(theta)
     assert np.all(np.diff(torque) >= 0.0)
     # The first plateau stays between its end points (no overshoot of the cubic).
-    plateau = law.torque(np.linspace(0.1, 0.2, 1001))
+    plateau = over(law.torque)(np.linspace(0.1, 0.2, 1001))
     assert plateau.min() >= 16.0 - 1e-12 and plateau.max() <= 16.5 + 1e-12
-    assert np.all(law.stiffness_at(theta) >= 0.0)
+    assert np.all(over(law.stiffness_at)(theta) >= 0.0)
 
 
 def test_tabulated_law_is_odd(law):
     theta = np.linspace(0.0, 0.8, 4001)
-    assert np.array_equal(law.torque(-theta), -law.torque(theta))
-    assert np.array_equal(law.energy(-theta), law.energy(theta))
-    assert np.array_equal(law.stiffness_at(-theta), law.stiffness_at(theta))
+    assert np.array_equal(over(law.torque)(-theta), -over(law.torque)(theta))
+    assert np.array_equal(over(law.energy)(-theta), over(law.energy)(theta))
+    assert np.array_equal(over(law.stiffness_at)(-theta), over(law.stiffness_at)(theta))
 
 
 @pytest.mark.parametrize("x", [0.0, 0.01, 0.05, 0.07, 0.1, 0.15, 0.2, 0.299, 0.3, 0.44, 0.45, 0.5, 0.7, -0.33, -0.6])
@@ -204,18 +216,18 @@ def test_stiffness_is_the_derivative_of_the_torque(law):
     theta = np.linspace(0.003, 0.7, 701)
     theta = theta[np.min(np.abs(theta[:, None] - np.array([p[0] for p in TABLE_POINTS])[None, :]), axis=1) > 1e-4]
     e = 1e-7
-    derivative = (law.torque(theta + e) - law.torque(theta - e)) / (2.0 * e)
-    np.testing.assert_allclose(law.stiffness_at(theta), derivative, rtol=1e-5, atol=1e-4)
+    derivative = (over(law.torque)(theta + e) - over(law.torque)(theta - e)) / (2.0 * e)
+    np.testing.assert_allclose(over(law.stiffness_at)(theta), derivative, rtol=1e-5, atol=1e-4)
 
 
 def test_missing_origin_is_added_and_explicit_origin_accepted():
     with_origin = TabulatedElasticLaw.parse("0:0; " + TABLE)
     without = TabulatedElasticLaw.parse(TABLE)
     theta = np.linspace(-0.6, 0.6, 1201)
-    assert np.array_equal(with_origin.torque(theta), without.torque(theta))
+    assert np.array_equal(over(with_origin.torque)(theta), over(without.torque)(theta))
     # other separators of parse_table
-    assert np.array_equal(TabulatedElasticLaw.parse("0.05, 10\n0.1 16\n0.2:16.5;0.3:26.5;0.45:50").torque(theta),
-                          without.torque(theta))
+    assert np.array_equal(over(TabulatedElasticLaw.parse("0.05, 10\n0.1 16\n0.2:16.5;0.3:26.5;0.45:50").torque)(theta),
+                          over(without.torque)(theta))
 
 
 @pytest.mark.parametrize("table", [

@@ -380,3 +380,191 @@ def test_shaft_fmus_step_like_the_physics(components):
             got = run_shaft(c, tau, 1, h=2e-3, t0=n * 2e-3)[-1]
             phi, w, _ = shaft.advance(n * 2e-3, phi, w, tau, 2e-3)
             assert got[:2] == (phi, w), fmu
+
+
+def test_a_shafts_acceleration_follows_every_torque_written_between_steps(components):
+    # Only the acceleration depends on the torque: after a write it is recomputed alone,
+    # from the external torque of this time and state, and equals the physics' exactly.
+    params = {"seed": 5, "w_start": 35.0}
+    c = start(components("LoadShaft"), params)
+    shaft = catalogue.load_from(params)
+    vrs, values = c.real_buffer(["tau"])
+    c.do_step(0.0, 1e-3)
+    phi, w = c.get(["phi", "w"])
+    for tau in (100.0, -40.0, 1e12, 250.5):
+        values[0] = tau
+        c.write(vrs, values)
+        assert c.get(["a", "load_torque"]) == [shaft.rates(1e-3, phi, w, tau)[0], -shaft.rates(1e-3, phi, w, tau)[1]]
+
+
+def test_an_input_at_its_bound_is_taken_and_the_next_float_refused(components):
+    c = start(components("EngineShaft"))
+    vrs, values = c.real_buffer(["tau"])
+    values[0] = 1e12                      # the upper bound of tau, closed
+    c.write(vrs, values)
+    assert c.get(["tau"]) == [1e12]
+    values[0] = math.nextafter(1e12, math.inf)
+    with pytest.raises(FmuCallError):
+        c.write(vrs, values)
+    assert c.get(["tau"]) == [1e12]
+
+
+# --------------------------------------------------------------------------------------
+# The model code on the standard library alone (issue 13)
+# --------------------------------------------------------------------------------------
+
+# Runs an FMU's own Python (its resources folder): "bare", in an interpreter started with
+# -I -S (no site-packages) and numpy made unimportable, else with site-packages and numpy
+# loaded; initialise, 50 steps with moving inputs, every output after each step, printed
+# as repr-exact JSON.
+_BARE_RUN = r'''
+import json, math, sys
+resources, model, bare = sys.argv[1], sys.argv[2], sys.argv[3] == "bare"
+if bare:
+    sys.modules["numpy"] = None        # "import numpy" anywhere in the model now fails
+else:
+    import numpy                       # noqa: F401 - present, as in our environment
+sys.path.insert(0, resources)
+cls = getattr(__import__(open(resources + "/slavemodule.txt").read().strip()), model)
+errors = []
+slave = cls(instance_name="bare", resources=resources)
+slave.log = lambda message, status=None, *rest: errors.append(message) if status and int(status) >= 3 else None
+vr = {v.name: ref for ref, v in slave.vars.items()}
+inputs = [p.name for p in cls.INPUTS if p.kind == "real"]
+outputs = [vr[o.name] for o in cls.OUTPUTS]
+slave.setup_experiment(0.0)
+slave.enter_initialization_mode()
+slave.exit_initialization_mode()
+rows, t = [], 0.0
+for k in range(50):
+    values = {"tau": 80.0 * math.sin(0.3 * k), "tau_rate": 24.0 * math.cos(0.3 * k), "phi1": 0.04 * k + 0.01,
+              "w1": 40.0, "phi2": 0.038 * k, "w2": 38.0, "misalignment": 0.26}
+    slave.set_real([vr[n] for n in inputs], [values[n] for n in inputs])
+    assert slave.do_step(t, 1e-3), errors
+    t += 1e-3
+    rows.append(slave.get_real(outputs))
+print(json.dumps({"rows": rows, "errors": errors, "third_party": sorted(
+    m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] not in sys.stdlib_module_names
+    and not m.startswith(("_lever_", "pythonfmu", model)) and m != "__main__")}))
+'''
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("FreewheelRectifier",))
+def test_the_model_runs_on_the_standard_library_alone(fmu_dir, fmu, tmp_path):
+    """The FMU's Python (model and pythonfmu's Python part, both inside the FMU) in a bare
+    interpreter without numpy steps exactly as in our environment, which has numpy."""
+    import json
+    import subprocess
+    import sys
+    import zipfile
+
+    with zipfile.ZipFile(Path(fmu_dir) / f"{fmu}.fmu") as archive:
+        archive.extractall(tmp_path)
+        shipped = [r for r in archive.read("resources/requirements.txt").decode().splitlines()
+                   if r.strip() and not r.startswith("#")]
+    assert shipped == []
+    script = tmp_path / "bare_run.py"
+    script.write_text(_BARE_RUN)
+    runs = {}
+    for label, flags in (("bare", ["-I", "-S"]), ("with numpy", ["-I"])):
+        done = subprocess.run([sys.executable, *flags, str(script), str(tmp_path / "resources"), fmu, label],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, (label, done.stderr[-2000:])
+        runs[label] = json.loads(done.stdout)
+    bare = runs["bare"]
+    assert bare["errors"] == [] and bare["third_party"] == []
+    assert all(math.isfinite(x) for row in bare["rows"] for x in row)
+    assert bare["rows"] == runs["with numpy"]["rows"]
+
+
+# --------------------------------------------------------------------------------------
+# Serialized states restored into a fresh instance, after fmi2Reset, into another instance
+# --------------------------------------------------------------------------------------
+
+#: per FMU: parameters of the run that is saved, parameters of the "other" instance, and
+#: the inputs at step k (moving, so that a stale output or input would show)
+RESTORE_RUNS = {
+    "LeverCoupling": ({"stiffness": 900.0, "support_deformation": 0.04}, {"stiffness": 500.0},
+                      lambda k: {"phi1": 0.04 * k + 0.02, "w1": 40.0 + 0.1 * k, "phi2": 0.039 * k, "w2": 38.0,
+                                 "misalignment": 0.26 + 0.0007 * k}),
+    "EngineShaft": ({"inertia": 0.15}, {"inertia": 0.3},
+                    lambda k: {"tau": -100.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+    "LoadShaft": ({"seed": 3, "load_kind": "random"}, {"seed": 4},
+                  lambda k: {"tau": 110.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+    "MisalignmentSource": ({"table": "0:0.2; 1:0.3"}, {"table": "0:0.1; 1:0.1"}, lambda k: {}),
+    "FreewheelRectifier": ({}, {}, lambda k: {"tau": 0.5 * math.sin(0.2 * k)}),
+}
+
+
+class _Fmi:
+    """One fmpy FMU2Slave instance, driven by variable names."""
+
+    def __init__(self, fmu_dir, fmu: str, name: str):
+        from fmpy.fmi2 import FMU2Slave
+        from harness.component import unzipped
+
+        path = Path(fmu_dir) / f"{fmu}.fmu"
+        self.md = fmpy.read_model_description(str(path))
+        self.vr = {v.name: v for v in self.md.modelVariables}
+        self.slave = FMU2Slave(guid=self.md.guid, unzipDirectory=unzipped(path),
+                               modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.slave.instantiate(loggingOn=False)
+        self.outputs = [v.valueReference for v in self.md.modelVariables if v.causality == "output"]
+
+    def set(self, values: dict):
+        for name, value in values.items():
+            v = self.vr[name]
+            if v.type == "Real":
+                self.slave.setReal([v.valueReference], [float(value)])
+            elif v.type == "Integer":
+                self.slave.setInteger([v.valueReference], [int(value)])
+            else:
+                self.slave.setString([v.valueReference], [str(value)])
+
+    def start(self, parameters: dict):
+        self.set(parameters)
+        self.slave.setupExperiment(startTime=0.0)
+        self.slave.enterInitializationMode()
+        self.slave.exitInitializationMode()
+
+    def run(self, inputs, first: int, steps: int, h: float = 1e-3) -> list:
+        rows = []
+        for k in range(first, first + steps):
+            self.set(inputs(k))
+            self.slave.doStep(k * h, h)
+            rows.append(self.slave.getReal(self.outputs))
+        return rows
+
+    def free(self):
+        self.slave.terminate()
+        self.slave.freeInstance()
+
+
+@pytest.mark.parametrize("defaults", [True, False], ids=["default parameters", "parameters set"])
+@pytest.mark.parametrize("into", ["a fresh instance", "an instance after fmi2Reset", "another running instance"])
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("FreewheelRectifier",))
+def test_a_serialized_state_continues_exactly_wherever_it_is_restored(fmu_dir, fmu, into, defaults):
+    """FMI 2.0 lets an importer restore a serialized state into any instance of the FMU
+    (fmi2Instantiate, fmi2DeSerializeFMUstate, fmi2SetFMUstate, fmi2DoStep): the run goes
+    on exactly as the uninterrupted one, outputs bit for bit.  With default parameters a
+    fresh instance has nothing to rebuild from them: the model must still be built."""
+    parameters, other_parameters, inputs = RESTORE_RUNS[fmu]
+    if defaults:
+        parameters = {}
+    saved = _Fmi(fmu_dir, fmu, "saved")
+    target = _Fmi(fmu_dir, fmu, "target")
+    try:
+        saved.start(parameters)
+        saved.run(inputs, 0, 30)
+        data = saved.slave.serializeFMUstate(saved.slave.getFMUstate())
+        uninterrupted = saved.run(inputs, 30, 30)
+        if into != "a fresh instance":
+            target.start(other_parameters)
+            target.run(lambda k: inputs(k + 7), 0, 12)
+            if into == "an instance after fmi2Reset":
+                target.slave.reset()
+        target.slave.setFMUstate(target.slave.deSerializeFMUstate(data))
+        assert target.run(inputs, 30, 30) == uninterrupted
+    finally:
+        saved.free()
+        target.free()

@@ -42,23 +42,49 @@ def quad_integrals(resistance, t, h, points=None):
 # --------------------------------------------------------------------------------------
 
 
+def over(method):
+    """A scalar method of the physics mapped over numpy arrays (the physics takes scalars:
+    it runs in the FMUs on the standard library alone)."""
+    return np.vectorize(method, otypes=[float])
+
+
+def multisine(load: RandomLoad, t: np.ndarray) -> np.ndarray:
+    """The random load's resistance over an array, from its drawn tones, with numpy."""
+    return load.mean + sum(a * np.sin(f * t + p) for a, f, p in zip(load.weights, load.frequencies, load.phases))
+
+
 def test_random_load_is_reproducible_by_seed():
     t = np.linspace(0.0, 10.0, 20001)
     a, b = RandomLoad(107.5, 8.8, seed=7), RandomLoad(107.5, 8.8, seed=7)
-    assert np.array_equal(a.resistance(t, 0.0, 0.0), b.resistance(t, 0.0, 0.0))
+    assert np.array_equal(over(a.resistance)(t, 0.0, 0.0), over(b.resistance)(t, 0.0, 0.0))
     assert a.frequencies == b.frequencies and a.phases == b.phases and a.weights == b.weights
     assert a.integrals(1.0, 0.01) == b.integrals(1.0, 0.01)
     c = RandomLoad(107.5, 8.8, seed=8)
-    assert not np.allclose(a.resistance(t, 0.0, 0.0), c.resistance(t, 0.0, 0.0))
+    assert not np.allclose(over(a.resistance)(t, 0.0, 0.0), over(c.resistance)(t, 0.0, 0.0))
     # through the shared constructor, as the FMU and the reference build it
     d = load_model("random", 107.5, 8.8, seed=7)
-    assert np.array_equal(a.resistance(t, 0.0, 0.0), d.resistance(t, 0.0, 0.0))
+    assert np.array_equal(over(a.resistance)(t, 0.0, 0.0), over(d.resistance)(t, 0.0, 0.0))
 
 
-def test_random_load_scalar_and_array_agree():
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 7, 99, 123456, 2 ** 31 - 1])
+@pytest.mark.parametrize("tones", [1, 6, 7, 8, 9, 40, 129, 256])
+def test_random_load_draws_are_numpys_default_rng_bit_for_bit(seed, tones):
+    # The physics draws with its own PCG64/SeedSequence (lever.physics.numerics) since the
+    # FMUs left numpy: every seeded load is exactly the one numpy drew before.
+    band_low, band_high, amplitude = 2.0, 450.0, 8.8
+    rng = np.random.default_rng(seed)
+    frequencies = np.exp(rng.uniform(math.log(band_low), math.log(band_high), tones)).tolist()
+    phases = rng.uniform(0.0, 2.0 * math.pi, tones).tolist()
+    weights = rng.uniform(0.5, 1.0, tones)
+    load = RandomLoad(107.5, amplitude, seed, tones, band_low, band_high)
+    assert load.frequencies == frequencies and load.phases == phases
+    assert load.weights == (amplitude * weights / weights.sum()).tolist()
+
+
+def test_random_load_scalar_resistance_is_the_multisine():
     load = RandomLoad(107.5, 8.8, seed=3)
     t = np.linspace(0.0, 3.0, 301)
-    values = load.resistance(t, 0.0, 0.0)
+    values = multisine(load, t)
     for k in range(0, len(t), 17):
         assert load.resistance(float(t[k]), 0.0, 0.0) == pytest.approx(values[k], abs=1e-12)
         assert load.torque(float(t[k]), 0.0, 0.0) == -load.resistance(float(t[k]), 0.0, 0.0)
@@ -70,12 +96,34 @@ def test_random_load_stays_within_its_bound(seed, tones, band):
     mean, bound = 107.5, 8.8
     load = RandomLoad(mean, bound, seed=seed, tones=tones, band_low=band[0], band_high=band[1])
     t = np.linspace(0.0, 30.0, 600001)
-    deviation = np.abs(load.resistance(t, 0.0, 0.0) - mean)
+    deviation = np.abs(multisine(load, t) - mean)
     assert deviation.max() <= bound * (1.0 + 1e-12)
     assert deviation.max() >= 0.3 * bound  # the random part is really there
     assert sum(abs(w) for w in load.weights) == pytest.approx(bound, rel=1e-12)
     assert all(band[0] * (1 - 1e-12) <= f <= band[1] * (1 + 1e-12) for f in load.frequencies)
     assert len(load.frequencies) == tones
+
+
+def test_random_load_integrals_with_per_step_constants_are_the_direct_formula_bit_for_bit():
+    # integrals() takes what depends on the step size alone from a cache (the hot path of
+    # the load shaft): the same operations in the same order, so the same bits - also
+    # across the cache's overflow (more step sizes than it keeps).
+    load = RandomLoad(107.5, 8.8, seed=2, tones=9)
+
+    def direct(t, h):
+        from lever.physics.load import _one_minus_sinc_over_y, _sinc
+        impulse, second = load.mean * h, 0.5 * load.mean * h * h
+        for a, f, p in zip(load.weights, load.frequencies, load.phases):
+            x, start = f * h, f * t + p
+            impulse += a * h * math.sin(start + 0.5 * x) * _sinc(0.5 * x)
+            second += 0.5 * a * h * h * (math.sin(start + 0.25 * x) * _sinc(0.25 * x)
+                                         + math.cos(start + 0.5 * x) * _one_minus_sinc_over_y(0.5 * x))
+        return impulse, second
+
+    steps = [1e-3, 2.5e-4, 1e-6, 0.05] + [1e-4 * (1.0 + k / 97.0) for k in range(RandomLoad.STEP_CACHE + 5)]
+    for k, h in enumerate(steps * 2):
+        t = 0.37 * k
+        assert load.integrals(t, h) == direct(t, h), (t, h)
 
 
 def test_random_load_bad_band_is_refused():
@@ -135,8 +183,9 @@ def test_tabulated_load_interpolates_and_holds_its_ends():
     assert load.resistance(0.05, 0.0, 0.0) == pytest.approx(110.0)
     assert load.resistance(0.175, 0.0, 0.0) == pytest.approx(105.0)
     t = np.linspace(-1.0, 2.0, 3001)
-    np.testing.assert_allclose(load.resistance(t, 0.0, 0.0),
-                               [load.resistance(float(x), 0.0, 0.0) for x in t], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(over(load.resistance)(t, 0.0, 0.0),
+                               np.interp(t, [p[0] for p in LOAD_POINTS], [p[1] for p in LOAD_POINTS]),
+                               rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("table", ["0:100", "0.1:100; 0.1:120", "0.2:100; 0.1:120", "0.1:abc; 0.2:3"])
@@ -192,19 +241,38 @@ def test_fourier_load_of_the_mean_cycle_reproduces_the_averaged_series():
     for phi in ANGLES:
         assert load.resistance(0.0, phi, 39.0) == pytest.approx(_series(mean_row, phi), rel=1e-12)
     phi = np.array(ANGLES)
-    np.testing.assert_allclose(load.resistance(0.0, phi, 0.0), [_series(mean_row, p) for p in ANGLES], rtol=1e-12)
+    np.testing.assert_allclose(over(load.resistance)(0.0, phi, 0.0), [_series(mean_row, p) for p in ANGLES],
+                               rtol=1e-12)
     # Its mean over a revolution is M_mean.
     grid = 2.0 * np.pi * np.arange(256) / 256
-    assert np.mean(load.resistance(0.0, grid, 0.0)) == pytest.approx(mean_row["M_mean"], rel=1e-12)
+    assert np.mean(over(load.resistance)(0.0, grid, 0.0)) == pytest.approx(mean_row["M_mean"], rel=1e-12)
 
 
 def test_fourier_text_round_trip():
     load = read_harmonics(HARMONICS, 3)
     again = FourierLoad.parse(load.to_text())
     phi = np.linspace(-7.0, 7.0, 141)
-    assert np.array_equal(again.resistance(0.0, phi, 0.0), load.resistance(0.0, phi, 0.0))
+    assert np.array_equal(over(again.resistance)(0.0, phi, 0.0), over(load.resistance)(0.0, phi, 0.0))
     model = load_model("fourier", 0.0, fourier=load.to_text())
-    assert np.array_equal(model.resistance(0.0, phi, 0.0), load.resistance(0.0, phi, 0.0))
+    assert np.array_equal(over(model.resistance)(0.0, phi, 0.0), over(load.resistance)(0.0, phi, 0.0))
+
+
+@pytest.mark.parametrize("m", [3, 4, 7, 12, 25, 36])
+def test_fourier_series_from_samples_agrees_with_numpys_rfft(m):
+    # A direct DFT (math.fsum per term) since the FMUs left numpy: pocketfft's result to
+    # rounding, 1e-14 of the ordinates.
+    from lever.physics.load import fourier_from_samples
+    y = 200.0 + 30.0 * np.random.default_rng(m).standard_normal(m)
+    series = fourier_from_samples(y.tolist())
+    spectrum = np.fft.rfft(y) / m
+    cosines = 2.0 * spectrum[1:].real
+    sines = -2.0 * spectrum[1:].imag
+    if m % 2 == 0:
+        cosines[-1] *= 0.5
+        sines = np.append(sines[:-1], 0.0)
+    assert series.mean == pytest.approx(spectrum[0].real, rel=1e-15)
+    np.testing.assert_allclose(series.cosines, cosines, rtol=0, atol=1e-14 * np.max(np.abs(y)))
+    np.testing.assert_allclose(series.sines, sines, rtol=0, atol=1e-14 * np.max(np.abs(y)))
 
 
 def test_missing_cycle_is_refused():

@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 
 from lever.physics import catalogue
 from lever.physics.elastic import LinearElasticLaw
@@ -133,7 +132,7 @@ def bounds(scene: scenes.Scene) -> list[Bound]:
     if "torque" in limits:
         torque, why = limits["torque"], "set in the scene's [limits]"
     else:
-        ratio = float(np.max(coupling.transfer.ratio(2.0 * np.pi * np.arange(1024) / 1024)))
+        ratio = max(coupling.transfer.ratio(2.0 * math.pi * k / 1024) for k in range(1024))
         energy = 0.5 * (engine.inertia + load.inertia) * speed * speed
         theta = _deflection_at_energy(coupling.law, energy) if math.isfinite(energy) else math.inf
         torque = max(1.0, ratio) * (float(coupling.law.torque(theta)) + coupling.damping * (1.0 + ratio) * speed)

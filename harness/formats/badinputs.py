@@ -4,8 +4,13 @@ with fmpy's ``FMU2Slave`` (``lever badinputs``, ``tests/test_badinputs.py``).
 
 Every case must end the same way: the offending call returns fmi2Error (or fmi2Discard),
 the FMU logs a message that names the variable (or the call) and what is allowed, a
-refused value is not applied, the instance stays usable where FMI lets it, nothing is
-ever fatal, and the instance is freed cleanly.  The importing process - the one running
+refused call changes no variable (every Real is read before and after it), the instance
+stays usable where FMI lets it, nothing is ever fatal, and the instance is freed cleanly.
+
+Besides bad values: fmi2Set* on outputs, after fmi2Terminate, with the wrong type or an
+unknown value reference, a multi-value call with one bad value (nothing of it applied),
+and serialized states damaged every way ``_STATE_EDITS`` lists (header, length, format,
+model, GUID, nesting, content).  The importing process - the one running
 the corpus - survives all of it.
 
 Cases for the declared parameters and inputs are generated from the catalogue (every
@@ -221,11 +226,115 @@ def _by_hand() -> list[Case]:
             Case(fmu, "out-of-order call", "non-finite start time", "instantiated",
                  ("call", "fmi2SetupExperiment", (math.nan,)), ("start time", "finite")),
             Case(fmu, "bad state", "fmi2SetFMUstate of bytes that are no state", "stepping",
-                 ("call", "deserialize", (b"\x00garbage{",)), ("fmi2SetFMUstate", "not a state", "do not decode")),
+                 ("call", "deserialize", (b"\x00garbage{",)), ("fmi2SetFMUstate", "not a serialized state")),
             Case(fmu, "bad state", "fmi2SetFMUstate of a state of another FMU", "stepping",
-                 ("call", "foreign-state", ()), ("fmi2SetFMUstate", "not a state of", "variables differ")),
+                 ("call", "foreign-state", ()), ("fmi2SetFMUstate", "not a state of", "a state of")),
         ]
+        cases += [Case(fmu, "bad state", f"fmi2SetFMUstate of its own state, {label}", "stepping",
+                       ("call", "edited-state", (edit,)), ("fmi2SetFMUstate",) + fragments)
+                  for edit, (label, fragments) in _STATE_EDITS.items()]
+        cases += _boundary_cases(fmu)
     return cases
+
+
+#: Damage done to a state the instance serialized itself (``_edited_state``):
+#: edit -> (label, fragments of the refusal's message).
+_STATE_EDITS = {
+    "truncated": ("truncated in the middle", ("truncated",)),
+    "header-only": ("cut after its header", ("truncated",)),
+    "padded": ("with bytes appended", ("padded",)),
+    "format": ("of an unknown format version", ("format",)),
+    "model": ("whose header names another model", ("not a state of", "a state of")),
+    "guid": ("whose header names another GUID", ("GUID",)),
+    "nested": ("with deeply nested content", ("nested",)),
+    "not-json": ("with content that is no JSON", ("does not decode",)),
+    "nan-input": ("with a NaN input", ("not finite",)),
+    "parameter-range": ("with a parameter out of its range", ("outside",)),
+    "parameter-type": ("with a parameter of the wrong type", ("is not a",)),
+    "missing-variable": ("lacking a variable", ("missing",)),
+    "time": ("with a non-finite time", ("time",)),
+    "phase": ("with an unknown phase", ("phase",)),
+    "internal": ("with a malformed internal state", ("internal state",)),
+}
+
+
+def _edited_state(data: bytes, edit: str, fmu: str) -> bytes:
+    """A serialized state of ours with one kind of damage (``_STATE_EDITS``)."""
+    import json
+    magic, rest = data.split(b" ", 1)
+    header_text, payload = rest.split(b"\n", 1)
+    header, state = json.loads(header_text), json.loads(payload)
+    if edit == "truncated":
+        return data[: len(data) // 2]
+    if edit == "header-only":
+        return data[: len(data) - len(payload)]
+    if edit == "padded":
+        return data + b"  "
+    if edit == "nested":
+        payload = b"[" * 100_000 + b"]" * 100_000
+    elif edit == "not-json":
+        payload = b"{time: soon}"
+    else:
+        variables = state["variables"]
+        parameters, inputs = DECLARED[fmu]
+        first_real_parameter = next(p.name for p in parameters if p.kind == "real")
+        if edit == "format":
+            header["format"] = 99
+        elif edit == "model":
+            header["model"] = "SomeOtherModel"
+        elif edit == "guid":
+            header["guid"] = "{00000000-0000-0000-0000-000000000000}"
+        elif edit == "nan-input":
+            variables[inputs[0]] = math.nan
+        elif edit == "parameter-range":
+            variables[first_real_parameter] = -1.0e300
+        elif edit == "parameter-type":
+            variables[first_real_parameter] = "heavy"
+        elif edit == "missing-variable":
+            del variables[next(iter(variables))]
+        elif edit == "time":
+            state["time"] = math.inf
+        elif edit == "phase":
+            state["phase"] = "flying"
+        elif edit == "internal":
+            state["internal"] = {"bogus": [1, 2]}
+        payload = json.dumps(state, allow_nan=True).encode()
+    header["length"] = len(payload)
+    return magic + b" " + json.dumps(header).encode() + b"\n" + payload
+
+
+def _boundary_cases(fmu: str) -> list[Case]:
+    """fmi2Set* on what FMI 2.0 does not let an importer set, and in states where it may not."""
+    parameters, inputs = DECLARED[fmu]
+    outputs = _OUTPUTS[fmu]
+    cases = []
+    for name in outputs:
+        for phase, value in (("stepping", 1.5), ("initialization", math.nan)):
+            cases.append(Case(fmu, "set on an output", f"fmi2SetReal on output {name} = {value} ({phase})", phase,
+                              ("set", name, value), (f"'{name}'", "cannot be set", "output")))
+    first_input = inputs[0]
+    cases += [
+        Case(fmu, "set on an output", f"one call setting input {first_input} and output {outputs[0]}", "stepping",
+             ("call", "set-many", ((first_input, 0.25), (outputs[0], 2.0))), (f"'{outputs[0]}'", "cannot be set",
+                                                                               "nor anything else")),
+        Case(fmu, "set in a wrong state", f"input {first_input} set after fmi2Terminate", "stepping",
+             ("call", "terminate-then-set", (first_input, 0.25)), (f"'{first_input}'", "fmi2Terminate")),
+        Case(fmu, "wrong type or reference", f"fmi2SetInteger on the Real input {first_input}", "stepping",
+             ("call", "set-as", ("setInteger", first_input, 1)), (f"'{first_input}'", "Real variable")),
+        Case(fmu, "wrong type or reference", f"fmi2SetBoolean on the Real input {first_input}", "stepping",
+             ("call", "set-as", ("setBoolean", first_input, True)), (f"'{first_input}'", "Real variable")),
+        Case(fmu, "wrong type or reference", "fmi2SetReal of an unknown value reference", "stepping",
+             ("call", "set-unknown", ()), ("value reference", "no variable")),
+    ]
+    return cases
+
+
+#: FMU -> its outputs (as the adapters declare them)
+_OUTPUTS = {
+    "LeverCoupling": ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"),
+    "EngineShaft": ("phi", "w", "a", "engine_torque", "engine_work"),
+    "LoadShaft": ("phi", "w", "a", "load_torque", "load_work"),
+}
 
 
 def corpus() -> list[Case]:
@@ -295,6 +404,11 @@ class _Slave:
         setter = {"Real": ("setReal", float), "Integer": ("setInteger", int), "String": ("setString", str)}[v.type]
         return self.call(setter[0], [v.valueReference], [setter[1](value)])
 
+    def reals(self) -> dict:
+        """Every Real variable's value (what a refused call must leave as it was)."""
+        names = [n for n, v in self.variables.items() if v.type == "Real"]
+        return dict(zip(names, self.fmu.getReal([self.variables[n].valueReference for n in names])))
+
     def get(self, name: str):
         v = self.variables[name]
         getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger, "String": self.fmu.getString}[v.type]
@@ -355,8 +469,22 @@ def _act(slave: _Slave, case: Case, fmu_dir: Path) -> int:
     if function == "terminate-then-step":
         slave.call("terminate")
         return slave.call("doStep", slave.time, 1e-3)
-    if function in ("deserialize", "foreign-state"):
-        data = args[0] if function == "deserialize" else _foreign_state_bytes(case, fmu_dir)
+    if function == "set-many":
+        return slave.call("setReal", [slave.variables[n].valueReference for n, _ in args], [v for _, v in args])
+    if function == "terminate-then-set":
+        slave.call("terminate")
+        return slave.set(*args)
+    if function == "set-as":
+        setter, name, value = args
+        return slave.call(setter, [slave.variables[name].valueReference], [value])
+    if function == "set-unknown":
+        return slave.call("setReal", [max(v.valueReference for v in slave.variables.values()) + 1000], [1.0])
+    if function in ("deserialize", "foreign-state", "edited-state"):
+        if function == "edited-state":
+            own = bytes(slave.fmu.serializeFMUstate(slave.fmu.getFMUstate()))
+            data = _edited_state(own, args[0], case.fmu)
+        else:
+            data = args[0] if function == "deserialize" else _foreign_state_bytes(case, fmu_dir)
         from fmpy.fmi1 import FMICallException
         try:
             state = slave.fmu.deSerializeFMUstate(data)
@@ -377,6 +505,7 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         if slave.advance(case.phase) > FMI2_WARNING:
             outcome.problems.append(f"reaching phase {case.phase} failed: {slave.log[-1:]}")
         before = slave.get(case.action[1]) if case.action[0] == "set" else None
+        everything = slave.reals() if case.refused_by == "action" else None
         seen = len(slave.log)
         status = _act(slave, case, fmu_dir)
         if case.refused_by == "exit":
@@ -401,7 +530,13 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
                 after = slave.get(case.action[1])
                 if not (after == before or (isinstance(before, float) and math.isnan(before) and math.isnan(after))):
                     outcome.problems.append(f"the refused value was applied: {before!r} -> {after!r}")
-            if case.phase == "stepping" and case.action[1] != "terminate-then-step" and not slave.step_ok():
+            after = slave.reals()
+            changed = [n for n, x in everything.items()
+                       if not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
+            if changed:
+                outcome.problems.append(f"the refused call changed {', '.join(changed)}")
+            if (case.phase == "stepping" and case.action[1] not in ("terminate-then-step", "terminate-then-set")
+                    and not slave.step_ok()):
                 outcome.problems.append(f"the instance did not step on after the refusal: {slave.log[-1:]}")
     except Exception as error:  # noqa: BLE001 - a case that breaks the runner is a failed case
         outcome.problems.append(f"the importer saw an exception: {error!r}")

@@ -254,10 +254,12 @@ def _coupling_exact(t):
     out = {k: np.empty(len(t)) for k in ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power")}
     for alpha in _ALPHA:
         rows = u["misalignment"] == alpha
-        r = catalogue.coupling_from({}, misalignment=alpha).evaluate(
-            u["phi1"][rows], u["w1"][rows], u["phi2"][rows], u["w2"][rows])
-        for key, value in zip(out, (r.tau1, r.tau2, r.ratio, r.deflection, r.energy, r.dissipation)):
-            out[key][rows] = value
+        coupling = catalogue.coupling_from({}, misalignment=alpha)
+        # the physics takes scalars: evaluated row by row
+        results = [coupling.evaluate(*row) for row in zip(u["phi1"][rows], u["w1"][rows], u["phi2"][rows],
+                                                           u["w2"][rows])]
+        for key, field in zip(out, ("tau1", "tau2", "ratio", "deflection", "energy", "dissipation")):
+            out[key][rows] = [getattr(r, field) for r in results]
     return out
 
 

@@ -108,11 +108,12 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
     p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
     t = solution.t
+    # the physics takes scalars (it runs in the FMUs on the standard library alone)
     if misalignment is None:
-        r = coupling.evaluate(p1, v1, p2, v2)
+        rows = [coupling.evaluate(*row) for row in zip(p1, v1, p2, v2)]
     else:
         rows = [evaluate(*row) for row in zip(p1, v1, p2, v2, t)]
-        r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
+    r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
     a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
     a2, m2 = _shaft_rates(load, t, p2, v2, np.asarray(r.tau2))
     e, c, l = engine_name, coupling_name, load_name

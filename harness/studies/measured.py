@@ -299,10 +299,12 @@ def predict_transmitted(driven: Table, conditions: Conditions, cycle: int | str 
     coupling ties its two torques algebraically; nothing else enters)."""
     transfer = transfer_of(conditions)
     marks = np.radians(driven.angles_deg if angles_deg is None else angles_deg)
-    at_marks = cycle_of(driven, cycle) / transfer.ratio(marks)
+    ratio = np.vectorize(transfer.ratio, otypes=[float])     # the physics takes scalars
+    at_marks = cycle_of(driven, cycle) / ratio(marks)
     dense_deg = np.arange(0.0, 360.0 + 1e-9, 2.0)
     phi = np.radians(dense_deg)
-    dense = load_series(driven, cycle).resistance(0.0, phi, 0.0) / transfer.ratio(phi)
+    series = load_series(driven, cycle)
+    dense = np.array([series.resistance(0.0, p, 0.0) for p in phi]) / ratio(phi)
     return Prediction(np.asarray(at_marks, dtype=float), dense_deg, np.asarray(dense, dtype=float), None, 0.0)
 
 

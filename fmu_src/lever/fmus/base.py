@@ -14,11 +14,14 @@ from __future__ import annotations
 import functools
 import json
 import math
+import operator
+import re
 import traceback
+from pathlib import Path
 from typing import NamedTuple, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
-from pythonfmu import Fmi2Slave, Real, Integer, String, Fmi2Causality, Fmi2Variability, Fmi2Initial
+from pythonfmu import Boolean, Fmi2Slave, Real, Integer, String, Fmi2Causality, Fmi2Variability, Fmi2Initial
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
@@ -98,13 +101,81 @@ def guarded(default=None):
 
 
 class _OwnState(dict):
-    """A state an instance took itself (``fmi2GetFMUstate``); deserialized bytes become a
-    plain dict and are validated before they are restored."""
-    __slots__ = ("owner",)
+    """A state an instance took itself (``fmi2GetFMUstate``), with the model and GUID
+    its serialized form carries in its header."""
+    __slots__ = ("owner", "model", "guid")
+
+
+class _SerializedState:
+    """Bytes given to ``fmi2DeSerializeFMUstate``, kept as they are: pythonfmu calls the
+    deserializer on the class, where nothing can be logged and an exception is fatal, so
+    they are judged (header, then content) by ``fmi2SetFMUstate`` on the instance."""
+    __slots__ = ("data",)
+
+    def __init__(self, data: bytes):
+        self.data = data
+
+
+#: A serialized state: ``STATE_MAGIC``, a space, a JSON header (format, model, GUID,
+#: length of the payload), a newline, the payload (JSON of the state).
+STATE_MAGIC = b"lever-fmu-state"
+STATE_FORMAT = 1
+_HEADER_LIMIT = 1024     # bytes the header line may take
+_NESTING_LIMIT = 4       # a state is {"variables": {...}, "internal": {"y": [...]}}
+
+
+def _nesting(data: bytes) -> int:
+    """The deepest nesting of JSON arrays and objects in ``data`` (strings skipped):
+    judged before parsing, so deeply nested bytes never reach the recursive parser."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in data:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:          # backslash
+                escaped = True
+            elif byte == 0x22:          # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):      # [ {
+            depth += 1
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest
+
+
+_GUIDS: dict[str, str] = {}
+
+
+def _guid_of(resources) -> str:
+    """The GUID in the model description of the unpacked FMU whose resources folder is
+    ``resources`` ("" where there is none to read: the model run outside an FMU)."""
+    key = str(resources or "")
+    if key not in _GUIDS:
+        guid = ""
+        if key:
+            try:
+                text = (Path(key).parent / "modelDescription.xml").read_text(encoding="utf-8", errors="replace")
+                found = re.search(r'\bguid\s*=\s*"([^"]*)"', text)
+                guid = found.group(1) if found else ""
+            except (OSError, ValueError):
+                pass
+        _GUIDS[key] = guid
+    return _GUIDS[key]
 
 
 def _nan_values(self, vrs):
     return [math.nan] * len(vrs)
+
+
+# What must be recomputed before outputs are read (``LeverSlave._dirty``).
+_CLEAN = 0
+_INPUTS_CHANGED = 1      # only outputs that depend on inputs (``_compute_input_outputs``)
+_ALL = 2                 # everything: time, state or model changed
+_LIVE = ("initialization", "stepping")
 
 
 class LeverSlave(Fmi2Slave):
@@ -140,7 +211,7 @@ class LeverSlave(Fmi2Slave):
         self.description = self.DESCRIPTION
         self._phase = "instantiated"   # -> initialization -> stepping (-> terminated)
         self._time = 0.0
-        self._dirty = True             # outputs must be recomputed before they are read
+        self._dirty = _ALL             # what must be recomputed before outputs are read
         self._build_error = None
         self._declared = {}
         for p in self.PARAMETERS:
@@ -153,6 +224,23 @@ class LeverSlave(Fmi2Slave):
                                         variability=Fmi2Variability.continuous,
                                         initial=Fmi2Initial.calculated, description=o.description))
             self._declared[o.name] = o
+        # value reference -> the declared parameter or input it sets (nothing else may be
+        # set: FMI 2.0 allows fmi2Set* on parameters and inputs only)
+        self._settable = {vr: self._declared[v.name] for vr, v in self.vars.items()
+                          if isinstance(self._declared.get(v.name), Parameter)}
+        self._built_with = None        # the parameter values the model was built with
+        # The hot path, mapped once: value reference -> attribute name of each Real, and
+        # of each real input its name and closed bounds (open ones moved in by an ulp), so
+        # that a good value costs one comparison; anything else takes _set_values's path,
+        # which says what is wrong.
+        self._real_names = {vr: v.name for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._fast_inputs = {}
+        for vr, p in self._settable.items():
+            if p.kind == "real" and not p.fixed:
+                low = math.nextafter(p.low, math.inf) if p.low_open else p.low
+                high = math.nextafter(p.high, -math.inf) if p.high_open else p.high
+                self._fast_inputs[vr] = (p.name, low, high)
+        self._outputs_of = operator.attrgetter(*(o.name for o in self.OUTPUTS)) if self.OUTPUTS else None
 
     # -- declaration ----------------------------------------------------------------------
     def _declare(self, p: Parameter, causality):
@@ -163,27 +251,57 @@ class LeverSlave(Fmi2Slave):
         else:
             variability = Fmi2Variability.continuous
         self.register_variable(kind(p.name, causality=causality, variability=variability, start=p.default,
-                                    description=p.description, setter=self._setter(p)))
+                                    description=p.description))
         self._declared[p.name] = p
 
-    def _setter(self, p: Parameter):
-        def set_value(value):
+    _KINDS = {Real: "Real", Integer: "Integer", String: "String", Boolean: "Boolean"}
+
+    def _set_values(self, call: str, kind, vrs, values):
+        """``fmi2Set<kind>``: every value is judged first - the variable exists, is of
+        that type, may be set in this state (FMI 2.0 CS: parameters before the end of
+        initialisation, inputs also while stepping, nothing after fmi2Terminate), lies in
+        its range - and applied only when all are good: a refused call changes nothing."""
+        if len(vrs) != len(values):
+            self._error(f"{call}: {len(vrs)} value references but {len(values)} values; nothing was applied")
+            return
+        checked = []
+        for vr, value in zip(vrs, values):
+            var = self.vars.get(vr)
+            if var is None:
+                self._error(f"{call}: value reference {vr} is no variable of {type(self).__name__}; "
+                            "nothing of this call was applied")
+                return
+            if not isinstance(var, kind):
+                self._error(f"{call}: '{var.name}' (value reference {vr}) is a {self._KINDS[type(var)]} variable; "
+                            "nothing of this call was applied")
+                return
+            p = self._settable.get(vr)
+            if p is None:
+                causality = var.causality.name
+                self._error(f"{call}: '{var.name}' is {'an' if causality[0] in 'aeiou' else 'a'} {causality} "
+                            f"({var.variability.name}) and cannot be "
+                            "set (FMI 2.0 lets an importer set parameters and inputs only); the value "
+                            f"{value!r} was not applied, nor anything else of this call")
+                return
+            if self._phase == "terminated":
+                self._error(f"{call}: '{p.name}' cannot be set after fmi2Terminate (the value {value!r} was not "
+                            "applied)")
+                return
             if p.fixed and self._phase not in ("instantiated", "initialization"):
                 self._error(f"parameter '{p.name}' is fixed: it cannot be changed after initialisation "
-                            f"(the value {value!r} was not applied)")
+                            f"(the value {value!r} was not applied, nor anything else of this call)")
                 return
-            # check() judges and converts in one pass: this runs at every input set of every step
             try:
-                checked = p.check(value)
+                checked.append((p, p.check(value)))
             except ParameterError as error:
-                self._error(f"{error}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r}")
+                self._error(f"{error}; the value was not applied, '{p.name}' stays {getattr(self, p.name)!r} "
+                            "(nor was anything else of this call)")
                 return
-            setattr(self, p.name, checked)
-            self._dirty = True
+        for p, value in checked:
+            setattr(self, p.name, value)
             if p.fixed:
                 self._model_stale = True
-
-        return set_value
+        self._dirty = _ALL if any(p.fixed for p, _ in checked) else max(self._dirty, _INPUTS_CHANGED)
 
     def _error(self, message: str):
         self.log(message, Fmi2Status.error)
@@ -242,7 +360,7 @@ class LeverSlave(Fmi2Slave):
             self._error(f"fmi2DoStep at t = {current_time:.9g} s, h = {step_size:.3g} s: {failure}")
             return False
         self._time = current_time + step_size
-        self._dirty = True
+        self._dirty = _ALL
         return True
 
     @guarded()
@@ -251,13 +369,33 @@ class LeverSlave(Fmi2Slave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        if self._dirty and self._phase in ("initialization", "stepping"):
+        if self._dirty and self._phase in _LIVE:
             self._refresh()
-        return super().get_real(vrs)
+        names = self._real_names
+        try:
+            return [float(getattr(self, names[vr])) for vr in vrs]
+        except KeyError:
+            unknown = next(vr for vr in vrs if vr not in names)
+            self._error(f"fmi2GetReal: value reference {unknown} is no Real variable of {type(self).__name__}")
+            return _nan_values(self, vrs)
 
     @guarded()
     def set_real(self, vrs, values):
-        super().set_real(vrs, values)
+        # The hot path: inputs in range while the FMU runs, applied without further ado;
+        # anything else is judged (and refused with its reason) by _set_values.
+        fast = self._fast_inputs
+        if self._phase != "terminated" and len(vrs) == len(values):
+            for vr, x in zip(vrs, values):
+                entry = fast.get(vr)
+                if entry is None or not entry[1] <= x <= entry[2]:
+                    break
+            else:
+                for vr, x in zip(vrs, values):
+                    setattr(self, fast[vr][0], x)
+                if not self._dirty:
+                    self._dirty = _INPUTS_CHANGED
+                return
+        self._set_values("fmi2SetReal", Real, vrs, values)
 
     @guarded(default=_nan_values)
     def get_integer(self, vrs):
@@ -265,7 +403,7 @@ class LeverSlave(Fmi2Slave):
 
     @guarded()
     def set_integer(self, vrs, values):
-        super().set_integer(vrs, values)
+        self._set_values("fmi2SetInteger", Integer, vrs, values)
 
     @guarded(default=lambda self, vrs: [""] * len(vrs))
     def get_string(self, vrs):
@@ -273,7 +411,7 @@ class LeverSlave(Fmi2Slave):
 
     @guarded()
     def set_string(self, vrs, values):
-        super().set_string(vrs, values)
+        self._set_values("fmi2SetString", String, vrs, values)
 
     @guarded(default=lambda self, vrs: [False] * len(vrs))
     def get_boolean(self, vrs):
@@ -281,7 +419,7 @@ class LeverSlave(Fmi2Slave):
 
     @guarded()
     def set_boolean(self, vrs, values):
-        super().set_boolean(vrs, values)
+        self._set_values("fmi2SetBoolean", Boolean, vrs, values)
 
     # -- model construction and outputs -----------------------------------------------------
     _model_stale = True
@@ -294,21 +432,33 @@ class LeverSlave(Fmi2Slave):
             if reset:
                 self._reset_state()
             self._build_error = None
+            self._built_with = self._values()
         except ParameterError as error:
             self._build_error = str(error)
+            self._built_with = None
             if report:
                 self._error(str(error))
         self._model_stale = False
-        self._dirty = True
+        self._dirty = _ALL
 
     def _refresh(self):
         if self._build_error is None and not self._model_stale:
-            self._compute_outputs()
-            self._dirty = False
+            if self._dirty == _ALL:
+                self._compute_outputs()
+            else:
+                self._compute_input_outputs()
+            self._dirty = _CLEAN
+            # One test for all outputs: their sum is finite unless one is not (or the sum
+            # overflows, which the test below sorts out).
+            if self._outputs_of is None:
+                return
+            total = sum(self._outputs_of(self)) if len(self.OUTPUTS) > 1 else self._outputs_of(self)
+            if total - total == 0.0:
+                return
             bad = [o.name for o in self.OUTPUTS if not math.isfinite(getattr(self, o.name))]
             if bad:
                 # Reported at every read until the inputs change: never a silent NaN.
-                self._dirty = True
+                self._dirty = _ALL
                 inputs = ", ".join(f"{p.name} = {getattr(self, p.name)!r}" for p in self.INPUTS)
                 self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with inputs "
                             f"{inputs}: the inputs are beyond what the model can represent")
@@ -322,6 +472,10 @@ class LeverSlave(Fmi2Slave):
     def _compute_outputs(self):
         raise NotImplementedError
 
+    def _compute_input_outputs(self):
+        """Recompute what depends on the inputs after only they changed (default: all)."""
+        self._compute_outputs()
+
     def _advance(self, t, h):
         raise NotImplementedError
 
@@ -329,8 +483,15 @@ class LeverSlave(Fmi2Slave):
     def _internal_state(self) -> dict:
         return {}
 
+    def _internal_problem(self, internal) -> str | None:
+        """Why ``internal`` (from a serialized state) is not this model's internal state."""
+        return None if internal == {} else f"internal state {internal!r} where this model keeps none"
+
     def _restore_internal_state(self, state: dict):
         pass
+
+    def _guid(self) -> str:
+        return _guid_of(self.resources)
 
     @guarded(default=dict)
     def _get_fmu_state(self):
@@ -340,67 +501,126 @@ class LeverSlave(Fmi2Slave):
             variables={name: getattr(self, name) for name in self._declared},
             internal=self._internal_state(),
         )
-        state.owner = self
+        state.owner, state.model, state.guid = self, type(self).__name__, self._guid()
         return state
 
+    def _parse_serialized(self, data: bytes) -> tuple[dict | None, str | None]:
+        """(state, None) from serialized bytes, or (None, why they are no state of this FMU)."""
+        if not data.startswith(STATE_MAGIC + b" "):
+            return None, f"the bytes do not start with {STATE_MAGIC.decode()!r} (not a serialized state of a lever FMU)"
+        end = data.find(b"\n", 0, _HEADER_LIMIT)
+        if end < 0:
+            return None, f"the state's header is not terminated within {_HEADER_LIMIT} bytes (truncated or malformed)"
+        try:
+            header = json.loads(data[len(STATE_MAGIC) + 1:end].decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as error:
+            return None, f"the state's header does not decode ({type(error).__name__}: {error})"
+        if not (isinstance(header, dict) and set(header) == {"format", "model", "guid", "length"}):
+            return None, f"the state's header {header!r} lacks format, model, guid or length"
+        if header["format"] != STATE_FORMAT:
+            return None, f"state format {header['format']!r}; this FMU reads format {STATE_FORMAT}"
+        if header["model"] != type(self).__name__:
+            return None, f"not a state of {type(self).__name__}: it is a state of {header['model']!r}"
+        guid = self._guid()
+        if header["guid"] and guid and header["guid"] != guid:
+            return None, (f"not a state of this build of {type(self).__name__}: GUID {header['guid']!r}, "
+                          f"this FMU's is {guid!r}")
+        payload = data[end + 1:]
+        if header["length"] != len(payload):
+            return None, (f"the state's header announces {header['length']!r} bytes of content, "
+                          f"{len(payload)} follow (truncated or padded)")
+        if _nesting(payload) > _NESTING_LIMIT:
+            return None, f"the state's content is nested deeper than {_NESTING_LIMIT} levels"
+        try:
+            return json.loads(payload.decode("utf-8")), None
+        except (UnicodeDecodeError, ValueError, RecursionError) as error:
+            return None, f"the state's content does not decode ({type(error).__name__}: {error})"
+
     def _state_problem(self, state) -> str | None:
-        """Why ``state`` is not a state of this FMU (None when it is one)."""
-        if isinstance(state, dict) and "not_a_state" in state:
-            return f"not a state of this FMU: {state['not_a_state']}"
+        """Why ``state`` is not a complete, valid state of this FMU (None when it is one):
+        every part is judged before anything is applied."""
         if not isinstance(state, dict) or set(state) != {"time", "phase", "variables", "internal"}:
-            return "not a state of this FMU"
+            return "not a state of this FMU (it needs time, phase, variables and internal)"
         variables = state["variables"]
         if not isinstance(variables, dict) or set(variables) != set(self._declared):
             names = set(variables) if isinstance(variables, dict) else set()
             return (f"not a state of {type(self).__name__}: its variables differ (unknown: "
-                    f"{', '.join(sorted(names - set(self._declared))) or '-'}; missing: "
+                    f"{', '.join(sorted(map(str, names - set(self._declared)))) or '-'}; missing: "
                     f"{', '.join(sorted(set(self._declared) - names)) or '-'})")
         if state["phase"] not in ("instantiated", "initialization", "stepping", "terminated"):
             return f"not a state of this FMU: unknown phase {state['phase']!r}"
-        if not (isinstance(state["time"], float) and math.isfinite(state["time"])):
+        if not (type(state["time"]) is float and math.isfinite(state["time"])):
             return f"not a state of this FMU: time {state['time']!r} is not a finite number"
-        for p in self.PARAMETERS:
-            message = p.problem(variables[p.name])
+        for name, spec in self._declared.items():
+            value = variables[name]
+            kind = getattr(spec, "kind", "real")
+            if type(value) not in {"real": (float, int), "integer": (int,), "string": (str,)}[kind]:
+                return f"not a state of this FMU: '{name}' = {value!r} is not a{'n' if kind == 'integer' else ''} {kind}"
+            message = spec.problem(value) if isinstance(spec, Parameter) else (
+                None if math.isfinite(value) else f"output '{name}' = {value!r} is not finite")
             if message:
                 return f"not a state of this FMU: {message}"
-        return None
+        return self._internal_problem(state["internal"])
 
     @guarded()
     def _set_fmu_state(self, state):
-        # A state this instance took is one; anything else (deserialized bytes) is checked.
-        # An iterating master restores a state on every step: the check would cost a
-        # fifth of the restore.
+        # A state this instance took is one; anything else (another instance's, or
+        # deserialized bytes) is judged completely first.  An iterating master restores
+        # its own state on every step: the check would cost a fifth of the restore.
         own = type(state) is _OwnState and state.owner is self
-        problem = None if own else self._state_problem(state)
-        if problem:
-            self._error(f"fmi2SetFMUstate: {problem}; the FMU's state is unchanged")
+        if not own:
+            problem = None
+            if isinstance(state, _SerializedState):
+                state, problem = self._parse_serialized(state.data)
+            elif type(state) is _OwnState and state.model != type(self).__name__:
+                problem = f"not a state of {type(self).__name__}: it is a state of {state.model!r}"
+            problem = problem or self._state_problem(state)
+            if problem:
+                self._error(f"fmi2SetFMUstate: {problem}; the FMU's state is unchanged")
+                return
+        elif state["phase"] == self._phase == "stepping" and not self._model_stale and self._build_error is None:
+            # Its own state while stepping: the parameters are fixed since, the model was
+            # built for them and nothing can fail (an iterating master's every step).
+            for name, value in state["variables"].items():
+                setattr(self, name, value)
+            self._time = state["time"]
+            self._restore_internal_state(state["internal"])
+            self._dirty = _ALL
             return
-        parameters_changed = any(getattr(self, p.name) != state["variables"].get(p.name)
-                                 for p in self.PARAMETERS)
-        for name, value in state["variables"].items():
-            setattr(self, name, value)
-        self._time = state["time"]
-        self._phase = state["phase"]
-        if parameters_changed:
-            self._try_build(reset=False)
-        self._restore_internal_state(state["internal"])
-        self._dirty = True
+        # Applied as one transaction: should the model not build from the state's
+        # parameters, the instance is put back as it was.
+        before = dict(self.__dict__)
+        try:
+            for name, value in state["variables"].items():
+                setattr(self, name, value)
+            self._time = state["time"]
+            self._phase = state["phase"]
+            if self._phase != "instantiated" and (self._model_stale or self._build_error is not None
+                                                   or self._built_with != self._values()):
+                self._try_build(report=False, reset=False)
+                if self._build_error is not None:
+                    raise ParameterError("state", self._build_error)
+            self._restore_internal_state(state["internal"])
+        except Exception as error:
+            self.__dict__.clear()
+            self.__dict__.update(before)
+            why = str(error) if isinstance(error, ParameterError) else f"{type(error).__name__}: {error}"
+            self._error(f"fmi2SetFMUstate: the model does not build from the state ({why}); the FMU's state "
+                        "is unchanged")
+            return
+        self._dirty = _ALL
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:
         # repr-exact floats: a restored state continues bit-identically.
-        return json.dumps(state, allow_nan=True).encode("utf-8")
+        payload = json.dumps(state, allow_nan=True).encode("utf-8")     # judged when restored
+        header = json.dumps({"format": STATE_FORMAT, "model": getattr(state, "model", ""),
+                             "guid": getattr(state, "guid", ""), "length": len(payload)})
+        return STATE_MAGIC + b" " + header.encode("utf-8") + b"\n" + payload
 
     @staticmethod
     def _fmu_state_from_bytes(data: bytes):
-        # pythonfmu calls this on the class, where nothing can be logged, and turns an
-        # exception into fmi2Fatal: bytes that are no state become a marker that
-        # fmi2SetFMUstate refuses with a message (fmi2Error) instead.
-        try:
-            return json.loads(bytes(data).decode("utf-8"))
-        except (UnicodeDecodeError, ValueError) as error:
-            return {"not_a_state": f"the bytes given to fmi2DeSerializeFMUstate do not decode "
-                                   f"({type(error).__name__}: {error})"}
+        return _SerializedState(bytes(data))
 
     # -- model description -----------------------------------------------------------------
     @classmethod

@@ -60,3 +60,21 @@ class LeverCoupling(LeverSlave):
 
     def _advance(self, t, h):
         return None  # no state: the outputs follow the inputs
+
+    # The family is exact at the misalignment it was built with and blended elsewhere:
+    # a restored state rebuilds it at that same angle, so it continues exactly.
+    def _internal_state(self) -> dict:
+        return {"start_misalignment": self._family.start_alpha if self._family is not None else None}
+
+    def _internal_problem(self, internal) -> str | None:
+        alpha = internal.get("start_misalignment", "missing") if isinstance(internal, dict) else "missing"
+        if not (isinstance(internal, dict) and set(internal) == {"start_misalignment"}
+                and (alpha is None or (type(alpha) is float and MISALIGNMENT.problem(alpha) is None))):
+            return (f"internal state {internal!r}: it needs start_misalignment, the angle the coupling was built "
+                    f"at, in {MISALIGNMENT.range_text()}")
+        return None
+
+    def _restore_internal_state(self, state: dict):
+        alpha = state["start_misalignment"]
+        if alpha is not None and (self._family is None or self._family.start_alpha != alpha):
+            self._family = catalogue.coupling_family_from(self._values() | {"misalignment": alpha})

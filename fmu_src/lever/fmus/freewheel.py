@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from ..physics import catalogue
-from ..physics.freewheel import EVENTS, FREE, STATE
+from ..physics.freewheel import EVENTS, FREE, STATE, STICK
 from ..physics.parameters import Parameter
 from .base import LeverSlave, Output
 
@@ -104,6 +104,21 @@ class FreewheelRectifier(LeverSlave):
     def _internal_state(self) -> dict:
         return {"y": list(self._y) if self._y is not None else None, "disc": self._disc, "fly": self._fly,
                 "events": self._events}
+
+    def _internal_problem(self, internal) -> str | None:
+        if not (isinstance(internal, dict) and set(internal) == {"y", "disc", "fly", "events"}):
+            return f"internal state {internal!r}: it needs y, disc, fly and events"
+        y = internal["y"]
+        if y is not None and not (isinstance(y, list) and len(y) == len(STATE)
+                                  and all(type(v) in (int, float) and math.isfinite(v) and abs(v) < 1e15 for v in y)):
+            return f"internal state y = {y!r}: it must be {len(STATE)} finite numbers ({', '.join(STATE)})"
+        if internal["disc"] not in (STICK, 1, -1) or type(internal["disc"]) is not int:
+            return f"internal state disc = {internal['disc']!r}: it must be {STICK}, 1 or -1"
+        if internal["fly"] not in (STICK, 1, -1, FREE) or type(internal["fly"]) is not int:
+            return f"internal state fly = {internal['fly']!r}: it must be {STICK}, 1, -1 or {FREE}"
+        if not (type(internal["events"]) is int and internal["events"] >= 0):
+            return f"internal state events = {internal['events']!r}: it must be a count >= 0"
+        return None
 
     def _restore_internal_state(self, state: dict):
         self._y = None if state["y"] is None else list(state["y"])

@@ -65,6 +65,9 @@ def documentation_html(model, requirements: list[str]) -> str:
                   f"<code>{port.angle}</code> ({_causality(model, port.angle)})", _e(port.description)]
                  for port in model.PORTS]
     experiment = model.default_experiment
+    packages = ("on the standard library alone: no third-party package is needed "
+                "(<code>resources/requirements.txt</code> lists none)" if not requirements else
+                "with the Python packages listed below (also in <code>resources/requirements.txt</code>)")
     sections = [
         f"<h1>{name}</h1>",
         f"<p>{_e(model.DESCRIPTION)}</p>",
@@ -96,12 +99,11 @@ def documentation_html(model, requirements: list[str]) -> str:
         "<li>several instances per process: yes</li></ul>",
         "<h2>Host requirements</h2>",
         "<p>The model runs in Python inside the importer (pythonfmu 0.7; its Python part is in "
-        "<code>resources/pythonfmu</code>). The importing process needs CPython 3.11 or later with its shared "
-        "library <code>libpython3.x.so</code> loaded with global symbols (a Python importer already has it; "
-        "a C/C++ importer: <code>LD_PRELOAD=/path/to/libpython3.11.so.1.0</code>), <code>PYTHONHOME</code> "
-        "naming that Python's prefix where it is not found by default, and <code>PYTHONPATH</code> naming the "
-        "site-packages that hold these packages (also in <code>resources/requirements.txt</code>):</p>",
-        "<pre>" + "\n".join(_e(r) for r in requirements) + "</pre>",
+        f"<code>resources/pythonfmu</code>), {packages}. The importing process needs CPython 3.11 or "
+        "later with its shared library <code>libpython3.x.so</code> loaded with global symbols (a Python "
+        "importer already has it; a C/C++ importer: <code>LD_PRELOAD=/path/to/libpython3.11.so.1.0</code>) "
+        "and <code>PYTHONHOME</code> naming that Python's prefix where it is not found by default.</p>",
+        *(["<pre>" + "\n".join(_e(r) for r in requirements) + "</pre>"] if requirements else []),
     ]
     style = ("body{font-family:sans-serif;max-width:62em;margin:2em auto}table{border-collapse:collapse}"
              "td,th{border:1px solid #bbb;padding:.2em .5em;vertical-align:top}th{background:#eee}")

@@ -25,6 +25,7 @@ class _ShaftSlave(LeverSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._shaft = None
+        self._external = 0.0    # external torque at the current time and state
 
     def _make_shaft(self):
         raise NotImplementedError
@@ -37,8 +38,13 @@ class _ShaftSlave(LeverSlave):
         setattr(self, self.WORK_OUTPUT, 0.0)
 
     def _compute_outputs(self):
-        self.a, external = self._shaft.rates(self._time, self.phi, self.w, self.tau)
-        setattr(self, self.TORQUE_OUTPUT, self.SIGN * external)
+        self.a, self._external = self._shaft.rates(self._time, self.phi, self.w, self.tau)
+        setattr(self, self.TORQUE_OUTPUT, self.SIGN * self._external)
+
+    def _compute_input_outputs(self):
+        # Only the acceleration depends on the torque input: Shaft.rates' own expression
+        # with the external torque of this time and state, not evaluated again.
+        self.a = (self._external + self.tau) / self._shaft.inertia
 
     def _advance(self, t, h):
         phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h, self.tau_rate)

@@ -13,8 +13,6 @@ import bisect
 import math
 from typing import Sequence
 
-import numpy as np
-
 from .parameters import ParameterError, parse_table
 
 
@@ -41,23 +39,23 @@ class LinearElasticLaw:
         return self.stiffness
 
 
-def _pchip_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _pchip_slopes(x: list[float], y: list[float]) -> list[float]:
     """Fritsch-Carlson (Fritsch-Butland harmonic-mean) slopes: monotone data give a
     monotone interpolant.  End slopes by the one-sided three-point formula, limited."""
-    h = np.diff(x)
-    delta = np.diff(y) / h
-    m = np.zeros_like(y)
+    h = [b - a for a, b in zip(x, x[1:])]
+    delta = [(b - a) / hk for a, b, hk in zip(y, y[1:], h)]
+    m = [0.0] * len(y)
     if len(x) == 2:
-        m[:] = delta[0]
-        return m
+        return [delta[0]] * len(y)
     for k in range(1, len(x) - 1):
         if delta[k - 1] * delta[k] <= 0.0:
             m[k] = 0.0
         else:
             w1 = 2.0 * h[k] + h[k - 1]
             w2 = h[k] + 2.0 * h[k - 1]
-            with np.errstate(over="ignore"):   # a tiny slope next to k: the harmonic mean tends to 0
-                m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
+            # both slopes are non-zero here; a tiny one makes its term inf (Python's float
+            # division overflows to inf like numpy's) and the harmonic mean tends to 0
+            m[k] = (w1 + w2) / (w1 / delta[k - 1] + w2 / delta[k])
 
     def end(h0, h1, d0, d1):
         s = ((2.0 * h0 + h1) * d0 - h0 * d1) / (h0 + h1)
@@ -89,20 +87,20 @@ class TabulatedElasticLaw:
             pts.insert(0, (0.0, 0.0))
         if len(pts) < 3:
             raise ParameterError(name, f"parameter '{name}' needs at least 2 points with theta > 0, got {len(pts) - 1}")
-        theta = np.array([p[0] for p in pts])
-        torque = np.array([p[1] for p in pts])
-        if np.any(np.diff(theta) <= 0.0):
+        theta = [p[0] for p in pts]
+        torque = [p[1] for p in pts]
+        if any(b - a <= 0.0 for a, b in zip(theta, theta[1:])):
             raise ParameterError(name, f"parameter '{name}': deflections must be strictly increasing from 0 "
-                                 f"(got {theta.tolist()})")
-        if np.any(np.diff(torque) < 0.0):
+                                 f"(got {theta})")
+        if any(b - a < 0.0 for a, b in zip(torque, torque[1:])):
             raise ParameterError(name, f"parameter '{name}': torques must be non-decreasing (a monotone law), "
-                                 f"got {torque.tolist()}")
+                                 f"got {torque}")
         if torque[-1] <= 0.0:
             raise ParameterError(name, f"parameter '{name}': the law carries no torque (all torques are 0)")
-        self.points = list(zip(theta.tolist(), torque.tolist()))
-        self._theta = theta.tolist()
-        self._torque = torque.tolist()
-        self._slope = _pchip_slopes(theta, torque).tolist()
+        self.points = list(zip(theta, torque))
+        self._theta = theta
+        self._torque = torque
+        self._slope = _pchip_slopes(theta, torque)
         # Potential at each knot: exact integral of the cubic Hermite segments.
         energy = [0.0]
         for k in range(len(theta) - 1):
@@ -148,19 +146,13 @@ class TabulatedElasticLaw:
         return torque, energy, stiffness
 
     def torque(self, theta):
-        if isinstance(theta, np.ndarray):
-            return np.array([self.torque(float(t)) for t in theta.ravel()]).reshape(theta.shape)
         t = self._eval(abs(theta))[0]
         return t if theta >= 0.0 else -t
 
     def energy(self, theta):
-        if isinstance(theta, np.ndarray):
-            return np.array([self.energy(float(t)) for t in theta.ravel()]).reshape(theta.shape)
         return self._eval(abs(theta))[1]
 
     def stiffness_at(self, theta):
-        if isinstance(theta, np.ndarray):
-            return np.array([self.stiffness_at(float(t)) for t in theta.ravel()]).reshape(theta.shape)
         return self._eval(abs(theta))[2]
 
 

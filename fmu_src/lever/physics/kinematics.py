@@ -8,7 +8,8 @@ position function ``Phi`` (MODEL.md section 2).
 
 so ``U12`` has unit mean and ``Phi(phi + 2 pi) = Phi(phi) + 2 pi`` hold by construction
 (no constant term), ``Phi(0) = 0``, and evaluation is one Horner pass in complex
-arithmetic that works for floats and numpy arrays alike.
+arithmetic.  Scalars only (the FMU runs on the standard library): the harness maps it
+over arrays.
 
 The printed driven-half formula (3.14) and transfer function (3.16) are garbled (see
 MODEL.md); they are not used.  The kinematic mode builds ``U12`` from the Cardan-like
@@ -19,8 +20,7 @@ from __future__ import annotations
 import cmath
 import math
 
-import numpy as np
-
+from .numerics import irfft, least_squares, pairwise_sum_complex, rfft
 from .parameters import ParameterError
 
 #: ``g`` is defined for misalignment angles below 45 deg (its denominator vanishes there).
@@ -48,11 +48,11 @@ def _fit_reported_amplitude() -> tuple[float, float, float, float]:
     """Least-squares fit of ``dU = k sin(alpha)^p (D2s/l2)^q (D2h/lc2)^r`` in logs to the
     reported points.  A power law vanishes at alpha = 0 and at zero deformation, as the
     amplitude must, and varies smoothly between the few printed points."""
-    a = np.array([[1.0, math.log(math.sin(math.radians(al))), math.log(ds), math.log(dh)]
-                  for al, ds, dh, _ in MONOGRAPH_AMPLITUDES])
-    y = np.array([math.log(du) for *_, du in MONOGRAPH_AMPLITUDES])
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    return math.exp(coef[0]), float(coef[1]), float(coef[2]), float(coef[3])
+    a = [[1.0, math.log(math.sin(math.radians(al))), math.log(ds), math.log(dh)]
+         for al, ds, dh, _ in MONOGRAPH_AMPLITUDES]
+    y = [math.log(du) for *_, du in MONOGRAPH_AMPLITUDES]
+    coef = least_squares(a, y)
+    return math.exp(coef[0]), coef[1], coef[2], coef[3]
 
 
 _REPORTED_FIT = _fit_reported_amplitude()
@@ -71,8 +71,8 @@ def reported_amplitude(alpha: float, support_deformation: float, hinge_deformati
 def half_coupling_ratio(phi, alpha):
     """Speed ratio of a half-coupling's earring to its shaft, ``w_c / w``, (3.14, first
     line).  Cardan-like, period pi in ``phi``, defined for ``alpha < 45 deg``."""
-    s2 = np.sin(alpha) ** 2
-    return np.sqrt((1.0 - 2.0 * s2 * np.cos(2.0 * phi)) / (1.0 - 2.0 * s2 * np.cos(phi) ** 2))
+    s2 = math.sin(alpha) ** 2
+    return math.sqrt((1.0 - 2.0 * s2 * math.cos(2.0 * phi)) / (1.0 - 2.0 * s2 * math.cos(phi) ** 2))
 
 
 class TransferFunction:
@@ -108,27 +108,28 @@ class TransferFunction:
         self.hinge_deformation = float(hinge_deformation)
         self.tilt = math.asin(self.support_deformation)          # d_alpha
         self.phase_shift = math.asin(self.hinge_deformation)     # d_phi
-        coefficients = np.zeros(0, dtype=complex)
+        coefficients = []
         if mode != "synchronous" and self.alpha > 0.0 and (self.tilt > 0.0 or self.phase_shift > 0.0):
             coefficients = self._kinematic_coefficients()
-            if mode == "scaled" and coefficients.size:
+            if mode == "scaled" and coefficients:
                 target = reported_amplitude(self.alpha, self.support_deformation, self.hinge_deformation)
-                coefficients = coefficients * (target / self._amplitude_of(coefficients))
-        self.coefficients = coefficients
-        k = np.arange(1, coefficients.size + 1)
-        self._position_coefficients = coefficients / (1j * k) if coefficients.size else coefficients
-        self._position_offset = float(np.sum(self._position_coefficients).real)
-        # Plain Python complex lists: the scalar Horner loop is several times faster on them.
-        self._c = [complex(c) for c in coefficients[::-1]]
-        self._d = [complex(d) for d in self._position_coefficients[::-1]]
-        self.amplitude = self._amplitude_of(coefficients) if coefficients.size else 0.0
-        if coefficients.size and self.minimum_ratio() <= 0.05:
+                factor = target / self._amplitude_of(coefficients)
+                coefficients = [c * factor for c in coefficients]
+        #: C_k, k = 1, 2, ...: U12 = 1 + Re sum_k C_k e^{i k phi}
+        self.coefficients = tuple(coefficients)
+        position_coefficients = [c / (1j * k) for k, c in enumerate(coefficients, start=1)]
+        # the real part of numpy's (pairwise) sum, as before the physics left numpy
+        self._position_offset = pairwise_sum_complex(position_coefficients).real
+        self._c = coefficients[::-1]
+        self._d = position_coefficients[::-1]
+        self.amplitude = self._amplitude_of(coefficients) if coefficients else 0.0
+        if coefficients and self.minimum_ratio() <= 0.05:
             raise ParameterError("misalignment", f"parameter 'misalignment' (alpha) = {math.degrees(alpha):.4g} deg gives a transfer "
                                  f"function amplitude {self.amplitude:.3g} in mode {mode!r}: U12 would "
                                  "approach zero (the coupling would lock); reduce alpha or the deformations")
 
     # -- construction -------------------------------------------------------------------
-    def _kinematic_coefficients(self) -> np.ndarray:
+    def _kinematic_coefficients(self) -> list[complex]:
         if self.alpha + self.tilt >= KINEMATIC_LIMIT:
             raise ParameterError("misalignment", (
                 f"parameter 'misalignment' (alpha) = {math.degrees(self.alpha):.4g} deg plus the support tilt "
@@ -136,44 +137,46 @@ class TransferFunction:
                 f"half-coupling function is undefined; mode {self.mode!r} needs alpha + tilt < 45 deg "
                 "(use transfer_mode='synchronous' up to 75 deg)"))
         n = 256
+        alpha, tilted, shift = self.alpha, self.alpha + self.tilt, self.phase_shift
         while n <= 1 << 16:
-            phi = 2.0 * np.pi * np.arange(n) / n
-            ratio = half_coupling_ratio(phi + self.phase_shift, self.alpha + self.tilt) / \
-                half_coupling_ratio(phi, self.alpha)
-            spectrum = np.fft.rfft(ratio) / n
+            ratio = []
+            for j in range(n):
+                phi = 2.0 * math.pi * j / n
+                ratio.append(half_coupling_ratio(phi + shift, tilted) / half_coupling_ratio(phi, alpha))
+            spectrum = [x / n for x in rfft(ratio)]
             mean = spectrum[0].real
-            coefficients = 2.0 * spectrum[1:n // 2] / mean  # e^{ik phi} coefficients, k >= 1
-            tail = np.abs(coefficients[n // 4:]).max()
+            coefficients = [2.0 * x / mean for x in spectrum[1:n // 2]]  # e^{ik phi} coefficients, k >= 1
+            tail = max(abs(c) for c in coefficients[n // 4:])
             if tail < self.TRUNCATION:
-                keep = np.nonzero(np.abs(coefficients) >= self.TRUNCATION)[0]
-                return coefficients[: keep[-1] + 1] if keep.size else coefficients[:0]
+                keep = [k for k, c in enumerate(coefficients) if abs(c) >= self.TRUNCATION]
+                return coefficients[: keep[-1] + 1] if keep else []
             n *= 2
         raise ParameterError("misalignment", f"parameter 'misalignment' (alpha) = {math.degrees(self.alpha):.4g} deg is too close "
                              "to the 45 deg singularity of the half-coupling function to be represented")
 
     @staticmethod
-    def _samples(coefficients: np.ndarray) -> np.ndarray:
+    def _samples(coefficients: list[complex]) -> list[float]:
         """``U12 - 1`` at 4096 (or more, for long series) equidistant angles, by one
         inverse FFT (a transfer function is built for every 0.05 deg a time-varying
         misalignment passes: this runs often)."""
         n = 4096
-        while n < 4 * coefficients.size:
+        while n < 4 * len(coefficients):
             n *= 2
-        spectrum = np.zeros(n // 2 + 1, dtype=complex)
-        spectrum[1:coefficients.size + 1] = coefficients * (n / 2.0)
-        return np.fft.irfft(spectrum, n)
+        spectrum = [0j] + [c * (n / 2.0) for c in coefficients]
+        spectrum += [0j] * (n // 2 + 1 - len(spectrum))
+        return irfft(spectrum, n)
 
     @classmethod
-    def _amplitude_of(cls, coefficients: np.ndarray) -> float:
+    def _amplitude_of(cls, coefficients: list[complex]) -> float:
         ratio = cls._samples(coefficients)
-        return float((ratio.max() - ratio.min()) / 2.0)
+        return (max(ratio) - min(ratio)) / 2.0
 
     # -- evaluation ---------------------------------------------------------------------
     def evaluate(self, phi):
-        """Return ``(Phi(phi), U12(phi))`` for a float or a numpy array."""
+        """Return ``(Phi(phi), U12(phi))``."""
         if not self._c:
-            return phi, (1.0 if isinstance(phi, float) else np.ones_like(phi))
-        z = cmath.exp(1j * phi) if isinstance(phi, float) else np.exp(1j * np.asarray(phi))
+            return phi, 1.0
+        z = cmath.exp(1j * phi)
         ratio = 0j
         position = 0j
         for c, d in zip(self._c, self._d):
@@ -192,9 +195,9 @@ class TransferFunction:
         return self.evaluate(phi)[0]
 
     def minimum_ratio(self) -> float:
-        if not self.coefficients.size:
+        if not self.coefficients:
             return 1.0
-        return 1.0 + float(np.min(self._samples(self.coefficients)))
+        return 1.0 + min(self._samples(self.coefficients))
 
     def __repr__(self) -> str:
         return (f"TransferFunction(mode={self.mode!r}, alpha={math.degrees(self.alpha):.3g} deg, "

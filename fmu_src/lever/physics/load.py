@@ -17,8 +17,7 @@ import math
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
-
+from .numerics import SeededUniform, pairwise_sum
 from .parameters import TABLE_LIMIT, ParameterError, parse_table
 from .signals import TimeTable
 
@@ -79,27 +78,43 @@ class RandomLoad(_TimeLoad):
                                  f"<= band_high = {band_high} rad/s")
         self.mean = float(mean)
         self.amplitude = float(amplitude)
-        rng = np.random.default_rng(int(seed))
-        self.frequencies = np.exp(rng.uniform(math.log(band_low), math.log(band_high), int(tones))).tolist()
-        self.phases = rng.uniform(0.0, 2.0 * math.pi, int(tones)).tolist()
+        # numpy's default_rng(seed) draw for draw (lever.physics.numerics): the same load as
+        # when the physics used numpy, and in every host whatever its Python has installed
+        rng = SeededUniform(int(seed))
+        self.frequencies = [math.exp(x) for x in rng.uniform(math.log(band_low), math.log(band_high), int(tones))]
+        self.phases = rng.uniform(0.0, 2.0 * math.pi, int(tones))
         weights = rng.uniform(0.5, 1.0, int(tones))
-        self.weights = (self.amplitude * weights / weights.sum()).tolist()
+        total = pairwise_sum(weights)
+        self.weights = [self.amplitude * w / total for w in weights]
         self._tones = list(zip(self.weights, self.frequencies, self.phases))
+        self._per_step: dict[float, list] = {}   # step size -> what integrals() needs of each tone
+
+    #: step sizes whose per-tone constants are kept (an adaptive master takes many)
+    STEP_CACHE = 64
+
+    def _step_constants(self, h: float) -> list:
+        """Per tone what ``integrals`` needs that depends on the step size only, computed
+        once per step size: the same operations, so the same numbers."""
+        constants = self._per_step.get(h)
+        if constants is None:
+            if len(self._per_step) >= self.STEP_CACHE:
+                self._per_step.clear()
+            constants = self._per_step[h] = [
+                (f, p, a * h, 0.5 * a * h * h, 0.5 * (f * h), 0.25 * (f * h), _sinc(0.5 * (f * h)),
+                 _sinc(0.25 * (f * h)), _one_minus_sinc_over_y(0.5 * (f * h)))
+                for a, f, p in self._tones]
+        return constants
 
     def resistance(self, t, phi, w):
-        if isinstance(t, np.ndarray):
-            return self.mean + sum(a * np.sin(f * t + p) for a, f, p in self._tones)
         return self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._tones)
 
     def integrals(self, t, h):
         impulse = self.mean * h
         second = 0.5 * self.mean * h * h
-        for a, f, p in self._tones:
-            x = f * h
+        for f, p, ah, aah, half, quarter, sinc_half, sinc_quarter, rest_half in self._step_constants(h):
             start = f * t + p
-            impulse += a * h * math.sin(start + 0.5 * x) * _sinc(0.5 * x)
-            second += 0.5 * a * h * h * (math.sin(start + 0.25 * x) * _sinc(0.25 * x)
-                                         + math.cos(start + 0.5 * x) * _one_minus_sinc_over_y(0.5 * x))
+            impulse += ah * math.sin(start + half) * sinc_half
+            second += aah * (math.sin(start + quarter) * sinc_quarter + math.cos(start + half) * rest_half)
         return impulse, second
 
 
@@ -117,8 +132,6 @@ class TabulatedLoad(_TimeLoad):
         return cls(parse_table(text, name), name)
 
     def resistance(self, t, phi, w):
-        if isinstance(t, np.ndarray):
-            return np.interp(t, self._t, self._m)
         return self.table.value(t)
 
     def integrals(self, t, h):
@@ -176,7 +189,7 @@ class FourierLoad:
         return "; ".join([repr(self.mean)] + [f"{a!r}:{b!r}" for a, b in zip(self.cosines, self.sines)])
 
     def resistance(self, t, phi, w):
-        z = cmath.exp(1j * phi) if not isinstance(phi, np.ndarray) else np.exp(1j * phi)
+        z = cmath.exp(1j * phi)
         acc = 0j
         for c in self._c:
             acc = acc * z + c
@@ -195,17 +208,22 @@ def fourier_from_samples(values: Sequence[float]) -> FourierLoad:
     ``m // 2``.  For even ``m`` the highest harmonic's sine is undetermined by the samples
     and left out (as Tables 4.12-4.13 print no b_6) and its cosine is halved, so that the
     series passes exactly through every ordinate."""
-    y = np.asarray(values, dtype=float)
+    y = [float(v) for v in values]
     m = len(y)
-    if m < 3 or not np.all(np.isfinite(y)):
+    if m < 3 or not all(math.isfinite(v) for v in y):
         raise ParameterError("fourier", f"a Fourier series needs at least 3 finite ordinates, got {values!r}")
-    spectrum = np.fft.rfft(y) / m
-    cosines = (2.0 * spectrum[1:].real).tolist()
-    sines = (-2.0 * spectrum[1:].imag).tolist()
+    # The discrete Fourier transform written out (m is a table's handful of ordinates):
+    # numpy's rfft to rounding, each twiddle from its own angle.
+    spectrum = []
+    for k in range(m // 2 + 1):
+        terms = [v * cmath.exp(-2j * math.pi * (k * j % m) / m) for j, v in enumerate(y)]
+        spectrum.append(complex(math.fsum(z.real for z in terms), math.fsum(z.imag for z in terms)) / m)
+    cosines = [2.0 * c.real for c in spectrum[1:]]
+    sines = [-2.0 * c.imag for c in spectrum[1:]]
     if m % 2 == 0:
         cosines[-1] *= 0.5
         sines = sines[:-1]
-    return FourierLoad(float(spectrum[0].real), [float(a) for a in cosines], [float(b) for b in sines])
+    return FourierLoad(spectrum[0].real, cosines, sines)
 
 
 def read_harmonics(path: Path | str, cycle: str | int = "mean") -> FourierLoad:

@@ -22,7 +22,7 @@ class Shaft:
 
     def rates(self, t, phi, w, tau):
         """``(a, M_ext)``: the acceleration with coupling torque ``tau`` and the
-        external torque on the shaft (floats or numpy arrays alike)."""
+        external torque on the shaft (scalars: the harness maps it over arrays)."""
         external = self.external.torque(t, phi, w)
         return (external + tau) / self.inertia, external
 
