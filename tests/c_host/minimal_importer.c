@@ -8,6 +8,8 @@
  *
  * usage: minimal_importer UNZIPPED_DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE
  *                         OUTPUT_VR STEP N_STEPS
+ * INPUT_VR "-" sets nothing.  The resource location is file://UNZIPPED_DIR/resources
+ * unless the environment variable RESOURCE_URI gives another one.
  * prints "t=<time> y=<output>" after every step and "freed" at the end; exit 0 on success.
  */
 #include <dlfcn.h>
@@ -68,7 +70,8 @@ static void *symbol(void *lib, const char *name) {
         fmi2Status s_ = (call);                                                       \
         if (s_ > fmi2Warning) {                                                       \
             fprintf(stderr, "minimal_importer: %s returned status %d\n", #call, s_);  \
-            return 4;                                                                 \
+            fflush(stderr);                                                           \
+            _exit(4); /* see the end of main */                                       \
         }                                                                             \
     } while (0)
 
@@ -79,6 +82,7 @@ int main(int argc, char **argv) {
         return 2;
     }
     const char *dir = argv[1], *model = argv[2], *guid = argv[3];
+    int set_input = strcmp(argv[4], "-") != 0;
     fmi2ValueReference in_vr = (fmi2ValueReference)strtoul(argv[4], NULL, 10);
     fmi2Real in_value = strtod(argv[5], NULL);
     fmi2ValueReference out_vr = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
@@ -87,7 +91,11 @@ int main(int argc, char **argv) {
 
     char path[4096], uri[4096];
     snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, model);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
+    const char *given_uri = getenv("RESOURCE_URI");
+    snprintf(uri, sizeof uri, "%s", given_uri ? given_uri : "");
+    if (!given_uri) {
+        snprintf(uri, sizeof uri, "file://%s/resources", dir);
+    }
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!lib) {
         fprintf(stderr, "minimal_importer: cannot load %s: %s\n", path, dlerror());
@@ -107,11 +115,14 @@ int main(int argc, char **argv) {
     fmi2Component c = instantiate("host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
     if (!c) {
         fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
-        return 4;
+        fflush(stderr);
+        _exit(5); /* see the end of main */
     }
     CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
     CHECK(enter(c));
-    CHECK(set_real(c, &in_vr, 1, &in_value));
+    if (set_input) {
+        CHECK(set_real(c, &in_vr, 1, &in_value));
+    }
     CHECK(exit_init(c));
     for (long k = 0; k < n; ++k) {
         fmi2Real y;
