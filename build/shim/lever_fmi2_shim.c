@@ -826,13 +826,15 @@ static const char *state_name(int state)
 
 #define ANY_STATE (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
 #define INITIALIZED (ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
-/* The standard's table (FMI 2.0, section 4.2.4), Co-Simulation columns. */
+/* The standard's table (FMI 2.0, section 4.2.4), Co-Simulation columns, with one
+ * leniency: the getters also work in 'instantiated' (they return the start values), as
+ * importers, ours included, read them before initialisation; reading changes nothing. */
 #define MASK_fmi2SetupExperiment ST_INSTANTIATED
 #define MASK_fmi2EnterInitializationMode ST_INSTANTIATED
 #define MASK_fmi2ExitInitializationMode ST_INITIALIZATION
 #define MASK_fmi2Terminate (ST_STEP_COMPLETE | ST_STEP_FAILED)
 #define MASK_fmi2Reset ANY_STATE
-#define MASK_fmi2GetReal (ST_INITIALIZATION | INITIALIZED)
+#define MASK_fmi2GetReal ANY_STATE
 #define MASK_fmi2GetInteger MASK_fmi2GetReal
 #define MASK_fmi2GetBoolean MASK_fmi2GetReal
 #define MASK_fmi2GetString MASK_fmi2GetReal
@@ -967,6 +969,33 @@ static fmi2Status shim_error(Shim *s, const char *fmt, ...)
     return fmi2Error;
 }
 
+/* The refusal of a call made in a state the standard does not allow it in. */
+static void shim_refuse_state(Shim *s, const char *function, int allowed)
+{
+    char where[256] = "";
+    if (allowed == ST_INSTANTIATED) {
+        appendf(where, sizeof where, "only in the instantiated phase (after fmi2Instantiate or fmi2Reset)");
+    } else if (allowed == ST_INITIALIZATION) {
+        appendf(where, sizeof where, "only in the initialisation phase (after fmi2EnterInitializationMode)");
+    } else if (allowed == 0) {
+        appendf(where, sizeof where, "only while an asynchronous step runs, and steps are synchronous");
+    } else {
+        appendf(where, sizeof where, "in the states");
+        for (int bit = ST_INSTANTIATED; bit <= ST_TERMINATED; bit <<= 1) {
+            if (allowed & bit) {
+                appendf(where, sizeof where, " '%s'", state_name(bit));
+            }
+        }
+    }
+    int early = (s->state & (ST_INSTANTIATED | ST_INITIALIZATION)) && (allowed & INITIALIZED) &&
+                !(allowed & s->state);
+    shim_error(s, "%s is not allowed in state '%s'; it is allowed %s (FMI 2.0 Co-Simulation "
+                  "state machine)%s",
+               function, state_name(s->state), where,
+               early ? "; initialise the instance first (fmi2SetupExperiment, "
+                       "fmi2EnterInitializationMode, fmi2ExitInitializationMode)" : "");
+}
+
 /* Prologue of every call: 1 if the inner library may be called in this state. */
 static int shim_begin(Shim *s, const char *function, int allowed)
 {
@@ -979,8 +1008,7 @@ static int shim_begin(Shim *s, const char *function, int allowed)
         return 0;
     }
     if (!(s->state & allowed)) {
-        shim_error(s, "%s is not allowed in state '%s' (FMI 2.0 Co-Simulation state machine)",
-                   function, state_name(s->state));
+        shim_refuse_state(s, function, allowed);
         return 0;
     }
     thread_state_ready();
@@ -1176,7 +1204,8 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     BEGIN(fmi2SetupExperiment, c);
     Shim *s = SHIM(c);
     if (!isfinite(startTime)) {
-        return shim_error(s, "fmi2SetupExperiment: startTime %g is not finite", startTime);
+        return shim_error(s, "fmi2SetupExperiment: the start time (startTime = %g) is not finite; "
+                             "nothing was set", startTime);
     }
     fmi2Status status = shim_end(s, "fmi2SetupExperiment",
                                  g_api->fmi2SetupExperiment(s->inner, toleranceDefined, tolerance,
@@ -1448,8 +1477,9 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
     }
     /* The whole header is checked before anything reaches the inner library. */
     if (size < SERIAL_HEADER || memcmp(bytes, SERIAL_MAGIC, 8) != 0) {
-        return shim_error(s, "fmi2DeSerializeFMUstate: %zu bytes that are no serialized state of "
-                             "this FMU (no '%s' header)", size, SERIAL_MAGIC);
+        return shim_error(s, "fmi2DeSerializeFMUstate: these %zu bytes are not a state of this FMU: "
+                             "they do not decode (no '%s' header), so there is nothing for "
+                             "fmi2SetFMUstate to restore", size, SERIAL_MAGIC);
     }
     uint32_t version, st;
     fmi2Real time;
