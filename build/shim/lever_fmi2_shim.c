@@ -375,8 +375,9 @@ typedef enum { PyGILState_LOCKED, PyGILState_UNLOCKED } PyGILState_STATE;
     X(void *, PyEval_SaveThread, (void))                                                           \
     X(void, PyEval_RestoreThread, (void *))                                                        \
     X(PyGILState_STATE, PyGILState_Ensure, (void))                                                 \
-    X(void, PyGILState_Release, (PyGILState_STATE))                                                \
-    X(void *, PyGILState_GetThisThreadState, (void))
+    X(void *, PyGILState_GetThisThreadState, (void))                                               \
+    X(void, PyThreadState_Clear, (void *))                                                         \
+    X(void, PyThreadState_DeleteCurrent, (void))
 
 typedef struct {
 #define PY_MEMBER(ret, name, args) ret(*name) args;
@@ -605,10 +606,13 @@ static int g_live_instances;
 
 static void release_thread_state(void *state)
 {
-    /* After the host's Py_Finalize the state is gone with the interpreter. */
+    /* After the host's Py_Finalize the state is gone with the interpreter.  Not
+     * PyGILState_Release: at thread exit the C library may already have cleared Python's
+     * thread-specific slot, which that function insists on. */
     if (state && g_py.Py_IsInitialized()) {
         g_py.PyEval_RestoreThread(state);
-        g_py.PyGILState_Release(PyGILState_UNLOCKED); /* deletes it and drops the lock */
+        g_py.PyThreadState_Clear(state);
+        g_py.PyThreadState_DeleteCurrent(); /* also unregisters it and drops the lock */
     }
 }
 
