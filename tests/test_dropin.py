@@ -338,7 +338,7 @@ def c_host(tmp_path_factory):
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     assert cc, "a C compiler is needed (the FMU build needs one too)"
     subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
-                    str(exe), str(REPO / "tests" / "c_host" / "minimal_importer.c"), "-ldl"], check=True)
+                    str(exe), str(REPO / "tests" / "c_host" / "minimal_importer.c"), "-ldl", "-pthread"], check=True)
     return exe
 
 
@@ -419,6 +419,19 @@ def test_a_c_host_in_a_bare_environment_runs_each_fmu(fmu, fmu_dir, c_host, tmp_
     # a PYTHONHOME of another Python is not what the FMU's library gets (it would abort the host)
     done = _run_c_host(c_host, unzipped, fmu, {**BARE, "PYTHONHOME": str(tmp_path)}, steps=1)
     assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize("threads", [{"STEP_THREADS": "1"}, {"INSTANCES": "2"}, {"STEP_THREADS": "1", "INSTANCES": "2"}],
+                         ids=["a-thread-per-step", "two-instances", "both"])
+def test_a_c_host_calling_from_several_threads_gets_the_same_numbers(threads, fmu_dir, c_host, tmp_path):
+    """One Python thread state is kept per host thread: calls from a new thread each step (each
+    thread's state released when it ends) and two instances on one thread compute what the
+    plain run computes."""
+    unzipped = _unzipped(fmu_dir, "EngineShaft", tmp_path / "e")
+    plain = _run_c_host(c_host, unzipped, "EngineShaft", BARE, steps=20)
+    done = _run_c_host(c_host, unzipped, "EngineShaft", {**BARE, **threads}, steps=20)
+    assert plain.returncode == 0 and done.returncode == 0, done.stderr
+    assert _outputs(done) == _outputs(plain)
 
 
 @pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")

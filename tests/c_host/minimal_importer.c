@@ -9,10 +9,14 @@
  * usage: minimal_importer UNZIPPED_DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE
  *                         OUTPUT_VR STEP N_STEPS
  * INPUT_VR "-" sets nothing.  The resource location is file://UNZIPPED_DIR/resources
- * unless the environment variable RESOURCE_URI gives another one.
+ * unless the environment variable RESOURCE_URI gives another one.  INSTANCES=2 runs two
+ * instances side by side in each thread (their outputs must agree: exit 6 if not);
+ * STEP_THREADS=1 makes every step in a thread of its own (one instance called from
+ * several threads in turn).
  * prints "t=<time> y=<output>" after every step and "freed" at the end; exit 0 on success.
  */
 #include <dlfcn.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -54,6 +58,31 @@ static void logger(void *env, fmi2String instance, fmi2Status status, fmi2String
     vfprintf(stderr, message, args);
     fputc('\n', stderr);
     va_end(args);
+}
+
+static GetRealT get_real;
+static DoStepT do_step;
+
+/* One communication step of every instance (run in the caller's or a thread of its own). */
+typedef struct {
+    fmi2Component *c;
+    int n;
+    double t, h;
+    fmi2ValueReference vr;
+    fmi2Real y[2];
+    fmi2Status status;
+} Step;
+
+static void *step_all(void *arg) {
+    Step *s = arg;
+    s->status = fmi2OK;
+    for (int i = 0; i < s->n && s->status <= fmi2Warning; i++) {
+        s->status = do_step(s->c[i], s->t, s->h, 1);
+        if (s->status <= fmi2Warning) {
+            s->status = get_real(s->c[i], &s->vr, 1, &s->y[i]);
+        }
+    }
+    return NULL;
 }
 
 static void *symbol(void *lib, const char *name) {
@@ -107,31 +136,51 @@ int main(int argc, char **argv) {
     ModeT enter = (ModeT)symbol(lib, "fmi2EnterInitializationMode");
     ModeT exit_init = (ModeT)symbol(lib, "fmi2ExitInitializationMode");
     ModeT terminate = (ModeT)symbol(lib, "fmi2Terminate");
-    GetRealT get_real = (GetRealT)symbol(lib, "fmi2GetReal");
+    get_real = (GetRealT)symbol(lib, "fmi2GetReal");
     SetRealT set_real = (SetRealT)symbol(lib, "fmi2SetReal");
-    DoStepT do_step = (DoStepT)symbol(lib, "fmi2DoStep");
+    do_step = (DoStepT)symbol(lib, "fmi2DoStep");
+    const char *instances_setting = getenv("INSTANCES");
+    int instances = instances_setting && strcmp(instances_setting, "2") == 0 ? 2 : 1;
+    int step_threads = getenv("STEP_THREADS") != NULL;
 
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
-    if (!c) {
-        fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
-        fflush(stderr);
-        _exit(5); /* see the end of main */
+    fmi2Component cs[2];
+    for (int i = 0; i < instances; i++) {
+        fmi2Component c = cs[i] = instantiate(i ? "host2" : "host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
+        if (!c) {
+            fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
+            fflush(stderr);
+            _exit(5); /* see the end of main */
+        }
+        CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
+        CHECK(enter(c));
+        if (set_input) {
+            CHECK(set_real(c, &in_vr, 1, &in_value));
+        }
+        CHECK(exit_init(c));
     }
-    CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
-    CHECK(enter(c));
-    if (set_input) {
-        CHECK(set_real(c, &in_vr, 1, &in_value));
-    }
-    CHECK(exit_init(c));
     for (long k = 0; k < n; ++k) {
-        fmi2Real y;
-        CHECK(do_step(c, k * h, h, 1));
-        CHECK(get_real(c, &out_vr, 1, &y));
-        printf("t=%.17g y=%.17g\n", (k + 1) * h, y);
+        Step step = {cs, instances, k * h, h, out_vr, {0, 0}, fmi2OK};
+        if (step_threads) {
+            pthread_t thread;
+            if (pthread_create(&thread, NULL, step_all, &step) != 0 || pthread_join(thread, NULL) != 0) {
+                fprintf(stderr, "minimal_importer: cannot run a step thread\n");
+                _exit(3);
+            }
+        } else {
+            step_all(&step);
+        }
+        CHECK(step.status);
+        if (instances == 2 && step.y[0] != step.y[1]) {
+            fprintf(stderr, "minimal_importer: the instances differ at step %ld\n", k);
+            _exit(6);
+        }
+        printf("t=%.17g y=%.17g\n", (k + 1) * h, step.y[0]);
     }
-    CHECK(terminate(c));
-    free_instance(c);
+    for (int i = 0; i < instances; i++) {
+        CHECK(terminate(cs[i]));
+        free_instance(cs[i]);
+    }
     printf("freed\n");
     /* Leave without running the libraries' exit-time destructors: pythonfmu 0.7
      * finalises its embedded interpreter in a static destructor, which corrupts the

@@ -1,0 +1,178 @@
+"""``lever hosts``: our FMUs in hosts we did not write, timed against our harness.
+
+The same scene (KAVZ-685, 10 s at 1 ms by default) in
+* ``harness-jacobi`` - our harness, master ``jacobi`` (in this process, fmpy's ctypes calls);
+* ``libcosim-fixed`` - OSP libcosim's fixed-step algorithm (libcosimpy, a child process;
+  it calls the FMUs from its worker threads);
+* ``ecos`` - the C++ engine ecos (PyPI ``ecospy``), its command-line program on our SSP
+  export, in a bare environment (``PATH=/usr/bin:/bin`` and the path to PyPI ``tbb``'s
+  ``libtbb.so.12`` only: the FMUs find their Python themselves).
+Each host's time is its stepping loop as the host reports it (ours and libcosim's: from
+applying the parameters to the last communication point; ecos: from its "Simulation
+commencing" to its "Wrote CSV" log line), the median of ``repeats`` runs, and the ratio
+to our harness's median in the same run.
+
+``run_ecos`` and ``ecos_traces`` are also what the tests use to run ecos.
+"""
+from __future__ import annotations
+
+import csv
+import datetime
+import importlib.metadata
+import re
+import shutil
+import statistics
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import peers, ssp
+from . import scene as scenes
+from .paths import FMUS, RESULTS
+from .run import simulate
+
+HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos")
+#: The environment of a host that is not a Python process and was set up for nothing.
+BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
+
+
+class EcosUnavailable(RuntimeError):
+    pass
+
+
+def set_up_environment() -> dict:
+    """What a non-Python host needed before the FMUs found their Python themselves (and
+    still may use): this interpreter's libpython preloaded, its home and site-packages."""
+    import sys
+    import sysconfig
+
+    library = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
+    return {**BARE_ENVIRONMENT, "LD_PRELOAD": str(library), "PYTHONHOME": sys.base_prefix,
+            "PYTHONPATH": sysconfig.get_paths()["purelib"], "PYTHONNOUSERSITE": "1"}
+
+
+def ecos_program(cache: Path) -> tuple[Path, Path]:
+    """(the ecos executable, the directory of libtbb.so.12) from the installed ``ecospy`` and
+    ``tbb`` wheels.  ecospy's wheel ships its program without the executable bit: a copy
+    with it is made in ``cache``."""
+    try:
+        ecos_files = importlib.metadata.distribution("ecospy").files or []
+        tbb_files = importlib.metadata.distribution("tbb").files or []
+    except importlib.metadata.PackageNotFoundError as missing:
+        raise EcosUnavailable(f"{missing.name} is not installed (a test dependency: pip install -e '.[test]')")
+    program = next((f for f in ecos_files if f.parts[-2:] == ("binaries", "ecos")), None)
+    tbb = next((f for f in tbb_files if f.name == "libtbb.so.12"), None)
+    if program is None or tbb is None:
+        raise EcosUnavailable("ecospy's binaries/ecos or tbb's libtbb.so.12 is missing from the installed wheels")
+    cache.mkdir(parents=True, exist_ok=True)
+    executable = cache / "ecos"
+    if not executable.exists():
+        shutil.copy2(Path(program.locate()), executable)
+        executable.chmod(0o755)
+    return executable, Path(tbb.locate()).resolve().parent
+
+
+@dataclass
+class EcosRun:
+    csv: Path
+    wall_time: float   # the stepping loop, from ecos's own log
+    log: str
+
+
+_STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+)\]")
+
+
+def _stamp(line: str) -> datetime.datetime | None:
+    match = _STAMP.match(line)
+    return datetime.datetime.fromisoformat(match.group(1)) if match else None
+
+
+def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | None = None,
+             timeout: float = 600) -> EcosRun:
+    """Runs ``ecos simulate`` on an SSP archive or an FMU (``target``) from 0 to ``stop`` at
+    ``step``, in ``env`` (default: bare).  ecos writes ``<target stem>.csv`` next to the
+    target.  Raises RuntimeError with ecos's output if it fails."""
+    program, tbb_dir = ecos_program(cache)
+    environment = dict(BARE_ENVIRONMENT if env is None else env)
+    environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
+    done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),
+                           "--stepSize", repr(step), "--logLevel", "info"], env=environment, cwd=target.parent,
+                          capture_output=True, text=True, timeout=timeout)
+    log = done.stdout + done.stderr
+    result = target.with_suffix(".csv")
+    if done.returncode != 0 or not result.exists() or "[error]" in log:
+        raise RuntimeError(f"ecos failed on {target.name} (exit {done.returncode}):\n{log[-4000:]}")
+    lines = log.splitlines()
+    begin = next((_stamp(line) for line in lines if "Simulation commencing" in line), None)
+    end = next((_stamp(line) for line in lines if "Wrote CSV" in line), None)
+    wall = (end - begin).total_seconds() if begin and end else float("nan")
+    return EcosRun(result, wall, log)
+
+
+def ecos_traces(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(times, {component.variable: values}) of the real columns of an ecos CSV
+    (header ``iterations, time, component::variable[REAL], ...``)."""
+    with open(path, newline="") as handle:
+        rows = list(csv.reader(handle))
+    header = [h.strip() for h in rows[0]]
+    columns = {}
+    for index, name in enumerate(header):
+        match = re.fullmatch(r"(\w+)::(\w+)\[REAL\]", name)
+        if match:
+            columns[f"{match.group(1)}.{match.group(2)}"] = index
+    table = [[float(row[i]) for i in [header.index("time"), *columns.values()]] for row in rows[1:] if row]
+    data = np.array(table)
+    return data[:, 0], {name: data[:, k + 1] for k, name in enumerate(columns)}
+
+
+def write_result_csv(path: Path, times: np.ndarray, traces: dict[str, np.ndarray], names: list[str]) -> Path:
+    """A CSV ``lever validate --result`` reads: time, then the named traces."""
+    table = np.column_stack([times] + [traces[n] for n in names])
+    np.savetxt(path, table, delimiter=",", header=",".join(["time", *names]), comments="", fmt="%.17g")
+    return path
+
+
+def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,
+               hosts=HOSTS, ecos_env: dict | None = None, log=print) -> dict:
+    """Median stepping-loop time of each host over ``repeats`` runs, and its ratio to the
+    first host's (our harness's jacobi by default).  ecos runs in ``ecos_env`` (default bare)."""
+    times: dict[str, list[float]] = {h: [] for h in hosts}
+    with tempfile.TemporaryDirectory(prefix="lever-hosts-") as scratch:
+        scratch = Path(scratch)
+        archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) if "ecos" in hosts else None
+        for k in range(repeats):
+            for host in hosts:
+                if host == "harness-jacobi":
+                    result = simulate(scene, "jacobi", step, fmu_dir)
+                    ok, wall = result.ok, result.wall_time
+                elif host == "libcosim-fixed":
+                    result = peers.simulate_peer("libcosim-fixed", scene, step, fmu_dir)
+                    ok, wall = result.ok, result.wall_time
+                elif host == "ecos":
+                    wall, ok = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", ecos_env).wall_time, True
+                else:
+                    raise ValueError(f"unknown host '{host}' (known: {', '.join(HOSTS)})")
+                if not ok:
+                    raise RuntimeError(f"{host} failed: {result.failure}")
+                times[host].append(wall)
+                log(f"  run {k + 1}/{repeats} {host}: {wall:.3f} s")
+    base = statistics.median(times[hosts[0]])
+    return {"scene": scene.name, "stop": scene.experiment.stop, "step": step, "repeats": repeats,
+            "hosts": {h: {"median_s": statistics.median(t), "runs_s": t,
+                          "ratio": statistics.median(t) / base} for h, t in times.items()}}
+
+
+def table(report: dict) -> str:
+    lines = [f"{report['scene']}: {report['stop']:g} s at {report['step'] * 1e3:g} ms, "
+             f"medians of {report['repeats']} runs",
+             "", "| host | wall time (median) | vs harness-jacobi |", "|---|---|---|"]
+    for host, row in report["hosts"].items():
+        lines.append(f"| {host} | {row['median_s']:.3f} s | {row['ratio']:.2f}x |")
+    return "\n".join(lines) + "\n"
+
+
+def default_out(scene: scenes.Scene) -> Path:
+    return RESULTS / "hosts" / scene.name
