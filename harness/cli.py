@@ -398,19 +398,20 @@ def engines(scene, engine_names, assignments, step, repeats, out):
 @main.command()
 @click.argument("scene", default="kavz685")
 @click.option("--host", "host_names", multiple=True, metavar="HOST",
-              help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos).")
+              help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos, ecos-serial, "
+                   "c-importer).")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
 @click.option("--step", type=float, default=1e-3, show_default=True, help="Communication step [s].")
 @click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Runs per host; the median is quoted.")
 @click.option("--fmu-dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
               help="Time these FMUs (e.g. another build) instead of build/fmus.")
-@click.option("--ecos-env", type=click.Choice(["bare", "set-up"]), default="bare", show_default=True,
-              help="ecos's environment: bare (PATH only), or set up with LD_PRELOAD, PYTHONHOME and PYTHONPATH "
-                   "of this Python (what FMUs without their own Python finding need).")
+@click.option("--native-env", type=click.Choice(["bare", "set-up"]), default="bare", show_default=True,
+              help="The environment of ecos and the C importer: bare (PATH only), or set up with LD_PRELOAD, "
+                   "PYTHONHOME and PYTHONPATH of this Python (what FMUs that cannot find a Python need).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/hosts/<scene>).")
-def hosts(scene, host_names, assignments, step, repeats, fmu_dir, ecos_env, out):
+def hosts(scene, host_names, assignments, step, repeats, fmu_dir, native_env, out):
     """SCENE in hosts we did not write (libcosim, ecos) and in our harness (jacobi), at one
     fixed step: each host's median stepping time and its ratio to ours, in one run;
     writes hosts.md and hosts.json."""
@@ -423,7 +424,7 @@ def hosts(scene, host_names, assignments, step, repeats, fmu_dir, ecos_env, out)
         raise UserError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
     if fmu_dir is None:
         ensure_fmus(quiet=True)
-    environment = comparison.set_up_environment() if ecos_env == "set-up" else None
+    environment = comparison.set_up_environment() if native_env == "set-up" else None
     report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
                                    log=click.echo)
     folder = out or comparison.default_out(spec)

@@ -6,7 +6,12 @@ The same scene (KAVZ-685, 10 s at 1 ms by default) in
   it calls the FMUs from its worker threads);
 * ``ecos`` - the C++ engine ecos (PyPI ``ecospy``), its command-line program on our SSP
   export, in a bare environment (``PATH=/usr/bin:/bin`` and the path to PyPI ``tbb``'s
-  ``libtbb.so.12`` only: the FMUs find their Python themselves).
+  ``libtbb.so.12`` only: the FMUs find their Python themselves), stepping the FMUs in
+  parallel threads as it does by default; ``ecos-serial`` the same with ``--noParallel``;
+* ``c-importer`` - our minimal C host (tests/c_host), bare environment: it cannot couple
+  FMUs, so it steps the scene's three FMUs each alone for the same span (one input set
+  once; fmi2DoStep and one fmi2GetReal a step: 6 calls a step for the three, against the
+  coupled scene's 12), and its time is the sum of the three stepping loops.
 Each host's time is its stepping loop as the host reports it (ours and libcosim's: from
 applying the parameters to the last communication point; ecos: from its "Simulation
 commencing" to its "Wrote CSV" log line), the median of ``repeats`` runs, and the ratio
@@ -19,6 +24,7 @@ from __future__ import annotations
 import csv
 import datetime
 import importlib.metadata
+import os
 import re
 import shutil
 import statistics
@@ -34,7 +40,7 @@ from . import scene as scenes
 from .paths import FMUS, RESULTS
 from .run import simulate
 
-HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos")
+HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "c-importer")
 #: The environment of a host that is not a Python process and was set up for nothing.
 BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
 
@@ -91,15 +97,17 @@ def _stamp(line: str) -> datetime.datetime | None:
 
 
 def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | None = None,
-             timeout: float = 600) -> EcosRun:
+             parallel: bool = True, timeout: float = 600) -> EcosRun:
     """Runs ``ecos simulate`` on an SSP archive or an FMU (``target``) from 0 to ``stop`` at
-    ``step``, in ``env`` (default: bare).  ecos writes ``<target stem>.csv`` next to the
-    target.  Raises RuntimeError with ecos's output if it fails."""
+    ``step``, in ``env`` (default: bare), the FMUs stepped in parallel threads or not.  ecos
+    writes ``<target stem>.csv`` next to the target.  Raises RuntimeError with ecos's output
+    if it fails."""
     program, tbb_dir = ecos_program(cache)
     environment = dict(BARE_ENVIRONMENT if env is None else env)
     environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
     done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),
-                           "--stepSize", repr(step), "--logLevel", "info"], env=environment, cwd=target.parent,
+                           "--stepSize", repr(step), "--logLevel", "info", *([] if parallel else ["--noParallel"])],
+                          env=environment, cwd=target.parent,
                           capture_output=True, text=True, timeout=timeout)
     log = done.stdout + done.stderr
     result = target.with_suffix(".csv")
@@ -135,14 +143,68 @@ def write_result_csv(path: Path, times: np.ndarray, traces: dict[str, np.ndarray
     return path
 
 
+C_IMPORTER = Path(__file__).resolve().parents[1] / "tests" / "c_host" / "minimal_importer.c"
+#: what the C importer sets and reads in each FMU it steps alone
+C_IMPORTER_CASES = {"EngineShaft": ("tau", -100.0, "w"), "LoadShaft": ("tau", 120.0, "w"),
+                    "LeverCoupling": ("phi1", 0.1, "tau1"), "MisalignmentSource": (None, None, "misalignment")}
+
+
+def compile_c_importer(dest: Path) -> Path:
+    """Compiles tests/c_host/minimal_importer.c to ``dest`` with ``$CC`` or cc."""
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if not cc:
+        raise RuntimeError("no C compiler (cc) for the C importer")
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
+                    str(dest), str(C_IMPORTER), "-ldl", "-pthread"], check=True)
+    return dest
+
+
+def run_c_importer(program: Path, unzipped: Path, model: str, steps: int, step: float, env: dict,
+                   guid: str | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    """The C importer on an unzipped FMU: ``C_IMPORTER_CASES[model]``'s input set, ``steps``
+    steps of ``step``; what it printed and its exit status."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(unzipped / "modelDescription.xml"))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    name_in, value, name_out = C_IMPORTER_CASES[model]
+    return subprocess.run([str(program), str(unzipped), md.coSimulation.modelIdentifier, guid or md.guid,
+                           str(vr[name_in]) if name_in else "-", repr(value), str(vr[name_out]), repr(step),
+                           str(steps)], env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path, env: dict | None) -> float:
+    from fmpy import extract
+
+    program = scratch / "bin" / "minimal_importer"
+    if not program.exists():
+        compile_c_importer(program)
+    steps = round((scene.experiment.stop - scene.experiment.start) / step)
+    total = 0.0
+    for model in sorted({c.fmu for c in scene.components.values()}):
+        unzipped = scratch / "unzipped" / model
+        if not unzipped.exists():
+            extract(str(fmu_dir / f"{model}.fmu"), str(unzipped))
+        done = run_c_importer(program, unzipped, model, steps, step, BARE_ENVIRONMENT if env is None else env,
+                              timeout=600)
+        loop = re.search(r"^loop_s=([0-9.]+)$", done.stderr, re.M)
+        if done.returncode != 0 or not loop:
+            raise RuntimeError(f"the C importer failed on {model} (exit {done.returncode}):\n{done.stderr[-2000:]}")
+        total += float(loop.group(1))
+    return total
+
+
 def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,
-               hosts=HOSTS, ecos_env: dict | None = None, log=print) -> dict:
+               hosts=HOSTS, native_env: dict | None = None, log=print) -> dict:
     """Median stepping-loop time of each host over ``repeats`` runs, and its ratio to the
-    first host's (our harness's jacobi by default).  ecos runs in ``ecos_env`` (default bare)."""
+    first host's (our harness's jacobi by default).  The hosts that are no Python process
+    (ecos, the C importer) run in ``native_env`` (default bare)."""
     times: dict[str, list[float]] = {h: [] for h in hosts}
     with tempfile.TemporaryDirectory(prefix="lever-hosts-") as scratch:
         scratch = Path(scratch)
-        archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) if "ecos" in hosts else None
+        archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) \
+            if {"ecos", "ecos-serial"} & set(hosts) else None
         for k in range(repeats):
             for host in hosts:
                 if host == "harness-jacobi":
@@ -151,8 +213,12 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
                 elif host == "libcosim-fixed":
                     result = peers.simulate_peer("libcosim-fixed", scene, step, fmu_dir)
                     ok, wall = result.ok, result.wall_time
-                elif host == "ecos":
-                    wall, ok = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", ecos_env).wall_time, True
+                elif host in ("ecos", "ecos-serial"):
+                    wall = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", native_env,
+                                    parallel=host == "ecos").wall_time
+                    ok = True
+                elif host == "c-importer":
+                    wall, ok = _c_importer_time(scene, step, fmu_dir, scratch, native_env), True
                 else:
                     raise ValueError(f"unknown host '{host}' (known: {', '.join(HOSTS)})")
                 if not ok:

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import ast
 import math
-import os
-import shutil
 import subprocess
 import sys
 import zipfile
@@ -19,7 +17,7 @@ import pytest
 from click.testing import CliRunner
 from fmpy import read_model_description
 
-from harness import compliance, engines, osp, peers, reference, run, scene, ssp
+from harness import compliance, engines, hosts, osp, peers, reference, run, scene, ssp
 from harness.cli import main as cli
 from harness.component import Component
 from lever.physics import catalogue
@@ -334,21 +332,13 @@ def test_two_instances_of_each_fmu_in_one_process_do_not_interfere(engine, fmu_d
 @pytest.fixture(scope="module")
 def c_host(tmp_path_factory):
     """The minimal C importer (tests/c_host), compiled."""
-    exe = tmp_path_factory.mktemp("c_host") / "minimal_importer"
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-    assert cc, "a C compiler is needed (the FMU build needs one too)"
-    subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
-                    str(exe), str(REPO / "tests" / "c_host" / "minimal_importer.c"), "-ldl", "-pthread"], check=True)
-    return exe
+    return hosts.compile_c_importer(tmp_path_factory.mktemp("c_host") / "minimal_importer")
 
 
 #: A bare environment: no LD_PRELOAD, PYTHONHOME or PYTHONPATH; the FMU finds its Python itself.
-BARE = {"PATH": "/usr/bin:/bin"}
+BARE = hosts.BARE_ENVIRONMENT
 #: The system's CPython (Debian: a shared libpython3.11, no numpy), what the bare-CPython runs use.
 SYSTEM_PYTHON = Path("/usr/bin/python3")
-
-HOST_CASES = {"EngineShaft": ("tau", -100.0, "w"), "LoadShaft": ("tau", 120.0, "w"),
-              "LeverCoupling": ("phi1", 0.1, "tau1"), "MisalignmentSource": (None, None, "misalignment")}
 
 
 def _unzipped(fmu_dir: Path, fmu: str, where: Path) -> Path:
@@ -357,17 +347,12 @@ def _unzipped(fmu_dir: Path, fmu: str, where: Path) -> Path:
 
 
 def _run_c_host(c_host, unzipped: Path, fmu: str, env: dict, steps: int = 5, guid: str | None = None):
-    md = read_model_description(str(unzipped / "modelDescription.xml"))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    name_in, value, name_out = HOST_CASES[fmu]
-    args = [str(c_host), str(unzipped), md.coSimulation.modelIdentifier, guid or md.guid,
-            str(vr[name_in]) if name_in else "-", repr(value), str(vr[name_out]), "0.001", str(steps)]
-    return subprocess.run(args, env=env, capture_output=True, text=True, timeout=120)
+    return hosts.run_c_importer(c_host, unzipped, fmu, steps, 1e-3, env, guid)
 
 
 def _fmpy_outputs(fmu_dir: Path, fmu: str, steps: int = 5) -> list[float]:
     """The same steps through fmpy in this (Python) process."""
-    name_in, value, name_out = HOST_CASES[fmu]
+    name_in, value, name_out = hosts.C_IMPORTER_CASES[fmu]
     c = Component("reference", fmu_dir / f"{fmu}.fmu")
     try:
         c.initialize(0.0, None)
