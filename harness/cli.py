@@ -399,7 +399,7 @@ def engines(scene, engine_names, assignments, step, repeats, out):
 @click.argument("scene", default="kavz685")
 @click.option("--host", "host_names", multiple=True, metavar="HOST",
               help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos, ecos-serial, "
-                   "ecos-nocsv, c-importer).")
+                   "ecos-log-all, c-importer).")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
 @click.option("--step", type=float, default=1e-3, show_default=True, help="Communication step [s].")
 @click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,

@@ -7,9 +7,10 @@ The same scene (KAVZ-685, 10 s at 1 ms by default) in
 * ``ecos`` - the C++ engine ecos (PyPI ``ecospy``), its command-line program on our SSP
   export, in a bare environment (``PATH=/usr/bin:/bin`` and the path to PyPI ``tbb``'s
   ``libtbb.so.12`` only: the FMUs find their Python themselves), stepping the FMUs in
-  parallel threads as it does by default and logging every variable to its CSV each step;
-  ``ecos-serial`` the same with ``--noParallel``, ``ecos-nocsv`` with ``--noCsv`` (where
-  ecos's time goes: its CSV logger reads all of the FMUs' variables every step);
+  parallel threads as it does by default and logging what our harness records (a
+  ``--csvConfig`` of the scene's record); ``ecos-serial`` the same with ``--noParallel``;
+  ``ecos-log-all`` with ecos's default CSV log, every variable of every FMU each step
+  (about 60 reads a step, each a Python call: where ecos's time goes by default);
 * ``c-importer`` - our minimal C host (tests/c_host), bare environment: it cannot couple
   FMUs, so it steps the scene's three FMUs each alone for the same span (one input set
   once; fmi2DoStep and one fmi2GetReal a step: 6 calls a step for the three, against the
@@ -41,7 +42,7 @@ from . import scene as scenes
 from .paths import FMUS, RESULTS
 from .run import simulate
 
-HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "ecos-nocsv", "c-importer")
+HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "ecos-log-all", "c-importer")
 #: The environment of a host that is not a Python process and was set up for nothing.
 BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
 
@@ -82,30 +83,53 @@ def ecos_program(cache: Path) -> tuple[Path, Path]:
     return executable, Path(tbb.locate()).resolve().parent
 
 
+def _csv_config(record: list[str], path: Path) -> Path:
+    """An ecos CSV configuration (its CsvConfig.xsd) logging the ``component.variable`` names."""
+    from xml.sax.saxutils import quoteattr
+
+    by_component: dict[str, list[str]] = {}
+    for name in record:
+        component, variable = name.split(".", 1)
+        by_component.setdefault(component, []).append(variable)
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<ecos:CsvConfig xmlns:ecos="http://github.com/Ecos-platform/libecos/resources/schema/CsvConfig">',
+             "  <ecos:components>"]
+    for component, variables in by_component.items():
+        lines.append(f"    <ecos:component name={quoteattr(component)}>")
+        lines += [f"      <ecos:variable name={quoteattr(v)}/>" for v in variables]
+        lines.append("    </ecos:component>")
+    lines += ["  </ecos:components>", "</ecos:CsvConfig>"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 @dataclass
 class EcosRun:
-    csv: Path | None
+    csv: Path
     wall_time: float   # the stepping loop, from ecos's own log
     log: str
 
 
 def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | None = None,
-             parallel: bool = True, csv_log: bool = True, timeout: float = 600) -> EcosRun:
+             parallel: bool = True, record: list[str] | None = None, timeout: float = 600) -> EcosRun:
     """Runs ``ecos simulate`` on an SSP archive or an FMU (``target``) from 0 to ``stop`` at
-    ``step``, in ``env`` (default: bare), the FMUs stepped in parallel threads or not.  With
-    ``csv_log`` ecos writes ``<target stem>.csv`` next to the target.  Raises RuntimeError
-    with ecos's output if it fails."""
+    ``step``, in ``env`` (default: bare), the FMUs stepped in parallel threads or not.  ecos
+    writes ``<target stem>.csv`` next to the target: the ``record`` (``component.variable``
+    names) or, by default, every variable.  Raises RuntimeError with ecos's output if it
+    fails."""
     program, tbb_dir = ecos_program(cache)
     environment = dict(BARE_ENVIRONMENT if env is None else env)
     environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
+    options = [] if parallel else ["--noParallel"]
+    if record is not None:
+        options += ["--csvConfig", str(_csv_config(record, target.with_name(target.stem + "_CsvConfig.xml")))]
     done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),
-                           "--stepSize", repr(step), "--logLevel", "info", *([] if parallel else ["--noParallel"]),
-                           *([] if csv_log else ["--noCsv"])],
+                           "--stepSize", repr(step), "--logLevel", "info", *options],
                           env=environment, cwd=target.parent,
                           capture_output=True, text=True, timeout=timeout)
     log = done.stdout + done.stderr
-    result = target.with_suffix(".csv") if csv_log else None
-    if done.returncode != 0 or (result and not result.exists()) or "[error]" in log:
+    result = target.with_suffix(".csv")
+    if done.returncode != 0 or not result.exists() or "[error]" in log:
         raise RuntimeError(f"ecos failed on {target.name} (exit {done.returncode}):\n{log[-4000:]}")
     # ecos's own progress lines ("90% complete, simulated 9.000s in 4.321s"): the last one,
     # scaled to the whole span (it logs no line at 100 %).
@@ -199,7 +223,7 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
     with tempfile.TemporaryDirectory(prefix="lever-hosts-") as scratch:
         scratch = Path(scratch)
         archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) \
-            if {"ecos", "ecos-serial", "ecos-nocsv"} & set(hosts) else None
+            if {"ecos", "ecos-serial", "ecos-log-all"} & set(hosts) else None
         for k in range(repeats):
             for host in hosts:
                 if host == "harness-jacobi":
@@ -208,9 +232,10 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
                 elif host == "libcosim-fixed":
                     result = peers.simulate_peer("libcosim-fixed", scene, step, fmu_dir)
                     ok, wall = result.ok, result.wall_time
-                elif host in ("ecos", "ecos-serial", "ecos-nocsv"):
+                elif host in ("ecos", "ecos-serial", "ecos-log-all"):
                     wall = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", native_env,
-                                    parallel=host != "ecos-serial", csv_log=host != "ecos-nocsv").wall_time
+                                    parallel=host != "ecos-serial",
+                                    record=None if host == "ecos-log-all" else list(scene.record)).wall_time
                     ok = True
                 elif host == "c-importer":
                     wall, ok = _c_importer_time(scene, step, fmu_dir, scratch, native_env), True
