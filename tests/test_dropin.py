@@ -445,6 +445,18 @@ def _expect_bare_run(done, unzipped: Path) -> bool:
     return True
 
 
+@pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
+def test_the_fmu_carries_pythonfmu_for_a_bare_cpython(fmu_dir, tmp_path):
+    """pythonfmu's Python package travels in resources/ (pythonfmu's builder copies the installed
+    one) and imports on a CPython that has nothing installed, from there."""
+    resources = _unzipped(fmu_dir, "EngineShaft", tmp_path / "e") / "resources"
+    done = subprocess.run([str(SYSTEM_PYTHON), "-I", "-c", "import sys; sys.path.insert(0, sys.argv[1]); "
+                           "import pythonfmu, pythonfmu.fmi2slave; print(pythonfmu.__file__)", str(resources)],
+                          env=BARE, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(resources / "pythonfmu" / "__init__.py")
+
+
 def test_without_any_python_the_c_host_is_told_what_was_tried(fmu_dir, c_host, tmp_path):
     unzipped = _unzipped(fmu_dir, "MisalignmentSource", tmp_path / "m")
     _without_build_python(unzipped)
