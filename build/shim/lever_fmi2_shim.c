@@ -533,8 +533,10 @@ static int python_ready(const Config *built, char *err, size_t errsize)
     }
     pthread_mutex_lock(&g_python_lock);
     int rc = -1;
-    char why[PATH_MAX + 256] = "";
-    err[0] = '\0';
+    /* Static, under the lock: host threads may have small stacks. */
+    static char why[PATH_MAX + 256];
+    static Config found;
+    why[0] = err[0] = '\0';
     if (g_python_ready) {
         rc = 0;
         goto done;
@@ -544,6 +546,7 @@ static int python_ready(const Config *built, char *err, size_t errsize)
     PythonApi host;
     if (python_resolve(RTLD_DEFAULT, &host, why, sizeof why) == 0) {
         Dl_info info;
+        memset(&info, 0, sizeof info);
         if (host.Py_IsInitialized()) {
             g_py = host;
             rc = 0;
@@ -575,7 +578,6 @@ static int python_ready(const Config *built, char *err, size_t errsize)
         }
         appendf(err, errsize, "the Python this FMU was built with (%s): %s; ", built->library, why);
     }
-    Config found;
     memset(&found, 0, sizeof found);
     if (query_python_on_path(&found, why, sizeof why) == 0 &&
         python_try(found.library, found.home, &found, why, sizeof why) == 0) {
@@ -1100,10 +1102,11 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     s->own.componentEnvironment = s;
     s->state = ST_INSTANTIATED;
 
-    static char resources[PATH_MAX]; /* large: not on the host's stack */
+    /* Large, so static (host threads may have small stacks), under this lock. */
+    static char resources[PATH_MAX];
     static Config cfg;
+    static char err[8192];
     static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
-    char err[8192];
     pthread_mutex_lock(&lock);
     int ok = 0;
     if (!fmuGUID || !fmuResourceLocation) {
