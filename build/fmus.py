@@ -7,8 +7,9 @@ For each model:
    builds of the same one) never share modules through ``sys.modules``;
 2. write a one-line entry script that imports the model class from that package;
 3. let pythonfmu build the FMU (state handling declared: our slaves save their full state);
-4. put the status shim (``build/shim``) in front of pythonfmu's native library, so that
-   errors our slaves log come back to the importer as fmi2Error;
+4. put the native entry (``build/shim``) in front of pythonfmu's native library: it finds a
+   Python for the FMU, checks the FMI 2.0 boundary and turns the errors our slaves log into
+   fmi2Error (docs/hosts.md);
 5. ship what an importer needs to know, generated from the model's declarations
    (``lever.fmus.interface``): ``documentation/_main.html`` and
    ``resources/requirements.txt`` inside the FMU, ``<Model>_OspModelDescription.xml``
@@ -82,10 +83,11 @@ def runtime_requirements() -> list[str]:
 
 
 REQUIREMENTS_HEADER = """\
-# Python packages this FMU's model imports in the importer's Python interpreter, beyond the
-# standard library (CPython >= 3.11 with a shared libpython; pythonfmu's Python part is in
-# resources/pythonfmu).  Empty: the model runs on the standard library alone.
-# Non-Python hosts: see documentation/_main.html, "Host requirements".
+# Python packages this FMU's model imports in the Python it runs on (CPython >= 3.11 with a
+# shared libpython; pythonfmu's Python part is in resources/pythonfmu).  In a host that is
+# no Python process the FMU finds that Python itself: LEVER_FMU_LIBPYTHON, else the Python
+# it was built with (resources/lever_shim.cfg), else python3 on PATH.  No package is listed:
+# the model runs on the standard library alone.
 """
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import copy
 import importlib.util
+import json
 import math
 import os
 import sys
@@ -412,6 +413,46 @@ def engines(scene, engine_names, assignments, step, repeats, out):
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=click.echo)
     paths = comparison.write(out or comparison.default_out(spec), spec, rows)
     click.echo("written: " + ", ".join(str(p) for p in paths))
+
+
+@main.command()
+@click.argument("scene", default="kavz685")
+@click.option("--host", "host_names", multiple=True, metavar="HOST",
+              help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos, ecos-serial, "
+                   "ecos-log-all, c-importer).")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
+@click.option("--step", type=float, default=1e-3, show_default=True, help="Communication step [s].")
+@click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
+              help="Runs per host; the median is quoted.")
+@click.option("--fmu-dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
+              help="Time these FMUs (e.g. another build) instead of build/fmus.")
+@click.option("--native-env", type=click.Choice(["bare", "set-up"]), default="bare", show_default=True,
+              help="The environment of ecos and the C importer: bare (PATH only), or set up with LD_PRELOAD, "
+                   "PYTHONHOME and PYTHONPATH of this Python (what FMUs that cannot find a Python need).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/hosts/<scene>).")
+def hosts(scene, host_names, assignments, step, repeats, fmu_dir, native_env, out):
+    """SCENE in hosts we did not write (libcosim, ecos) and in our harness (jacobi), at one
+    fixed step: each host's median stepping time and its ratio to ours, in one run;
+    writes hosts.md and hosts.json."""
+    from .studies import hosts as comparison
+
+    spec = _scene(scene, assignments)
+    chosen = tuple(host_names) or comparison.HOSTS
+    unknown = [n for n in chosen if n not in comparison.HOSTS]
+    if unknown:
+        raise UserError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
+    if fmu_dir is None:
+        ensure_fmus(quiet=True)
+    environment = comparison.set_up_environment() if native_env == "set-up" else None
+    report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
+                                   log=click.echo)
+    folder = out or comparison.default_out(spec)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "hosts.json").write_text(json.dumps(report, indent=1))
+    (folder / "hosts.md").write_text(comparison.table(report))
+    click.echo(comparison.table(report))
+    click.echo(f"written: {folder / 'hosts.md'}, {folder / 'hosts.json'}")
 
 
 def _export(scene, assignments, out, folder: str, suffix: str, export):

@@ -6,11 +6,8 @@ from __future__ import annotations
 
 import ast
 import math
-import os
-import shutil
 import subprocess
 import sys
-import sysconfig
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -28,6 +25,7 @@ from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene
 from harness.formats import ssp
+from harness.studies import hosts
 from harness.cli import main as cli
 from harness.engine.component import Component
 from lever.physics import catalogue
@@ -339,75 +337,195 @@ def test_two_instances_of_each_fmu_in_one_process_do_not_interfere(engine, fmu_d
 
 # -- a host that is not a Python process --------------------------------------------------------
 
-def _libpython() -> Path:
-    path = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
-    if not path.exists():
-        path = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("LDLIBRARY")
-    return path
-
-
 @pytest.fixture(scope="module")
 def c_host(tmp_path_factory):
     """The minimal C importer (tests/c_host), compiled."""
-    exe = tmp_path_factory.mktemp("c_host") / "minimal_importer"
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
-    assert cc, "a C compiler is needed (the FMU build needs one too)"
-    subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
-                    str(exe), str(REPO / "tests" / "c_host" / "minimal_importer.c"), "-ldl"], check=True)
-    return exe
+    return hosts.compile_c_importer(tmp_path_factory.mktemp("c_host") / "minimal_importer")
 
 
-def host_environment() -> dict:
-    """The set-up the README documents for a non-Python host."""
-    site = sysconfig.get_paths()["purelib"]
-    return dict(os.environ, LD_PRELOAD=str(_libpython()), PYTHONHOME=sys.base_prefix, PYTHONPATH=site,
-                PYTHONNOUSERSITE="1")
+#: A bare environment: no LD_PRELOAD, PYTHONHOME or PYTHONPATH; the FMU finds its Python itself.
+BARE = hosts.BARE_ENVIRONMENT
+#: The system's CPython (Debian: a shared libpython3.11, no numpy), what the bare-CPython runs use.
+SYSTEM_PYTHON = Path("/usr/bin/python3")
 
 
-HOST_CASES = {"EngineShaft": ("tau", -100.0, "w"), "LoadShaft": ("tau", 120.0, "w"),
-              "LeverCoupling": ("phi1", 0.1, "tau1")}
-
-
-@pytest.mark.parametrize("fmu", FMU_NAMES)
-def test_a_c_host_loads_instantiates_steps_reads_and_frees_each_fmu(fmu, fmu_dir, c_host, tmp_path):
+def _unzipped(fmu_dir: Path, fmu: str, where: Path) -> Path:
     from fmpy import extract
+    return Path(extract(str(fmu_dir / f"{fmu}.fmu"), str(where)))
 
-    md = read_model_description(str(fmu_dir / f"{fmu}.fmu"))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    name_in, value, name_out = HOST_CASES[fmu]
-    unzipped = extract(str(fmu_dir / f"{fmu}.fmu"), str(tmp_path / fmu))
-    args = [str(c_host), unzipped, md.coSimulation.modelIdentifier, md.guid, str(vr[name_in]), repr(value),
-            str(vr[name_out]), "0.001", "5"]
-    done = subprocess.run(args, env=host_environment(), capture_output=True, text=True, timeout=60)
-    assert done.returncode == 0, done.stderr
-    lines = done.stdout.split()
-    assert lines[-1] == "freed"
-    got = [float(line.split("y=")[1]) for line in lines[1:-1:2]]
-    # The same steps through fmpy in this (Python) process.
+
+def _run_c_host(c_host, unzipped: Path, fmu: str, env: dict, steps: int = 5, guid: str | None = None):
+    return hosts.run_c_importer(c_host, unzipped, fmu, steps, 1e-3, env, guid)
+
+
+def _fmpy_outputs(fmu_dir: Path, fmu: str, steps: int = 5) -> list[float]:
+    """The same steps through fmpy in this (Python) process."""
+    name_in, value, name_out = hosts.C_IMPORTER_CASES[fmu]
     c = Component("reference", fmu_dir / f"{fmu}.fmu")
     try:
         c.initialize(0.0, None)
-        c.set_parameters({name_in: value})
+        if name_in:
+            c.set_parameters({name_in: value})
         c.exit_initialization()
         expected = []
-        for k in range(5):
+        for k in range(steps):
             c.do_step(k * 1e-3, 1e-3)
             expected.append(c.get([name_out])[0])
     finally:
         c.free()
-    assert got == expected
+    return expected
 
 
-def test_without_libpython_the_c_host_is_told_what_is_missing(fmu_dir, c_host, tmp_path):
-    from fmpy import extract
+def _outputs(done) -> list[float]:
+    lines = done.stdout.split()
+    assert lines[-1] == "freed", done.stdout
+    return [float(line.split("y=")[1]) for line in lines[1:-1:2]]
 
-    md = read_model_description(str(fmu_dir / "EngineShaft.fmu"))
-    unzipped = extract(str(fmu_dir / "EngineShaft.fmu"), str(tmp_path / "e"))
-    env = {k: v for k, v in host_environment().items() if k != "LD_PRELOAD"}
-    done = subprocess.run([str(c_host), unzipped, "EngineShaft", md.guid, "0", "0", "0", "0.001", "1"], env=env,
-                          capture_output=True, text=True, timeout=60)
-    assert done.returncode != 0
-    assert "undefined symbol" in done.stderr and "pythonfmu-export.so" in done.stderr
+
+def _without_build_python(unzipped: Path) -> None:
+    """Make the FMU look as it does on a machine without the Python it was built with."""
+    cfg = unzipped / "resources" / "lever_shim.cfg"
+    cfg.write_text("".join(line for line in cfg.read_text().splitlines(keepends=True)
+                           if not line.startswith("python_")))
+
+
+def _imports_numpy(unzipped: Path) -> bool:
+    """Whether the model code in the FMU imports numpy (another branch removes it)."""
+    for path in (unzipped / "resources").rglob("*.py"):
+        if "pythonfmu" in path.relative_to(unzipped / "resources").parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else [])
+            if any(n.split(".")[0] == "numpy" for n in names):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+def test_a_c_host_in_a_bare_environment_runs_each_fmu(fmu, fmu_dir, c_host, tmp_path):
+    """env -i PATH=/usr/bin:/bin, no LD_PRELOAD: the FMU loads the Python it was built with."""
+    unzipped = _unzipped(fmu_dir, fmu, tmp_path / fmu)
+    done = _run_c_host(c_host, unzipped, fmu, BARE)
+    assert done.returncode == 0, done.stderr
+    assert _outputs(done) == _fmpy_outputs(fmu_dir, fmu)
+    # a PYTHONHOME of another Python is not what the FMU's library gets (it would abort the host)
+    done = _run_c_host(c_host, unzipped, fmu, {**BARE, "PYTHONHOME": str(tmp_path)}, steps=1)
+    assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.parametrize("threads", [{"STEP_THREADS": "1"}, {"INSTANCES": "2"}, {"STEP_THREADS": "1", "INSTANCES": "2"}],
+                         ids=["a-thread-per-step", "two-instances", "both"])
+def test_a_c_host_calling_from_several_threads_gets_the_same_numbers(threads, fmu_dir, c_host, tmp_path):
+    """One Python thread state is kept per host thread: calls from a new thread each step (each
+    thread's state released when it ends) and two instances on one thread compute what the
+    plain run computes."""
+    unzipped = _unzipped(fmu_dir, "EngineShaft", tmp_path / "e")
+    plain = _run_c_host(c_host, unzipped, "EngineShaft", BARE, steps=20)
+    done = _run_c_host(c_host, unzipped, "EngineShaft", {**BARE, **threads}, steps=20)
+    assert plain.returncode == 0 and done.returncode == 0, done.stderr
+    assert _outputs(done) == _outputs(plain)
+
+
+@pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+def test_a_c_host_on_a_bare_system_cpython(fmu, fmu_dir, c_host, tmp_path):
+    """Without the build's Python the FMU asks python3 on PATH: /usr/bin/python3, no third-party
+    package.  An FMU whose model code needs none runs; one that imports numpy where the system
+    Python has none fails at fmi2Instantiate with a message naming it, and the host lives."""
+    unzipped = _unzipped(fmu_dir, fmu, tmp_path / fmu)
+    _without_build_python(unzipped)
+    done = _run_c_host(c_host, unzipped, fmu, BARE)
+    if _expect_bare_run(done, unzipped):
+        assert _outputs(done) == pytest.approx(_fmpy_outputs(fmu_dir, fmu), rel=1e-14, abs=0)
+
+
+def _expect_bare_run(done, unzipped: Path) -> bool:
+    """Checks a run on the system's CPython: it ran, or (model code importing numpy, which that
+    Python lacks) it failed cleanly at fmi2Instantiate naming numpy.  True if it ran."""
+    has_numpy = subprocess.run([str(SYSTEM_PYTHON), "-c", "import numpy"], env=BARE,
+                               capture_output=True).returncode == 0
+    if _imports_numpy(unzipped) and not has_numpy:
+        assert done.returncode == 5, (done.stdout, done.stderr)
+        assert "No module named 'numpy'" in done.stderr
+        return False
+    assert done.returncode == 0, done.stderr
+    return True
+
+
+@pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
+def test_the_fmu_carries_pythonfmu_for_a_bare_cpython(fmu_dir, tmp_path):
+    """pythonfmu's Python package travels in resources/ (pythonfmu's builder copies the installed
+    one) and imports on a CPython that has nothing installed, from there."""
+    resources = _unzipped(fmu_dir, "EngineShaft", tmp_path / "e") / "resources"
+    done = subprocess.run([str(SYSTEM_PYTHON), "-I", "-c", "import sys; sys.path.insert(0, sys.argv[1]); "
+                           "import pythonfmu, pythonfmu.fmi2slave; print(pythonfmu.__file__)", str(resources)],
+                          env=BARE, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == str(resources / "pythonfmu" / "__init__.py")
+
+
+def test_without_any_python_the_c_host_is_told_what_was_tried(fmu_dir, c_host, tmp_path):
+    unzipped = _unzipped(fmu_dir, "MisalignmentSource", tmp_path / "m")
+    _without_build_python(unzipped)
+    done = _run_c_host(c_host, unzipped, "MisalignmentSource", {"PATH": str(tmp_path)}, steps=1)
+    assert done.returncode == 5, done.stderr        # NULL from fmi2Instantiate, no crash
+    assert "no usable Python" in done.stderr and "python3 on PATH" in done.stderr
+    assert "LEVER_FMU_LIBPYTHON" in done.stderr     # how to fix it
+    # the explicit setting is used, and its mistake reported as such
+    done = _run_c_host(c_host, unzipped, "MisalignmentSource",
+                       {**BARE, "LEVER_FMU_LIBPYTHON": str(tmp_path / "libpython3.11.so")}, steps=1)
+    assert done.returncode == 5 and f"LEVER_FMU_LIBPYTHON={tmp_path}" in done.stderr, done.stderr
+    if SYSTEM_PYTHON.exists():
+        library = subprocess.run([str(SYSTEM_PYTHON), "-c", "import sysconfig as s; print(s.get_config_var('LIBDIR') "
+                                  "+ '/' + s.get_config_var('INSTSONAME'))"], env=BARE, capture_output=True,
+                                 text=True).stdout.strip()
+        done = _run_c_host(c_host, unzipped, "MisalignmentSource",
+                           {"PATH": str(tmp_path), "LEVER_FMU_LIBPYTHON": library}, steps=1)
+        _expect_bare_run(done, unzipped)
+
+
+def _file_uri_forms(resources: Path) -> list[str]:
+    path = str(resources)
+    encoded = "".join(c if c.isalnum() or c in "/-_." else "".join(f"%{b:02X}" for b in c.encode()) for c in path)
+    return [f"file://{path}", f"file:{path}", f"file://localhost{path}", f"FILE://LOCALHOST{path}/",
+            f"file://{encoded}", f"file:{encoded.lower()}", f"file://localhost{encoded}"]
+
+
+def test_every_file_uri_form_locates_the_resources(fmu_dir, c_host, tmp_path):
+    unzipped = _unzipped(fmu_dir, "MisalignmentSource", tmp_path / "dir with space, ü & more")
+    for uri in _file_uri_forms(unzipped / "resources"):
+        done = _run_c_host(c_host, unzipped, "MisalignmentSource", {**BARE, "RESOURCE_URI": uri}, steps=1)
+        assert done.returncode == 0, (uri, done.stderr)
+
+
+BAD_RESOURCE_LOCATIONS = {
+    "": "is empty",
+    "resources": "is not a file URI",
+    "http://localhost/tmp": "is not a file URI",
+    "file://example.org/tmp": "names a host other than localhost",
+    "file://localhost": "names a host other than localhost or no path",
+    "file:relative/path": "has no absolute path",
+    "file:///nonexistent/lever/resources": "is not a directory",
+    "file:///tmp/%zz": "malformed percent-encoding",
+    "file:///tmp/%00": "malformed percent-encoding",
+    "file:///tmp?x=1": "query or fragment",
+}
+
+
+@pytest.mark.parametrize("uri", list(BAD_RESOURCE_LOCATIONS))
+def test_a_bad_resource_location_gives_null_and_a_message(uri, fmu_dir, c_host, tmp_path):
+    unzipped = _unzipped(fmu_dir, "MisalignmentSource", tmp_path / "m")
+    done = _run_c_host(c_host, unzipped, "MisalignmentSource", {**BARE, "RESOURCE_URI": uri}, steps=1)
+    assert done.returncode == 5, (uri, done.returncode, done.stderr)   # NULL, not a crash
+    assert BAD_RESOURCE_LOCATIONS[uri] in done.stderr, done.stderr
+
+
+def test_a_wrong_guid_gives_null_and_a_message(fmu_dir, c_host, tmp_path):
+    unzipped = _unzipped(fmu_dir, "MisalignmentSource", tmp_path / "m")
+    done = _run_c_host(c_host, unzipped, "MisalignmentSource", BARE, steps=1, guid="{not-this-fmu}")
+    assert done.returncode == 5
+    assert "is not this FMU's GUID" in done.stderr
 
 
 def test_kavz_run_in_libcosim_passes_lever_validate(fmu_dir, tmp_path):

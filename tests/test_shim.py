@@ -244,7 +244,13 @@ def test_wrap_fmu_moves_pythonfmu_library_and_keeps_the_rest(gain_fmus, shim_so)
         ident = "ShimGain"
         lib = f"binaries/linux64/{ident}.so"
         inner = "binaries/linux64/pythonfmu-export.so"
-        assert sorted(b.namelist()) == sorted(a.namelist() + [inner])
+        assert sorted(b.namelist()) == sorted(a.namelist() + [inner, shim.CONFIG_NAME])
+        config = b.read(shim.CONFIG_NAME).decode()
+        guid = fmpy.read_model_description(str(original)).guid
+        assert f"guid={guid}\n" in config
+        python = shim.build_python()
+        if python["library"]:
+            assert f"python_library={python['library']}\n" in config
         assert b.read(lib) == shim_so.read_bytes()
         assert b.read(inner) == a.read(lib)
         for name in a.namelist():

@@ -1,29 +1,68 @@
 /*
- * lever_fmi2_shim.c -- FMI 2.0 Co-Simulation shim in front of pythonfmu 0.7.0.
+ * lever_fmi2_shim.c -- the native entry of our FMI 2.0 Co-Simulation FMUs, in front of
+ * pythonfmu 0.7.0's export library (shipped next to this file as "pythonfmu-export.so").
  *
- * pythonfmu's native export library (shipped next to this file in the FMU as
- * "pythonfmu-export.so") has three defects we work around here:
- *   1. The only non-OK status a Python slave can produce is an exception, which
- *      becomes fmi2Fatal *and* frees the Python instance while keeping a
- *      dangling pointer: any later call, fmi2FreeInstance included, is a
- *      use-after-free.
- *   2. With loggingOn=fmi2False it drops every message, errors included.
- *   3. do_step() returning False is reported as fmi2Discard.
- * Our Python slaves therefore never raise; they call self.log(msg, error) and
- * return normally.  This shim turns the most severe status logged during a call
- * into that call's return status, always delivers warnings/errors to the
- * importer, and quarantines an instance after a fatal error.
+ * What it adds, so that the FMUs are usable guests of any FMI 2.0 host:
+ *   1. It finds a Python itself (python_ready): the host's own interpreter if the host
+ *      already runs one, else a CPython shared library loaded RTLD_GLOBAL (pythonfmu's
+ *      library resolves its Python symbols against it) from, in this order:
+ *        LEVER_FMU_LIBPYTHON (a path to libpython3.X.so; LEVER_FMU_PYTHONHOME optional),
+ *        the interpreter the FMU was built with (resources/lever_shim.cfg) if present,
+ *        `python3` on PATH, asked for its library and prefix.
+ *      It sets the Python home to match the library (a PYTHONHOME of another Python in the
+ *      environment would make Py_Initialize abort the host), initialises the interpreter
+ *      once and never finalises it.  Nothing usable: fmi2Instantiate returns NULL and logs
+ *      what it tried and how to fix it.
+ *   2. The resource location is any RFC 8089 file URI (file:///p, file:/p,
+ *      file://localhost/p, percent-encoded), checked and turned into a plain path before
+ *      pythonfmu sees it; anything else is refused with a message.
+ *   3. The FMI 2.0 Co-Simulation state machine (the standard's table of which function may
+ *      be called in which state): calls in the wrong state get fmi2Error and reach nothing.
+ *      A GUID other than the one the FMU was built with is refused.  The shim keeps the
+ *      communication time, wraps FMU states (and their serialized bytes, in a header it
+ *      validates before anything is forwarded) with the time and state they were taken
+ *      in, so fmi2GetRealStatus(fmi2LastSuccessfulTime) is true after refusals and
+ *      restores.  Strings that are not UTF-8 and too small buffers get fmi2Error.
+ *      A refused call (fmi2Error) changes nothing: the instance stays in its state.
+ *   4. One Python thread state per host thread: pythonfmu calls PyGILState_Ensure and
+ *      Release around every call, which creates and destroys a thread state each time when
+ *      the calling thread is unknown to Python.  The shim registers one thread state for
+ *      such a thread on its first call and keeps it (released when the last instance is
+ *      freed on that thread, or when the thread ends); threads Python knows are left alone.
+ *   5. pythonfmu's own defects: the only non-OK status a Python slave can produce is an
+ *      exception, which becomes fmi2Fatal *and* frees the Python instance while keeping a
+ *      dangling pointer; with loggingOn=fmi2False it drops every message, errors included;
+ *      do_step() returning False is reported as fmi2Discard.  Our Python slaves therefore
+ *      never raise; they call self.log(msg, error) and return normally.  The shim turns the
+ *      most severe status logged during a call into that call's return status, always
+ *      delivers warnings and errors to the importer, and quarantines an instance after a
+ *      fatal error.
  *
- * Build: cc -shared -fPIC -O2 -std=c99 -fvisibility=hidden -Wall -Wextra -Werror
- *        -o <modelIdentifier>.so lever_fmi2_shim.c -ldl
+ * Build (build/shim/compile.py): cc -shared -fPIC -O2 -std=c99 -fvisibility=hidden
+ *        -Wall -Wextra -Werror -Wl,-z,nodelete -o <modelIdentifier>.so lever_fmi2_shim.c
+ *        -ldl -lpthread
  */
-#define _GNU_SOURCE /* dladdr */
+#define _GNU_SOURCE /* dladdr, RTLD_DEFAULT */
 
 #include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <spawn.h>
+#include <stdarg.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <wchar.h>
+
+extern char **environ;
 
 /* ------------------------------------------------------------------------- */
 /* Minimal FMI 2.0 declarations (standard ABI of fmi2TypesPlatform.h,          */
@@ -158,11 +197,453 @@ SHIM_DECLARE(fmi2SetDebugLogging)
 SHIM_INNER_FUNCTIONS(SHIM_DECLARE)
 
 /* ------------------------------------------------------------------------- */
-/* Inner library                                                              */
+/* Small helpers                                                             */
 /* ------------------------------------------------------------------------- */
 
 #define INNER_LIBRARY_NAME "pythonfmu-export.so"
+#define CONFIG_NAME "lever_shim.cfg" /* in resources/, written by compile.py */
 #define SHIM_CATEGORY "logStatusError"
+#define MAX_PYTHON_PATHS 8
+
+/* Appends printf-formatted text to a bounded buffer (truncating, never overflowing). */
+static void appendf(char *buf, size_t size, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void appendf(char *buf, size_t size, const char *fmt, ...)
+{
+    size_t used = strlen(buf);
+    if (used + 1 >= size) {
+        return;
+    }
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(buf + used, size - used, fmt, args);
+    va_end(args);
+}
+
+static char *copy_string(const char *text)
+{
+    size_t n = strlen(text) + 1;
+    char *copy = malloc(n);
+    if (copy) {
+        memcpy(copy, text, n);
+    }
+    return copy;
+}
+
+static int is_file(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 && S_ISREG(st.st_mode);
+}
+
+static int is_directory(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+/* The directory part of path (without the final '/'), in out (which may be path). */
+static void dirname_of(const char *path, char *out, size_t size)
+{
+    if (out != path) {
+        snprintf(out, size, "%s", path);
+    }
+    char *slash = strrchr(out, '/');
+    if (slash && slash != out) {
+        *slash = '\0';
+    } else if (slash) {
+        out[1] = '\0';
+    }
+}
+
+/* ------------------------------------------------------------------------- */
+/* Configuration: resources/lever_shim.cfg, and `python3 -c` answers          */
+/* (lines "key=value"; '#' starts a comment line)                             */
+/* ------------------------------------------------------------------------- */
+
+typedef struct {
+    char guid[256];
+    char library[PATH_MAX];            /* python_library */
+    char home[PATH_MAX];               /* python_home */
+    char paths[MAX_PYTHON_PATHS][PATH_MAX]; /* python_path: added with site.addsitedir */
+    int nPaths;
+} Config;
+
+static void config_line(Config *cfg, char *line)
+{
+    size_t n = strlen(line);
+    while (n > 0 && (line[n - 1] == '\n' || line[n - 1] == '\r')) {
+        line[--n] = '\0';
+    }
+    char *eq = strchr(line, '=');
+    if (line[0] == '#' || !eq) {
+        return;
+    }
+    *eq = '\0';
+    const char *key = line, *value = eq + 1;
+    if (strcmp(key, "guid") == 0) {
+        snprintf(cfg->guid, sizeof cfg->guid, "%s", value);
+    } else if (strcmp(key, "python_library") == 0) {
+        snprintf(cfg->library, sizeof cfg->library, "%s", value);
+    } else if (strcmp(key, "python_home") == 0) {
+        snprintf(cfg->home, sizeof cfg->home, "%s", value);
+    } else if (strcmp(key, "python_path") == 0 && cfg->nPaths < MAX_PYTHON_PATHS) {
+        snprintf(cfg->paths[cfg->nPaths++], PATH_MAX, "%s", value);
+    }
+}
+
+static void config_read(Config *cfg, FILE *f)
+{
+    char line[PATH_MAX + 64];
+    while (fgets(line, sizeof line, f)) {
+        config_line(cfg, line);
+    }
+}
+
+/* Asks `python3` on PATH (isolated from PYTHON* variables) for its shared library, its
+ * prefix and, in a virtual environment, its site-packages.  0 on success. */
+static const char PYTHON_QUERY[] =
+    "import os, site, sys, sysconfig\n"
+    "d = sysconfig.get_config_var('LIBDIR') or ''\n"
+    "for n in (sysconfig.get_config_var('INSTSONAME'), sysconfig.get_config_var('LDLIBRARY')):\n"
+    "    if n and '.so' in n and os.path.exists(os.path.join(d, n)):\n"
+    "        print('python_library=' + os.path.join(d, n))\n"
+    "        break\n"
+    "print('python_home=' + sys.base_prefix)\n"
+    "if sys.prefix != sys.base_prefix:\n"
+    "    for p in site.getsitepackages():\n"
+    "        print('python_path=' + p)\n";
+
+static int query_python_on_path(Config *cfg, char *why, size_t whysize)
+{
+    int out[2];
+    if (pipe(out) != 0) {
+        snprintf(why, whysize, "pipe: %s", strerror(errno));
+        return -1;
+    }
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_adddup2(&actions, out[1], 1);
+    posix_spawn_file_actions_addclose(&actions, out[0]);
+    posix_spawn_file_actions_addclose(&actions, out[1]);
+    posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+    char *argv[] = {"python3", "-I", "-c", (char *)PYTHON_QUERY, NULL};
+    pid_t pid;
+    int rc = posix_spawnp(&pid, "python3", &actions, NULL, argv, environ);
+    posix_spawn_file_actions_destroy(&actions);
+    close(out[1]);
+    if (rc != 0) {
+        close(out[0]);
+        snprintf(why, whysize, "no python3 on PATH (%s)", strerror(rc));
+        return -1;
+    }
+    FILE *f = fdopen(out[0], "r");
+    if (!f) {
+        close(out[0]);
+        waitpid(pid, NULL, 0);
+        snprintf(why, whysize, "fdopen: %s", strerror(errno));
+        return -1;
+    }
+    config_read(cfg, f);
+    fclose(f);
+    int status = 0;
+    if (waitpid(pid, &status, 0) == pid && !(WIFEXITED(status) && WEXITSTATUS(status) == 0)) {
+        snprintf(why, whysize, "python3 on PATH failed to answer");
+        return -1;
+    }
+    if (!cfg->library[0]) {
+        snprintf(why, whysize, "python3 on PATH (prefix %s) has no shared libpython",
+                 cfg->home[0] ? cfg->home : "?");
+        return -1;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
+/* Python                                                                     */
+/* ------------------------------------------------------------------------- */
+
+typedef enum { PyGILState_LOCKED, PyGILState_UNLOCKED } PyGILState_STATE;
+
+/* The few CPython functions the shim calls, resolved at run time. */
+#define PYTHON_FUNCTIONS(X)                                                                        \
+    X(int, Py_IsInitialized, (void))                                                               \
+    X(void, Py_InitializeEx, (int))                                                                \
+    X(const char *, Py_GetVersion, (void))                                                         \
+    X(wchar_t *, Py_DecodeLocale, (const char *, size_t *))                                        \
+    X(void, Py_SetPythonHome, (const wchar_t *))                                                   \
+    X(int, PyRun_SimpleStringFlags, (const char *, void *))                                        \
+    X(void *, PyEval_SaveThread, (void))                                                           \
+    X(void, PyEval_RestoreThread, (void *))                                                        \
+    X(PyGILState_STATE, PyGILState_Ensure, (void))                                                 \
+    X(void *, PyGILState_GetThisThreadState, (void))                                               \
+    X(void, PyThreadState_Clear, (void *))                                                         \
+    X(void, PyThreadState_DeleteCurrent, (void))
+
+typedef struct {
+#define PY_MEMBER(ret, name, args) ret(*name) args;
+    PYTHON_FUNCTIONS(PY_MEMBER)
+#undef PY_MEMBER
+} PythonApi;
+
+static PythonApi g_py;
+static int g_python_ready; /* written under g_python_lock, read atomically */
+static pthread_mutex_t g_python_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* Resolves every function from handle (RTLD_DEFAULT: whatever the process has). */
+static int python_resolve(void *handle, PythonApi *api, char *why, size_t whysize)
+{
+#define PY_RESOLVE(ret, name, args)                                                                \
+    api->name = (ret(*) args)dlsym(handle, #name);                                                 \
+    if (!api->name) {                                                                              \
+        snprintf(why, whysize, "it lacks %s", #name);                                              \
+        return -1;                                                                                 \
+    }
+    PYTHON_FUNCTIONS(PY_RESOLVE)
+#undef PY_RESOLVE
+    return 0;
+}
+
+/* "3.11" of Py_GetVersion(), checked to be 3.9 or later. */
+static int python_version(const PythonApi *api, char *version, size_t size, char *why, size_t whysize)
+{
+    int major = 0, minor = 0;
+    if (sscanf(api->Py_GetVersion(), "%d.%d", &major, &minor) != 2) {
+        snprintf(why, whysize, "unreadable version %.40s", api->Py_GetVersion());
+        return -1;
+    }
+    if (major != 3 || minor < 9) {
+        snprintf(why, whysize, "it is Python %d.%d, 3.9 or later is needed", major, minor);
+        return -1;
+    }
+    snprintf(version, size, "%d.%d", major, minor);
+    return 0;
+}
+
+/* The prefix holding lib/pythonX.Y/encodings (what Py_Initialize needs first) for the
+ * library at lib_path: its directory's parent (<prefix>/lib/libpython...) or grandparent
+ * (<prefix>/lib/<multiarch>/libpython...).  Empty if neither. */
+static void home_of_library(const char *lib_path, const char *version, char *home, size_t size)
+{
+    char real[PATH_MAX], dir[PATH_MAX], probe[PATH_MAX + 64];
+    home[0] = '\0';
+    if (!realpath(lib_path, real)) {
+        return;
+    }
+    dirname_of(real, dir, sizeof dir);
+    for (int up = 0; up < 2; up++) {
+        dirname_of(dir, dir, sizeof dir);
+        snprintf(probe, sizeof probe, "%s/lib/python%s/encodings/__init__.py", dir, version);
+        if (is_file(probe)) {
+            snprintf(home, size, "%s", dir);
+            return;
+        }
+    }
+}
+
+/* The code that adds a directory to sys.path; the path travels hex-encoded so that no
+ * character in it can break the Python source. */
+static int python_add_site_dir(const char *dir)
+{
+    size_t n = strlen(dir);
+    size_t size = 2 * n + 200;
+    char *code = malloc(size);
+    if (!code) {
+        return -1;
+    }
+    int k = snprintf(code, size, "import os, site\nsite.addsitedir(os.fsdecode(bytes.fromhex('");
+    for (size_t i = 0; i < n; i++) {
+        k += snprintf(code + k, size - (size_t)k, "%02x", (unsigned char)dir[i]);
+    }
+    snprintf(code + k, size - (size_t)k, "')))\n");
+    int rc = g_py.PyRun_SimpleStringFlags(code, NULL);
+    free(code);
+    return rc;
+}
+
+/* Loads the library of one candidate, initialises its interpreter with the matching home
+ * and the extra site directories.  0 on success; on failure why says what went wrong
+ * and nothing irreversible was done (the interpreter was not initialised). */
+static int python_try(const char *library, const char *home_hint, const Config *extra, char *why,
+                      size_t whysize)
+{
+    if (!is_file(library)) {
+        snprintf(why, whysize, "no such file");
+        return -1;
+    }
+    void *handle = dlopen(library, RTLD_NOW | RTLD_GLOBAL);
+    if (!handle) {
+        const char *e = dlerror();
+        snprintf(why, whysize, "cannot load it: %s", e ? e : "unknown error");
+        return -1;
+    }
+    PythonApi api;
+    char version[16];
+    if (python_resolve(handle, &api, why, whysize) != 0 ||
+        python_version(&api, version, sizeof version, why, whysize) != 0) {
+        dlclose(handle);
+        return -1;
+    }
+    if (api.Py_IsInitialized()) { /* someone in this process already runs it */
+        g_py = api;
+        return 0;
+    }
+    char home[PATH_MAX], probe[PATH_MAX + 64];
+    if (home_hint && home_hint[0]) {
+        snprintf(home, sizeof home, "%s", home_hint);
+    } else {
+        home_of_library(library, version, home, sizeof home);
+    }
+    snprintf(probe, sizeof probe, "%s/lib/python%s/encodings/__init__.py", home, version);
+    if (!home[0] || !is_file(probe)) {
+        /* Py_Initialize would abort the process without its standard library. */
+        snprintf(why, whysize, "the standard library of Python %s is not at %s/lib/python%s "
+                 "(set LEVER_FMU_PYTHONHOME to its prefix)", version, home[0] ? home : "<unknown prefix>",
+                 version);
+        return -1;
+    }
+    /* Py_SetPythonHome keeps the pointer: the string must live for ever. */
+    wchar_t *whome = api.Py_DecodeLocale(home, NULL);
+    if (!whome) {
+        snprintf(why, whysize, "cannot decode the path %s", home);
+        return -1;
+    }
+    g_py = api;
+    api.Py_SetPythonHome(whome);
+    /* UTF-8 mode: an embedded interpreter does not coerce the C locale hosts usually run
+     * in, and would decode paths as ASCII. */
+    int *utf8_mode = (int *)dlsym(handle, "Py_UTF8Mode");
+    if (utf8_mode) {
+        *utf8_mode = 1;
+    }
+    api.Py_InitializeEx(0); /* 0: the host's signal handlers stay the host's */
+    for (int i = 0; extra && i < extra->nPaths; i++) {
+        python_add_site_dir(extra->paths[i]);
+    }
+    /* Release the interpreter lock; this thread keeps its (main) thread state. */
+    api.PyEval_SaveThread();
+    return 0;
+}
+
+/* Makes sure a usable Python runs in this process; see the comment at the top of this
+ * file for the order of places.  0 on success, else a message in err. */
+static int python_ready(const Config *built, char *err, size_t errsize)
+{
+    if (__atomic_load_n(&g_python_ready, __ATOMIC_ACQUIRE)) {
+        return 0;
+    }
+    pthread_mutex_lock(&g_python_lock);
+    int rc = -1;
+    /* Static, under the lock: host threads may have small stacks. */
+    static char why[PATH_MAX + 256];
+    static Config found;
+    why[0] = err[0] = '\0';
+    if (g_python_ready) {
+        rc = 0;
+        goto done;
+    }
+
+    /* The host already runs Python (fmpy, libcosimpy, ...), or loaded its library. */
+    PythonApi host;
+    if (python_resolve(RTLD_DEFAULT, &host, why, sizeof why) == 0) {
+        Dl_info info;
+        memset(&info, 0, sizeof info);
+        if (host.Py_IsInitialized()) {
+            g_py = host;
+            rc = 0;
+            goto done;
+        }
+        if (dladdr((void *)host.Py_IsInitialized, &info) && info.dli_fname &&
+            python_try(info.dli_fname, getenv("LEVER_FMU_PYTHONHOME"), NULL, why, sizeof why) == 0) {
+            rc = 0;
+            goto done;
+        }
+        appendf(err, errsize, "the Python library already in this process (%s): %s; ",
+                info.dli_fname ? info.dli_fname : "?", why);
+    }
+
+    const char *explicit_library = getenv("LEVER_FMU_LIBPYTHON");
+    if (explicit_library && explicit_library[0]) {
+        /* An explicit setting is final: falling back would hide its mistake. */
+        if (python_try(explicit_library, getenv("LEVER_FMU_PYTHONHOME"), NULL, why, sizeof why) == 0) {
+            rc = 0;
+        } else {
+            appendf(err, errsize, "LEVER_FMU_LIBPYTHON=%s: %s", explicit_library, why);
+        }
+        goto done;
+    }
+    if (built->library[0]) {
+        if (python_try(built->library, built->home, built, why, sizeof why) == 0) {
+            rc = 0;
+            goto done;
+        }
+        appendf(err, errsize, "the Python this FMU was built with (%s): %s; ", built->library, why);
+    }
+    memset(&found, 0, sizeof found);
+    if (query_python_on_path(&found, why, sizeof why) == 0 &&
+        python_try(found.library, found.home, &found, why, sizeof why) == 0) {
+        rc = 0;
+        goto done;
+    }
+    appendf(err, errsize, "python3 on PATH%s%s: %s. ", found.library[0] ? " " : "", found.library, why);
+    appendf(err, errsize, "Fix: set LEVER_FMU_LIBPYTHON to a CPython 3.9+ shared library "
+                          "(libpython3.X.so, e.g. Debian's package libpython3.11), or put a python3 "
+                          "that has one on PATH");
+done:
+    if (rc == 0) {
+        __atomic_store_n(&g_python_ready, 1, __ATOMIC_RELEASE);
+    }
+    pthread_mutex_unlock(&g_python_lock);
+    return rc;
+}
+
+/* ------------------------------------------------------------------------- */
+/* One Python thread state per host thread                                    */
+/* ------------------------------------------------------------------------- */
+
+static __thread int t_thread_known;  /* this thread has a thread state (ours or Python's) */
+static __thread void *t_kept_state;   /* the one we registered, if any */
+static pthread_key_t g_thread_key;     /* its destructor releases it when the thread ends */
+static pthread_once_t g_thread_key_once = PTHREAD_ONCE_INIT;
+static int g_live_instances;
+
+static void release_thread_state(void *state)
+{
+    /* After the host's Py_Finalize the state is gone with the interpreter.  Not
+     * PyGILState_Release: at thread exit the C library may already have cleared Python's
+     * thread-specific slot, which that function insists on. */
+    if (state && g_py.Py_IsInitialized()) {
+        g_py.PyEval_RestoreThread(state);
+        g_py.PyThreadState_Clear(state);
+        g_py.PyThreadState_DeleteCurrent(); /* also unregisters it and drops the lock */
+    }
+}
+
+static void make_thread_key(void) { pthread_key_create(&g_thread_key, release_thread_state); }
+
+/* On a thread's first call: register a thread state with the GIL-state machinery and
+ * keep it, so that pythonfmu's PyGILState_Ensure finds it instead of making one. */
+static void keep_thread_state(void)
+{
+    t_thread_known = 1;
+    if (g_py.PyGILState_GetThisThreadState()) {
+        return; /* Python's own thread, or the one that initialised the interpreter */
+    }
+    pthread_once(&g_thread_key_once, make_thread_key);
+    g_py.PyGILState_Ensure(); /* creates the thread state, counter 1, lock held */
+    t_kept_state = g_py.PyEval_SaveThread();
+    pthread_setspecific(g_thread_key, t_kept_state);
+}
+
+static inline void thread_state_ready(void)
+{
+    if (__builtin_expect(!t_thread_known, 0)) {
+        keep_thread_state();
+    }
+}
+
+/* ------------------------------------------------------------------------- */
+/* Inner library                                                              */
+/* ------------------------------------------------------------------------- */
 
 typedef struct {
 #define SHIM_API_MEMBER(name) name##TYPE *name;
@@ -171,10 +652,27 @@ typedef struct {
 } InnerApi;
 
 /* Published once with an atomic compare-and-swap so that concurrent first
- * instantiations (importers may instantiate from several threads) are safe
- * without pulling in pthreads.  The inner library is never unloaded: leaked
- * (dead) inner instances live in it, and pythonfmu pins itself anyway. */
+ * instantiations (importers may instantiate from several threads) are safe.  The inner
+ * library is never unloaded: leaked (dead) inner instances live in it, and pythonfmu
+ * pins itself anyway. */
 static InnerApi *g_api;
+
+/* The directory of this library, with a trailing '/'. */
+static int own_directory(char *dir, size_t size)
+{
+    Dl_info info;
+    if (!dladdr((void *)&fmi2Instantiate, &info) || !info.dli_fname) {
+        return -1;
+    }
+    const char *slash = strrchr(info.dli_fname, '/');
+    size_t n = slash ? (size_t)(slash - info.dli_fname) + 1 : 0;
+    if (n + 1 > size) {
+        return -1;
+    }
+    memcpy(dir, info.dli_fname, n);
+    dir[n] = '\0';
+    return 0;
+}
 
 /* Loads the inner library on first use.  On failure returns NULL and leaves a
  * description in err. */
@@ -184,38 +682,23 @@ static InnerApi *inner_api(char *err, size_t errsize)
     if (api) {
         return api;
     }
-
-    /* The inner library sits next to this file; dladdr on one of our own
-     * functions yields our path regardless of how the importer found us. */
-    Dl_info info;
-    if (!dladdr((void *)&fmi2Instantiate, &info) || !info.dli_fname) {
+    char path[PATH_MAX];
+    if (own_directory(path, sizeof path - sizeof INNER_LIBRARY_NAME) != 0) {
         snprintf(err, errsize, "cannot determine the directory of the FMU binary");
         return NULL;
     }
-    const char *slash = strrchr(info.dli_fname, '/');
-    size_t dirlen = slash ? (size_t)(slash - info.dli_fname) + 1 : 0;
-    size_t pathsize = dirlen + sizeof INNER_LIBRARY_NAME;
-    char *path = malloc(pathsize);
-    if (!path) {
-        snprintf(err, errsize, "out of memory");
-        return NULL;
-    }
-    memcpy(path, info.dli_fname, dirlen);
-    memcpy(path + dirlen, INNER_LIBRARY_NAME, sizeof INNER_LIBRARY_NAME);
+    strcat(path, INNER_LIBRARY_NAME);
 
     void *handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!handle) {
         const char *why = dlerror();
         snprintf(err, errsize, "cannot load %s: %s", path, why ? why : "unknown error");
-        free(path);
         return NULL;
     }
-
     api = calloc(1, sizeof *api);
     if (!api) {
         snprintf(err, errsize, "out of memory");
         dlclose(handle);
-        free(path);
         return NULL;
     }
 #define SHIM_RESOLVE(name)                                                                         \
@@ -224,12 +707,10 @@ static InnerApi *inner_api(char *err, size_t errsize)
         snprintf(err, errsize, "%s does not export %s", path, #name);                             \
         free(api);                                                                                 \
         dlclose(handle);                                                                           \
-        free(path);                                                                                \
         return NULL;                                                                               \
     }
     SHIM_INNER_FUNCTIONS(SHIM_RESOLVE)
 #undef SHIM_RESOLVE
-    free(path);
 
     InnerApi *expected = NULL;
     if (!__atomic_compare_exchange_n(&g_api, &expected, api, 0, __ATOMIC_ACQ_REL,
@@ -243,8 +724,146 @@ static InnerApi *inner_api(char *err, size_t errsize)
 }
 
 /* ------------------------------------------------------------------------- */
+/* Resource location: RFC 8089 file URIs                                      */
+/* ------------------------------------------------------------------------- */
+
+static int hex_value(char c)
+{
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* The local directory a file URI names, percent-decoded, without a trailing '/'.
+ * 0 on success, else a message in err. */
+static int resource_directory(const char *uri, char *path, size_t size, char *err, size_t errsize)
+{
+    if (!uri[0]) {
+        snprintf(err, errsize, "fmuResourceLocation is empty; a file URI is needed "
+                               "(file:///path/to/unzipped/resources)");
+        return -1;
+    }
+    if (strncasecmp(uri, "file:", 5) != 0) {
+        snprintf(err, errsize, "fmuResourceLocation '%.200s' is not a file URI "
+                               "(file:///path, file:/path or file://localhost/path)", uri);
+        return -1;
+    }
+    const char *p = uri + 5;
+    if (p[0] == '/' && p[1] == '/') { /* an authority: empty or localhost */
+        const char *end = strchr(p + 2, '/');
+        size_t n = end ? (size_t)(end - (p + 2)) : strlen(p + 2);
+        if (!(n == 0 || (n == 9 && strncasecmp(p + 2, "localhost", 9) == 0)) || !end) {
+            snprintf(err, errsize, "fmuResourceLocation '%.200s' names a host other than "
+                                   "localhost or no path; only local files can be used", uri);
+            return -1;
+        }
+        p = end;
+    }
+    if (p[0] != '/') {
+        snprintf(err, errsize, "fmuResourceLocation '%.200s' has no absolute path", uri);
+        return -1;
+    }
+    size_t k = 0;
+    for (; *p && *p != '?' && *p != '#'; p++) {
+        char c = *p;
+        if (c == '%') {
+            int hi = hex_value(p[1]), lo = hi < 0 ? -1 : hex_value(p[2]);
+            if (hi < 0 || lo < 0 || (hi == 0 && lo == 0)) {
+                snprintf(err, errsize, "fmuResourceLocation '%.200s' has a malformed "
+                                       "percent-encoding", uri);
+                return -1;
+            }
+            c = (char)(hi * 16 + lo);
+            p += 2;
+        }
+        if (k + 1 >= size) {
+            snprintf(err, errsize, "fmuResourceLocation is longer than %zu bytes", size);
+            return -1;
+        }
+        path[k++] = c;
+    }
+    if (*p) {
+        snprintf(err, errsize, "fmuResourceLocation '%.200s' has a query or fragment", uri);
+        return -1;
+    }
+    while (k > 1 && path[k - 1] == '/') {
+        k--;
+    }
+    path[k] = '\0';
+    if (strstr(path, "%20")) {
+        /* pythonfmu turns "%20" into a space once more. */
+        snprintf(err, errsize, "the resource directory %.200s contains \"%%20\", which pythonfmu "
+                               "misreads", path);
+        return -1;
+    }
+    if (!is_directory(path)) {
+        snprintf(err, errsize, "fmuResourceLocation '%.200s': %.200s is not a directory", uri, path);
+        return -1;
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------------------- */
 /* Instances                                                                  */
 /* ------------------------------------------------------------------------- */
+
+/* The FMI 2.0 Co-Simulation states (stepInProgress and stepCanceled never occur: steps
+ * are synchronous).  Bits, so that each function's allowed states are one mask. */
+typedef enum {
+    ST_INSTANTIATED = 1,
+    ST_INITIALIZATION = 2,
+    ST_STEP_COMPLETE = 4,
+    ST_STEP_FAILED = 8,
+    ST_TERMINATED = 16,
+} ShimStateBit;
+
+static const char *state_name(int state)
+{
+    switch (state) {
+    case ST_INSTANTIATED: return "instantiated";
+    case ST_INITIALIZATION: return "initialization mode";
+    case ST_STEP_COMPLETE: return "step complete";
+    case ST_STEP_FAILED: return "step failed";
+    case ST_TERMINATED: return "terminated";
+    default: return "?";
+    }
+}
+
+#define ANY_STATE (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
+#define INITIALIZED (ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
+/* The standard's table (FMI 2.0, section 4.2.4), Co-Simulation columns, with one
+ * leniency: the getters also work in 'instantiated' (they return the start values), as
+ * importers, ours included, read them before initialisation; reading changes nothing. */
+#define MASK_fmi2SetupExperiment ST_INSTANTIATED
+#define MASK_fmi2EnterInitializationMode ST_INSTANTIATED
+#define MASK_fmi2ExitInitializationMode ST_INITIALIZATION
+#define MASK_fmi2Terminate (ST_STEP_COMPLETE | ST_STEP_FAILED)
+#define MASK_fmi2Reset ANY_STATE
+#define MASK_fmi2GetReal ANY_STATE
+#define MASK_fmi2GetInteger MASK_fmi2GetReal
+#define MASK_fmi2GetBoolean MASK_fmi2GetReal
+#define MASK_fmi2GetString MASK_fmi2GetReal
+#define MASK_fmi2SetReal (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE)
+#define MASK_fmi2SetInteger MASK_fmi2SetReal
+#define MASK_fmi2SetBoolean MASK_fmi2SetReal
+#define MASK_fmi2SetString MASK_fmi2SetReal
+#define MASK_fmi2GetFMUstate ANY_STATE
+#define MASK_fmi2SetFMUstate ANY_STATE
+#define MASK_fmi2FreeFMUstate ANY_STATE
+#define MASK_fmi2SerializedFMUstateSize ANY_STATE
+#define MASK_fmi2SerializeFMUstate ANY_STATE
+#define MASK_fmi2DeSerializeFMUstate ANY_STATE
+#define MASK_fmi2GetDirectionalDerivative (ST_INITIALIZATION | INITIALIZED)
+#define MASK_fmi2SetRealInputDerivatives (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE)
+#define MASK_fmi2GetRealOutputDerivatives INITIALIZED
+#define MASK_fmi2DoStep ST_STEP_COMPLETE
+#define MASK_fmi2CancelStep 0 /* only while an asynchronous step runs: never */
+#define MASK_fmi2GetStatus INITIALIZED
+#define MASK_fmi2GetRealStatus INITIALIZED
+#define MASK_fmi2GetIntegerStatus INITIALIZED
+#define MASK_fmi2GetBooleanStatus INITIALIZED
+#define MASK_fmi2GetStringStatus INITIALIZED
 
 typedef struct {
     fmi2Component inner;
@@ -259,7 +878,23 @@ typedef struct {
     fmi2Status worst;       /* most severe status logged during the current call */
     int dead;               /* inner instance returned fmi2Fatal: never touch it again */
     const char *deadIn;     /* the function that returned fmi2Fatal */
+    int state;              /* ShimStateBit */
+    fmi2Real time;          /* the current communication point */
 } Shim;
+
+/* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
+#define STATE_MAGIC 0x4c565253u /* "LVRS" */
+typedef struct {
+    unsigned magic;
+    int state;
+    fmi2Real time;
+    fmi2FMUstate inner;
+} ShimFMUstate;
+
+/* The header in front of the inner library's serialized bytes. */
+#define SERIAL_MAGIC "LVRSHIM"  /* 8 bytes with its NUL */
+#define SERIAL_VERSION 1u
+#define SERIAL_HEADER 32       /* magic[8] version:u32 state:u32 time:f64 length:u64 */
 
 static void free_categories(Shim *s)
 {
@@ -327,16 +962,48 @@ static void shim_logger(fmi2ComponentEnvironment env, fmi2String instanceName, f
     }
 }
 
-/* Messages originating in the shim itself. */
-static void shim_error(Shim *s, const char *fmt, const char *arg)
+/* Messages originating in the shim itself; returns fmi2Error. */
+static fmi2Status shim_error(Shim *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static fmi2Status shim_error(Shim *s, const char *fmt, ...)
 {
-    char buffer[2048]; /* room for an err[1024] plus prefix */
-    snprintf(buffer, sizeof buffer, fmt, arg);
+    char buffer[4096];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(buffer, sizeof buffer, fmt, args);
+    va_end(args);
     shim_record(s, fmi2Error, SHIM_CATEGORY, buffer);
+    return fmi2Error;
 }
 
-/* Prologue of every forwarded call: 1 if the inner library may be called. */
-static int shim_begin(Shim *s)
+/* The refusal of a call made in a state the standard does not allow it in. */
+static void shim_refuse_state(Shim *s, const char *function, int allowed)
+{
+    char where[256] = "";
+    if (allowed == ST_INSTANTIATED) {
+        appendf(where, sizeof where, "only in the instantiated phase (after fmi2Instantiate or fmi2Reset)");
+    } else if (allowed == ST_INITIALIZATION) {
+        appendf(where, sizeof where, "only in the initialisation phase (after fmi2EnterInitializationMode)");
+    } else if (allowed == 0) {
+        appendf(where, sizeof where, "only while an asynchronous step runs, and steps are synchronous");
+    } else {
+        appendf(where, sizeof where, "in the states");
+        for (int bit = ST_INSTANTIATED; bit <= ST_TERMINATED; bit <<= 1) {
+            if (allowed & bit) {
+                appendf(where, sizeof where, " '%s'", state_name(bit));
+            }
+        }
+    }
+    int early = (s->state & (ST_INSTANTIATED | ST_INITIALIZATION)) && (allowed & INITIALIZED) &&
+                !(allowed & s->state);
+    shim_error(s, "%s is not allowed in state '%s'; it is allowed %s (FMI 2.0 Co-Simulation "
+                  "state machine)%s",
+               function, state_name(s->state), where,
+               early ? "; initialise the instance first (fmi2SetupExperiment, "
+                       "fmi2EnterInitializationMode, fmi2ExitInitializationMode)" : "");
+}
+
+/* Prologue of every call: 1 if the inner library may be called in this state. */
+static int shim_begin(Shim *s, const char *function, int allowed)
 {
     if (!s) {
         return 0;
@@ -346,6 +1013,11 @@ static int shim_begin(Shim *s)
         shim_error(s, "instance is unusable after a fatal error in %s", s->deadIn);
         return 0;
     }
+    if (!(s->state & allowed)) {
+        shim_refuse_state(s, function, allowed);
+        return 0;
+    }
+    thread_state_ready();
     return 1;
 }
 
@@ -361,20 +1033,17 @@ static fmi2Status shim_end(Shim *s, const char *function, fmi2Status status)
     return status > s->worst ? status : s->worst;
 }
 
+static int succeeded(fmi2Status status) { return status == fmi2OK || status == fmi2Warning; }
+
 #define SHIM(c) ((Shim *)(c))
+#define BEGIN(name, c)                                                                             \
+    if (!shim_begin(SHIM(c), #name, MASK_##name)) return fmi2Error
 
 /* Forward a call with arguments after the component. */
 #define FORWARD(name, c, ...)                                                                      \
     do {                                                                                           \
-        if (!shim_begin(SHIM(c))) return fmi2Error;                                                \
+        BEGIN(name, c);                                                                            \
         return shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner, __VA_ARGS__));                 \
-    } while (0)
-
-/* Forward a call whose only argument is the component. */
-#define FORWARD0(name, c)                                                                          \
-    do {                                                                                           \
-        if (!shim_begin(SHIM(c))) return fmi2Error;                                                \
-        return shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner));                              \
     } while (0)
 
 /* ------------------------------------------------------------------------- */
@@ -385,14 +1054,25 @@ const char *fmi2GetTypesPlatform(void) { return "default"; }
 
 const char *fmi2GetVersion(void) { return "2.0"; }
 
-static char *copy_string(const char *text)
+/* Reads resources/lever_shim.cfg.  0 on success, else a message in err. */
+static int read_config(const char *resources, Config *cfg, char *err, size_t errsize)
 {
-    size_t n = strlen(text) + 1;
-    char *copy = malloc(n);
-    if (copy) {
-        memcpy(copy, text, n);
+    char path[PATH_MAX + 32];
+    snprintf(path, sizeof path, "%s/%s", resources, CONFIG_NAME);
+    memset(cfg, 0, sizeof *cfg);
+    FILE *f = fopen(path, "r");
+    if (!f) {
+        snprintf(err, errsize, "cannot read %s (%s): is fmuResourceLocation this FMU's resources "
+                               "directory?", path, strerror(errno));
+        return -1;
     }
-    return copy;
+    config_read(cfg, f);
+    fclose(f);
+    if (!cfg->guid[0]) {
+        snprintf(err, errsize, "%s names no guid", path);
+        return -1;
+    }
+    return 0;
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -420,34 +1100,48 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     s->own.freeMemory = functions->freeMemory;
     s->own.stepFinished = NULL; /* asynchronous doStep is not supported */
     s->own.componentEnvironment = s;
+    s->state = ST_INSTANTIATED;
 
-    /* pythonfmu builds std::strings from these; NULL would crash it. */
+    /* Large, so static (host threads may have small stacks), under this lock. */
+    static char resources[PATH_MAX];
+    static Config cfg;
+    static char err[8192];
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    pthread_mutex_lock(&lock);
+    int ok = 0;
     if (!fmuGUID || !fmuResourceLocation) {
         shim_error(s, "fmi2Instantiate: %s is NULL", fmuGUID ? "fmuResourceLocation" : "fmuGUID");
-        free_shim(s);
-        return NULL;
-    }
-    if (fmuType != fmi2CoSimulation) {
-        shim_error(s, "fmi2Instantiate: %s", "this FMU supports Co-Simulation only");
-        free_shim(s);
-        return NULL;
-    }
-
-    char err[1024];
-    if (!inner_api(err, sizeof err)) {
+    } else if (fmuType != fmi2CoSimulation) {
+        shim_error(s, "fmi2Instantiate: this FMU supports Co-Simulation only");
+    } else if (resource_directory(fmuResourceLocation, resources, sizeof resources, err, sizeof err) ||
+               read_config(resources, &cfg, err, sizeof err)) {
         shim_error(s, "fmi2Instantiate: %s", err);
+    } else if (strcmp(fmuGUID, cfg.guid) != 0) {
+        shim_error(s, "fmi2Instantiate: fmuGUID '%.100s' is not this FMU's GUID '%s' "
+                      "(modelDescription.xml of another FMU or build?)", fmuGUID, cfg.guid);
+    } else if (python_ready(&cfg, err, sizeof err) != 0) {
+        shim_error(s, "fmi2Instantiate: no usable Python for this FMU. Tried: %s", err);
+    } else if (!inner_api(err, sizeof err)) {
+        shim_error(s, "fmi2Instantiate: %s", err);
+    } else {
+        ok = 1;
+    }
+    if (!ok) {
+        pthread_mutex_unlock(&lock);
         free_shim(s);
         return NULL;
     }
-
+    thread_state_ready();
     /* loggingOn is always true for the inner library: with it off, pythonfmu
      * suppresses errors too.  The shim filters instead. */
-    s->inner = g_api->fmi2Instantiate(s->instanceName, fmuType, fmuGUID, fmuResourceLocation,
-                                      &s->own, visible, fmi2True);
+    s->inner = g_api->fmi2Instantiate(s->instanceName, fmuType, fmuGUID, resources, &s->own, visible,
+                                      fmi2True);
+    pthread_mutex_unlock(&lock);
     if (!s->inner) {
         free_shim(s);
         return NULL;
     }
+    __atomic_add_fetch(&g_live_instances, 1, __ATOMIC_ACQ_REL);
     return s;
 }
 
@@ -461,21 +1155,28 @@ void fmi2FreeInstance(fmi2Component c)
      * already freed Python object a second time. */
     if (!s->dead) {
         s->worst = fmi2OK;
+        thread_state_ready();
         g_api->fmi2FreeInstance(s->inner);
     }
     free_shim(s);
+    if (__atomic_sub_fetch(&g_live_instances, 1, __ATOMIC_ACQ_REL) == 0 && t_kept_state) {
+        /* The last instance: this thread's kept state goes (others' when they end). */
+        pthread_setspecific(g_thread_key, NULL);
+        release_thread_state(t_kept_state);
+        t_kept_state = NULL;
+        t_thread_known = 0;
+    }
 }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[])
 {
     Shim *s = SHIM(c);
-    if (!shim_begin(s)) {
+    if (!shim_begin(s, "fmi2SetDebugLogging", ANY_STATE)) {
         return fmi2Error;
     }
     if (nCategories > 0 && !categories) {
-        shim_error(s, "fmi2SetDebugLogging: %s", "categories is NULL");
-        return fmi2Error;
+        return shim_error(s, "fmi2SetDebugLogging: categories is NULL");
     }
     /* Copy first so a failure leaves the previous settings intact; the
      * caller's strings may not outlive this call. */
@@ -483,8 +1184,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     if (nCategories > 0) {
         copies = calloc(nCategories, sizeof *copies);
         if (!copies) {
-            shim_error(s, "fmi2SetDebugLogging: %s", "out of memory");
-            return fmi2Error;
+            return shim_error(s, "fmi2SetDebugLogging: out of memory");
         }
         for (size_t i = 0; i < nCategories; i++) {
             copies[i] = copy_string(categories[i] ? categories[i] : "");
@@ -493,8 +1193,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
                     free(copies[j]);
                 }
                 free(copies);
-                shim_error(s, "fmi2SetDebugLogging: %s", "out of memory");
-                return fmi2Error;
+                return shim_error(s, "fmi2SetDebugLogging: out of memory");
             }
         }
     }
@@ -509,17 +1208,53 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
-    FORWARD(fmi2SetupExperiment, c, toleranceDefined, tolerance, startTime, stopTimeDefined,
-            stopTime);
+    BEGIN(fmi2SetupExperiment, c);
+    Shim *s = SHIM(c);
+    if (!isfinite(startTime)) {
+        return shim_error(s, "fmi2SetupExperiment: the start time (startTime = %g) is not finite; "
+                             "nothing was set", startTime);
+    }
+    fmi2Status status = shim_end(s, "fmi2SetupExperiment",
+                                 g_api->fmi2SetupExperiment(s->inner, toleranceDefined, tolerance,
+                                                            startTime, stopTimeDefined, stopTime));
+    if (succeeded(status)) {
+        s->time = startTime;
+    }
+    return status;
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { FORWARD0(fmi2EnterInitializationMode, c); }
+/* A call that moves the instance to state `to` when it succeeds. */
+#define TRANSITION(name, c, to)                                                                    \
+    do {                                                                                           \
+        BEGIN(name, c);                                                                            \
+        fmi2Status status_ = shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner));                \
+        if (succeeded(status_)) SHIM(c)->state = (to);                                             \
+        return status_;                                                                            \
+    } while (0)
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) { FORWARD0(fmi2ExitInitializationMode, c); }
+fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    TRANSITION(fmi2EnterInitializationMode, c, ST_INITIALIZATION);
+}
 
-fmi2Status fmi2Terminate(fmi2Component c) { FORWARD0(fmi2Terminate, c); }
+fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    TRANSITION(fmi2ExitInitializationMode, c, ST_STEP_COMPLETE);
+}
 
-fmi2Status fmi2Reset(fmi2Component c) { FORWARD0(fmi2Reset, c); }
+fmi2Status fmi2Terminate(fmi2Component c) { TRANSITION(fmi2Terminate, c, ST_TERMINATED); }
+
+fmi2Status fmi2Reset(fmi2Component c)
+{
+    BEGIN(fmi2Reset, c);
+    Shim *s = SHIM(c);
+    fmi2Status status = shim_end(s, "fmi2Reset", g_api->fmi2Reset(s->inner));
+    if (succeeded(status)) {
+        s->state = ST_INSTANTIATED;
+        s->time = 0.0;
+    }
+    return status;
+}
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
@@ -562,42 +1297,233 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     FORWARD(fmi2SetBoolean, c, vr, nvr, value);
 }
 
+/* Offset of the first byte of text that is not well-formed UTF-8 (RFC 3629: no overlong
+ * forms, no surrogates, nothing above U+10FFFF), or -1 if all of it is. */
+static long utf8_error(const char *text)
+{
+    const unsigned char *p = (const unsigned char *)text, *start = p;
+    while (*p) {
+        unsigned c = *p;
+        int n = c < 0x80 ? 0 : (c & 0xe0) == 0xc0 ? 1 : (c & 0xf0) == 0xe0 ? 2 : (c & 0xf8) == 0xf0 ? 3 : -1;
+        if (n < 0 || (n == 1 && c < 0xc2) || (n == 3 && c > 0xf4)) {
+            return (long)(p - start);
+        }
+        for (int i = 1; i <= n; i++) {
+            if ((p[i] & 0xc0) != 0x80) {
+                return (long)(p - start);
+            }
+        }
+        if ((n == 2 && c == 0xe0 && p[1] < 0xa0) || (n == 2 && c == 0xed && p[1] >= 0xa0) ||
+            (n == 3 && c == 0xf0 && p[1] < 0x90) || (n == 3 && c == 0xf4 && p[1] >= 0x90)) {
+            return (long)(p - start);
+        }
+        p += n + 1;
+    }
+    return -1;
+}
+
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[])
 {
-    FORWARD(fmi2SetString, c, vr, nvr, value);
+    BEGIN(fmi2SetString, c);
+    Shim *s = SHIM(c);
+    if (nvr > 0 && (!vr || !value)) {
+        return shim_error(s, "fmi2SetString: vr or value is NULL");
+    }
+    /* pythonfmu cannot take text that is not UTF-8 (its exception would be fatal). */
+    for (size_t i = 0; i < nvr; i++) {
+        if (!value[i]) {
+            return shim_error(s, "fmi2SetString: value[%zu] (vr %u) is NULL; nothing was set", i, vr[i]);
+        }
+        long bad = utf8_error(value[i]);
+        if (bad >= 0) {
+            return shim_error(s, "fmi2SetString: value[%zu] (vr %u) is not UTF-8 (byte %ld); "
+                                 "nothing was set", i, vr[i], bad);
+        }
+    }
+    return shim_end(s, "fmi2SetString", g_api->fmi2SetString(s->inner, vr, nvr, value));
 }
 
-/* FMU states are opaque: the inner library's pointers pass through unchanged. */
+/* ---- FMU states -------------------------------------------------------- */
+
+static ShimFMUstate *fmu_state_of(Shim *s, const char *function, fmi2FMUstate state)
+{
+    ShimFMUstate *w = (ShimFMUstate *)state;
+    if (!w || w->magic != STATE_MAGIC) {
+        shim_error(s, "%s: not an FMU state of this FMU (NULL, freed or foreign)", function);
+        return NULL;
+    }
+    return w;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    FORWARD(fmi2GetFMUstate, c, state);
+    BEGIN(fmi2GetFMUstate, c);
+    Shim *s = SHIM(c);
+    if (!state) {
+        return shim_error(s, "fmi2GetFMUstate: state is NULL");
+    }
+    /* An existing state of ours is overwritten in place (FMI 2.0 allows reusing it). */
+    ShimFMUstate *w = *state ? fmu_state_of(s, "fmi2GetFMUstate", *state) : calloc(1, sizeof *w);
+    if (!w) {
+        return *state ? fmi2Error : shim_error(s, "fmi2GetFMUstate: out of memory");
+    }
+    fmi2FMUstate inner = w->inner;
+    fmi2Status status = shim_end(s, "fmi2GetFMUstate", g_api->fmi2GetFMUstate(s->inner, &inner));
+    if (!succeeded(status)) {
+        if (!*state) {
+            free(w);
+        }
+        return status;
+    }
+    w->magic = STATE_MAGIC;
+    w->inner = inner;
+    w->state = s->state;
+    w->time = s->time;
+    *state = w;
+    return status;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    FORWARD(fmi2SetFMUstate, c, state);
+    BEGIN(fmi2SetFMUstate, c);
+    Shim *s = SHIM(c);
+    ShimFMUstate *w = fmu_state_of(s, "fmi2SetFMUstate", state);
+    if (!w) {
+        return fmi2Error;
+    }
+    fmi2Status status = shim_end(s, "fmi2SetFMUstate", g_api->fmi2SetFMUstate(s->inner, w->inner));
+    if (succeeded(status)) {
+        s->state = w->state;
+        s->time = w->time;
+    }
+    return status;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    FORWARD(fmi2FreeFMUstate, c, state);
+    BEGIN(fmi2FreeFMUstate, c);
+    Shim *s = SHIM(c);
+    if (!state || !*state) {
+        return fmi2OK; /* freeing nothing is allowed */
+    }
+    ShimFMUstate *w = fmu_state_of(s, "fmi2FreeFMUstate", *state);
+    if (!w) {
+        return fmi2Error;
+    }
+    fmi2Status status = shim_end(s, "fmi2FreeFMUstate", g_api->fmi2FreeFMUstate(s->inner, &w->inner));
+    w->magic = 0;
+    free(w);
+    *state = NULL;
+    return status;
+}
+
+static fmi2Status inner_serialized_size(Shim *s, const char *function, ShimFMUstate *w, size_t *size)
+{
+    *size = 0;
+    fmi2Status status = shim_end(s, function, g_api->fmi2SerializedFMUstateSize(s->inner, w->inner, size));
+    if (succeeded(status) && *size > SIZE_MAX - SERIAL_HEADER) {
+        return shim_error(s, "%s: the state is too large", function);
+    }
+    return status;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    FORWARD(fmi2SerializedFMUstateSize, c, state, size);
+    BEGIN(fmi2SerializedFMUstateSize, c);
+    Shim *s = SHIM(c);
+    ShimFMUstate *w = fmu_state_of(s, "fmi2SerializedFMUstateSize", state);
+    if (!w || !size) {
+        return w ? shim_error(s, "fmi2SerializedFMUstateSize: size is NULL") : fmi2Error;
+    }
+    size_t inner = 0;
+    fmi2Status status = inner_serialized_size(s, "fmi2SerializedFMUstateSize", w, &inner);
+    if (succeeded(status)) {
+        *size = SERIAL_HEADER + inner;
+    }
+    return status;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
-    FORWARD(fmi2SerializeFMUstate, c, state, bytes, size);
+    BEGIN(fmi2SerializeFMUstate, c);
+    Shim *s = SHIM(c);
+    ShimFMUstate *w = fmu_state_of(s, "fmi2SerializeFMUstate", state);
+    if (!w) {
+        return fmi2Error;
+    }
+    size_t inner = 0;
+    fmi2Status status = inner_serialized_size(s, "fmi2SerializeFMUstate", w, &inner);
+    if (!succeeded(status)) {
+        return status;
+    }
+    if (!bytes || size < SERIAL_HEADER + inner) {
+        return shim_error(s, "fmi2SerializeFMUstate: the buffer holds %zu bytes, the state needs %zu "
+                             "(fmi2SerializedFMUstateSize); nothing was written",
+                          bytes ? size : 0, SERIAL_HEADER + inner);
+    }
+    uint32_t version = SERIAL_VERSION, st = (uint32_t)w->state;
+    uint64_t length = inner;
+    memcpy(bytes, SERIAL_MAGIC, 8);
+    memcpy(bytes + 8, &version, 4);
+    memcpy(bytes + 12, &st, 4);
+    memcpy(bytes + 16, &w->time, 8);
+    memcpy(bytes + 24, &length, 8);
+    /* The inner library writes exactly as many bytes as it is told. */
+    return shim_end(s, "fmi2SerializeFMUstate",
+                    g_api->fmi2SerializeFMUstate(s->inner, w->inner, bytes + SERIAL_HEADER, inner));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                    fmi2FMUstate *state)
 {
-    FORWARD(fmi2DeSerializeFMUstate, c, bytes, size, state);
+    BEGIN(fmi2DeSerializeFMUstate, c);
+    Shim *s = SHIM(c);
+    if (!state || (!bytes && size)) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: %s is NULL", state ? "bytes" : "state");
+    }
+    /* The whole header is checked before anything reaches the inner library. */
+    if (size < SERIAL_HEADER || memcmp(bytes, SERIAL_MAGIC, 8) != 0) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: these %zu bytes are not a state of this FMU: "
+                             "they do not decode (no '%s' header), so there is nothing for "
+                             "fmi2SetFMUstate to restore", size, SERIAL_MAGIC);
+    }
+    uint32_t version, st;
+    fmi2Real time;
+    uint64_t length;
+    memcpy(&version, bytes + 8, 4);
+    memcpy(&st, bytes + 12, 4);
+    memcpy(&time, bytes + 16, 8);
+    memcpy(&length, bytes + 24, 8);
+    if (version != SERIAL_VERSION) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: format version %u, this FMU reads %u", version,
+                          SERIAL_VERSION);
+    }
+    if (!(st & ANY_STATE) || (st & (st - 1)) || !isfinite(time)) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: malformed header (state %u, time %g)", st, time);
+    }
+    if (length != size - SERIAL_HEADER) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: the header announces %llu bytes of state, "
+                             "%zu follow", (unsigned long long)length, size - SERIAL_HEADER);
+    }
+    ShimFMUstate *w = calloc(1, sizeof *w);
+    if (!w) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: out of memory");
+    }
+    fmi2FMUstate inner = NULL;
+    fmi2Status status = shim_end(s, "fmi2DeSerializeFMUstate",
+                                 g_api->fmi2DeSerializeFMUstate(s->inner, bytes + SERIAL_HEADER,
+                                                                (size_t)length, &inner));
+    if (!succeeded(status)) {
+        free(w);
+        return status;
+    }
+    w->magic = STATE_MAGIC;
+    w->inner = inner;
+    w->state = (int)st;
+    w->time = time;
+    *state = w;
+    return status;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown[],
@@ -624,33 +1550,73 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
-    FORWARD(fmi2DoStep, c, currentCommunicationPoint, communicationStepSize,
-            noSetFMUStatePriorToCurrentPoint);
+    BEGIN(fmi2DoStep, c);
+    Shim *s = SHIM(c);
+    fmi2Status status = shim_end(s, "fmi2DoStep",
+                                 g_api->fmi2DoStep(s->inner, currentCommunicationPoint,
+                                                   communicationStepSize,
+                                                   noSetFMUStatePriorToCurrentPoint));
+    if (succeeded(status)) {
+        s->time = currentCommunicationPoint + communicationStepSize;
+    } else if (status == fmi2Discard) {
+        s->state = ST_STEP_FAILED;
+    }
+    /* fmi2Error: the step was refused and nothing changed. */
+    return status;
 }
 
-fmi2Status fmi2CancelStep(fmi2Component c) { FORWARD0(fmi2CancelStep, c); }
-
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    FORWARD(fmi2GetStatus, c, s, value);
+    BEGIN(fmi2CancelStep, c); /* no asynchronous step ever runs: always refused */
+    return fmi2Error;
 }
 
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Status *value)
 {
-    FORWARD(fmi2GetRealStatus, c, s, value);
+    BEGIN(fmi2GetStatus, c);
+    return shim_error(SHIM(c), "fmi2GetStatus(%d): steps are synchronous, no step is pending",
+                      (int)kind);
+    (void)value;
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real *value)
 {
-    FORWARD(fmi2GetIntegerStatus, c, s, value);
+    BEGIN(fmi2GetRealStatus, c);
+    Shim *s = SHIM(c);
+    if (kind != fmi2LastSuccessfulTime) {
+        return shim_error(s, "fmi2GetRealStatus: status kind %d has no real value", (int)kind);
+    }
+    if (!value) {
+        return shim_error(s, "fmi2GetRealStatus: value is NULL");
+    }
+    *value = s->time;
+    return fmi2OK;
 }
 
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Integer *value)
 {
-    FORWARD(fmi2GetBooleanStatus, c, s, value);
+    BEGIN(fmi2GetIntegerStatus, c);
+    (void)value;
+    return shim_error(SHIM(c), "fmi2GetIntegerStatus: status kind %d has no integer value", (int)kind);
 }
 
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Boolean *value)
 {
-    FORWARD(fmi2GetStringStatus, c, s, value);
+    BEGIN(fmi2GetBooleanStatus, c);
+    Shim *s = SHIM(c);
+    if (kind != fmi2Terminated) {
+        return shim_error(s, "fmi2GetBooleanStatus: status kind %d has no boolean value", (int)kind);
+    }
+    if (!value) {
+        return shim_error(s, "fmi2GetBooleanStatus: value is NULL");
+    }
+    *value = fmi2False; /* our slaves never ask to end the simulation */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind kind, fmi2String *value)
+{
+    BEGIN(fmi2GetStringStatus, c);
+    (void)value;
+    return shim_error(SHIM(c), "fmi2GetStringStatus: status kind %d has no string value", (int)kind);
 }

@@ -8,14 +8,22 @@
  *
  * usage: minimal_importer UNZIPPED_DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE
  *                         OUTPUT_VR STEP N_STEPS
- * prints "t=<time> y=<output>" after every step and "freed" at the end; exit 0 on success.
+ * INPUT_VR "-" sets nothing.  The resource location is file://UNZIPPED_DIR/resources
+ * unless the environment variable RESOURCE_URI gives another one.  INSTANCES=2 runs two
+ * instances side by side in each thread (their outputs must agree: exit 6 if not);
+ * STEP_THREADS=1 makes every step in a thread of its own (one instance called from
+ * several threads in turn).
+ * prints "t=<time> y=<output>" after every step and "freed" at the end, and the time the
+ * stepping loop took as "loop_s=<seconds>" on stderr; exit 0 on success.
  */
 #include <dlfcn.h>
+#include <pthread.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 typedef void *fmi2Component;
@@ -54,6 +62,31 @@ static void logger(void *env, fmi2String instance, fmi2Status status, fmi2String
     va_end(args);
 }
 
+static GetRealT get_real;
+static DoStepT do_step;
+
+/* One communication step of every instance (run in the caller's or a thread of its own). */
+typedef struct {
+    fmi2Component *c;
+    int n;
+    double t, h;
+    fmi2ValueReference vr;
+    fmi2Real y[2];
+    fmi2Status status;
+} Step;
+
+static void *step_all(void *arg) {
+    Step *s = arg;
+    s->status = fmi2OK;
+    for (int i = 0; i < s->n && s->status <= fmi2Warning; i++) {
+        s->status = do_step(s->c[i], s->t, s->h, 1);
+        if (s->status <= fmi2Warning) {
+            s->status = get_real(s->c[i], &s->vr, 1, &s->y[i]);
+        }
+    }
+    return NULL;
+}
+
 static void *symbol(void *lib, const char *name) {
     void *f = dlsym(lib, name);
     if (!f) {
@@ -68,7 +101,8 @@ static void *symbol(void *lib, const char *name) {
         fmi2Status s_ = (call);                                                       \
         if (s_ > fmi2Warning) {                                                       \
             fprintf(stderr, "minimal_importer: %s returned status %d\n", #call, s_);  \
-            return 4;                                                                 \
+            fflush(stderr);                                                           \
+            _exit(4); /* see the end of main */                                       \
         }                                                                             \
     } while (0)
 
@@ -79,6 +113,7 @@ int main(int argc, char **argv) {
         return 2;
     }
     const char *dir = argv[1], *model = argv[2], *guid = argv[3];
+    int set_input = strcmp(argv[4], "-") != 0;
     fmi2ValueReference in_vr = (fmi2ValueReference)strtoul(argv[4], NULL, 10);
     fmi2Real in_value = strtod(argv[5], NULL);
     fmi2ValueReference out_vr = (fmi2ValueReference)strtoul(argv[6], NULL, 10);
@@ -87,7 +122,11 @@ int main(int argc, char **argv) {
 
     char path[4096], uri[4096];
     snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, model);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
+    const char *given_uri = getenv("RESOURCE_URI");
+    snprintf(uri, sizeof uri, "%s", given_uri ? given_uri : "");
+    if (!given_uri) {
+        snprintf(uri, sizeof uri, "file://%s/resources", dir);
+    }
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!lib) {
         fprintf(stderr, "minimal_importer: cannot load %s: %s\n", path, dlerror());
@@ -99,28 +138,55 @@ int main(int argc, char **argv) {
     ModeT enter = (ModeT)symbol(lib, "fmi2EnterInitializationMode");
     ModeT exit_init = (ModeT)symbol(lib, "fmi2ExitInitializationMode");
     ModeT terminate = (ModeT)symbol(lib, "fmi2Terminate");
-    GetRealT get_real = (GetRealT)symbol(lib, "fmi2GetReal");
+    get_real = (GetRealT)symbol(lib, "fmi2GetReal");
     SetRealT set_real = (SetRealT)symbol(lib, "fmi2SetReal");
-    DoStepT do_step = (DoStepT)symbol(lib, "fmi2DoStep");
+    do_step = (DoStepT)symbol(lib, "fmi2DoStep");
+    const char *instances_setting = getenv("INSTANCES");
+    int instances = instances_setting && strcmp(instances_setting, "2") == 0 ? 2 : 1;
+    int step_threads = getenv("STEP_THREADS") != NULL;
 
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = instantiate("host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
-    if (!c) {
-        fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
-        return 4;
+    fmi2Component cs[2];
+    for (int i = 0; i < instances; i++) {
+        fmi2Component c = cs[i] = instantiate(i ? "host2" : "host", fmi2CoSimulation, guid, uri, &callbacks, 0, 0);
+        if (!c) {
+            fprintf(stderr, "minimal_importer: fmi2Instantiate failed\n");
+            fflush(stderr);
+            _exit(5); /* see the end of main */
+        }
+        CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
+        CHECK(enter(c));
+        if (set_input) {
+            CHECK(set_real(c, &in_vr, 1, &in_value));
+        }
+        CHECK(exit_init(c));
     }
-    CHECK(setup(c, 0, 0.0, 0.0, 0, 0.0));
-    CHECK(enter(c));
-    CHECK(set_real(c, &in_vr, 1, &in_value));
-    CHECK(exit_init(c));
+    struct timespec began, ended;
+    clock_gettime(CLOCK_MONOTONIC, &began);
     for (long k = 0; k < n; ++k) {
-        fmi2Real y;
-        CHECK(do_step(c, k * h, h, 1));
-        CHECK(get_real(c, &out_vr, 1, &y));
-        printf("t=%.17g y=%.17g\n", (k + 1) * h, y);
+        Step step = {cs, instances, k * h, h, out_vr, {0, 0}, fmi2OK};
+        if (step_threads) {
+            pthread_t thread;
+            if (pthread_create(&thread, NULL, step_all, &step) != 0 || pthread_join(thread, NULL) != 0) {
+                fprintf(stderr, "minimal_importer: cannot run a step thread\n");
+                _exit(3);
+            }
+        } else {
+            step_all(&step);
+        }
+        CHECK(step.status);
+        if (instances == 2 && step.y[0] != step.y[1]) {
+            fprintf(stderr, "minimal_importer: the instances differ at step %ld\n", k);
+            _exit(6);
+        }
+        printf("t=%.17g y=%.17g\n", (k + 1) * h, step.y[0]);
     }
-    CHECK(terminate(c));
-    free_instance(c);
+    clock_gettime(CLOCK_MONOTONIC, &ended);
+    fprintf(stderr, "loop_s=%.6f\n", (double)(ended.tv_sec - began.tv_sec) + 1e-9 * (ended.tv_nsec - began.tv_nsec));
+    for (int i = 0; i < instances; i++) {
+        CHECK(terminate(cs[i]));
+        free_instance(cs[i]);
+    }
     printf("freed\n");
     /* Leave without running the libraries' exit-time destructors: pythonfmu 0.7
      * finalises its embedded interpreter in a static destructor, which corrupts the

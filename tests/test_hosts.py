@@ -1,0 +1,80 @@
+"""Our FMUs in the C++ engine ecos (PyPI ecospy, its command-line program), in a bare
+environment (PATH=/usr/bin:/bin; only ecos's own libtbb is pointed to): each FMU alone, and
+the KAVZ-685 scene from our SSP export judged by `lever validate --result`; and the
+`lever hosts` command that times the hosts."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from harness import run, scene, ssp
+from harness.studies import hosts
+from harness.cli import main as cli
+
+#: what each FMU alone records (its outputs), with its default parameters and inputs
+ALONE = {"EngineShaft": ["w", "phi", "engine_torque"], "LoadShaft": ["w", "phi", "load_torque"],
+         "LeverCoupling": ["tau1", "tau2", "U12"], "MisalignmentSource": ["misalignment"]}
+
+
+@pytest.fixture(scope="module")
+def ecos_bin(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ecos")
+    hosts.ecos_program(path)     # EcosUnavailable fails the tests: ecospy and tbb are test dependencies
+    return path
+
+
+@pytest.mark.parametrize("fmu", list(ALONE))
+def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, tmp_path):
+    import shutil
+
+    target = tmp_path / f"{fmu}.fmu"
+    shutil.copy(fmu_dir / f"{fmu}.fmu", target)
+    result = hosts.run_ecos(target, 0.2, 1e-3, ecos_bin)
+    times, traces = hosts.ecos_traces(result.csv)
+    name = fmu.lower()
+    spec = scene.Scene(name=f"{name}_alone", description=f"{fmu} alone",
+                       components={name: scene.ComponentSpec(fmu, {})}, connections=[],
+                       experiment=scene.Experiment(stop=0.2, step=1e-3, master="jacobi", transient=0.0),
+                       record=[f"{name}.{v}" for v in ALONE[fmu]], features=set())
+    ours = run.simulate(spec, "jacobi", 1e-3, fmu_dir)
+    assert ours.ok, ours.failure
+    assert times[-1] > 0.2 - 1.001e-3          # ecos stops within a step of the end
+    for variable in ALONE[fmu]:
+        theirs = traces[f"instance.{variable}"]          # ecos names a lone FMU's instance so
+        expected = np.interp(times, ours.times, ours.traces[f"{name}.{variable}"])
+        # ecos writes six decimals
+        assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
+
+
+def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_path):
+    spec = scene.load("kavz685")
+    archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
+    result = hosts.run_ecos(archive, spec.experiment.stop, spec.experiment.step, ecos_bin, record=list(spec.record))
+    times, traces = hosts.ecos_traces(result.csv)
+    assert times[-1] > spec.experiment.stop - 1.001 * spec.experiment.step
+    assert sorted(traces) == sorted(spec.record)          # ecos logged what its CSV configuration names
+    names = list(spec.record)
+    csv_path = hosts.write_result_csv(tmp_path / "ecos.csv", times, traces, names)
+    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v")])
+    assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
+
+
+def test_ecos_says_what_failed(tmp_path, ecos_bin):
+    with pytest.raises(RuntimeError, match="ecos failed"):
+        hosts.run_ecos(tmp_path / "missing.ssp", 0.1, 1e-3, ecos_bin)
+
+
+def test_lever_hosts_writes_the_table(tmp_path, fmu_dir):
+    result = CliRunner().invoke(cli, ["hosts", "--repeats", "1", "--set", "experiment.stop=0.05",
+                                      "--set", "experiment.transient=0.01", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "hosts.json").read_text())
+    assert list(report["hosts"]) == list(hosts.HOSTS)
+    assert report["hosts"]["harness-jacobi"]["ratio"] == 1.0
+    assert all(row["median_s"] > 0 for row in report["hosts"].values())
+    assert "| ecos |" in (tmp_path / "hosts.md").read_text()
+    bad = CliRunner().invoke(cli, ["hosts", "--host", "simulink"])
+    assert bad.exit_code != 0 and "unknown host simulink" in bad.output
