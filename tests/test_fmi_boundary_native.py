@@ -17,7 +17,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2FMUstate
 
-from harness.component import add_log_listener, log_callbacks
+from harness.engine.component import add_log_listener, log_callbacks
 
 OK, WARNING, DISCARD, ERROR, FATAL = range(5)
 DO_STEP_STATUS, PENDING_STATUS, LAST_SUCCESSFUL_TIME, TERMINATED = range(4)

@@ -501,7 +501,7 @@ class _Fmi:
 
     def __init__(self, fmu_dir, fmu: str, name: str):
         from fmpy.fmi2 import FMU2Slave
-        from harness.component import unzipped
+        from harness.engine.component import unzipped
 
         path = Path(fmu_dir) / f"{fmu}.fmu"
         self.md = fmpy.read_model_description(str(path))

@@ -1484,7 +1484,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
     }
     /* The whole header is checked before anything reaches the inner library. */
     if (size < SERIAL_HEADER || memcmp(bytes, SERIAL_MAGIC, 8) != 0) {
-        return shim_error(s, "fmi2DeSerializeFMUstate: these %zu bytes are not a state of this FMU: "
+        return shim_error(s, "fmi2DeSerializeFMUstate: these %zu bytes are not a serialized state of this FMU: "
                              "they do not decode (no '%s' header), so there is nothing for "
                              "fmi2SetFMUstate to restore", size, SERIAL_MAGIC);
     }
@@ -1504,7 +1504,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
     }
     if (length != size - SERIAL_HEADER) {
         return shim_error(s, "fmi2DeSerializeFMUstate: the header announces %llu bytes of state, "
-                             "%zu follow", (unsigned long long)length, size - SERIAL_HEADER);
+                             "%zu follow: the state is %s", (unsigned long long)length, size - SERIAL_HEADER,
+                          length > size - SERIAL_HEADER ? "truncated" : "padded (bytes appended)");
     }
     ShimFMUstate *w = calloc(1, sizeof *w);
     if (!w) {

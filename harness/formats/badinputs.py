@@ -231,7 +231,7 @@ def _by_hand() -> list[Case]:
                  ("call", "foreign-state", ()), ("fmi2SetFMUstate", "not a state of", "a state of")),
         ]
         cases += [Case(fmu, "bad state", f"fmi2SetFMUstate of its own state, {label}", "stepping",
-                       ("call", "edited-state", (edit,)), ("fmi2SetFMUstate",) + fragments)
+                       ("call", "edited-state", (edit,)), ("FMUstate",) + fragments)
                   for edit, (label, fragments) in _STATE_EDITS.items()]
         cases += _boundary_cases(fmu)
     return cases
@@ -258,8 +258,30 @@ _STATE_EDITS = {
 }
 
 
+#: The native entry's frame around the model's serialized state (build/shim: magic[8]
+#: version:u32 state:u32 time:f64 length:u64, little-endian on our platforms).
+SHIM_MAGIC, SHIM_HEADER = b"LVRSHIM\0", 32
+
+
 def _edited_state(data: bytes, edit: str, fmu: str) -> bytes:
-    """A serialized state of ours with one kind of damage (``_STATE_EDITS``)."""
+    """A serialized state of ours with one kind of damage (``_STATE_EDITS``).
+
+    Truncating and padding damage the whole state, so the native entry's frame must find
+    them; every other edit is made to the model's state inside the
+    frame, which is then re-framed with the right length, so the model's own validation
+    must find it."""
+    if edit == "truncated":
+        return data[: len(data) // 2]
+    if edit == "padded":
+        return data + b"  "
+    if not data.startswith(SHIM_MAGIC):
+        return _edited_model_state(data, edit, fmu)
+    import struct
+    frame, inner = data[:SHIM_HEADER], _edited_model_state(data[SHIM_HEADER:], edit, fmu)
+    return frame[:24] + struct.pack("<Q", len(inner)) + inner
+
+
+def _edited_model_state(data: bytes, edit: str, fmu: str) -> bytes:
     import json
     magic, rest = data.split(b" ", 1)
     header_text, payload = rest.split(b"\n", 1)
@@ -318,7 +340,7 @@ def _boundary_cases(fmu: str) -> list[Case]:
              ("call", "set-many", ((first_input, 0.25), (outputs[0], 2.0))), (f"'{outputs[0]}'", "cannot be set",
                                                                                "nor anything else")),
         Case(fmu, "set in a wrong state", f"input {first_input} set after fmi2Terminate", "stepping",
-             ("call", "terminate-then-set", (first_input, 0.25)), (f"'{first_input}'", "fmi2Terminate")),
+             ("call", "terminate-then-set", (first_input, 0.25)), ("fmi2SetReal", "'terminated'")),
         Case(fmu, "wrong type or reference", f"fmi2SetInteger on the Real input {first_input}", "stepping",
              ("call", "set-as", ("setInteger", first_input, 1)), (f"'{first_input}'", "Real variable")),
         Case(fmu, "wrong type or reference", f"fmi2SetBoolean on the Real input {first_input}", "stepping",

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..formats import peers, ssp
 from ..description import scene as scenes
-from ..paths import FMUS, RESULTS
+from ..paths import FMUS, RESULTS, ROOT
 from ..engine.run import simulate
 
 HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "ecos-log-all", "c-importer")
@@ -162,7 +162,7 @@ def write_result_csv(path: Path, times: np.ndarray, traces: dict[str, np.ndarray
     return path
 
 
-C_IMPORTER = Path(__file__).resolve().parents[1] / "tests" / "c_host" / "minimal_importer.c"
+C_IMPORTER = ROOT / "tests" / "c_host" / "minimal_importer.c"
 #: what the C importer sets and reads in each FMU it steps alone
 C_IMPORTER_CASES = {"EngineShaft": ("tau", -100.0, "w"), "LoadShaft": ("tau", 120.0, "w"),
                     "LeverCoupling": ("phi1", 0.1, "tau1"), "MisalignmentSource": (None, None, "misalignment")}
