@@ -12,6 +12,7 @@ says how far the model is allowed to be and why.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import fmpy
 import numpy as np
@@ -50,6 +51,30 @@ def amplitude(tf: TransferFunction) -> float:
     return float((ratio.max() - ratio.min()) / 2.0)
 
 
+@contextmanager
+def coupling_fmu(fmu_dir, instance: str, parameters: dict):
+    """The coupling FMU through fmpy, ``parameters`` set (strings and reals), initialised:
+    yields ``(fmu, value references by name)``, terminated and freed after."""
+    md = fmpy.read_model_description(str(fmu_dir / "LeverCoupling.fmu"))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=component.unzipped(fmu_dir / "LeverCoupling.fmu"),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance)
+    fmu.instantiate(callbacks=component.log_callbacks(), loggingOn=False)
+    try:
+        for name, value in parameters.items():
+            if isinstance(value, str):
+                fmu.setString([vr[name]], [value])
+            else:
+                fmu.setReal([vr[name]], [float(value)])
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        yield fmu, vr
+        fmu.terminate()
+    finally:
+        fmu.freeInstance()
+
+
 @pytest.mark.parametrize("alpha_deg,support,hinge,printed", FIG_3_7)
 def test_scaled_mode_reproduces_the_printed_fig_3_7_amplitudes(alpha_deg, support, hinge, printed):
     found = amplitude(TransferFunction("scaled", alpha_deg * DEG, support, hinge))
@@ -68,25 +93,14 @@ def test_scaled_mode_through_the_fmu_at_the_30_degree_point(fmu_dir):
     """The coupling FMU in scaled mode, driven over a revolution of phi2 at the
     monograph's 30 deg / 0.05 point: its U12 output's amplitude is the printed 0.34 within
     the fit's tolerance."""
-    md = fmpy.read_model_description(str(fmu_dir / "LeverCoupling.fmu"))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=component.unzipped(fmu_dir / "LeverCoupling.fmu"),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="oracle-fig-3-7")
-    fmu.instantiate(callbacks=component.log_callbacks(), loggingOn=False)
-    try:
-        fmu.setString([vr["transfer_mode"]], ["scaled"])
-        fmu.setReal([vr["misalignment"], vr["support_deformation"], vr["hinge_deformation"]], [30 * DEG, 0.05, 0.03])
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
+    parameters = {"transfer_mode": "scaled", "misalignment": 30 * DEG, "support_deformation": 0.05,
+                  "hinge_deformation": 0.03}
+    with coupling_fmu(fmu_dir, "oracle-fig-3-7", parameters) as (fmu, vr):
         ratios = []
         for k, phi in enumerate(np.linspace(0.0, 2.0 * np.pi, 721)):
             fmu.setReal([vr["phi2"]], [phi])
             fmu.doStep(k * 1e-3, 1e-3)
             ratios.append(fmu.getReal([vr["U12"]])[0])
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
     found = (max(ratios) - min(ratios)) / 2.0
     assert abs(found / 0.34 - 1.0) <= FIT_TOLERANCE, f"coupling FMU, scaled mode: dU12 = {found:.4g}, printed 0.34"
 
@@ -135,29 +149,12 @@ NONLINEAR_TABLE_1 = {
 
 def coupling_torque(fmu_dir, parameters: dict, thetas) -> list[float]:
     """T(theta) of the coupling FMU: drive flange at theta, driven at 0, at rest, alpha = 0."""
-    md = fmpy.read_model_description(str(fmu_dir / "LeverCoupling.fmu"))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=component.unzipped(fmu_dir / "LeverCoupling.fmu"),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="oracle-nonlinear-law")
-    fmu.instantiate(callbacks=component.log_callbacks(), loggingOn=False)
-    try:
-        for name, value in parameters.items():
-            if isinstance(value, str):
-                fmu.setString([vr[name]], [value])
-            else:
-                fmu.setReal([vr[name]], [float(value)])
-        fmu.setReal([vr["misalignment"], vr["damping"]], [0.0, 0.0])
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
+    with coupling_fmu(fmu_dir, "oracle-nonlinear-law", {**parameters, "misalignment": 0.0, "damping": 0.0}) as (fmu, vr):
         torques = []
         for k, theta in enumerate(thetas):
             fmu.setReal([vr["phi1"], vr["phi2"], vr["w1"], vr["w2"]], [theta, 0.0, 0.0, 0.0])
             fmu.doStep(k * 1e-3, 1e-3)
             torques.append(-fmu.getReal([vr["tau1"]])[0])      # tau1 = -T on the drive shaft
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
     return torques
 
 
