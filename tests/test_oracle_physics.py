@@ -8,6 +8,11 @@ import math
 import pytest
 
 from harness import masters
+from lever.physics import catalogue
+from lever.physics.coupling import build_coupling, coupling_mode
+from lever.physics.elastic import TabulatedElasticLaw
+from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic, engine_characteristic
+from lever.physics.kinematics import TransferFunction
 
 # -- the masters' extrapolation weights ------------------------------------------------------------------------
 
@@ -59,3 +64,126 @@ def test_lagrange_weights_extrapolate_a_parabola():
     assert masters._lagrange_weights([0.0, 1.0, 2.0], 3.0) == pytest.approx([1.0, -3.0, 3.0], abs=1e-12)
     assert masters._lagrange_weights([0.0, 1.0, 2.0], 0.5) == pytest.approx([0.375, 0.75, -0.125], abs=1e-12)
     assert masters._lagrange_weights([5.0], 7.0) == [1.0]
+
+
+# -- the engine's characteristics ---------------------------------------------------------------------------------
+
+def test_linear_characteristic_through_an_operating_point_and_back():
+    """MODEL.md section 4: K1 = 14.06 puts the steady speed at 37.2 rad/s under 100 N*m, so
+    M1 = Mc + K1 w = 100 + 14.06 * 37.2 = 623.032 N*m (the monograph's 623), and back
+    (M1 - Mc)/K1 = 37.2.  Mg(w) = M1 - K1 w: at 30 rad/s 623.032 - 421.8 = 201.232."""
+    line = LinearCharacteristic.through(37.2, 100.0, 14.06)
+    assert line.stall_torque == pytest.approx(623.032, rel=1e-12) and line.slope == 14.06
+    assert line.steady_speed(100.0) == pytest.approx(37.2, rel=1e-12)
+    assert line.steady_speed(623.032) == pytest.approx(0.0, abs=1e-12)
+    assert line.torque(0.0, 0.0, 30.0) == pytest.approx(201.232, rel=1e-12)
+
+
+def test_tabulated_characteristic_between_and_beyond_its_points():
+    """Points (speed, torque): (10, 300), (20, 500), (30, 560), (40, 600) - rising to the end:
+    linear between points (at 25: 530; at 35: 580), the first torque held below 10 (300),
+    the last held above 40 (600: a rising end is not extended).  Falling end (40, 400):
+    extended with its slope (400 - 560)/10 = -16 per rad/s: at 45, 320.  Steepest slope
+    |dMg/dw| = 20 (first segment); rate = 20 / I."""
+    rising = TabulatedCharacteristic([(30, 560), (10, 300), (40, 600), (20, 500)])   # any order
+    expected = {0.0: 300.0, 10.0: 300.0, 15.0: 400.0, 25.0: 530.0, 35.0: 580.0, 40.0: 600.0, 50.0: 600.0}
+    for w, torque in expected.items():
+        assert rising.torque(0.0, 0.0, w) == pytest.approx(torque, rel=1e-12), (w, rising.torque(0.0, 0.0, w))
+    assert rising.speed_stiffness == pytest.approx(20.0) and rising.rate(0.5) == pytest.approx(40.0)
+    falling = TabulatedCharacteristic([(10, 300), (20, 500), (30, 560), (40, 400)])
+    for w, torque in {35.0: 480.0, 40.0: 400.0, 45.0: 320.0}.items():
+        assert falling.torque(0.0, 0.0, w) == pytest.approx(torque, rel=1e-12), (w, falling.torque(0.0, 0.0, w))
+    assert falling.speed_stiffness == pytest.approx(20.0)
+
+
+def test_engine_characteristic_chooses_the_table_only_when_one_is_given():
+    assert isinstance(engine_characteristic(623.0, 14.06), LinearCharacteristic)
+    for blank in ("", "   ", "linear", " linear "):
+        line = engine_characteristic(623.0, 14.06, blank)
+        assert isinstance(line, LinearCharacteristic) and (line.stall_torque, line.slope) == (623.0, 14.06)
+    table = engine_characteristic(623.0, 14.06, "10:300; 20:500")
+    assert isinstance(table, TabulatedCharacteristic) and table.points == [(10.0, 300.0), (20.0, 500.0)]
+
+
+# -- the coupling mode used for step-size and stability advice -------------------------------------------------------
+
+def test_coupling_mode_of_the_kavz685_chain():
+    """README "Linear analysis": omega_n = sqrt(c / I_red), I_red = I1 I2/(I1 + I2),
+    zeta = (b + K1 (I2/(I1 + I2))^2) / (2 sqrt(c I_red)).  KAVZ-685: I_red = 0.128*0.161/0.289
+    = 0.0713080 kg*m2, omega_n = sqrt(715.4/0.0713080) = 100.1626 rad/s; 2 sqrt(c I_red) =
+    14.2848, so without the engine zeta = 6.35/14.2848 = 0.44453; with K1 = 14.06 the share
+    (0.161/0.289)^2 = 0.310353 adds 4.36356 N*m*s/rad: zeta = 10.71356/14.2848 = 0.75000
+    (the README's "zeta 0.75")."""
+    omega, zeta = coupling_mode(715.4, 6.35, 0.128, 0.161)
+    assert omega == pytest.approx(100.1626, rel=1e-6) and zeta == pytest.approx(0.44453, rel=1e-4)
+    omega, zeta = coupling_mode(715.4, 6.35, 0.128, 0.161, engine_slope=14.06)
+    assert omega == pytest.approx(100.1626, rel=1e-6) and zeta == pytest.approx(0.75000, rel=1e-4)
+    coupling = build_coupling("synchronous", 0.0, 0.0, 0.0, 715.4, 6.35)
+    assert coupling.eigen_estimate(0.128, 0.161) == pytest.approx((100.1626, 0.44453), rel=1e-4)
+    table = build_coupling("synchronous", 0.0, 0.0, 0.0, 715.4, 6.35, "0.1:10; 0.2:40")
+    # a table's nominal stiffness is its secant over the table: 40/0.2 = 200 N*m/rad
+    assert table.eigen_estimate(0.128, 0.161)[0] == pytest.approx(math.sqrt(200.0 / 0.0713080), rel=1e-5)
+
+
+# -- a monotone cubic elastic law ------------------------------------------------------------------------------------
+
+def test_tabulated_law_slopes_energy_and_extension_by_hand():
+    """Points (0, 0), (1, 1), (2, 3): secants d = (1, 2), steps h = (1, 1).  Fritsch-Butland
+    slope at the inner knot: w1 = 2h1 + h0 = 3, w2 = h1 + 2h0 = 3, m1 = (w1 + w2)/(w1/d0 + w2/d1)
+    = 6/4.5 = 4/3.  Ends, one-sided three-point: m0 = ((2h0 + h1) d0 - h0 d1)/(h0 + h1) = 1/2,
+    m2 = ((2h1 + h0) d1 - h1 d0)/(h0 + h1) = 5/2.  Energy at a knot, exact for the cubic:
+    sum h (y0 + y1)/2 + h^2 (m0 - m1)/12 = (1/2 - 5/72) + (2 - 7/72) = 7/3.  Beyond the last
+    point the last slope: T(3) = 3 + 5/2 = 5.5, V(3) = 7/3 + 3*1 + 5/4; odd: T(-3) = -5.5."""
+    law = TabulatedElasticLaw([(1.0, 1.0), (2.0, 3.0)])
+    for theta, stiffness in ((0.0, 0.5), (1.0, 4.0 / 3.0), (2.0, 2.5), (3.0, 2.5)):
+        assert law.stiffness_at(theta) == pytest.approx(stiffness, rel=1e-12), (theta, law.stiffness_at(theta))
+    for theta, torque in ((1.0, 1.0), (2.0, 3.0), (3.0, 5.5), (-3.0, -5.5)):
+        assert law.torque(theta) == pytest.approx(torque, rel=1e-12), (theta, law.torque(theta))
+    assert law.energy(2.0) == pytest.approx(7.0 / 3.0, rel=1e-12)
+    assert law.energy(-3.0) == law.energy(3.0) == pytest.approx(7.0 / 3.0 + 3.0 + 1.25, rel=1e-12)
+    assert law.nominal_stiffness == pytest.approx(1.5)
+    # mid-segment, the cubic Hermite form: s = 1/2 on [0, 1]: (y0 + y1)/2 + h (m0 - m1)/8
+    assert law.torque(0.5) == pytest.approx(0.5 + (0.5 - 4.0 / 3.0) / 8.0, rel=1e-12)
+
+
+def test_tabulated_law_flattens_at_a_plateau_and_at_a_steep_rise():
+    """Monotone cubic: where the secants change sign or one is zero the inner slope is 0
+    (a plateau stays flat); an end slope whose three-point formula turns against its
+    secant is 0.  (0,0), (1,1), (2,1), (3,2): inner slopes 0, 0; ends (3*1 - 0)/2 = 1.5 both.
+    (0,0), (1,0.1), (2,10): m0 = (3*0.1 - 9.9)/2 < 0 -> 0."""
+    plateau = TabulatedElasticLaw([(1.0, 1.0), (2.0, 1.0), (3.0, 2.0)])
+    assert [plateau.stiffness_at(x) for x in (0.0, 1.0, 2.0, 3.0)] == pytest.approx([1.5, 0.0, 0.0, 1.5], abs=1e-12)
+    assert plateau.torque(1.5) == pytest.approx(1.0, abs=1e-12)
+    steep = TabulatedElasticLaw([(1.0, 0.1), (2.0, 10.0)])
+    assert steep.stiffness_at(0.0) == 0.0
+
+
+# -- a misalignment that varies in time: the blended transfer function ---------------------------------------------
+
+def test_coupling_family_is_exact_at_nodes_and_blends_linearly_between():
+    """``CouplingFamily`` at alpha between the 0.05 deg nodes a_k < alpha < a_k+1 uses
+    U12 = U_k + w (U_k+1 - U_k), w = (alpha - a_k)/(a_k+1 - a_k); at a node the exact one;
+    at its start alpha the exact coupling of that alpha."""
+    node = math.radians(0.05)
+    start = math.radians(15.0)
+    family = catalogue.coupling_family_from({"misalignment": start})
+    assert family.at(start) is family.start
+    phi = [0.0, 0.7, 2.0, 4.4]
+
+    def exact(alpha):
+        return TransferFunction("kinematic", alpha, 0.03, 0.03)
+
+    k = 300                                                    # 15 deg is node 300
+    alpha = (k + 0.3) * node
+    lower, upper = exact(k * node), exact((k + 1) * node)
+    blended = family.at(alpha).transfer
+    for x in phi:
+        p0, u0 = lower.evaluate(x)
+        p1, u1 = upper.evaluate(x)
+        p, u = blended.evaluate(x)
+        assert u == pytest.approx(u0 + 0.3 * (u1 - u0), rel=1e-12, abs=1e-15)
+        assert p == pytest.approx(p0 + 0.3 * (p1 - p0), rel=1e-12)
+    on_node = family.at(301 * node).transfer
+    for x in phi:
+        assert on_node.evaluate(x) == pytest.approx(exact(301 * node).evaluate(x), rel=1e-12)
+    assert family.at(alpha).damping == 6.35 and family.at(alpha).law.stiffness == 715.4
