@@ -10,9 +10,10 @@ import pytest
 from harness import masters
 from lever.physics import catalogue
 from lever.physics.coupling import build_coupling, coupling_mode
-from lever.physics.elastic import TabulatedElasticLaw
+from lever.physics.elastic import LinearElasticLaw, TabulatedElasticLaw
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic, engine_characteristic
 from lever.physics.kinematics import TransferFunction
+from lever.physics.parameters import ParameterError
 
 # -- the masters' extrapolation weights ------------------------------------------------------------------------
 
@@ -187,3 +188,47 @@ def test_coupling_family_is_exact_at_nodes_and_blends_linearly_between():
     for x in phi:
         assert on_node.evaluate(x) == pytest.approx(exact(301 * node).evaluate(x), rel=1e-12)
     assert family.at(alpha).damping == 6.35 and family.at(alpha).law.stiffness == 715.4
+
+
+# -- refusals that name the parameter and its range (MODEL.md section 3) -----------------------------------------
+
+def test_stiffness_and_damping_bounds_in_the_physics():
+    """c > 0 and b >= 0, each refused outside with a ParameterError naming it and its
+    range; values at the edge (the smallest positive double, zero damping) accepted."""
+    tiny = math.nextafter(0.0, 1.0)
+    assert LinearElasticLaw(tiny).stiffness == tiny and LinearElasticLaw(0.5).torque(2.0) == 1.0
+    assert build_coupling("synchronous", 0.0, 0.0, 0.0, 0.5, 0.0).damping == 0.0
+    for bad in (0.0, -tiny, math.inf, math.nan):
+        with pytest.raises(ParameterError) as refused:
+            LinearElasticLaw(bad)
+        assert refused.value.name == "stiffness" and "(0, inf) N.m/rad" in str(refused.value), str(refused.value)
+    for bad in (-tiny, -1.0, math.inf, math.nan):
+        with pytest.raises(ParameterError) as refused:
+            build_coupling("synchronous", 0.0, 0.0, 0.0, 715.4, bad)
+        assert refused.value.name == "damping" and "[0, inf) N.m.s/rad" in str(refused.value), str(refused.value)
+
+
+@pytest.mark.parametrize("make,name,says", [
+    (lambda: TabulatedCharacteristic([(10.0, 300.0)]), "characteristic", "needs at least 2 (speed, torque) points, got 1"),
+    (lambda: TabulatedCharacteristic([(10.0, 300.0), (10.0, 400.0)]), "characteristic", "speeds must be distinct"),
+    (lambda: TabulatedCharacteristic([(0.0, 0.0), (1e-300, 1e300)]), "characteristic", "slopes overflow"),
+    (lambda: TabulatedElasticLaw([(0.1, 1.0)]), "elastic_table", "needs at least 2 points with theta > 0, got 1"),
+    (lambda: TabulatedElasticLaw([(0.0, 1.0), (0.1, 2.0), (0.2, 3.0)]), "elastic_table", "torque at zero deflection"),
+    (lambda: TabulatedElasticLaw([(0.2, 1.0), (0.1, 2.0)]), "elastic_table", "strictly increasing"),
+    (lambda: TabulatedElasticLaw([(0.1, 2.0), (0.2, 1.0)]), "elastic_table", "non-decreasing"),
+    (lambda: TabulatedElasticLaw([(0.1, 0.0), (0.2, 0.0)]), "elastic_table", "carries no torque"),
+])
+def test_bad_tables_are_refused_naming_the_parameter(make, name, says):
+    with pytest.raises(ParameterError) as refused:
+        make()
+    assert refused.value.name == name and f"'{name}'" in str(refused.value) and says in str(refused.value), (
+        refused.value.name, str(refused.value))
+
+
+def test_the_smallest_tables_are_accepted():
+    """Two points are enough for a characteristic, two beyond zero for an elastic law (the
+    zero point is added); a law whose torque reaches 1e-3 N*m only still carries torque."""
+    assert TabulatedCharacteristic([(10.0, 300.0), (20.0, 200.0)]).torque(0.0, 0.0, 15.0) == pytest.approx(250.0)
+    law = TabulatedElasticLaw([(0.1, 0.0), (0.2, 1e-3)])
+    assert law.points == [(0.0, 0.0), (0.1, 0.0), (0.2, 1e-3)] and law.torque(0.2) == pytest.approx(1e-3)
+    assert TabulatedElasticLaw([(0.0, 0.0), (0.1, 1.0), (0.2, 3.0)]).points[0] == (0.0, 0.0)
