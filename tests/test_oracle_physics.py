@@ -232,3 +232,25 @@ def test_the_smallest_tables_are_accepted():
     law = TabulatedElasticLaw([(0.1, 0.0), (0.2, 1e-3)])
     assert law.points == [(0.0, 0.0), (0.1, 0.0), (0.2, 1e-3)] and law.torque(0.2) == pytest.approx(1e-3)
     assert TabulatedElasticLaw([(0.0, 0.0), (0.1, 1.0), (0.2, 3.0)]).points[0] == (0.0, 0.0)
+
+
+def test_misalignment_limits_of_the_transfer_function():
+    """MODEL.md section 2: g exists for alpha < 45 deg, and the kinematic and scaled modes
+    evaluate it at alpha + asin(D2s/l2) (the support's tilt): asin(0.1) = 5.739 deg, so
+    alpha = 39.2 deg (44.939) is accepted and 39.3 deg (45.039) refused; the working range
+    ends at 75 deg for every mode; a scaled U12 that falls to 0.05 locks the coupling and
+    is refused (alpha = 10 deg with both deformations 0.4: the reported amplitude's power
+    law gives about 0.8) - each naming the misalignment."""
+    TransferFunction("kinematic", math.radians(39.2), 0.1, 0.03)
+    for mode in ("kinematic", "scaled"):
+        with pytest.raises(ParameterError) as refused:
+            TransferFunction(mode, math.radians(39.3), 0.1, 0.03)
+        assert refused.value.name == "misalignment" and "45 deg" in str(refused.value), str(refused.value)
+    TransferFunction("synchronous", math.radians(74.9))
+    for mode in ("synchronous", "kinematic", "scaled"):
+        with pytest.raises(ParameterError) as refused:
+            TransferFunction(mode, math.radians(75.0), 0.03, 0.03)
+        assert refused.value.name == "misalignment" and "75 deg" in str(refused.value), str(refused.value)
+    with pytest.raises(ParameterError) as refused:
+        TransferFunction("scaled", math.radians(10.0), 0.4, 0.4)
+    assert refused.value.name == "misalignment" and "would lock" in str(refused.value), str(refused.value)

@@ -81,8 +81,9 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
 
 
 def score(target: Path, names: list[str]) -> str:
-    """mutmut's results as a table per file: killed, survived, no tests, timeout, score
-    (of the mutants matching ``names``' globs, all when empty)."""
+    """mutmut's results as a table per file: killed, survived, no tests, not (yet) checked,
+    timeout, score = killed / (killed + survived), of the mutants matching ``names``' globs
+    (all when empty)."""
     out = subprocess.run([sys.executable, "-m", "mutmut", "results", "--all", "true"], cwd=target,
                          capture_output=True, text=True)
     counts: dict[str, Counter] = {}
@@ -95,7 +96,8 @@ def score(target: Path, names: list[str]) -> str:
         counts.setdefault(module, Counter())[status] += 1
         if status == "survived":
             survivors.append(name)
-    rows = ["| module | mutants | killed | survived | no tests | timeout/other | score |", "|---|---|---|---|---|---|---|"]
+    rows = ["| module | mutants | killed | survived | no tests | not checked | timeout/other | score |",
+            "|---|---|---|---|---|---|---|---|"]
     total = Counter()
     for module, c in sorted(counts.items()):
         total.update(c)
@@ -107,9 +109,9 @@ def score(target: Path, names: list[str]) -> str:
 
 def _row(module: str, c: Counter) -> str:
     n = sum(c.values())
-    other = n - c["killed"] - c["survived"] - c["no tests"]
+    other = n - c["killed"] - c["survived"] - c["no tests"] - c["not checked"]
     tested = c["killed"] + c["survived"]
-    return (f"| {module} | {n} | {c['killed']} | {c['survived']} | {c['no tests']} | {other} | "
+    return (f"| {module} | {n} | {c['killed']} | {c['survived']} | {c['no tests']} | {c['not checked']} | {other} | "
             f"{100.0 * c['killed'] / tested if tested else float('nan'):.1f} % |")
 
 
