@@ -254,3 +254,13 @@ def test_misalignment_limits_of_the_transfer_function():
     with pytest.raises(ParameterError) as refused:
         TransferFunction("scaled", math.radians(10.0), 0.4, 0.4)
     assert refused.value.name == "misalignment" and "would lock" in str(refused.value), str(refused.value)
+
+
+def test_tabulated_law_on_uneven_steps_by_hand():
+    """Points (0, 0), (1, 1), (3, 5): h = (1, 2), secants d = (1, 2).  Inner slope:
+    w1 = 2 h1 + h0 = 5, w2 = h1 + 2 h0 = 4, m1 = (w1 + w2)/(w1/d0 + w2/d1) = 9/7; ends
+    m0 = ((2 h0 + h1) d0 - h0 d1)/(h0 + h1) = 2/3, m2 = ((2 h1 + h0) d1 - h1 d0)/(h0 + h1) = 8/3;
+    energy at 3: (1/2 + (2/3 - 9/7)/12) + (6 + 4 (9/7 - 8/3)/12) = 6.5 - 129/252."""
+    law = TabulatedElasticLaw([(1.0, 1.0), (3.0, 5.0)])
+    assert [law.stiffness_at(x) for x in (0.0, 1.0, 3.0)] == pytest.approx([2 / 3, 9 / 7, 8 / 3], rel=1e-12)
+    assert law.energy(3.0) == pytest.approx(6.5 - 129 / 252, rel=1e-12)
