@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt 2>/dev/null | cksum | cut -d' ' -f1)
 
-.PHONY: run test fmus bench fuzz clean distclean
+.PHONY: run test fmus bench fuzz mutants clean distclean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -33,6 +33,13 @@ bench: $(STAMP)
 fuzz: $(STAMP)
 	$(BIN)/lever build
 	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics
+
+# Mutation testing (mutmut) of the physics and the masters with the tests that cover them:
+# tens of minutes, outside CI's budget and not part of `make test` (docs/testing.md).
+mutants: $(STAMP)
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,mutation]'
+	$(BIN)/lever build
+	$(BIN)/python tests/mutation/run_mutants.py $(MUTANTS_ARGS)
 
 clean:
 	rm -rf results build/fmus build/tmp

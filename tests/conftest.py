@@ -34,7 +34,9 @@ def pytest_sessionfinish(session, exitstatus):
 @pytest.hookimpl(trylast=True)
 def pytest_unconfigure(config):
     status = getattr(config, "_lever_exit_status", None)
-    if status is not None:
+    # mutmut runs pytest inside its own process (it sets MUTANT_UNDER_TEST): leaving from
+    # here would end mutmut itself (tests/mutation/run_mutants.py).
+    if status is not None and "MUTANT_UNDER_TEST" not in os.environ:
         from harness.engine.component import remove_extractions
         remove_extractions()
         sys.stdout.flush()

@@ -11,6 +11,7 @@ import pytest
 from harness.studies import bench
 from harness.description import scene
 from harness.studies.bench import Case
+from harness.engine import masters
 
 
 @pytest.fixture(autouse=True)
@@ -69,8 +70,14 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     assert float(jacobi[1]["tau_rms"]) < float(jacobi[0]["tau_rms"])   # smaller step, smaller error
     assert all(float(r["overhead_above_floor"]) > -0.5 for r in jacobi)
     claims = json.loads((tmp_path / "bench.json").read_text())["claims"]
-    assert claims["time_at_target_s"]["jacobi-quadratic"] is not None
-    assert claims["best_master"] in ("jacobi-quadratic", "adaptive", "jacobi")
+    # The best master is the one of least (interpolated) time at the target error, read off
+    # the claims' own table; jacobi-quadratic reaches the 0.5 % target on this plan.
+    at_target = claims["time_at_target_s"]
+    assert at_target["jacobi-quadratic"] > 0.0 and math.isfinite(at_target["jacobi-quadratic"])
+    reached = {name: t for name, t in at_target.items() if t is not None and name in masters.MASTERS}
+    assert claims["best_master"] == min(reached, key=reached.get), (claims["best_master"], at_target)
+    if reached.get("jacobi"):
+        assert claims["speedup_over_baseline"] == pytest.approx(reached["jacobi"] / reached[claims["best_master"]])
     assert math.isfinite(result["floor_per_step_s"]) and result["floor_per_step_s"] > 0
     assert "At an RMS torque error" in (tmp_path / "bench.md").read_text()
 

@@ -154,25 +154,53 @@ def test_unknown_master_is_refused_by_simulate():
         run.simulate(kavz(*SHORT), master="newton")
 
 
+# The KAVZ-685 scene as shipped (jacobi-quadratic, 1 ms, 12 s, random load) against the
+# monolithic reference, measured (AMD EPYC, the pinned numpy/scipy): RMS errors relative to the
+# scale (the mean transmitted torque, the mean speed) of tau1 8.01e-6, tau2 8.01e-6, w1 1.87e-6,
+# w2 1.57e-6; co-simulation energy residual 2.24e-8 of the engine's work; the reference's own
+# 1.26e-12.  Each bound is 3x the measured figure: a change that costs an order of accuracy
+# (jacobi-quadratic at order 2: about 10x at this step) or an energy term fails.
+KAVZ_MEASURED = {"coupling.tau1": 8.01e-6, "coupling.tau2": 8.01e-6, "engine.w": 1.87e-6, "load.w": 1.57e-6}
+KAVZ_ENERGY_RESIDUAL = 2.24e-8
+KAVZ_REFERENCE_RESIDUAL = 1.26e-12
+
+
 def test_kavz685_default_scene_meets_its_accuracy_targets():
     spec = scene.load("kavz685")
     result = run.simulate(spec)
     assert result.ok, result.failure
-    assert result.master == spec.experiment.master
+    assert result.master == spec.experiment.master == "jacobi-quadratic"
     assert result.times[-1] == pytest.approx(spec.experiment.stop)
     ref = reference.solve(spec, result.times, use_cache=False)
-    found = metrics.errors(result.times, result.traces, ref.times, ref.traces,
-                           ["coupling.tau1", "coupling.tau2", "engine.w", "load.w"],
+    found = metrics.errors(result.times, result.traces, ref.times, ref.traces, list(KAVZ_MEASURED),
                            metrics.error_scales(spec, ref.traces))
     scale = found["coupling.tau2"]["scale"]
     assert scale == pytest.approx(107.5, rel=0.05)   # the mean transmitted torque
-    assert found["coupling.tau1"]["rms_relative"] <= 1e-3
-    assert found["coupling.tau2"]["rms_relative"] <= 1e-3
-    assert found["engine.w"]["rms_relative"] <= 1e-3 and found["load.w"]["rms_relative"] <= 1e-3
+    for name, measured in KAVZ_MEASURED.items():
+        assert found[name]["rms_relative"] <= 3.0 * measured, (
+            f"KAVZ-685 acceptance: RMS error of {name} {found[name]['rms_relative']:.3g} > 3x the measured "
+            f"{measured:.3g}: the master lost accuracy (e.g. jacobi-quadratic extrapolation weights are not quadratic)")
+    # The energy balance, rebuilt here from the traces: work in - out - kinetic - elastic -
+    # dissipated, the dissipation integrated from b*thetadot^2 with thetadot = w1 - U12*w2.
+    tr, t = result.traces, result.times
+    b, i1, i2 = 6.35, 0.128, 0.161
+    theta_dot = tr["engine.w"] - tr["coupling.U12"] * tr["load.w"]
+    dissipated = float(np.sum(np.diff(t) * 0.5 * (b * theta_dot[1:] ** 2 + b * theta_dot[:-1] ** 2)))
+    work_in = tr["engine.engine_work"][-1] - tr["engine.engine_work"][0]
+    kinetic = 0.5 * i1 * (tr["engine.w"][-1] ** 2 - tr["engine.w"][0] ** 2) + \
+        0.5 * i2 * (tr["load.w"][-1] ** 2 - tr["load.w"][0] ** 2)
+    elastic = 0.5 * 715.4 * (tr["coupling.theta"][-1] ** 2 - tr["coupling.theta"][0] ** 2)
+    by_hand = work_in - (tr["load.load_work"][-1] - tr["load.load_work"][0]) - kinetic - elastic - dissipated
     balance = metrics.energy_balance(spec, result.times, result.traces)
-    assert balance["residual_relative"] <= 1e-3, balance
+    assert balance["dissipated_J"] == pytest.approx(dissipated, rel=1e-3), (
+        f"the co-simulation energy balance counts {balance['dissipated_J']} J dissipated, b*thetadot^2 integrated "
+        f"gives {dissipated} J: the energy balance ignores (or miscounts) the dissipation")
+    assert abs(by_hand) / work_in <= 3.0 * KAVZ_ENERGY_RESIDUAL, by_hand
+    assert balance["residual_relative"] <= 3.0 * KAVZ_ENERGY_RESIDUAL, (
+        f"KAVZ-685 acceptance: energy residual {balance['residual_relative']:.3g} > 3x the measured "
+        f"{KAVZ_ENERGY_RESIDUAL:.3g}: the co-simulation energy balance misses a term (the dissipation?)")
     reference_balance = metrics.energy_balance(spec, ref.times, ref.traces, ref.traces["coupling.dissipated_energy"])
-    assert reference_balance["residual_relative"] < 1e-8
+    assert reference_balance["residual_relative"] <= 3.0 * KAVZ_REFERENCE_RESIDUAL, reference_balance
 
 
 # --------------------------------------------------------------------------------------

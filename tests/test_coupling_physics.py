@@ -113,10 +113,10 @@ def test_torques_are_minus_t_and_u12_t(name):
     torque = over(coupling.law.torque)(theta) + coupling.damping * theta_dot
     assert np.array_equal(r.ratio, ratio)
     assert np.array_equal(r.deflection, theta)
-    assert np.array_equal(r.deflection_rate, theta_dot)
-    assert np.array_equal(r.torque, torque)
-    assert np.array_equal(r.tau1, -torque)
-    assert np.array_equal(r.tau2, ratio * torque)
+    assert np.array_equal(r.deflection_rate, theta_dot), "the damping does not act on thetadot = w1 - U12*w2"
+    assert np.array_equal(r.torque, torque), "T is not T_el(theta) + b*(w1 - U12*w2)"
+    assert np.array_equal(r.tau1, -torque), "tau1 is not -T (sign of the drive shaft's torque)"
+    assert np.array_equal(r.tau2, ratio * torque), "tau2 is not +U12*T (sign of the driven shaft's torque flipped?)"
     assert np.array_equal(r.energy, over(coupling.law.energy)(theta))
     np.testing.assert_allclose(r.dissipation, coupling.damping * theta_dot ** 2, rtol=1e-14, atol=0)
     # Scalar evaluation and the hot-path torques() agree with it.

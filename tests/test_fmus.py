@@ -202,16 +202,13 @@ def test_fixed_parameter_cannot_change_after_initialisation(components):
 def test_misalignment_beyond_the_kinematic_limit_fails_initialisation_naming_alpha(components):
     c = components("LeverCoupling")
     c.set_parameters({"transfer_mode": "kinematic", "misalignment": 44 * DEG, "support_deformation": 0.1})
-    messages = []
-    try:
-        c.initialize(0.0, 1.0)
-    except FmuCallError as error:  # the FMU may already refuse when it enters initialisation
-        messages.append(str(error))
+    # Entering initialisation succeeds: the importer may still set the misalignment (an
+    # input) there, so the combination is judged when initialisation ends.
+    c.initialize(0.0, 1.0)
     with pytest.raises(FmuCallError) as info:
         c.exit_initialization()
     assert info.value.status == FMI2_ERROR
     assert "alpha" in str(info.value)
-    assert all("alpha" in m for m in messages)
     # No stepping with an uninitialised model.
     with pytest.raises(FmuCallError):
         c.do_step(0.0, 1e-3)
@@ -221,10 +218,7 @@ def test_misalignment_beyond_the_kinematic_limit_fails_initialisation_naming_alp
 def test_misalignment_corrected_during_initialisation_is_accepted(components):
     c = components("LeverCoupling")
     c.set_parameters({"transfer_mode": "kinematic", "misalignment": 44 * DEG, "support_deformation": 0.1})
-    try:
-        c.initialize(0.0, 1.0)
-    except FmuCallError:
-        pass
+    c.initialize(0.0, 1.0)                         # not judged yet (see above)
     c.set_parameters({"misalignment": 20 * DEG})   # an input: may be set in initialisation mode
     c.exit_initialization()
     c.do_step(0.0, 1e-3)

@@ -179,4 +179,4 @@ def test_lever_measured_reports_every_grade(tmp_path, fmu_dir):
     assert "naive drive = driven" in text and "## Conditions and assumptions" in text
     assert "brake reading" in text and "beats naive" in text
     for g in GRADES:
-        assert (tmp_path / f"measured_{g}.png").exists()
+        assert (tmp_path / f"measured_{g}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", g

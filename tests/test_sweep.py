@@ -29,7 +29,7 @@ def test_local_sweep_keeps_failures_and_resumes(tmp_path, fmu_dir):
     assert failed["status"] == "failed" and "damping" in failed["error"] and "[0" in failed["error"]
     text = (tmp_path / "sweep.md").read_text()
     assert "## Failed cases" in text and "- damping = -1: " in text and failed["where"] in text
-    assert (tmp_path / "sweep_stiffness.png").exists()
+    assert (tmp_path / "sweep_stiffness.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # A re-run reuses the log: mark a finished case and see the mark come back.
     log = tmp_path / "cases.jsonl"
     lines = log.read_text().splitlines()

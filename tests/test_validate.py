@@ -2,6 +2,7 @@
 `lever validate`)."""
 from __future__ import annotations
 
+import csv
 import shutil
 
 import numpy as np
@@ -189,7 +190,9 @@ def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_pa
     failed = {n for n, s in findings["signals"].items() if not s["passed"]}
     # the torques follow the load; the deflection theta = T/c is what a stiffness sets
     assert failed == {"coupling.theta"}
-    assert (tmp_path / "coupling.theta.png").exists() and (tmp_path / "kavz685_out.csv").exists()
+    assert (tmp_path / "coupling.theta.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open(tmp_path / "kavz685_out.csv", newline="") as exported:
+        assert next(csv.reader(exported))[0] == "time"
 
 
 # -- results produced elsewhere -------------------------------------------------------------------

@@ -1,0 +1,146 @@
+"""Mutation testing of the physics and the masters with mutmut (``make mutants``).
+
+Outside CI's budget: it takes tens of minutes.  mutmut 3 imports the mutated code from
+``mutants/`` by the module name of each file's path, so the project is staged first into
+``results/mutation/<label>/`` in the layout mutmut expects - the ``lever`` and ``harness``
+packages at the top - with the FMUs already built (their physics is not mutated: the tests
+selected here run the mutated physics and masters in the test process).  Then
+
+    mutmut run            over each of GROUPS (below) with its tests
+    mutmut results        the survivors
+
+and the score table (killed / survived / no tests / timeout, per file) is printed and
+written to ``results/mutation/<label>/<group>/score.md``.
+
+    .venv/bin/python tests/mutation/run_mutants.py [--label NAME] [--group physics masters] [--tests-from DIR]
+
+``--tests-from`` takes the tests from another checkout (the "before" score: the tests of
+the main branch against the same code).
+"""
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import os
+import shutil
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+#: The scope, in two groups run apart so that each mutant runs only the tests that belong
+#: to it: (files to mutate, mutant-name globs or [] for all, tests).  Chosen to keep a run
+#: under about 20 minutes on two shared cores: the coupling, its elastic laws and
+#: kinematics, the engine and the shaft integrator (the driveline's physics; the loads,
+#: the freewheel, parameters and signals are left out), and the masters' extrapolation
+#: (the weights every extrapolating and adaptive master steps with).
+GROUPS = {
+    "physics": (["lever/physics/coupling.py", "lever/physics/elastic.py", "lever/physics/kinematics.py",
+                 "lever/physics/engine.py", "lever/physics/shaft.py"], [],
+                ["tests/test_coupling_physics.py", "tests/test_kinematics.py", "tests/test_loads_and_shafts.py",
+                 "tests/test_oracle_monograph.py", "tests/test_oracle_physics.py"]),
+    "masters": (["harness/engine/masters/explicit.py"], ["harness.engine.masters.explicit.x_extrapolation_weights*",
+                                                         "harness.engine.masters.explicit.x_lagrange_weights*"],
+                ["tests/test_masters.py", "tests/test_oracle_physics.py"]),
+}
+
+
+def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -> None:
+    """The staged tree: packages at the top, the build inputs where harness.paths finds
+    them (ROOT = the staged tree), the FMUs copied from build/fmus."""
+    if target.exists():
+        shutil.rmtree(target)
+    target.mkdir(parents=True)
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(REPO / "fmu_src" / "lever", target / "lever", ignore=ignore)
+    shutil.copytree(REPO / "fmu_src", target / "fmu_src", ignore=ignore)     # what the FMU build hashes
+    shutil.copytree(REPO / "harness", target / "harness", ignore=ignore)
+    shutil.copytree(tests_from / "tests", target / "tests", ignore=shutil.ignore_patterns("__pycache__", "mutation"))
+    # this checkout's conftest: it knows to stay inside mutmut's process (older ones do not)
+    shutil.copy2(REPO / "tests" / "conftest.py", target / "tests" / "conftest.py")
+    (target / "build").mkdir()
+    shutil.copy2(REPO / "build" / "fmus.py", target / "build" / "fmus.py")
+    shutil.copytree(REPO / "build" / "shim", target / "build" / "shim", ignore=ignore)
+    shutil.copytree(REPO / "build" / "fmus", target / "build" / "fmus")
+    shutil.copytree(REPO / "resources", target / "resources")
+    shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
+    selected = [t for t in tests if (target / t).exists()]
+    also_copy = ["fmu_src", "build", "resources", "constraints.txt", "tests", "lever", "harness"]
+    (target / "pyproject.toml").write_text(
+        "[tool.mutmut]\n"
+        f"source_paths = {json.dumps(['lever', 'harness'])}\n"
+        f"only_mutate = {json.dumps(mutate)}\n"
+        f"also_copy = {json.dumps(also_copy)}\n"
+        f"pytest_add_cli_args_test_selection = {json.dumps(selected)}\n"
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]\n'
+        "\n[tool.pytest.ini_options]\n"
+        'testpaths = ["tests"]\n')
+
+
+def score(target: Path, names: list[str]) -> str:
+    """mutmut's results as a table per file: killed, survived, no tests, not (yet) checked,
+    timeout, score = killed / (killed + survived), of the mutants matching ``names``' globs
+    (all when empty)."""
+    out = subprocess.run([sys.executable, "-m", "mutmut", "results", "--all", "true"], cwd=target,
+                         capture_output=True, text=True)
+    counts: dict[str, Counter] = {}
+    survivors = []
+    for line in out.stdout.splitlines():
+        name, _, status = line.strip().rpartition(": ")
+        if not name or (names and not any(fnmatch.fnmatch(name, n) for n in names)):
+            continue
+        module = name.split(".x")[0].split(".xǁ")[0]
+        counts.setdefault(module, Counter())[status] += 1
+        if status == "survived":
+            survivors.append(name)
+    rows = ["| module | mutants | killed | survived | no tests | not checked | timeout/other | score |",
+            "|---|---|---|---|---|---|---|---|"]
+    total = Counter()
+    for module, c in sorted(counts.items()):
+        total.update(c)
+        rows.append(_row(module, c))
+    rows.append(_row("**all**", total))
+    text = "\n".join(rows) + "\n\nSurvivors:\n" + "\n".join(f"- {s}" for s in survivors) + "\n"
+    return text
+
+
+def _row(module: str, c: Counter) -> str:
+    n = sum(c.values())
+    other = n - c["killed"] - c["survived"] - c["no tests"] - c["not checked"]
+    tested = c["killed"] + c["survived"]
+    return (f"| {module} | {n} | {c['killed']} | {c['survived']} | {c['no tests']} | {c['not checked']} | {other} | "
+            f"{100.0 * c['killed'] / tested if tested else float('nan'):.1f} % |")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--label", default="current")
+    parser.add_argument("--tests-from", type=Path, default=REPO)
+    parser.add_argument("--group", choices=list(GROUPS), nargs="+", default=list(GROUPS))
+    parser.add_argument("--max-children", type=int, default=2)
+    parser.add_argument("--keep", action="store_true", help="reuse a staged tree and mutmut's cached results")
+    args = parser.parse_args()
+    subprocess.run([sys.executable, "-c", "from harness.cli import ensure_fmus; ensure_fmus(quiet=True)"],
+                   cwd=REPO, check=True)
+    env = dict(os.environ)
+    env.pop("PYTHONPATH", None)
+    status = 0
+    for group in args.group:
+        mutate, names, tests = GROUPS[group]
+        target = REPO / "results" / "mutation" / args.label / group
+        if not (args.keep and target.exists()):
+            stage(target, args.tests_from.resolve(), mutate, tests)
+        run = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(args.max_children), *names],
+                             cwd=target, env=env)
+        table = score(target, names)
+        (target / "score.md").write_text(table)
+        print(f"## {group} ({args.label})\n\n{table}")
+        status = status or run.returncode
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
