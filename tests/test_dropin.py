@@ -95,7 +95,7 @@ def test_documentation_is_generated_from_the_declarations(fmu_dir):
         for p in declared:
             assert f"<code>{p.name}</code>" in page and p.description.split("'")[0][:30] in page, p.name
         assert "Sign conventions" in page and "cut torque" in page
-        assert "AngularMechanicalPort" in page and "LD_PRELOAD" in page
+        assert "AngularMechanicalPort" in page and "LEVER_FMU_LIBPYTHON" in page
         for line in [r for r in requirements.splitlines() if r and not r.startswith("#")]:
             assert line in page
     assert "tau2 = U12*T" in (zipfile.ZipFile(fmu_dir / "LeverCoupling.fmu")
@@ -389,19 +389,6 @@ def _without_build_python(unzipped: Path) -> None:
                            if not line.startswith("python_")))
 
 
-def _imports_numpy(unzipped: Path) -> bool:
-    """Whether the model code in the FMU imports numpy (another branch removes it)."""
-    for path in (unzipped / "resources").rglob("*.py"):
-        if "pythonfmu" in path.relative_to(unzipped / "resources").parts:
-            continue
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
-                [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else [])
-            if any(n.split(".")[0] == "numpy" for n in names):
-                return True
-    return False
-
-
 @pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
 def test_a_c_host_in_a_bare_environment_runs_each_fmu(fmu, fmu_dir, c_host, tmp_path):
     """env -i PATH=/usr/bin:/bin, no LD_PRELOAD: the FMU loads the Python it was built with."""
@@ -430,14 +417,30 @@ def test_a_c_host_calling_from_several_threads_gets_the_same_numbers(threads, fm
 @pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
 @pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
 def test_a_c_host_on_a_bare_system_cpython(fmu, fmu_dir, c_host, tmp_path):
-    """Without the build's Python the FMU asks python3 on PATH: /usr/bin/python3, no third-party
-    package.  An FMU whose model code needs none runs; one that imports numpy where the system
-    Python has none fails at fmi2Instantiate with a message naming it, and the host lives."""
+    """Without the build's Python the FMU asks python3 on PATH: /usr/bin/python3, with no
+    third-party package (the model code runs on the standard library alone)."""
     unzipped = _unzipped(fmu_dir, fmu, tmp_path / fmu)
     _without_build_python(unzipped)
     done = _run_c_host(c_host, unzipped, fmu, BARE)
-    if _expect_bare_run(done, unzipped):
-        assert _outputs(done) == pytest.approx(_fmpy_outputs(fmu_dir, fmu), rel=1e-14, abs=0)
+    assert done.returncode == 0, done.stderr
+    assert _outputs(done) == pytest.approx(_fmpy_outputs(fmu_dir, fmu), rel=1e-14, abs=0)
+
+
+#: The oldest CPython the FMUs promise to run on (docs/hosts.md), where this machine has one
+#: (pyenv's builds carry a shared libpython).
+OLDEST_PYTHON = sorted(Path("/root/.pyenv/versions").glob("3.9.*/lib/libpython3.9.so.1.0"))
+
+
+@pytest.mark.skipif(not OLDEST_PYTHON, reason="no CPython 3.9 shared library on this machine")
+@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+def test_a_c_host_on_the_oldest_supported_cpython(fmu, fmu_dir, c_host, tmp_path):
+    """LEVER_FMU_LIBPYTHON naming a CPython 3.9 library: the model code and pythonfmu's Python
+    part run on it, with the numbers of this process's Python."""
+    unzipped = _unzipped(fmu_dir, fmu, tmp_path / fmu)
+    _without_build_python(unzipped)
+    done = _run_c_host(c_host, unzipped, fmu, {**BARE, "LEVER_FMU_LIBPYTHON": str(OLDEST_PYTHON[-1])})
+    assert done.returncode == 0, done.stderr
+    assert _outputs(done) == pytest.approx(_fmpy_outputs(fmu_dir, fmu), rel=1e-14, abs=0)
 
 
 def _expect_bare_run(done, unzipped: Path) -> bool:
@@ -482,7 +485,7 @@ def test_without_any_python_the_c_host_is_told_what_was_tried(fmu_dir, c_host, t
                                  text=True).stdout.strip()
         done = _run_c_host(c_host, unzipped, "MisalignmentSource",
                            {"PATH": str(tmp_path), "LEVER_FMU_LIBPYTHON": library}, steps=1)
-        _expect_bare_run(done, unzipped)
+        assert done.returncode == 0, done.stderr
 
 
 def _file_uri_forms(resources: Path) -> list[str]:

@@ -130,7 +130,7 @@ def test_fmu_cosimulation_grows_at_the_hand_derived_zoh_rate(b, h_omega):
                 f"coupling.stiffness={c}", f"coupling.damping={b}", "engine.torque_slope=0",
                 f"engine.stall_torque={Mm}", f"load.mean_torque={Mm}", "engine.phi_start=0.0005",
                 "experiment.transient=0", f"experiment.stop={n * h!r}")
-    result = run.simulate(spec, master="jacobi", step=h, advise=False)
+    result = run.simulate(spec, master="jacobi", step=h)
     assert result.ok, result.failure
     e = result.traces["coupling.theta"] - Mm / c             # theta* = Mm/c: T* = I_red (M1/I1 + Mm/I2) = Mm
     v = result.traces["engine.w"] - result.traces["load.w"]

@@ -48,7 +48,7 @@ FIT_TOLERANCE = 0.20
 
 def amplitude(tf: TransferFunction) -> float:
     """(max - min)/2 of U12 over a revolution, sampled here (not the model's own figure)."""
-    ratio = tf.ratio(np.linspace(0.0, 2.0 * np.pi, 20001))
+    ratio = np.array([tf.ratio(x) for x in np.linspace(0.0, 2.0 * np.pi, 20001)])
     return float((ratio.max() - ratio.min()) / 2.0)
 
 
@@ -111,9 +111,9 @@ def test_half_coupling_function_amplitudes_of_model_md():
     (the text swaps them).  With s2 = sin^2 alpha, g = sqrt((1 - 2 s2 cos 2phi)/(1 - 2 s2 cos^2 phi))
     is 1 at phi = 0 and largest at phi = pi/2, sqrt(1 + 2 s2): the peak deviation is
     sqrt(1 + 2 sin^2 alpha) - 1 = 0.0297 (10 deg), 0.2247 (30 deg)."""
-    phi = np.linspace(0.0, 2.0 * np.pi, 100001)
+    phi = np.linspace(0.0, 2.0 * np.pi, 20001)
     for alpha_deg, printed in ((10.0, 0.030), (30.0, 0.22)):
-        peak = float(half_coupling_ratio(phi, alpha_deg * DEG).max() - 1.0)
+        peak = max(half_coupling_ratio(x, alpha_deg * DEG) for x in phi) - 1.0
         assert peak == pytest.approx(math.sqrt(1.0 + 2.0 * math.sin(alpha_deg * DEG) ** 2) - 1.0, rel=1e-9)
         assert peak == pytest.approx(printed, abs=0.005), (alpha_deg, peak)
 

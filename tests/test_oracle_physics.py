@@ -62,9 +62,9 @@ def test_extrapolation_weights_on_uneven_steps():
 def test_lagrange_weights_extrapolate_a_parabola():
     """Nodes 0, 1, 2, value at 3: L0 = (3-1)(3-2)/((0-1)(0-2)) = 1, L1 = (3-0)(3-2)/((1-0)(1-2)) = -3,
     L2 = (3-0)(3-1)/((2-0)(2-1)) = 3; at 0.5: (3/8, 3/4, -1/8)."""
-    assert masters._lagrange_weights([0.0, 1.0, 2.0], 3.0) == pytest.approx([1.0, -3.0, 3.0], abs=1e-12)
-    assert masters._lagrange_weights([0.0, 1.0, 2.0], 0.5) == pytest.approx([0.375, 0.75, -0.125], abs=1e-12)
-    assert masters._lagrange_weights([5.0], 7.0) == [1.0]
+    assert masters.lagrange_weights([0.0, 1.0, 2.0], 3.0) == pytest.approx([1.0, -3.0, 3.0], abs=1e-12)
+    assert masters.lagrange_weights([0.0, 1.0, 2.0], 0.5) == pytest.approx([0.375, 0.75, -0.125], abs=1e-12)
+    assert masters.lagrange_weights([5.0], 7.0) == [1.0]
 
 
 # -- the engine's characteristics ---------------------------------------------------------------------------------

@@ -99,10 +99,13 @@ def documentation_html(model, requirements: list[str]) -> str:
         "<li>several instances per process: yes</li></ul>",
         "<h2>Host requirements</h2>",
         "<p>The model runs in Python inside the importer (pythonfmu 0.7; its Python part is in "
-        f"<code>resources/pythonfmu</code>), {packages}. The importing process needs CPython 3.11 or "
-        "later with its shared library <code>libpython3.x.so</code> loaded with global symbols (a Python "
-        "importer already has it; a C/C++ importer: <code>LD_PRELOAD=/path/to/libpython3.11.so.1.0</code>) "
-        "and <code>PYTHONHOME</code> naming that Python's prefix where it is not found by default.</p>",
+        f"<code>resources/pythonfmu</code>), {packages}. A Python host's own interpreter is used. In any "
+        "other host the FMU's native entry finds a CPython 3.9+ shared library itself, in this order: "
+        "<code>LEVER_FMU_LIBPYTHON</code> (the library's path; <code>LEVER_FMU_PYTHONHOME</code> for an "
+        "unusual layout), the Python the FMU was built with (<code>resources/lever_shim.cfg</code>), a "
+        "<code>python3</code> on <code>PATH</code>; it loads it with global symbols and sets the Python "
+        "home to match, so neither <code>LD_PRELOAD</code> nor <code>PYTHONHOME</code> is needed. When "
+        "none is usable, <code>fmi2Instantiate</code> returns NULL and logs what it tried.</p>",
         *(["<pre>" + "\n".join(_e(r) for r in requirements) + "</pre>"] if requirements else []),
     ]
     style = ("body{font-family:sans-serif;max-width:62em;margin:2em auto}table{border-collapse:collapse}"
