@@ -264,3 +264,43 @@ def test_tabulated_law_on_uneven_steps_by_hand():
     law = TabulatedElasticLaw([(1.0, 1.0), (3.0, 5.0)])
     assert [law.stiffness_at(x) for x in (0.0, 1.0, 3.0)] == pytest.approx([2 / 3, 9 / 7, 8 / 3], rel=1e-12)
     assert law.energy(3.0) == pytest.approx(6.5 - 129 / 252, rel=1e-12)
+
+
+# -- the monotone cubic's slopes against an independent implementation -----------------------------------------
+
+def test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables():
+    """The elastic table's slopes are Fritsch-Butland's (weighted harmonic mean inside, the
+    limited three-point formula at the ends): what scipy.interpolate.PchipInterpolator
+    computes, written independently there.  Uneven steps, sign changes, flat stretches and
+    tables of 3 to 9 points, seeded: the mutation run left the uneven-step weights
+    (2 h[k-1] for 2/h[k-1]) and the end formula's step (h[1] for h[-1]) alive."""
+    import random
+
+    from scipy.interpolate import PchipInterpolator
+
+    from lever.physics.elastic import _pchip_slopes
+
+    rng = random.Random(20261123)
+    for _ in range(300):
+        n = rng.randint(3, 9)
+        x = [0.0]
+        for _ in range(n - 1):
+            x.append(x[-1] + rng.choice((0.01, 0.1, 1.0, 3.0)) * rng.uniform(0.2, 1.0))
+        y = [rng.choice((0.0, 1.0, -1.0, 2.5)) * rng.uniform(0.0, 5.0) for _ in range(n)]
+        expected = PchipInterpolator(x, y).derivative()(x)
+        got = _pchip_slopes(x, y)
+        assert got == pytest.approx(list(expected), rel=1e-12, abs=1e-12), (
+            f"the monotone cubic's slopes differ from scipy's PCHIP at x = {x}, y = {y}")
+
+
+@pytest.mark.parametrize("cls,name,later", [
+    (TabulatedCharacteristic, "engine_table", "10:300; 10:200"),     # speeds not distinct
+    (TabulatedElasticLaw, "coupling_table", "0:0; 0.2:5; 0.1:6"),    # angles not increasing
+])
+def test_a_parsed_table_is_refused_under_the_name_it_was_given(cls, name, later):
+    """parse() passes its name on: a row that is no number (refused while parsing) and a table
+    refused by the model afterwards both name the parameter the user set."""
+    for text in ("0:0; x:1", later):
+        with pytest.raises(ParameterError) as refused:
+            cls.parse(text, name)
+        assert refused.value.name == name and f"'{name}'" in str(refused.value), (text, refused.value)
