@@ -68,7 +68,12 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     assert [r["engine"] for r in rows] == ["jacobi", "jacobi", "jacobi-quadratic", "adaptive", "monolithic"]
     jacobi = [r for r in rows if r["engine"] == "jacobi"]
     assert float(jacobi[1]["tau_rms"]) < float(jacobi[0]["tau_rms"])   # smaller step, smaller error
-    assert all(float(r["overhead_above_floor"]) > -0.5 for r in jacobi)
+    # the overhead is the run's time over the floor of the same calls (not a timing bound:
+    # under load either can be anything)
+    for r in jacobi:
+        assert float(r["floor_s"]) > 0.0
+        assert float(r["overhead_above_floor"]) == pytest.approx(
+            float(r["wall_median_s"]) / float(r["floor_s"]) - 1.0, rel=1e-9), r
     claims = json.loads((tmp_path / "bench.json").read_text())["claims"]
     # The best master is the one of least (interpolated) time at the target error, read off
     # the claims' own table; jacobi-quadratic reaches the 0.5 % target on this plan.
