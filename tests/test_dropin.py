@@ -443,19 +443,6 @@ def test_a_c_host_on_the_oldest_supported_cpython(fmu, fmu_dir, c_host, tmp_path
     assert _outputs(done) == pytest.approx(_fmpy_outputs(fmu_dir, fmu), rel=1e-14, abs=0)
 
 
-def _expect_bare_run(done, unzipped: Path) -> bool:
-    """Checks a run on the system's CPython: it ran, or (model code importing numpy, which that
-    Python lacks) it failed cleanly at fmi2Instantiate naming numpy.  True if it ran."""
-    has_numpy = subprocess.run([str(SYSTEM_PYTHON), "-c", "import numpy"], env=BARE,
-                               capture_output=True).returncode == 0
-    if _imports_numpy(unzipped) and not has_numpy:
-        assert done.returncode == 5, (done.stdout, done.stderr)
-        assert "No module named 'numpy'" in done.stderr
-        return False
-    assert done.returncode == 0, done.stderr
-    return True
-
-
 @pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
 def test_the_fmu_carries_pythonfmu_for_a_bare_cpython(fmu_dir, tmp_path):
     """pythonfmu's Python package travels in resources/ (pythonfmu's builder copies the installed

@@ -56,10 +56,10 @@ RANGES = [
     # -- the freewheel rectifier (MODEL.md section 8; the paper's eqs. (1)-(18)) --
     ("FreewheelRectifier", "input_speed", 0.0, 1e4, True, False, "MODEL.md s.8: rocker frequency, > 0"),
     ("FreewheelRectifier", "rocker_amplitude", 0.0, 1.5, True, False, "MODEL.md s.8: phi0 > 0"),
-    ("FreewheelRectifier", "half_coupling_inertia", 0.0, 1e3, True, False, "an inertia, > 0"),
-    ("FreewheelRectifier", "driven_parts_inertia", 0.0, 1e3, True, False, "an inertia, > 0"),
-    ("FreewheelRectifier", "torsion_end_inertia", 0.0, 1e3, True, False, "an inertia, > 0"),
-    ("FreewheelRectifier", "flywheel_inertia", 0.0, 1e6, True, False, "an inertia, > 0"),
+    ("FreewheelRectifier", "half_coupling_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "driven_parts_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "torsion_end_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "flywheel_inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("FreewheelRectifier", "ramp_angle", 0.0, math.pi / 2, True, True, "ramp inclination in (0, 90 deg): tan finite"),
     ("FreewheelRectifier", "contact_radius", 0.0, 10.0, True, False, "a radius, > 0"),
     ("FreewheelRectifier", "disc_friction", 0.0, 2.0, False, False, "a friction coefficient, >= 0"),
@@ -103,12 +103,9 @@ SETUP = {
 }
 
 # Values the range admits but the model cannot initialise with (found by this table):
-# (FMU, parameter, label) -> why.  Strict xfail: the test fails once the range is fixed.
-KNOWN_GAPS = {
-    ("FreewheelRectifier", "torsion_end_inertia", "at low"):
-        "J4 = 5e-324 kg*m2 is admitted by (0, 1e3] but its acceleration overflows at initialisation: the "
-        "freewheel's inertias lack the 1e-6 kg*m2 floor the shafts got (docs/decisions.md)",
-}
+# (FMU, parameter, label) -> why.  Strict xfail: the test fails once the range is fixed.  None today
+# (the freewheel's inertias got the shafts' 1e-6 kg*m2 floor when this table found J4 = 5e-324 overflow).
+KNOWN_GAPS: dict = {}
 
 
 def _edges(low, high, low_open, high_open):

@@ -151,13 +151,13 @@ FREEWHEEL = (
     Parameter("rocker_amplitude", 0.103, "rad", "phi0 in the rocker's motion phi1 = phi0 (1 - cos(omega t))",
               0.0, 1.5, low_open=True),
     Parameter("half_coupling_inertia", 0.000202, "kg.m2", "J2, moment of inertia of ONE half-coupling (there are two)",
-              0.0, 1e3, low_open=True),
+              1e-6, 1e3),
     Parameter("driven_parts_inertia", 0.000217, "kg.m2", "J3, moment of inertia of the driven parts of ONE half "
-              "(driven discs, output shaft share; there are two)", 0.0, 1e3, low_open=True),
+              "(driven discs, output shaft share; there are two)", 1e-6, 1e3),
     Parameter("torsion_end_inertia", 0.0014, "kg.m2", "J4, output end of the torsion shaft with its peripheral gear",
-              0.0, 1e3, low_open=True),
+              1e-6, 1e3),
     Parameter("flywheel_inertia", 5.0, "kg.m2", "J5, central gear of the summing gearbox (5: the paper's stop mode; "
-              "the real one is 0.00225)", 0.0, 1e6, low_open=True),
+              "the real one is 0.00225)", 1e-6, 1e6),
     Parameter("ramp_angle", 0.3054, "rad", "alpha, inclination of the tear-shaped ramps the balls roll on",
               0.0, math.pi / 2.0, low_open=True, high_open=True),
     Parameter("contact_radius", 0.026, "m", "r, radius at which the balls and the discs act", 0.0, 10.0,
