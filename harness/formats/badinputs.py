@@ -165,6 +165,7 @@ _TABLES = [
     ("EngineShaft", "characteristic", "40:500; 40:400", ("distinct",), ()),
     ("EngineShaft", "characteristic", "40:500; fast:400", ("not numeric",), ()),
     ("EngineShaft", "characteristic", "40:500; 60:inf", ("non-finite",), ()),
+    ("EngineShaft", "characteristic", "kavz", ("named characteristic", "kavz685"), ()),
     ("LoadShaft", "table", "0:100", ("at least 2",), (("load_kind", "table"),)),
     ("LoadShaft", "table", "0:100; 2:120; 1:110", ("strictly increasing",), (("load_kind", "table"),)),
     ("LoadShaft", "table", "0:100; 1:-inf", ("non-finite",), (("load_kind", "table"),)),
