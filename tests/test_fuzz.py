@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 from lever.physics import catalogue
 from lever.physics.parameters import Parameter, ParameterError
+from lever.physics.shaft import LaggedShaft
 
 SCALE = float(os.environ.get("LEVER_FUZZ_SCALE", "1"))
 
@@ -176,15 +177,21 @@ def _steps_stay_finite(make, values, t, phi, w, moves):
     shaft = build(make, values)
     if shaft is None:
         return
+    lagged = isinstance(shaft, LaggedShaft)
+    torque = shaft.torque_start if lagged else None     # a lagged engine's torque is state too
     for tau, rate, h in moves:
         try:
-            phi, w, work = shaft.advance(t, phi, w, tau, h, rate)
+            if lagged:
+                phi, w, torque, work = shaft.advance(t, phi, w, torque, tau, h, rate)
+            else:
+                phi, w, work = shaft.advance(t, phi, w, tau, h, rate)
         except ParameterError as error:        # too many substeps asked for: refused, saying why
             assert error.name == "max_substep" and "'max_substep'" in str(error)
             return
         assert math.isfinite(phi) and math.isfinite(w) and math.isfinite(work)
+        assert not lagged or math.isfinite(torque)
         t += h
-    assert all(math.isfinite(x) for x in shaft.rates(t, phi, w, 0.0))
+    assert all(math.isfinite(x) for x in (shaft.rates(t, phi, w, 0.0, torque) if lagged else shaft.rates(t, phi, w, 0.0)))
 
 
 @fuzz(800)

@@ -239,8 +239,8 @@ def test_misalignment_limits_of_the_transfer_function():
     evaluate it at alpha + asin(D2s/l2) (the support's tilt): asin(0.1) = 5.739 deg, so
     alpha = 39.2 deg (44.939) is accepted and 39.3 deg (45.039) refused; the working range
     ends at 75 deg for every mode; a scaled U12 that falls to 0.05 locks the coupling and
-    is refused (alpha = 10 deg with both deformations 0.4: the reported amplitude's power
-    law gives about 0.8) - each naming the misalignment."""
+    is refused (alpha = 20 deg with both deformations 0.4: the reported amplitude's law
+    gives about 1.04) - each naming the misalignment."""
     TransferFunction("kinematic", math.radians(39.2), 0.1, 0.03)
     for mode in ("kinematic", "scaled"):
         with pytest.raises(ParameterError) as refused:
@@ -252,7 +252,7 @@ def test_misalignment_limits_of_the_transfer_function():
             TransferFunction(mode, math.radians(75.0), 0.03, 0.03)
         assert refused.value.name == "misalignment" and "75 deg" in str(refused.value), str(refused.value)
     with pytest.raises(ParameterError) as refused:
-        TransferFunction("scaled", math.radians(10.0), 0.4, 0.4)
+        TransferFunction("scaled", math.radians(20.0), 0.4, 0.4)
     assert refused.value.name == "misalignment" and "would lock" in str(refused.value), str(refused.value)
 
 

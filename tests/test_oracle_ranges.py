@@ -41,6 +41,8 @@ RANGES = [
     ("EngineShaft", "inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("EngineShaft", "stall_torque", -1e6, 1e6, False, False, "FMU docs"),
     ("EngineShaft", "torque_slope", 0.0, 1e6, False, False, "MODEL.md s.4: Mg = M1 - K1*w falls with speed, K1 >= 0"),
+    ("EngineShaft", "torque_lag", 0.0, 100.0, False, False, "a time constant, >= 0 (0: no lag); cap: FMU docs"),
+    ("EngineShaft", "torque_start", -1e6, 1e6, False, False, "FMU docs (as stall_torque)"),
     ("EngineShaft", "phi_start", -1e9, 1e9, False, False, "FMU docs"),
     ("EngineShaft", "w_start", -1e5, 1e5, False, False, "FMU docs"),
     ("EngineShaft", "max_substep", 0.0, 1.0, True, False, "FMU docs: an integration step, > 0"),

@@ -165,6 +165,7 @@ _TABLES = [
     ("EngineShaft", "characteristic", "40:500; 40:400", ("distinct",), ()),
     ("EngineShaft", "characteristic", "40:500; fast:400", ("not numeric",), ()),
     ("EngineShaft", "characteristic", "40:500; 60:inf", ("non-finite",), ()),
+    ("EngineShaft", "characteristic", "kavz", ("named characteristic", "kavz685"), ()),
     ("LoadShaft", "table", "0:100", ("at least 2",), (("load_kind", "table"),)),
     ("LoadShaft", "table", "0:100; 2:120; 1:110", ("strictly increasing",), (("load_kind", "table"),)),
     ("LoadShaft", "table", "0:100; 1:-inf", ("non-finite",), (("load_kind", "table"),)),
@@ -187,6 +188,13 @@ def _by_hand() -> list[Case]:
         Case("LeverCoupling", "misalignment out of range", "scaled U12 reaching zero",
              "initialization", ("set", "misalignment", 70 * DEG), ("'misalignment'",),
              setup=(("transfer_mode", "scaled"),), refused_by="exit"),
+        # A lagged engine's torque is state: a state without it, or with a malformed one, is refused.
+        Case("EngineShaft", "bad state", "fmi2SetFMUstate of a lagged engine's state without its torque",
+             "stepping", ("call", "edited-state", ("internal-empty",)), ("FMUstate", "lagged engine torque"),
+             setup=(("torque_lag", 0.1),)),
+        Case("EngineShaft", "bad state", "fmi2SetFMUstate of a lagged engine's state with a malformed torque",
+             "stepping", ("call", "edited-state", ("internal",)), ("FMUstate", "internal state", "engine_torque"),
+             setup=(("torque_lag", 0.1),)),
         Case("LoadShaft", "parameter out of range", "band_low above band_high", "instantiated",
              ("set", "band_low", 500.0), ("'band_low'", "band_high"), refused_by="exit"),
         Case("LoadShaft", "malformed table", "load_kind 'table' without a table", "instantiated",
@@ -320,6 +328,8 @@ def _edited_model_state(data: bytes, edit: str, fmu: str) -> bytes:
             state["phase"] = "flying"
         elif edit == "internal":
             state["internal"] = {"bogus": [1, 2]}
+        elif edit == "internal-empty":
+            state["internal"] = {}
         payload = json.dumps(state, allow_nan=True).encode()
     header["length"] = len(payload)
     return magic + b" " + json.dumps(header).encode() + b"\n" + payload

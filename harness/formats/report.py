@@ -5,8 +5,10 @@ from __future__ import annotations
 import platform
 from pathlib import Path
 
+import numpy as np
+
 from harness.description import kinds
-from harness.judges import metrics
+from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import rectifier_report
 from harness.formats.run_files import fmt, reference_error_lines, write_run
@@ -80,9 +82,56 @@ def write_report(path: Path, summary: dict):
                   f"{eb['kinetic_change_J']:.4g} J - elastic change {eb['elastic_change_J']:.4g} J - dissipated "
                   f"{eb['dissipated_J']:.4g} J = residual {eb['residual_J']:.4g} J "
                   f"(**{100 * eb['residual_relative']:.2g} %** of the work in)."]
-    lines += ["", "Plots: speeds.png, torques.png, accelerations.png, transfer_function.png, "
-              "vs_reference.png.  Traces: traces.csv (and reference.csv)."]
+    lines += ["", "Plots over time: speeds.png, torques.png, accelerations.png, transfer_function.png, "
+              "vs_reference.png; over the driven shaft's angle, as the monograph draws them: revolution.png (U12 and "
+              f"the torques over the last whole revolution), revolutions.png (speeds and accelerations over the last "
+              f"{REVOLUTIONS_SHOWN}).  Traces: traces.csv (and reference.csv)."]
     path.write_text("\n".join(lines) + "\n")
+
+
+#: revolutions of the driven shaft in the speeds-and-accelerations view over the angle
+REVOLUTIONS_SHOWN = 3
+
+
+def driven_angle(scene, times, traces) -> np.ndarray:
+    """The driven shaft's angle [rad] along a run: its recorded ``phi``, else its speed
+    integrated by trapezoids from 0 (at 1 ms steps a few 1e-7 rad of the revolution's
+    2 pi: invisible in a plot)."""
+    _, _, load = kinds.roles(scene)
+    if f"{load}.phi" in traces:
+        return np.asarray(traces[f"{load}.phi"], dtype=float)
+    w = np.asarray(traces[f"{load}.w"], dtype=float)
+    t = np.asarray(times, dtype=float)
+    return np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+
+
+def angle_views(scene, times, traces) -> dict:
+    """What the plots over the driven shaft's angle show, as the monograph draws its
+    figures: U12 and the two torques over the last whole revolution (``revolution``), the
+    speeds and accelerations over the last ``REVOLUTIONS_SHOWN`` (``revolutions``; fewer
+    if the run has fewer).  Each view: ``angle`` [deg from the window's start], ``t``
+    [s], and the traces by short name (``-tau1``: the torque the drive side transmits);
+    None when the run holds not one whole revolution."""
+    names = metrics.signals(scene)
+    phi2 = driven_angle(scene, times, traces)
+    views = {}
+    for key, count, shown in (("revolution", 1, ("U12", "tau1", "tau2")),
+                              ("revolutions", REVOLUTIONS_SHOWN, ("w1", "w2", "a1", "a2"))):
+        window = revolutions.last_revolutions(phi2, count)
+        while window.stop - window.start < 2 and count > 1:
+            count -= 1
+            window = revolutions.last_revolutions(phi2, count)
+        if window.stop - window.start < 2:
+            views[key] = None
+            continue
+        view = {"angle": np.degrees(revolutions.revolution_angle(phi2, window)), "t": np.asarray(times)[window],
+                "count": count}
+        for short in shown:
+            if names[short] in traces:
+                values = np.asarray(traces[names[short]], dtype=float)[window]
+                view["-tau1" if short == "tau1" else short] = -values if short == "tau1" else values
+        views[key] = view
+    return views
 
 
 def plot(out: Path, result: RunResult, reference=None):
@@ -118,6 +167,7 @@ def plot(out: Path, result: RunResult, reference=None):
     figure("accelerations.png", [("acceleration [rad/s^2]", [(names["a1"], "a1 drive", "-"),
                                                              (names["a2"], "a2 driven", "-")])], title)
     figure("transfer_function.png", [("U12 [1]", [(names["U12"], "U12", "-")])], title)
+    plot_over_angle(out, result.scene, t, tr, title)
     if reference is not None:
         fig, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
         n = min(len(t), len(reference.times))
@@ -138,6 +188,40 @@ def plot(out: Path, result: RunResult, reference=None):
         fig.suptitle(f"{title}: co-simulation vs reference")
         fig.tight_layout()
         fig.savefig(out / "vs_reference.png", dpi=110)
+        plt.close(fig)
+
+
+def plot_over_angle(out: Path, scene, times, traces, title: str):
+    """``revolution.png`` (U12 and the torques over the driven shaft's last whole
+    revolution) and ``revolutions.png`` (speeds and accelerations over its last few), over
+    the driven shaft's angle as the monograph's figures are; nothing when the run holds
+    no whole revolution."""
+    import matplotlib.pyplot as plt
+
+    views = angle_views(scene, times, traces)
+    panels = {"revolution.png": ("revolution", [("U12 [1]", [("U12", "U12")]),
+                                                ("torque [N*m]", [("-tau1", "-tau1 (drive)"), ("tau2", "tau2 (driven)")])]),
+              "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", "w1 drive"), ("w2", "w2 driven")]),
+                                                  ("acceleration [rad/s^2]", [("a1", "a1 drive"), ("a2", "a2 driven")])])}
+    for filename, (key, rows) in panels.items():
+        view = views[key]
+        if view is None:
+            continue
+        fig, axes = plt.subplots(len(rows), 1, figsize=(10, 2.8 * len(rows)), sharex=True, squeeze=False)
+        for ax, (label, series) in zip(axes[:, 0], rows):
+            for short, legend in series:
+                if short in view:
+                    ax.plot(view["angle"], view[short], "-", lw=0.9, label=legend)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)
+        count = view["count"]
+        axes[-1, 0].set_xlabel(f"driven shaft angle phi2 [deg] over its last {'whole revolution' if count == 1 else f'{count} whole revolutions'} "
+                               f"(t = {view['t'][0]:.3f} ... {view['t'][-1]:.3f} s)")
+        axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
+        fig.suptitle(title)
+        fig.tight_layout()
+        fig.savefig(out / filename, dpi=110)
         plt.close(fig)
 
 

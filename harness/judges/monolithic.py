@@ -3,7 +3,7 @@ tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue
 
 For the driveline (engine shaft - lever coupling - load shaft) the state is
 ``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
-energy dissipated in the coupling, so the reference's own energy balance is exact up to
+energy dissipated in the coupling (and, for an engine with a torque lag, its torque), so the reference's own energy balance is exact up to
 the integrator's tolerance.  Results are cached (harness.judges.solution).  ``solve``
 picks the solver of the scene's kind (``SOLVERS``).
 """
@@ -15,6 +15,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from lever.physics import catalogue
+from lever.physics.shaft import LaggedShaft
 
 from harness.description import kinds
 from harness.description import scene as scenes
@@ -90,6 +91,7 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         def evaluate(p1, v1, p2, v2, t):
             return family.at(alpha_at(t)).evaluate(p1, v1, p2, v2)
     fixed = coupling.evaluate if misalignment is None else None
+    lagged = isinstance(engine, LaggedShaft)
 
     def rhs(t, y):
         p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
@@ -98,15 +100,24 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         a2, m2 = driven_rates(t, p2, v2, r.tau2)
         return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation]
 
+    def rhs_lagged(t, y):
+        # the engine torque M lags its characteristic: an eighth state, after the works
+        p1, v1, p2, v2, m = y[0], y[1], y[2], y[3], y[7]
+        r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
+        a1, m1 = engine.rates(t, p1, v1, r.tau1, m)
+        a2, m2 = driven_rates(t, p2, v2, r.tau2)
+        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation, engine.torque_rate(t, p1, v1, m)]
+
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
-    solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), [phi1, w1, phi2, w2, 0.0, 0.0, 0.0],
+    start = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
+    solution = solve_ivp(rhs_lagged if lagged else rhs, (float(times[0]), float(times[-1])), start,
                          method=method, t_eval=times, rtol=rtol, atol=atol,
                          first_step=min(1e-4, 0.1 / omega))
     wall = clock.perf_counter() - started
     if not solution.success:
         raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
-    p1, v1, p2, v2, work_in, work_out, dissipated = solution.y
+    p1, v1, p2, v2, work_in, work_out, dissipated = solution.y[:7]
     t = solution.t
     # the physics takes scalars (it runs in the FMUs on the standard library alone)
     if misalignment is None:
@@ -114,7 +125,11 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     else:
         rows = [evaluate(*row) for row in zip(p1, v1, p2, v2, t)]
     r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
-    a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
+    if lagged:
+        m1 = solution.y[7]
+        a1 = (m1 + np.asarray(r.tau1)) / engine.inertia
+    else:
+        a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
     a2, m2 = _shaft_rates(load, t, p2, v2, np.asarray(r.tau2))
     e, c, l = engine_name, coupling_name, load_name
     traces = {

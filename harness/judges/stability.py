@@ -3,7 +3,8 @@ stability advisor that warns before a run.
 
 The model (linearised about the steady operating point):
 
-    I1 * dw1/dt = -K1 * w1 + tau1          drive shaft; K1 = -dMg/dw, the engine's slope
+    I1 * dw1/dt = M + tau1                 drive shaft; M = -K1 * w1 (K1 = -dMg/dw, the engine's
+    Te * dM/dt = -K1 * w1 - M              slope) at once when its torque lag Te = 0, else a state
     I2 * dw2/dt = tau2                     driven shaft; the loads here do not depend on w
     T = c * (phi1 - phi2) + b * (w1 - w2), tau1 = -T, tau2 = T
 
@@ -19,7 +20,12 @@ Coupling mode: ``omega_n = sqrt(c / I_red)`` with ``I_red = I1*I2/(I1 + I2)``, t
 undamped eigenfrequency, and the modal damping ratio of its mode shape (the drive
 shaft moves ``I2/(I1 + I2)`` of the deflection, so the engine's slope damps it too):
 
-    zeta = (b + K1 * (I2/(I1 + I2))^2) / (2 * sqrt(c * I_red))
+    zeta = (b + K1e * (I2/(I1 + I2))^2) / (2 * sqrt(c * I_red)),   K1e = K1 / (1 + (omega_n Te)^2)
+
+(``K1e``: the in-phase part of the lagged engine's answer ``K1 / (1 + i omega Te)`` at the
+mode's frequency; a lag slower than the mode takes the engine's damping away.  The
+one-step maps below carry the lagged torque as a state of their own and need no such
+approximation.)
 
 The one-step map of each master is not written out by hand: ``LinearDriveline`` is a
 stand-in for ``harness.engine.system.System`` whose three components carry the FMUs' own model
@@ -55,7 +61,7 @@ from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.load import ConstantLoad
 from lever.physics.parameters import check_all
-from lever.physics.shaft import Shaft
+from lever.physics.shaft import LaggedShaft, Shaft
 
 from harness.description import kinds
 from harness.engine import masters as master_family
@@ -79,13 +85,15 @@ CONVERGED = {"tolerance": 1e-9, "max_iterations": 100}
 @dataclass(frozen=True)
 class TwoInertia:
     """The linearised driveline: inertias [kg*m^2], engine slope K1 [N*m*s/rad],
-    coupling stiffness c [N*m/rad] and damping b [N*m*s/rad]."""
+    coupling stiffness c [N*m/rad] and damping b [N*m*s/rad], engine torque lag Te [s]
+    (0: the engine answers at once)."""
 
     drive_inertia: float
     driven_inertia: float
     engine_slope: float
     stiffness: float
     damping: float
+    engine_lag: float = 0.0
 
     @property
     def omega_n(self) -> float:
@@ -99,25 +107,34 @@ class TwoInertia:
 
     @property
     def _mode(self) -> tuple[float, float]:
+        omega, _ = coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia)
+        effective_slope = self.engine_slope / (1.0 + (omega * self.engine_lag) ** 2)
         return coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia,
-                             self.engine_slope)
+                             effective_slope)
 
     def with_coupling(self, stiffness: float | None = None, damping: float | None = None) -> "TwoInertia":
         return TwoInertia(self.drive_inertia, self.driven_inertia, self.engine_slope,
                           self.stiffness if stiffness is None else float(stiffness),
-                          self.damping if damping is None else float(damping))
+                          self.damping if damping is None else float(damping), self.engine_lag)
 
     def step_for(self, h_omega: float) -> float:
         """The communication step [s] at which ``h * omega_n`` is ``h_omega``."""
         return h_omega / self.omega_n
 
     def continuous_eigenvalues(self) -> np.ndarray:
-        """Eigenvalues of the continuous model in (theta, w1, w2)."""
-        c, b, k1 = self.stiffness, self.damping, self.engine_slope
+        """Eigenvalues of the continuous model in (theta, w1, w2), and the engine torque M
+        when it lags."""
+        c, b, k1, te = self.stiffness, self.damping, self.engine_slope, self.engine_lag
         i1, i2 = self.drive_inertia, self.driven_inertia
-        a = np.array([[0.0, 1.0, -1.0],
-                      [-c / i1, -(b + k1) / i1, b / i1],
-                      [c / i2, b / i2, -b / i2]])
+        if te > 0.0:
+            a = np.array([[0.0, 1.0, -1.0, 0.0],
+                          [-c / i1, -b / i1, b / i1, 1.0 / i1],
+                          [c / i2, b / i2, -b / i2, 0.0],
+                          [0.0, -k1 / te, 0.0, -1.0 / te]])
+        else:
+            a = np.array([[0.0, 1.0, -1.0],
+                          [-c / i1, -(b + k1) / i1, b / i1],
+                          [c / i2, b / i2, -b / i2]])
         return np.linalg.eigvals(a)
 
 
@@ -135,7 +152,7 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
         w, dw = drive["w_start"], max(1e-3, 1e-3 * abs(drive["w_start"]))
         slope = -(characteristic.torque(0.0, 0.0, w + dw) - characteristic.torque(0.0, 0.0, w - dw)) / (2 * dw)
     return TwoInertia(drive["inertia"], driven["inertia"], max(0.0, slope), law.law.nominal_stiffness,
-                      law.damping)
+                      law.damping, drive["torque_lag"] if drive["torque_lag"] >= catalogue.SHORTEST_LAG else 0.0)
 
 
 # -- the stand-in system -----------------------------------------------------------------------
@@ -252,6 +269,19 @@ class _LinearShaft(_LinearComponent):
         self["phi"], self["w"] = phi, w
 
 
+class _LinearLaggedShaft(_LinearShaft):
+    """The drive shaft with a lagged engine: the torque M is state, kept where the FMU
+    reports it (``engine_torque``), so the masters' saved states carry it."""
+
+    def _outputs(self):
+        self["a"] = self.shaft.acceleration(self.time, self["phi"], self["w"], self["tau"], self["engine_torque"])
+
+    def _advance(self, t, h):
+        phi, w, torque, _ = self.shaft.advance(t, self["phi"], self["w"], self["engine_torque"], self["tau"], h,
+                                               self["tau_rate"])
+        self["phi"], self["w"], self["engine_torque"] = phi, w, torque
+
+
 class _LinearCoupling(_LinearComponent):
     def __init__(self, name, description, stiffness, damping):
         super().__init__(name, description)
@@ -279,9 +309,13 @@ class LinearDriveline(System):
             connections=[scenes.parse_connection(c) for c in DRIVELINE_CONNECTIONS],
             experiment=scenes.Experiment(start=0.0, stop=1e9, step=step), record=[], features=set())
         self.record = []
+        line = LinearCharacteristic(0.0, model.engine_slope)
+        engine = (_LinearLaggedShaft("engine", descriptions["EngineShaft"],
+                                     LaggedShaft(model.drive_inertia, line, model.engine_lag, 0.0))
+                  if model.engine_lag > 0.0 else
+                  _LinearShaft("engine", descriptions["EngineShaft"], Shaft(model.drive_inertia, line)))
         self.components = {
-            "engine": _LinearShaft("engine", descriptions["EngineShaft"],
-                                   Shaft(model.drive_inertia, LinearCharacteristic(0.0, model.engine_slope))),
+            "engine": engine,
             "coupling": _LinearCoupling("coupling", descriptions["LeverCoupling"], model.stiffness, model.damping),
             "load": _LinearShaft("load", descriptions["LoadShaft"], Shaft(model.driven_inertia, ConstantLoad(0.0))),
         }
@@ -289,19 +323,27 @@ class LinearDriveline(System):
         self.stateful = [n for n in self.scene.components if n not in self.feedthrough]
         self._plan()
 
-    def set_state(self, phi1, w1, phi2, w2, t=0.0):
-        """Put the shafts in a state and make the system consistent (as after a step)."""
+    @property
+    def lagged(self) -> bool:
+        return self.model.engine_lag > 0.0
+
+    def set_state(self, phi1, w1, phi2, w2, torque=0.0, t=0.0):
+        """Put the shafts (and a lagged engine's torque) in a state and make the system
+        consistent (as after a step)."""
         for component in self.components.values():
             for vr in component.values:
                 component.values[vr] = 0.0
             component.time = t
         engine, load = self.components["engine"], self.components["load"]
         engine["phi"], engine["w"], load["phi"], load["w"] = phi1, w1, phi2, w2
+        if self.lagged:
+            engine["engine_torque"] = torque
         self.propagate()
 
     def state(self) -> list[float]:
+        """``[phi1, w1, phi2, w2]``, and the engine torque when it lags."""
         engine, load = self.components["engine"], self.components["load"]
-        return [engine["phi"], engine["w"], load["phi"], load["w"]]
+        return [engine["phi"], engine["w"], load["phi"], load["w"]] + ([engine["engine_torque"]] if self.lagged else [])
 
 
 # -- one-step maps -------------------------------------------------------------------------------
@@ -362,7 +404,7 @@ def fixed_point_limit(cls) -> float:
 
 def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FMUS) -> tuple[np.ndarray, list[str]]:
     """The matrix of ``master``'s one-step map at communication step ``step`` [s] on the
-    augmented state ``(theta, w1, w2, buffered outputs..., past torques...)``, with the names of its
+    augmented state ``(theta, w1, w2, M1 when the engine lags, buffered outputs..., past torques...)``, with the names of its
     coordinates.  Raises ``MapUndefined`` where the master fails to make the step (a
     fixed-point iteration whose contraction is not below 1)."""
     cls = master_family.MASTERS[fixed_step_master(master)]
@@ -382,15 +424,16 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
     # torques, so they carry the torque of the step before - state of the map, too.
     buffered = [(system.buffers[name][1], system.index[(name, var)], f"{name}.{var}")
                 for name in system.stateful for var in system.exposed[name] if var not in ("phi", "w")]
-    names = (["phi1", "w1", "phi2", "w2"] + [label for _, _, label in buffered]
+    core = ["phi1", "w1", "phi2", "w2"] + (["M1"] if system.lagged else [])   # M1: the lagged engine torque
+    names = (core + [label for _, _, label in buffered]
              + [f"{target.name}.{vr}@t-{k + 1}h" for k in range(slots) for target, vrs, _ in inputs
                 for vr in range(len(vrs))])
-    first = 4 + len(buffered)                 # where the torque history starts in z
+    first = len(core) + len(buffered)         # where the torque history starts in z
     n = first + slots * width
 
     def apply(z):
-        system.set_state(*z[:4])
-        for (values, index, _), value in zip(buffered, z[4:first]):
+        system.set_state(*z[:len(core)])
+        for (values, index, _), value in zip(buffered, z[len(core):first]):
             values[index] = value
         if slots:
             points = []

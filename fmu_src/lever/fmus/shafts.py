@@ -4,8 +4,11 @@ inside ``do_step`` with the coupling torque held over the step (exactly where th
 physics has a closed form)."""
 from __future__ import annotations
 
+import math
+
 from ..physics import catalogue
-from ..physics.parameters import Parameter
+from ..physics.parameters import Parameter, ParameterError
+from ..physics.shaft import LaggedShaft
 from .base import LeverSlave, MechanicalPort, Output
 
 
@@ -68,22 +71,77 @@ _SHAFT_OUTPUTS = (
 
 
 class EngineShaft(_ShaftSlave):
-    DESCRIPTION = "Drive shaft with the engine's static characteristic: I1*a = Mg(w) + tau"
+    DESCRIPTION = ("Drive shaft with the engine's static characteristic, optionally lagged: I1*a = M + tau, "
+                   "Te*dM/dt = Mg(w) - M (M = Mg(w) when Te = 0)")
     PARAMETERS = catalogue.ENGINE
     OUTPUTS = _SHAFT_OUTPUTS + (
-        Output("engine_torque", "N.m", "torque Mg(w) the engine applies to the drive shaft"),
-        Output("engine_work", "J", "work done by the engine since the start, integral of Mg*w dt"),
+        Output("engine_torque", "N.m", "torque M the engine applies to the drive shaft (Mg(w), or its lagged "
+               "value when torque_lag > 0)"),
+        Output("engine_work", "J", "work done by the engine since the start, integral of M*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "engine_torque", "engine_work", 1.0
     EQUATIONS = (
         "dphi/dt = w",
-        "I1*dw/dt = Mg(w) + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "I1*dw/dt = M + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
         "Mg(w) = M1 - K1*w   (stall_torque, torque_slope), or the tabulated characteristic",
-        "engine_work = integral of Mg*w dt",
+        "M = Mg(w) when torque_lag Te = 0; else Te*dM/dt = Mg(w) - M, M(0) = torque_start",
+        "engine_work = integral of M*w dt",
     )
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._torque = 0.0      # the lagged engine torque M, a state (torque_lag > 0)
 
     def _make_shaft(self):
         return catalogue.engine_from(self._values())
+
+    @property
+    def _lagged(self) -> bool:
+        return isinstance(self._shaft, LaggedShaft)
+
+    def _reset_state(self):
+        super()._reset_state()
+        self._torque = float(self.torque_start)
+
+    def _compute_outputs(self):
+        if not self._lagged:
+            return super()._compute_outputs()
+        self.a, self._external = self._shaft.rates(self._time, self.phi, self.w, self.tau, self._torque)
+        self.engine_torque = self._external
+
+    def _advance(self, t, h):
+        if not self._lagged:
+            return super()._advance(t, h)
+        phi, w, torque, work = self._shaft.advance(t, self.phi, self.w, self._torque, self.tau, h, self.tau_rate)
+        if not (abs(phi) < 1e15 and abs(w) < 1e12 and abs(torque) < 1e15):
+            bad = "w" if not abs(w) < 1e12 else "phi" if not abs(phi) < 1e15 else "engine_torque"
+            return (f"state variable '{bad}' became non-finite or unbounded (phi = {phi:.6g} rad, w = {w:.6g} rad/s, "
+                    f"engine_torque = {torque:.6g} N.m) with input tau = {self.tau:.6g} N.m; the state was not updated")
+        self.phi, self.w, self._torque = phi, w, torque
+        self.engine_work += work
+        return None
+
+    # The lagged torque is state: saved and restored with the rest (an engine answering
+    # instantly keeps none of its own: its internal state stays empty).
+    def _internal_state(self) -> dict:
+        return {"engine_torque": self._torque} if self._lagged else {}
+
+    def _internal_problem(self, internal) -> str | None:
+        if internal == {}:
+            return None
+        value = internal.get("engine_torque") if isinstance(internal, dict) else None
+        if isinstance(internal, dict) and set(internal) == {"engine_torque"} and type(value) is float \
+                and math.isfinite(value):
+            return None
+        return (f"internal state {internal!r}: it needs engine_torque, the lagged engine torque M [N.m], "
+                "finite (or nothing, for an engine without lag)")
+
+    def _restore_internal_state(self, state: dict):
+        if self._lagged:
+            if "engine_torque" not in state:
+                raise ParameterError("torque_lag", "the state has no lagged engine torque, but torque_lag > 0: "
+                                     "it is a state of an engine without lag")
+            self._torque = state["engine_torque"]
 
 
 class LoadShaft(_ShaftSlave):

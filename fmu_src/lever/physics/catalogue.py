@@ -16,7 +16,7 @@ from .kinematics import GEOMETRIC_LIMIT, MODES, TransferFunction
 from .load import LOAD_KINDS, FourierLoad, TabulatedLoad, load_model
 from .parameters import Parameter, ParameterError, check_all
 from .signals import TimeTable
-from .shaft import Shaft
+from .shaft import LaggedShaft, Shaft
 
 INF = math.inf
 
@@ -56,7 +56,15 @@ ENGINE = (
     Parameter("torque_slope", 14.06, "N.m.s/rad", "K1 of the linearised engine characteristic Mg = M1 - K1*w",
               0.0, 1e6),
     Parameter("characteristic", "", "", "static engine characteristic Mg(w) as 'w:torque; ...' points (rad/s, N.m); "
-              "empty for the linear zone M1 - K1*w", kind="string", parser=lambda text: engine_characteristic(0, 0, text)),
+              "empty for the linear zone M1 - K1*w; 'kavz685' for the monograph's Fig. 3.9 shape (start-up torque, "
+              "nominal point, idle)", kind="string", parser=lambda text: engine_characteristic(0, 0, text)),
+    # Simscape's Generic Engine: a torque time constant, 0.2 s by default; an engine's
+    # torque build-up takes 0.05-0.5 s.  100 s: beyond any engine, still computable.
+    Parameter("torque_lag", 0.0, "s", "time constant Te of the engine torque's first-order lag behind the "
+              "static characteristic, Te*dM/dt = Mg(w) - M; 0 (or below 1e-6 s): the torque follows the speed "
+              "instantly", 0.0, 100.0),
+    Parameter("torque_start", 0.0, "N.m", "engine torque M at the start when torque_lag > 0 (0: the throttle "
+              "opens at t = 0; Mg(w_start): already in balance); unused when torque_lag = 0", -1e6, 1e6),
     Parameter("phi_start", 0.0, "rad", "drive shaft angle at the start", -1e9, 1e9),
     Parameter("w_start", 39.0, "rad/s", "drive shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",
@@ -125,10 +133,20 @@ def misalignment_source_from(values: dict) -> TimeTable:
     return table
 
 
-def engine_from(values: dict) -> Shaft:
+#: A torque lag below a microsecond reaches the characteristic within microseconds: no
+#: communication step resolves it, so it is taken as none (the engine answers at once)
+#: rather than integrated through millions of substeps.
+SHORTEST_LAG = 1e-6
+
+
+def engine_from(values: dict) -> Shaft | LaggedShaft:
+    """The drive shaft: a ``Shaft`` whose engine answers instantly (``torque_lag = 0``),
+    else a ``LaggedShaft`` whose engine torque is a state."""
     p = check_all(ENGINE, values)
-    return Shaft(p["inertia"], engine_characteristic(p["stall_torque"], p["torque_slope"], p["characteristic"]),
-                 p["max_substep"])
+    characteristic = engine_characteristic(p["stall_torque"], p["torque_slope"], p["characteristic"])
+    if p["torque_lag"] >= SHORTEST_LAG:
+        return LaggedShaft(p["inertia"], characteristic, p["torque_lag"], p["torque_start"], p["max_substep"])
+    return Shaft(p["inertia"], characteristic, p["max_substep"])
 
 
 def load_from(values: dict) -> Shaft:

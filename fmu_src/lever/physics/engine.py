@@ -114,8 +114,32 @@ class TabulatedCharacteristic:
         return None  # no closed form: the shaft integrates numerically
 
 
+#: Full static characteristics a scene may name instead of writing the points out.
+#: ``kavz685``: the shape of the monograph's Fig. 3.9 (start-up torque, nominal point,
+#: idle) through the figures the monograph states (MODEL.md sections 4 and 6), speed in
+#: rad/s : torque in N.m -
+#:   0 : 623     start-up torque M_r, taken as the M1 of the monograph's line (3.23)
+#:   23.4 : 550  the largest load the text allows the operating mode (section 3.3)
+#:   33.6 : 450  measured operating point (alpha = 15 deg); nominal point: the table's
+#:               largest power (15.1 kW)
+#:   35.3 : 420  measured operating point (alpha = 5 deg)
+#:   37.8 : 320  measured operating point
+#:   39.25 : 0   idle (no-load) speed: n1 = 374.8 rpm of the no-load run-up (Fig. 4.6a)
+#: Between 37.8 and 39.25 rad/s the governor branch: 220 N.m.s/rad, 16 times the
+#: line's K1.  The idle point is that run-up's own reading, so a no-load run reaching
+#: 374.8 rpm on this table is no validation of it.
+NAMED_CHARACTERISTICS = {
+    "kavz685": "0:623; 23.4:550; 33.6:450; 35.3:420; 37.8:320; 39.25:0",
+}
+
+
 def engine_characteristic(M1: float, K1: float, table: str = ""):
-    """The characteristic an engine uses: the table when given, else the linear zone."""
-    if table and table.strip() and table.strip() != "linear":
-        return TabulatedCharacteristic.parse(table)
+    """The characteristic an engine uses: the table when given (points, or the name of
+    one of ``NAMED_CHARACTERISTICS``), else the linear zone."""
+    text = table.strip() if table else ""
+    if text and text != "linear":
+        if text[0].isalpha() and text not in NAMED_CHARACTERISTICS:
+            raise ParameterError("characteristic", f"parameter 'characteristic' = {text!r} is neither 'w:torque; ...' "
+                                 f"points nor a named characteristic ({', '.join(NAMED_CHARACTERISTICS)})")
+        return TabulatedCharacteristic.parse(NAMED_CHARACTERISTICS.get(text, text))
     return LinearCharacteristic(M1, K1)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from .engine import LinearCharacteristic
 from .parameters import ParameterError
 
 
@@ -85,3 +86,125 @@ class Shaft:
             phi += dt * (k1p + 2.0 * k2p + 2.0 * k3p + k4p) / 6.0
             w += dt * (k1w + 2.0 * k2w + 2.0 * k3w + k4w) / 6.0
         return phi, w
+
+
+class LaggedShaft:
+    """The drive shaft with an engine whose torque lags its static characteristic
+    ``Ms(w)`` (``external``) by a first-order lag of time constant ``lag`` [s]:
+
+        Te dM/dt = Ms(w) - M,      I dw/dt = M + tau
+
+    (Simscape's Generic Engine has the same torque time constant: fuel, air and
+    combustion do not answer a speed change at once).  State ``(phi, w, M)``; ``M`` starts
+    at ``torque_start``.  Over a step with coupling torque ``tau + tau_rate * s``: exact
+    for the linear zone (the step's matrix exponential, stable at any ``Te``), RK4
+    substeps for a tabulated characteristic.  ``lag = 0`` is not this class: the engine
+    then answers instantly (``Shaft``)."""
+
+    MAX_SUBSTEPS = Shaft.MAX_SUBSTEPS
+    STABLE = Shaft.STABLE
+
+    def __init__(self, inertia: float, external, lag: float, torque_start: float, max_substep: float = 2.5e-4):
+        if not (math.isfinite(lag) and lag > 0.0):
+            raise ParameterError("torque_lag", f"parameter 'torque_lag' = {lag} must be > 0 for a lagged engine")
+        self.inertia = float(inertia)
+        self.external = external
+        self.lag = float(lag)
+        self.torque_start = float(torque_start)
+        self.max_substep = float(max_substep)
+        self._exponentials: dict[float, list[list[float]]] = {}
+
+    def rates(self, t, phi, w, tau, torque):
+        """``(a, M)``: the acceleration with coupling torque ``tau`` and the engine's
+        (lagged) torque ``M``, which is state."""
+        return (torque + tau) / self.inertia, torque
+
+    def acceleration(self, t, phi, w, tau, torque):
+        return (torque + tau) / self.inertia
+
+    def torque_rate(self, t, phi, w, torque):
+        """``dM/dt = (Ms(w) - M) / Te``."""
+        return (self.external.torque(t, phi, w) - torque) / self.lag
+
+    def advance(self, t, phi, w, torque, tau, h, tau_rate=0.0):
+        """State after ``h`` seconds: ``(phi, w, M, engine_work)`` (the work from the
+        shaft's energy balance, as ``Shaft.advance``)."""
+        if isinstance(self.external, LinearCharacteristic):
+            phi1, w1, m1 = self._exact(phi, w, torque, tau, h, tau_rate)
+        else:
+            phi1, w1, m1 = self._rk4(t, phi, w, torque, tau, h, tau_rate)
+        coupling_work = tau * (phi1 - phi)
+        if tau_rate:
+            a0 = self.acceleration(t, phi, w, tau, torque)
+            a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h, m1)
+            coupling_work += tau_rate * h * h * (0.15 * w + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0))
+        return phi1, w1, m1, 0.5 * self.inertia * (w1 * w1 - w * w) - coupling_work
+
+    # -- the linear zone, exactly: x' = A x on x = (phi, w, M, 1, tau, q, tau_rate), q = tau_rate*s --
+    def _exact(self, phi, w, torque, tau, h, tau_rate):
+        e = self._exponentials.get(h)
+        if e is None:
+            if len(self._exponentials) > 64:        # an adaptive master's many step sizes
+                self._exponentials.clear()
+            e = self._exponentials[h] = self._step_exponential(h)
+        x = (phi, w, torque, 1.0, tau, 0.0, tau_rate)
+        return tuple(sum(row[j] * x[j] for j in range(7)) for row in e)
+
+    def _step_exponential(self, h):
+        """The first three rows of ``expm(A h)``, by scaling and squaring a Taylor series:
+        exact to rounding however fast the lag is against the step."""
+        i, te = self.inertia, self.lag
+        m1, k1 = self.external.stall_torque, self.external.slope
+        a = [[0.0] * 7 for _ in range(7)]
+        a[0][1] = 1.0                                              # phi' = w
+        a[1][2] = a[1][4] = a[1][5] = 1.0 / i                      # I w' = M + tau + q
+        a[2][1], a[2][2], a[2][3] = -k1 / te, -1.0 / te, m1 / te   # Te M' = M1 - K1 w - M
+        a[5][6] = 1.0                                              # q' = tau_rate
+        return expm(a, h)[:3]
+
+    # -- a tabulated characteristic: RK4 substeps ------------------------------------------------
+    def _rk4(self, t, phi, w, torque, tau, h, tau_rate):
+        stiffness = getattr(self.external, "speed_stiffness", 0.0)
+        rate = max(1.0 / self.lag, math.sqrt(stiffness / (self.inertia * self.lag)))
+        ratio = h / self.max_substep
+        needed = max(ratio, h * rate / self.STABLE)
+        if not needed <= self.MAX_SUBSTEPS:
+            raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {needed:.3g} RK4 substeps (torque "
+                                 f"lag {self.lag:.3g} s, characteristic slope up to {stiffness:.3g} N.m.s/rad), more "
+                                 f"than the {self.MAX_SUBSTEPS} allowed per step: take smaller communication steps, "
+                                 "a larger 'max_substep' or 'torque_lag', or a smoother characteristic")
+        n = max(1, math.ceil(needed - 1e-9))
+        dt = h / n
+        inertia, lag, static = self.inertia, self.lag, self.external.torque
+
+        def f(ti, p, v, m):
+            return v, (m + tau + tau_rate * (ti - t)) / inertia, (static(ti, p, v) - m) / lag
+
+        for k in range(n):
+            ti = t + k * dt
+            k1 = f(ti, phi, w, torque)
+            k2 = f(ti + 0.5 * dt, phi + 0.5 * dt * k1[0], w + 0.5 * dt * k1[1], torque + 0.5 * dt * k1[2])
+            k3 = f(ti + 0.5 * dt, phi + 0.5 * dt * k2[0], w + 0.5 * dt * k2[1], torque + 0.5 * dt * k2[2])
+            k4 = f(ti + dt, phi + dt * k3[0], w + dt * k3[1], torque + dt * k3[2])
+            phi += dt * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]) / 6.0
+            w += dt * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]) / 6.0
+            torque += dt * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]) / 6.0
+        return phi, w, torque
+
+
+def expm(a: list[list[float]], h: float) -> list[list[float]]:
+    """``exp(A h)`` of a small dense matrix: the Taylor series of ``A h / 2^k`` (norm below
+    1/2, 18 terms: far below rounding) squared ``k`` times."""
+    n = len(a)
+    norm = max(sum(abs(x) for x in row) for row in a) * h
+    k = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
+    scale = h / 2.0 ** k
+    b = [[x * scale for x in row] for row in a]
+    result = [[float(r == c) for c in range(n)] for r in range(n)]
+    term = [row[:] for row in result]
+    for j in range(1, 19):
+        term = [[sum(term[r][m] * b[m][c] for m in range(n)) / j for c in range(n)] for r in range(n)]
+        result = [[result[r][c] + term[r][c] for c in range(n)] for r in range(n)]
+    for _ in range(k):
+        result = [[sum(result[r][m] * result[m][c] for m in range(n)) for c in range(n)] for r in range(n)]
+    return result
