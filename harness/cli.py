@@ -288,10 +288,27 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
 
 
 @main.command()
-@click.argument("name", type=click.Choice(["transfer-modes"]))
+@click.argument("name", type=click.Choice(["transfer-modes", "runup"]))
 @click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "studies", show_default=True)
-def study(name, out):
-    """Recompute the numbers behind a documented decision (docs/decisions.md)."""
+@click.option("--scan", "lags", multiple=True, type=float,
+              help="runup: settling times of kavz685_runup_rest at this engine torque lag [s] (repeatable)")
+def study(name, out, lags):
+    """Recompute the numbers behind a documented decision (docs/decisions.md) or statement
+    (runup: the no-load run-up beside the monograph's 0.42 s, docs/models-and-fmus.md)."""
+    if name == "runup":
+        from harness.studies import runup
+
+        for lag in lags:
+            if not (math.isfinite(lag) and 0.0 <= lag <= 100.0):
+                raise UserError(f"--scan {lag}: engine.torque_lag must be in [0, 100] s")
+        text = runup.scan(lags) if lags else runup.markdown(runup.table())
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "runup.md").write_text(text + "\n")
+        click.echo(text)
+        click.echo(f"written to {out / 'runup.md'}")
+        return
+    if lags:
+        raise UserError("--scan applies to the runup study only")
     from harness.studies import decisions as studies
 
     ensure_fmus(quiet=True)
