@@ -1,6 +1,7 @@
 """The ``lever`` command line."""
 from __future__ import annotations
 
+import contextlib
 import copy
 import importlib.util
 import json
@@ -199,6 +200,18 @@ def _claim_out(out: Path) -> Path:
         raise UserError(str(error)) from None
 
 
+@contextlib.contextmanager
+def _resumable(out: Path):
+    """A study that resumes from OUT/cases.jsonl: Ctrl-C ends it with exit status 130 and
+    says what was kept."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        click.echo(f"\ninterrupted: the finished cases are kept in {out / 'cases.jsonl'} (the ones under way are "
+                   "logged as interrupted); run the same command again to resume", err=True)
+        sys.exit(INTERRUPTED_EXIT)
+
+
 def _refuse_unstreamed(spec: scenes.Scene, step: float | None):
     """Exit 2 before a run whose traces would not fit in memory: say to use --stream."""
     from harness.engine.run import available_memory, trace_memory
@@ -258,9 +271,10 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     except (scenes.SceneError, ValueError) as error:
         raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
-    out = out or benchmark.default_out(spec)
-    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                             progress=click.echo, out=out, resume=not fresh)
+    out = _claim_out(out or benchmark.default_out(spec))
+    with _resumable(out):
+        result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                                 progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
     claims = result["claims"]
@@ -325,8 +339,9 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     plan.min_steps = min_steps
     plan.refine = not no_refine
     ensure_fmus(quiet=True)
-    out = out or stabilitymap.default_out(spec)
-    result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
+    out = _claim_out(out or stabilitymap.default_out(spec))
+    with _resumable(out):
+        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
     paths = stabilitymap.write(out, result)
     agreed = stabilitymap.agreement(result)
     if agreed["explicit_rows"]:
@@ -418,9 +433,11 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise UserError(f"--stop {stop}: must be > 0 s")
     ensure_fmus(quiet=True)
     show_progress = sys.stderr.isatty() if progress is None else progress
+    _claim_out(out)
     try:
-        report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
-                              dask=dask_address, progress=show_progress, resume=not no_resume)
+        with _resumable(out):
+            report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
+                                  dask=dask_address, progress=show_progress, resume=not no_resume)
     except scenes.SceneError as error:
         raise UserError(str(error)) from None
     except OSError as error:       # e.g. no Dask scheduler at the address

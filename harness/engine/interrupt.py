@@ -28,6 +28,9 @@ class Interrupted(KeyboardInterrupt):
         self.time = time
         super().__init__("interrupted" + (f" at t = {time:.6g} s" if time is not None else ""))
 
+    def __reduce__(self):          # comes back from a worker process whole
+        return Interrupted, (self.time,)
+
 
 def _on_sigint(signum, frame):
     global _requested
