@@ -19,7 +19,6 @@ An exported archive holds
 """
 from __future__ import annotations
 
-import hashlib
 import math
 import shutil
 import xml.etree.ElementTree as ET
@@ -29,7 +28,8 @@ from pathlib import Path
 from lever.physics.parameters import UNITS
 
 from harness.description import scene as scenes
-from harness.paths import FMUS, RESULTS
+from harness.paths import FMUS
+from harness.engine.component import scratch_folder
 from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -44,9 +44,10 @@ PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
 for _prefix, _uri in PREFIXES.items():
     ET.register_namespace(_prefix, _uri)
 
-#: where ``load`` unpacks archives (by content hash: loading the same archive twice
-#: reuses the unpacked FMUs)
-UNPACKED = RESULTS / ".cache" / "ssp"
+#: the most an archive may unpack to, in bytes and in files (an exported scene: about
+#: 5 MB in 15 files); beyond, it is refused before unpacking
+MAX_UNPACKED_BYTES = 1 << 30
+MAX_FILES = 10_000
 _BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
@@ -175,33 +176,56 @@ def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
 
 # -- load ---------------------------------------------------------------------------------------
 
-def unpack(path: Path) -> Path:
-    """The directory the archive ``path`` is unpacked in (once per content)."""
+def unpack(path: Path, max_bytes: int | None = None, max_files: int | None = None) -> Path:
+    """A temporary folder holding the archive ``path`` unpacked, removed when the process
+    ends (``harness.engine.component.scratch_folder``).  An archive that would unpack to
+    more than ``max_bytes`` or ``max_files`` (default ``MAX_UNPACKED_BYTES``,
+    ``MAX_FILES``) is refused before anything is written: the sizes its directory
+    declares are what unpacking may write (zipfile stops a member at its declared size)."""
     path = Path(path)
+    max_bytes = MAX_UNPACKED_BYTES if max_bytes is None else max_bytes
+    max_files = MAX_FILES if max_files is None else max_files
     if not path.is_file():
         raise scenes.SceneError(f"no SSP archive {path}")
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
-    target = UNPACKED / f"{path.stem}-{digest}"
-    if not (target / "SystemStructure.ssd").exists():
-        partial = target.with_name(target.name + ".partial")
-        shutil.rmtree(partial, ignore_errors=True)
-        try:
-            with zipfile.ZipFile(path) as archive:
-                archive.extractall(partial)
-        except zipfile.BadZipFile as error:
-            raise scenes.SceneError(f"{path}: not an SSP archive ({error})") from None
-        if not (partial / "SystemStructure.ssd").exists():
-            shutil.rmtree(partial, ignore_errors=True)
-            raise scenes.SceneError(f"{path}: no SystemStructure.ssd in the archive")
-        shutil.rmtree(target, ignore_errors=True)
-        partial.rename(target)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = archive.infolist()
+            size = sum(m.file_size for m in members)
+            if len(members) > max_files:
+                raise scenes.SceneError(f"{path}: the archive holds {len(members):,} files, more than the "
+                                        f"{max_files:,} an SSP archive is allowed here; not unpacked")
+            if size > max_bytes:
+                raise scenes.SceneError(f"{path}: the archive would unpack to {size / 2**20:,.0f} MiB, more than "
+                                        f"the {max_bytes / 2**20:,.0f} MiB allowed (a zip bomb?); not unpacked")
+            if not any(m.filename == "SystemStructure.ssd" for m in members):
+                raise scenes.SceneError(f"{path}: no SystemStructure.ssd in the archive")
+            target = scratch_folder(f"lever-ssp-{path.stem[:40]}-")
+            try:
+                archive.extractall(target)
+            except Exception:
+                shutil.rmtree(target, ignore_errors=True)
+                raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError) as error:
+        raise scenes.SceneError(f"{path}: not an SSP archive ({error})") from None
     return target
 
 
 def read_scene(path: str | Path) -> scenes.Scene:
-    """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``)."""
+    """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``, a
+    temporary folder; removed at once when the archive is refused)."""
     path = Path(path)
     where = unpack(path)
+    try:
+        return _read_unpacked(path, where)
+    except (ET.ParseError, OSError) as error:
+        shutil.rmtree(where, ignore_errors=True)
+        raise scenes.SceneError(f"{path}: a file of the archive cannot be read: {error}") from None
+    except BaseException:
+        shutil.rmtree(where, ignore_errors=True)
+        raise
+
+
+def _read_unpacked(path: Path, where: Path) -> scenes.Scene:
     try:
         root = ET.parse(where / "SystemStructure.ssd").getroot()
     except ET.ParseError as error:
