@@ -48,6 +48,8 @@ for _prefix, _uri in PREFIXES.items():
 #: 5 MB in 15 files); beyond, it is refused before unpacking
 MAX_UNPACKED_BYTES = 1 << 30
 MAX_FILES = 10_000
+#: the variable types an exported archive has connectors for (what libcosim and fmpy.ssp take)
+CONNECTOR_TYPES = ("Real", "Integer", "Boolean")
 _BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
@@ -71,20 +73,34 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
     fmu_dir = Path(fmu_dir)
     descriptions = descriptions_for(scene, fmu_dir)
     findings = scenes.validate(scene, descriptions)
+    sources = archive_sources(scene, fmu_dir)
+    by_member: dict[str, Path] = {}
+    for fmu, member in sources.items():
+        other = by_member.setdefault(member, fmu_path(fmu, fmu_dir))
+        if other != fmu_path(fmu, fmu_dir):
+            findings.append(f"two FMU files named {Path(member).name} ({other} and {fmu_path(fmu, fmu_dir)}): an "
+                            "SSP archive holds its FMUs in one folder; rename one")
+    for c in scene.connections:
+        for comp, var in ((c.source, c.output), (c.target, c.input)):
+            md = descriptions.get(scene.components[comp].fmu) if comp in scene.components else None
+            kind = next((v.type for v in md.modelVariables if v.name == var), None) if md else None
+            if kind is not None and kind not in CONNECTOR_TYPES:
+                findings.append(f"connection '{c}': {comp}.{var} is a {kind}; SSP readers (libcosim, fmpy.ssp) "
+                                f"connect {', '.join(CONNECTOR_TYPES)} variables only")
     if findings:
         raise SceneInvalid(scene.name, findings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    files = {"SystemStructure.ssd": _ssd(scene, descriptions)}
+    files = {"SystemStructure.ssd": _ssd(scene, descriptions, sources)}
     for name, spec in scene.components.items():
         files[f"resources/{name}.ssv"] = _ssv(name, spec, descriptions[spec.fmu])
     tmp = out.with_name(out.name + ".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for member, text in files.items():
             archive.writestr(member, text)
-        for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values()):
+        for fmu, member in sources.items():
             source = fmu_path(fmu, fmu_dir)
-            archive.write(source, f"resources/{source.name}")
+            archive.write(source, member)
             osp = source.with_name(f"{source.stem}_OspModelDescription.xml")
             if osp.exists():
                 archive.write(osp, f"resources/{osp.name}")
@@ -97,7 +113,15 @@ def _xml(root: ET.Element) -> bytes:
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
 
 
-def _ssd(scene: scenes.Scene, descriptions: dict) -> bytes:
+def archive_sources(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, str]:
+    """Each of the scene's FMUs (as its components name them: ours by name, others by
+    path) -> its member in the archive, ``resources/<file name>``: what the SSD's
+    ``source`` says, so the archive resolves it whatever folder the FMU came from."""
+    return {fmu: f"resources/{fmu_path(fmu, fmu_dir).name}"
+            for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values())}
+
+
+def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> bytes:
     root = ET.Element(_q("ssd", "SystemStructureDescription"), {"name": scene.name, "version": "1.0"})
     system = ET.SubElement(root, _q("ssd", "System"), {"name": scene.name, "description": scene.description})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
@@ -105,14 +129,17 @@ def _ssd(scene: scenes.Scene, descriptions: dict) -> bytes:
     for name, spec in scene.components.items():
         md = descriptions[spec.fmu]
         component = ET.SubElement(elements, _q("ssd", "Component"), {
-            "name": name, "type": "application/x-fmu-sharedlibrary", "source": f"resources/{spec.fmu}.fmu"})
+            "name": name, "type": "application/x-fmu-sharedlibrary", "source": sources[spec.fmu]})
         connectors = ET.SubElement(component, _q("ssd", "Connectors"))
         # Inputs are connectors where the scene connects them; an unconnected input is
         # set once from the parameter set (fmpy.ssp would set every input connector at
-        # every step, to the value a connection gives it or to 0).
+        # every step, to the value a connection gives it or to 0).  String and
+        # Enumeration variables get none: libcosim aborts on them and fmpy.ssp refuses them.
         wired = {c.input for c in scene.connections if c.target == name}
         for var in md.modelVariables:
             if not (var.causality == "output" or (var.causality == "input" and var.name in wired)):
+                continue
+            if var.type not in CONNECTOR_TYPES:
                 continue
             connector = ET.SubElement(connectors, _q("ssd", "Connector"), {"name": var.name, "kind": var.causality})
             attrs = {}
