@@ -151,13 +151,15 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     warnings = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
     for warning in warnings:
         click.echo(f"warning: {warning}", err=True)     # before the run, so a long run is not waited for
-    out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
     if not stream:
         _refuse_unstreamed(spec, step)
+    out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
     try:
         result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
                           stream=out / "traces.csv" if stream else None, keep_partial=True)
     except SceneInvalid as error:
+        from harness.formats import outputs
+        outputs.abandon(out)             # refused before the run: no empty folder left
         raise UserError(str(error)) from None
     result.warnings = warnings
     reference = None

@@ -19,6 +19,8 @@ LOCK_NAME = ".lever.lock"
 
 #: locks this process holds (folder -> open lock file): kept open until the process ends
 _held: dict[Path, object] = {}
+#: folders ``claim`` made (``abandon`` removes them again when nothing was written)
+_created: set[Path] = set()
 
 
 class OutputError(Exception):
@@ -57,8 +59,11 @@ def check(out: Path, option: str = "--out") -> Path:
 def claim(out: Path, option: str = "--out") -> Path:
     """``check`` the folder and lock it for this process; ``OutputError`` when another
     process holds it.  Claiming a folder this process holds already is a no-op."""
+    existed = Path(out).is_dir()
     out = check(out, option)
     key = out.resolve()
+    if not existed:
+        _created.add(key)
     if key in _held:
         return out
     handle = open(key / LOCK_NAME, "a+")
@@ -78,6 +83,17 @@ def claim(out: Path, option: str = "--out") -> Path:
     handle.flush()
     _held[key] = handle
     return out
+
+
+def abandon(out: Path):
+    """Release ``out`` and remove it again when ``claim`` made it and nothing was written
+    into it (a command refused before it wrote anything leaves no empty folder)."""
+    key = Path(out).resolve()
+    release(out)
+    if key in _created and {p.name for p in key.iterdir()} <= {LOCK_NAME}:
+        (key / LOCK_NAME).unlink(missing_ok=True)
+        key.rmdir()
+        _created.discard(key)
 
 
 def release(out: Path):
