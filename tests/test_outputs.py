@@ -113,14 +113,16 @@ def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists
     assert "reference.csv" not in report and "vs_reference.png" not in report
 
 
-def test_a_failed_run_leaves_no_plots_of_an_earlier_one(tmp_path, fmu_dir):
+def test_a_failed_run_leaves_no_reference_of_an_earlier_one(tmp_path, fmu_dir):
     out = tmp_path / "run"
     assert _run("--out", out).exit_code == 0
-    # refused at initialisation: no traces to plot
-    result = _run("--out", out, "--set", "coupling.misalignment=43.3 deg")
-    assert result.exit_code == 2
-    assert not list(out.glob("*.png")) and not (out / "reference.csv").exists()
-    assert "Plots:" not in (out / "report.md").read_text()
+    # diverges after 8 steps: traces and plots of those, no reference
+    result = _run("--out", out, "--set", "coupling.stiffness=1e6", "--master", "jacobi")
+    assert result.exit_code == 1 and "diverged" in result.output
+    assert not (out / "reference.csv").exists() and not (out / "vs_reference.png").exists()
+    assert len((out / "traces.csv").read_text().splitlines()) < 20
+    report = (out / "report.md").read_text()
+    assert "reference.csv" not in report and "vs_reference.png" not in report and "speeds.png" in report
 
 
 def test_traces_that_would_not_fit_in_memory_are_refused_with_a_pointer_to_stream(tmp_path, fmu_dir):

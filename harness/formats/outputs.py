@@ -9,11 +9,15 @@ with the first one's process id and command, instead of interleaving its rows.
 from __future__ import annotations
 
 import errno
-import fcntl
 import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:          # not POSIX: folders are checked, not locked
+    fcntl = None
 
 LOCK_NAME = ".lever.lock"
 
@@ -64,7 +68,7 @@ def claim(out: Path, option: str = "--out") -> Path:
     key = out.resolve()
     if not existed:
         _created.add(key)
-    if key in _held:
+    if key in _held or fcntl is None:
         return out
     handle = open(key / LOCK_NAME, "a+")
     try:
