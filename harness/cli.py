@@ -1,6 +1,7 @@
 """The ``lever`` command line."""
 from __future__ import annotations
 
+import contextlib
 import copy
 import importlib.util
 import json
@@ -63,7 +64,19 @@ def _check_masters(*names: str):
         raise UserError(str(error)) from None
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Lever(click.Group):
+    """The command group: Ctrl-C anywhere a command does not take it itself ends with
+    "interrupted" and exit status 130, not click's "Aborted!" and 1."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as error:
+            click.echo(f"\n{error or 'interrupted'}", err=True)
+            raise click.exceptions.Exit(INTERRUPTED_EXIT) from None
+
+
+@click.group(cls=_Lever, context_settings={"help_option_names": ["-h", "--help"]})
 def main():
     """Co-simulation of lever-articulated drive-shaft couplings (FMI 2.0, fmpy)."""
 
@@ -138,21 +151,33 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     warnings = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
     for warning in warnings:
         click.echo(f"warning: {warning}", err=True)     # before the run, so a long run is not waited for
-    out = out or RESULTS / spec.name
+    if not stream:
+        _refuse_unstreamed(spec, step)
+    out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
     try:
         result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
-                          stream=out / "traces.csv" if stream else None)
+                          stream=out / "traces.csv" if stream else None, keep_partial=True)
     except SceneInvalid as error:
+        from harness.formats import outputs
+        outputs.abandon(out)             # refused before the run: no empty folder left
         raise UserError(str(error)) from None
     result.warnings = warnings
     reference = None
-    if "reference" in spec.features and not no_reference and not stream and result.ok:
-        try:
-            reference = references.solve(spec, result.times)
-        except references.ReferenceUnavailable as error:
-            click.echo(f"note: no reference for this scene: {error}", err=True)
+    try:
+        if "reference" in spec.features and not no_reference and not stream and result.ok:
+            try:
+                reference = references.solve(spec, result.times)
+            except references.ReferenceUnavailable as error:
+                click.echo(f"note: no reference for this scene: {error}", err=True)
+    except KeyboardInterrupt:
+        click.echo("interrupted while solving the reference: the run's results are written without it", err=True)
+        result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
+        result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
     summary = report.write(out, result, reference)
     _print_summary(summary, out)
+    if result.interrupted:
+        click.echo(f"{result.failure}; what was computed is in {out}/ (marked interrupted)", err=True)
+        sys.exit(INTERRUPTED_EXIT)
     if not result.ok:
         click.echo(f"error: {result.failure}", err=True)
         if result.failure_stage == "initialisation":
@@ -160,6 +185,46 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
             sys.exit(UserError.exit_code)
         click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
         sys.exit(1)
+
+
+#: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
+INTERRUPTED_EXIT = 130
+
+
+def _claim_out(out: Path) -> Path:
+    """``out`` made, proven writable and locked for this command (exit 2 with a sentence
+    when it cannot be, or another lever is writing there)."""
+    from harness.formats import outputs
+
+    try:
+        return outputs.claim(out)
+    except outputs.OutputError as error:
+        raise UserError(str(error)) from None
+
+
+@contextlib.contextmanager
+def _resumable(out: Path):
+    """A study that resumes from OUT/cases.jsonl: Ctrl-C ends it with exit status 130 and
+    says what was kept."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        click.echo(f"\ninterrupted: the finished cases are kept in {out / 'cases.jsonl'} (the ones under way are "
+                   "logged as interrupted); run the same command again to resume", err=True)
+        sys.exit(INTERRUPTED_EXIT)
+
+
+def _refuse_unstreamed(spec: scenes.Scene, step: float | None):
+    """Exit 2 before a run whose traces would not fit in memory: say to use --stream."""
+    from harness.engine.run import available_memory, trace_memory
+
+    needed, rows = trace_memory(spec, step)
+    free = available_memory()
+    if free is not None and needed > 0.8 * free:
+        raise UserError(f"a step of {step or spec.experiment.step:g} s over {spec.experiment.stop - spec.experiment.start:g} s "
+                        f"makes {rows:,} rows of traces, about {needed / 2**30:.1f} GiB in memory, more than this "
+                        f"machine has free ({free / 2**30:.1f} GiB): use --stream (writes traces.csv while running, "
+                        "keeps 1 row in k in memory), a larger --step or a shorter experiment.stop")
 
 
 def _print_summary(summary: dict, out: Path):
@@ -208,9 +273,10 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     except (scenes.SceneError, ValueError) as error:
         raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
-    out = out or benchmark.default_out(spec)
-    result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                             progress=click.echo, out=out, resume=not fresh)
+    out = _claim_out(out or benchmark.default_out(spec))
+    with _resumable(out):
+        result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                                 progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
     claims = result["claims"]
@@ -275,8 +341,9 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     plan.min_steps = min_steps
     plan.refine = not no_refine
     ensure_fmus(quiet=True)
-    out = out or stabilitymap.default_out(spec)
-    result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
+    out = _claim_out(out or stabilitymap.default_out(spec))
+    with _resumable(out):
+        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
     paths = stabilitymap.write(out, result)
     agreed = stabilitymap.agreement(result)
     if agreed["explicit_rows"]:
@@ -385,9 +452,11 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise UserError(f"--stop {stop}: must be > 0 s")
     ensure_fmus(quiet=True)
     show_progress = sys.stderr.isatty() if progress is None else progress
+    _claim_out(out)
     try:
-        report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
-                              dask=dask_address, progress=show_progress, resume=not no_resume)
+        with _resumable(out):
+            report = sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=list(assignments), workers=workers,
+                                  dask=dask_address, progress=show_progress, resume=not no_resume)
     except scenes.SceneError as error:
         raise UserError(str(error)) from None
     except OSError as error:       # e.g. no Dask scheduler at the address

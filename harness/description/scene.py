@@ -45,8 +45,20 @@ class Connection:
 
 @dataclass
 class ComponentSpec:
+    #: an FMU of ours by name (``EngineShaft``: build/fmus or the scene's ``fmu_dir``), or
+    #: any FMU by path (``"/abs/X.fmu"``; in a scene file also relative to the file)
     fmu: str
     parameters: dict[str, Any] = field(default_factory=dict)
+
+
+def is_fmu_path(fmu: str) -> bool:
+    """True when a component's ``fmu`` names a file (``X.fmu``), not one of our FMUs."""
+    return str(fmu).endswith(".fmu")
+
+
+def fmu_name(fmu: str) -> str:
+    """The FMU's name: ``EngineShaft`` for ``EngineShaft`` and for ``/x/EngineShaft.fmu``."""
+    return Path(fmu).stem if is_fmu_path(fmu) else fmu
 
 
 @dataclass
@@ -55,7 +67,23 @@ class Experiment:
     step: float = 1e-3
     start: float = 0.0
     master: str = "gauss-seidel"
-    transient: float = 2.0    # start-up time left out of amplitude statistics [s]
+    #: start-up time left out of amplitude statistics [s]; unstated: ``default_transient``
+    #: of the experiment's length, following it when --set changes start or stop
+    transient: float | None = None
+
+    def __post_init__(self):
+        self.transient_follows_length = self.transient is None
+        if self.transient is None:
+            self.transient = default_transient(self.start, self.stop)
+
+
+def default_transient(start: float, stop: float) -> float:
+    """The start-up transient a scene that states none gets: 2 s, or a fifth of a run
+    shorter than 10 s (a run of 2 s or less keeps statistics over its last 80 %)."""
+    try:
+        return min(2.0, 0.2 * (float(stop) - float(start)))
+    except (TypeError, ValueError):
+        return 2.0
 
 
 @dataclass
@@ -79,7 +107,7 @@ class Scene:
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
-        return next((n for n, c in self.components.items() if c.fmu == fmu), None)
+        return next((n for n, c in self.components.items() if fmu_name(c.fmu) == fmu), None)
 
     def with_overrides(self, assignments: list[str]) -> "Scene":
         """Apply ``component.parameter=value`` (or ``parameter=value`` when exactly one
@@ -119,6 +147,10 @@ class Scene:
                     raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
                                      f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
                 components[components_with[0]].parameters[key] = value
+        if self.experiment.transient_follows_length and not any(
+                a.split("=", 1)[0].strip() == "experiment.transient" for a in assignments):
+            experiment.transient = default_transient(experiment.start, experiment.stop)
+            experiment.transient_follows_length = True
         return replace(self, components=components, experiment=experiment, limits=limits)
 
 
@@ -198,6 +230,10 @@ def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: {error}") from None
+    # An FMU by path is relative to the file that names it (a base scene's to the base).
+    for spec in (data.get("components") or {}).values():
+        if isinstance(spec, dict) and isinstance(spec.get("fmu"), str) and is_fmu_path(spec["fmu"]):
+            spec["fmu"] = str((path.parent / Path(spec["fmu"]).expanduser()).resolve())
     base_name = data.get("extends")
     if base_name is None:
         return data
@@ -273,6 +309,9 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
     variables = {}
     for name, spec in scene.components.items():
         md = descriptions.get(spec.fmu)
+        if md is None and is_fmu_path(spec.fmu):
+            findings.append(f"component '{name}': no FMU file {spec.fmu}")
+            continue
         if md is None:
             findings.append(f"component '{name}': unknown FMU '{spec.fmu}' (known: {', '.join(descriptions)})")
             continue

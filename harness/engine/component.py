@@ -13,6 +13,7 @@ import ctypes
 import itertools
 import shutil
 import sys
+import tempfile
 from collections import deque
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -99,12 +100,26 @@ def unzipped(fmu_path: Path | str) -> str:
     return folder
 
 
+#: temporary folders of this process (``scratch_folder``), removed with the extractions
+_scratch: list[str] = []
+
+
+def scratch_folder(prefix: str) -> Path:
+    """A new temporary folder, removed when the process ends (``remove_extractions``) -
+    e.g. an SSP archive's unpacked FMUs."""
+    folder = tempfile.mkdtemp(prefix=prefix)
+    _scratch.append(folder)
+    return Path(folder)
+
+
 def remove_extractions():
-    """Delete the extracted FMUs (at exit; entry points that leave by ``os._exit`` call it
-    themselves).  Libraries already loaded stay usable: their files are mapped."""
-    for folder in _extracted.values():
+    """Delete the extracted FMUs and the scratch folders (at exit; entry points that leave
+    by ``os._exit`` call it themselves).  Libraries already loaded stay usable: their
+    files are mapped."""
+    for folder in [*_extracted.values(), *_scratch]:
         shutil.rmtree(folder, ignore_errors=True)
     _extracted.clear()
+    _scratch.clear()
 
 
 atexit.register(remove_extractions)

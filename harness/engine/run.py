@@ -16,6 +16,8 @@ from harness.engine import masters as master_family
 from harness.description import scene as scenes
 from harness.engine.component import FmuCallError
 from harness.engine.guard import Diverged, Guard
+from harness.engine import interrupt
+from harness.engine.interrupt import Interrupted
 from harness.paths import FMUS
 from harness.engine.system import System
 
@@ -30,7 +32,8 @@ class RunResult:
     wall_time: float
     counters: dict = field(default_factory=dict)
     failure: str | None = None
-    #: where a failed run stopped: "initialisation" (the inputs were refused) or "stepping"
+    #: where a failed run stopped: "initialisation" (the inputs were refused), "stepping",
+    #: or "interrupted" (Ctrl-C: the rows up to the last whole step are kept)
     failure_stage: str | None = None
     #: a failed run's diagnosis: kind (bound, non-finite, fmu-error, master), component,
     #: fmu, variable, value, bound, time, master, step, step_index (see harness.engine.guard)
@@ -43,6 +46,10 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.failure is None
+
+    @property
+    def interrupted(self) -> bool:
+        return self.failure_stage == "interrupted"
 
 
 class Recorder:
@@ -134,12 +141,24 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
-             stream: Path | None = None) -> RunResult:
+             stream: Path | None = None, keep_partial: bool = False) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
     (for an adaptive master: its first step); ``options`` go to the master.  The stability
     advice is not computed here: whoever shows it (``lever run``) asks
     ``harness.judges.stability.run_advice`` and may keep it in ``RunResult.warnings``.  ``stream``: a trace CSV
-    written while the run goes, the result keeping every k-th row (harness.engine.traces)."""
+    written while the run goes, the result keeping every k-th row (harness.engine.traces).
+
+    Ctrl-C stops the run at the next step boundary (harness.engine.interrupt): with
+    ``keep_partial`` the result holds the rows computed until then, marked interrupted;
+    without, ``Interrupted`` is raised once the FMUs are freed."""
+    with interrupt.deferred():
+        result = _simulate(scene, master, step, fmu_dir, progress, options, stream)
+    if result.interrupted and not keep_partial:
+        raise Interrupted(result.diagnosis["time"])
+    return result
+
+
+def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunResult:
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -149,7 +168,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = diagnosis = None
-    recorder = driver = None
+    recorder = driver = bar = None
     started = stepping = clock.perf_counter()
     try:
         system.initialize()
@@ -157,6 +176,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         driver = master_family.make(master, system, step, **options)
         recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
         recorder.record(e.start)
+        interrupt.check(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
         stepping = clock.perf_counter()
         if driver.adaptive:
@@ -164,6 +184,8 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
                 driver.step(min(driver.h, e.stop - driver.t))
                 recorder.record(driver.t)
                 guard.check(driver.t, driver.n_steps)
+                if interrupt.requested():
+                    raise Interrupted(driver.t)
                 if bar is not None:
                     bar.update(driver.t - bar.n)
         else:
@@ -173,6 +195,8 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
                 driver.step(t_next=min(e.start + n * step, e.stop))
                 recorder.record(driver.t)
                 guard.check(driver.t, n)
+                if interrupt.requested():
+                    raise Interrupted(driver.t)
                 if n % stride == 0:
                     bar.update(driver.t - bar.n)
         recorder.check()
@@ -185,6 +209,16 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
                    + f"{error} (master {master}, step {step:g} s"
                    + (f", after {driver.n_steps} steps" if driver else ", during initialisation") + ")")
         diagnosis = _diagnosis(error, scene, master, step, driver)
+    except Interrupted as error:
+        # Ctrl-C between two steps: what was computed stands; not the FMUs' failure.
+        at = error.time if error.time is not None else (driver.t if driver else e.start)
+        stage = "interrupted"
+        failure = (f"interrupted at t = {at:.6g} s (master {master}, step {step:g} s"
+                   + (f", after {driver.n_steps} steps)" if driver else ", during initialisation)"))
+        diagnosis = {"kind": "interrupted", "master": master, "step": step, "time": at,
+                     "step_index": driver.n_steps if driver else 0, "message": failure}
+        if bar is not None:
+            bar.close()
     finally:
         ended = clock.perf_counter()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
@@ -226,3 +260,27 @@ def _progress(span: float, scene: str, master: str):
     from tqdm import tqdm
     return tqdm(total=span, desc=f"{scene} [{master}]", unit="s", unit_scale=False, leave=False,
                 mininterval=0.5, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")
+
+
+def trace_memory(scene: scenes.Scene, step: float | None = None) -> tuple[int, int]:
+    """``(bytes, rows)``: what holding a run's traces in memory takes, estimated before it
+    runs: the recorder's rows (every connected and recorded output, and the time), the
+    recorded traces copied out of them, and the block the trace file is written from."""
+    e = scene.experiment
+    rows = max(1, math.ceil((e.stop - e.start) / float(step or e.step) - 1e-9)) + 1
+    names = recorded_names(scene)
+    columns = len(set(names) | {f"{c.source}.{c.output}" for c in scene.connections})
+    return 8 * rows * (columns + 2 * len(names) + 2), rows
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the system can give a process now (Linux: MemAvailable); None
+    where it cannot be told."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None

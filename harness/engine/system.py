@@ -29,7 +29,8 @@ class SceneInvalid(ValueError):
 
 
 def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
-    return Path(fmu_dir) / f"{fmu}.fmu"
+    """The file of a component's ``fmu``: a path as given (``X.fmu``), a name in ``fmu_dir``."""
+    return Path(fmu) if scenes.is_fmu_path(fmu) else Path(fmu_dir) / f"{fmu}.fmu"
 
 
 def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:

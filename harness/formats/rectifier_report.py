@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from harness.description import kinds
-from harness.formats.run_files import reference_error_lines, write_run
+from harness.formats.run_files import files_line, reference_error_lines, write_run
 from harness.judges.rectifier import analyse, errors
 
 
@@ -15,7 +15,8 @@ def summarize(result, reference=None) -> dict:
     summary = {
         "scene": scene.name, "description": scene.description, "master": result.master, "step_s": result.step,
         "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient, "ok": result.ok,
-        "failure": result.failure, "wall_time_s": result.wall_time, "counters": result.counters,
+        "failure": result.failure, "diagnosis": result.diagnosis, "wall_time_s": result.wall_time,
+        "counters": result.counters,
     }
     if len(result.times) > 1:
         summary["freewheel"] = analyse(scene, result.times, result.traces)
@@ -42,7 +43,9 @@ def write_report(path, summary: dict):
              f"wall time {summary['wall_time_s']:.2f} s.  One FMU (`FreewheelRectifier`) holds the whole chain "
              "(docs/decisions.md: why one FMU)."]
     if summary["failure"]:
-        lines += ["", f"**The run failed:** {summary['failure']}", "", "The traces up to the failure are in traces.csv."]
+        interrupted = (summary.get("diagnosis") or {}).get("kind") == "interrupted"
+        lines += ["", f"**The run {'was interrupted (Ctrl-C)' if interrupted else 'failed'}:** {summary['failure']}",
+                  "", "The traces up to the " + ("interruption" if interrupted else "failure") + " are in traces.csv."]
     fw = summary.get("freewheel")
     if fw:
         d = fw["derived"]
@@ -86,8 +89,8 @@ def write_report(path, summary: dict):
     errs = summary.get("error_vs_reference")
     lines += reference_error_lines(summary, "Against the monolithic reference",
                                    "speeds relative to the rocker's peak speed, torques to the reference's peak torque")
-    lines += ["", "Plots: kinematics.png (elements 1-4, as the paper's Figs. 8-11), gaps.png, torques.png, energy.png"
-              + (", vs_reference.png" if errs else "") + ".  Traces: traces.csv" + (" and reference.csv." if errs else ".")]
+    lines += ["", files_line(summary) + (" (kinematics.png: elements 1-4, as the paper's Figs. 8-11)"
+                                         if "kinematics.png" in summary.get("files", []) else "")]
     path.write_text("\n".join(lines) + "\n")
 
 

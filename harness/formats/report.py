@@ -11,7 +11,7 @@ from harness.description import kinds
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import rectifier_report
-from harness.formats.run_files import fmt, reference_error_lines, write_run
+from harness.formats.run_files import files_line, fmt, reference_error_lines, write_run
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -55,7 +55,10 @@ def write_report(path: Path, summary: dict):
     lines.append(f"Master **{summary['master']}**, communication step {summary['step_s']:g} s, "
                  f"0 ... {summary['stop_s']:g} s; wall time {summary['wall_time_s']:.2f} s "
                  f"({summary['counters'].get('fmu_calls', 0)} FMI calls).")
-    if summary["failure"]:
+    if summary.get("diagnosis") and summary["diagnosis"].get("kind") == "interrupted":
+        lines += ["", f"**The run was interrupted (Ctrl-C):** {summary['failure']}.", "",
+                  "What was computed until then is in traces.csv; the figures below cover that part only."]
+    elif summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "",
                   "The traces up to the failure are in traces.csv."]
     if summary.get("stream"):
@@ -82,10 +85,11 @@ def write_report(path: Path, summary: dict):
                   f"{eb['kinetic_change_J']:.4g} J - elastic change {eb['elastic_change_J']:.4g} J - dissipated "
                   f"{eb['dissipated_J']:.4g} J = residual {eb['residual_J']:.4g} J "
                   f"(**{100 * eb['residual_relative']:.2g} %** of the work in)."]
-    lines += ["", "Plots over time: speeds.png, torques.png, accelerations.png, transfer_function.png, "
-              "vs_reference.png; over the driven shaft's angle, as the monograph draws them: revolution.png (U12 and "
-              f"the torques over the last whole revolution), revolutions.png (speeds and accelerations over the last "
-              f"{REVOLUTIONS_SHOWN}).  Traces: traces.csv (and reference.csv)."]
+    lines += ["", files_line(summary)]
+    if "revolution.png" in (summary.get("files") or []):
+        lines.append(f"revolution.png and revolutions.png are over the driven shaft's angle, as the monograph draws "
+                     f"its figures: U12 and the torques over the last whole revolution, the speeds and accelerations "
+                     f"over the last {REVOLUTIONS_SHOWN}.")
     path.write_text("\n".join(lines) + "\n")
 
 

@@ -13,23 +13,58 @@ from harness.engine.run import RunResult
 from harness.engine.traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
 
+#: the files any kind of run may write (the plots of every kind of scene): an earlier run's
+#: that this run does not write again are removed, so a folder never mixes two runs
+RUN_FILES = ("traces.csv", "reference.csv", "summary.json", "report.md", "speeds.png", "torques.png",
+             "accelerations.png", "transfer_function.png", "vs_reference.png", "kinematics.png", "gaps.png",
+             "energy.png", "revolution.png", "revolutions.png")
+
+
+def earlier_run_files(out: Path) -> list[Path]:
+    """The files of an earlier run in ``out``: those its summary.json lists, and the
+    names in ``RUN_FILES`` (a run from before summaries listed their files)."""
+    names = set(RUN_FILES)
+    try:
+        names |= {Path(n).name for n in json.loads((out / "summary.json").read_text()).get("files", [])}
+    except (OSError, ValueError, AttributeError):
+        pass
+    return [out / n for n in sorted(names) if (out / n).is_file()]
+
+
 def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots) -> dict:
     """A run's files in ``out``, with the summary, report and plots of its kind of scene
     (``summary_of(result, reference)``, ``write_markdown(path, summary)``,
     ``make_plots(out, result, reference)``): traces.csv (unless the run streamed it while
-    running), reference.csv, summary.json, report.md, the plots (scene feature ``plots``).
-    Returns the summary."""
+    running), reference.csv, the plots (scene feature ``plots``), summary.json and
+    report.md, which list the files written (``summary["files"]``).  An earlier run's
+    files are removed first.  Returns the summary."""
     out.mkdir(parents=True, exist_ok=True)
-    if result.stream is None:             # a streamed run wrote its traces while it ran
+    streamed = out / "traces.csv" if result.stream is not None else None
+    for path in earlier_run_files(out):
+        if path != streamed:               # a streamed run wrote its traces while it ran
+            path.unlink()
+    if result.stream is None:
         write_traces(out / "traces.csv", result.times, result.traces)
     if reference is not None:
         write_traces(out / "reference.csv", reference.times, reference.traces)
-    summary = summary_of(result, reference)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    write_markdown(out / "report.md", summary)
     if "plots" in result.scene.features and len(result.times) > 1:
         make_plots(out, result, reference)
+    summary = summary_of(result, reference)
+    summary["files"] = [p.name for p in earlier_run_files(out) if p.name not in ("summary.json", "report.md")] \
+        + ["summary.json", "report.md"]
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    write_markdown(out / "report.md", summary)
     return summary
+
+
+def files_line(summary: dict) -> str:
+    """The report's line naming the run's plots and traces: only files it wrote."""
+    files = summary.get("files") or []
+    plots = [f for f in files if f.endswith(".png")]
+    traces = [f for f in files if f.endswith(".csv")]
+    parts = ([f"Plots: {', '.join(plots)}."] if plots else []) + ([f"Traces: {' and '.join(traces)}."] if traces
+                                                                    else [])
+    return "  ".join(parts) or "No traces were written."
 
 
 def _json_default(x):

@@ -19,7 +19,6 @@ An exported archive holds
 """
 from __future__ import annotations
 
-import hashlib
 import math
 import shutil
 import xml.etree.ElementTree as ET
@@ -29,7 +28,8 @@ from pathlib import Path
 from lever.physics.parameters import UNITS
 
 from harness.description import scene as scenes
-from harness.paths import FMUS, RESULTS
+from harness.paths import FMUS
+from harness.engine.component import scratch_folder
 from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -44,9 +44,12 @@ PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
 for _prefix, _uri in PREFIXES.items():
     ET.register_namespace(_prefix, _uri)
 
-#: where ``load`` unpacks archives (by content hash: loading the same archive twice
-#: reuses the unpacked FMUs)
-UNPACKED = RESULTS / ".cache" / "ssp"
+#: the most an archive may unpack to, in bytes and in files (an exported scene: about
+#: 5 MB in 15 files); beyond, it is refused before unpacking
+MAX_UNPACKED_BYTES = 1 << 30
+MAX_FILES = 10_000
+#: the variable types an exported archive has connectors for (what libcosim and fmpy.ssp take)
+CONNECTOR_TYPES = ("Real", "Integer", "Boolean")
 _BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
@@ -70,20 +73,34 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
     fmu_dir = Path(fmu_dir)
     descriptions = descriptions_for(scene, fmu_dir)
     findings = scenes.validate(scene, descriptions)
+    sources = archive_sources(scene, fmu_dir)
+    by_member: dict[str, Path] = {}
+    for fmu, member in sources.items():
+        other = by_member.setdefault(member, fmu_path(fmu, fmu_dir))
+        if other != fmu_path(fmu, fmu_dir):
+            findings.append(f"two FMU files named {Path(member).name} ({other} and {fmu_path(fmu, fmu_dir)}): an "
+                            "SSP archive holds its FMUs in one folder; rename one")
+    for c in scene.connections:
+        for comp, var in ((c.source, c.output), (c.target, c.input)):
+            md = descriptions.get(scene.components[comp].fmu) if comp in scene.components else None
+            kind = next((v.type for v in md.modelVariables if v.name == var), None) if md else None
+            if kind is not None and kind not in CONNECTOR_TYPES:
+                findings.append(f"connection '{c}': {comp}.{var} is a {kind}; SSP readers (libcosim, fmpy.ssp) "
+                                f"connect {', '.join(CONNECTOR_TYPES)} variables only")
     if findings:
         raise SceneInvalid(scene.name, findings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    files = {"SystemStructure.ssd": _ssd(scene, descriptions)}
+    files = {"SystemStructure.ssd": _ssd(scene, descriptions, sources)}
     for name, spec in scene.components.items():
         files[f"resources/{name}.ssv"] = _ssv(name, spec, descriptions[spec.fmu])
     tmp = out.with_name(out.name + ".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for member, text in files.items():
             archive.writestr(member, text)
-        for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values()):
+        for fmu, member in sources.items():
             source = fmu_path(fmu, fmu_dir)
-            archive.write(source, f"resources/{source.name}")
+            archive.write(source, member)
             osp = source.with_name(f"{source.stem}_OspModelDescription.xml")
             if osp.exists():
                 archive.write(osp, f"resources/{osp.name}")
@@ -96,7 +113,15 @@ def _xml(root: ET.Element) -> bytes:
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
 
 
-def _ssd(scene: scenes.Scene, descriptions: dict) -> bytes:
+def archive_sources(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, str]:
+    """Each of the scene's FMUs (as its components name them: ours by name, others by
+    path) -> its member in the archive, ``resources/<file name>``: what the SSD's
+    ``source`` says, so the archive resolves it whatever folder the FMU came from."""
+    return {fmu: f"resources/{fmu_path(fmu, fmu_dir).name}"
+            for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values())}
+
+
+def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> bytes:
     root = ET.Element(_q("ssd", "SystemStructureDescription"), {"name": scene.name, "version": "1.0"})
     system = ET.SubElement(root, _q("ssd", "System"), {"name": scene.name, "description": scene.description})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
@@ -104,14 +129,17 @@ def _ssd(scene: scenes.Scene, descriptions: dict) -> bytes:
     for name, spec in scene.components.items():
         md = descriptions[spec.fmu]
         component = ET.SubElement(elements, _q("ssd", "Component"), {
-            "name": name, "type": "application/x-fmu-sharedlibrary", "source": f"resources/{spec.fmu}.fmu"})
+            "name": name, "type": "application/x-fmu-sharedlibrary", "source": sources[spec.fmu]})
         connectors = ET.SubElement(component, _q("ssd", "Connectors"))
         # Inputs are connectors where the scene connects them; an unconnected input is
         # set once from the parameter set (fmpy.ssp would set every input connector at
-        # every step, to the value a connection gives it or to 0).
+        # every step, to the value a connection gives it or to 0).  String and
+        # Enumeration variables get none: libcosim aborts on them and fmpy.ssp refuses them.
         wired = {c.input for c in scene.connections if c.target == name}
         for var in md.modelVariables:
             if not (var.causality == "output" or (var.causality == "input" and var.name in wired)):
+                continue
+            if var.type not in CONNECTOR_TYPES:
                 continue
             connector = ET.SubElement(connectors, _q("ssd", "Connector"), {"name": var.name, "kind": var.causality})
             attrs = {}
@@ -175,33 +203,56 @@ def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
 
 # -- load ---------------------------------------------------------------------------------------
 
-def unpack(path: Path) -> Path:
-    """The directory the archive ``path`` is unpacked in (once per content)."""
+def unpack(path: Path, max_bytes: int | None = None, max_files: int | None = None) -> Path:
+    """A temporary folder holding the archive ``path`` unpacked, removed when the process
+    ends (``harness.engine.component.scratch_folder``).  An archive that would unpack to
+    more than ``max_bytes`` or ``max_files`` (default ``MAX_UNPACKED_BYTES``,
+    ``MAX_FILES``) is refused before anything is written: the sizes its directory
+    declares are what unpacking may write (zipfile stops a member at its declared size)."""
     path = Path(path)
+    max_bytes = MAX_UNPACKED_BYTES if max_bytes is None else max_bytes
+    max_files = MAX_FILES if max_files is None else max_files
     if not path.is_file():
         raise scenes.SceneError(f"no SSP archive {path}")
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
-    target = UNPACKED / f"{path.stem}-{digest}"
-    if not (target / "SystemStructure.ssd").exists():
-        partial = target.with_name(target.name + ".partial")
-        shutil.rmtree(partial, ignore_errors=True)
-        try:
-            with zipfile.ZipFile(path) as archive:
-                archive.extractall(partial)
-        except zipfile.BadZipFile as error:
-            raise scenes.SceneError(f"{path}: not an SSP archive ({error})") from None
-        if not (partial / "SystemStructure.ssd").exists():
-            shutil.rmtree(partial, ignore_errors=True)
-            raise scenes.SceneError(f"{path}: no SystemStructure.ssd in the archive")
-        shutil.rmtree(target, ignore_errors=True)
-        partial.rename(target)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = archive.infolist()
+            size = sum(m.file_size for m in members)
+            if len(members) > max_files:
+                raise scenes.SceneError(f"{path}: the archive holds {len(members):,} files, more than the "
+                                        f"{max_files:,} an SSP archive is allowed here; not unpacked")
+            if size > max_bytes:
+                raise scenes.SceneError(f"{path}: the archive would unpack to {size / 2**20:,.0f} MiB, more than "
+                                        f"the {max_bytes / 2**20:,.0f} MiB allowed (a zip bomb?); not unpacked")
+            if not any(m.filename == "SystemStructure.ssd" for m in members):
+                raise scenes.SceneError(f"{path}: no SystemStructure.ssd in the archive")
+            target = scratch_folder(f"lever-ssp-{path.stem[:40]}-")
+            try:
+                archive.extractall(target)
+            except Exception:
+                shutil.rmtree(target, ignore_errors=True)
+                raise
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError) as error:
+        raise scenes.SceneError(f"{path}: not an SSP archive ({error})") from None
     return target
 
 
 def read_scene(path: str | Path) -> scenes.Scene:
-    """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``)."""
+    """The scene an SSP archive describes, its FMUs unpacked (``Scene.fmu_dir``, a
+    temporary folder; removed at once when the archive is refused)."""
     path = Path(path)
     where = unpack(path)
+    try:
+        return _read_unpacked(path, where)
+    except (ET.ParseError, OSError) as error:
+        shutil.rmtree(where, ignore_errors=True)
+        raise scenes.SceneError(f"{path}: a file of the archive cannot be read: {error}") from None
+    except BaseException:
+        shutil.rmtree(where, ignore_errors=True)
+        raise
+
+
+def _read_unpacked(path: Path, where: Path) -> scenes.Scene:
     try:
         root = ET.parse(where / "SystemStructure.ssd").getroot()
     except ET.ParseError as error:

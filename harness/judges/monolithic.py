@@ -39,7 +39,7 @@ def _misalignment_source(scene: scenes.Scene, coupling_name: str):
     driver = next((c for c in scene.connections if c.target == coupling_name and c.input == "misalignment"), None)
     if driver is None:
         return None
-    if scene.components[driver.source].fmu != "MisalignmentSource" or driver.output != "misalignment":
+    if scenes.fmu_name(scene.components[driver.source].fmu) != "MisalignmentSource" or driver.output != "misalignment":
         raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
                                    f"MisalignmentSource, not from {driver}")
     return catalogue.misalignment_source_from(kinds.parameters(scene, driver.source))

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.description import kinds
+from harness.engine import interrupt
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.judges import monolithic as reference
@@ -121,6 +122,7 @@ def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
     judge the first run (runs are deterministic), stop at a failure or a long run."""
     for attempt in range(repeats):
         result: RunResult = run_once()
+        interrupt.check()          # Ctrl-C during a peer's run: the case is not measured
         case.wall_times.append(result.wall_time)
         if attempt == 0:
             # a master counts its accepted steps; a peer, its communication points
@@ -165,6 +167,7 @@ def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
     solution = None
     for _ in range(repeats):
         solution = reference.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
+        interrupt.check()
         case.wall_times.append(solution.wall_time)
     case.steps = solution.n_rhs
     _judge(case, scene, solution.times, solution.traces)
@@ -203,6 +206,7 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
             for get_real, handle, vrs, n, values in rereads:
                 get_real(handle, vrs, n, values)
             t += h
+        interrupt.check()
         return (clock.perf_counter() - started) / n_steps
     finally:
         system.free()
@@ -242,7 +246,13 @@ def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: lis
           resume: bool = True) -> dict:
     """Run the scene's plan.  With ``out``, every finished case goes to ``out/cases.jsonl``
     as it finishes (harness.studies.cases): a benchmark killed part-way and run again resumes
-    with the cases not yet done (``resume=False`` starts afresh)."""
+    with the cases not yet done (``resume=False`` starts afresh).  Ctrl-C stops it at the
+    running case's next step (logged as interrupted) with ``Interrupted``."""
+    with interrupt.deferred():
+        return _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume)
+
+
+def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume) -> dict:
     p = plan(scene, only)
     say = progress or (lambda text: None)
     log = CaseLog(out, fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None

@@ -4,7 +4,8 @@
 Each finished case is appended to ``cases.jsonl`` in the study's output folder as one
 JSON line, flushed and synced before the next case starts, so a study killed part-way
 keeps every case it finished and a re-run skips them.  A case that fails is recorded
-too, with its diagnosis, and the study goes on with the others.
+too, with its diagnosis, and the study goes on with the others.  A case stopped by
+Ctrl-C is recorded as interrupted - neither done nor failed: a re-run does it again.
 
 The log starts with a header naming what the study depends on (its *fingerprint*: scene,
 plan, versions); a log whose fingerprint differs is set aside (renamed, not deleted) and
@@ -18,7 +19,11 @@ import traceback
 from pathlib import Path
 from typing import Callable, Iterator
 
+from harness.engine import interrupt
+
 FAILED = "failed"
+#: a case stopped by Ctrl-C: logged, not done (a resumed study runs it again)
+INTERRUPTED = "interrupted"
 
 
 def case_key(*parts) -> str:
@@ -51,14 +56,19 @@ class CaseLog:
             return False
         if header.get("fingerprint") != self.fingerprint:
             return False
+        whole = 1
         for line in lines[1:]:
             try:
                 entry = json.loads(line)
             except json.JSONDecodeError:
                 break          # a line cut short by a kill: everything before it stands
-            self._done[entry["key"]] = entry["result"]
+            whole += 1
+            if entry["result"].get("status") == INTERRUPTED:
+                self._done.pop(entry["key"], None)      # to be run again
+            else:
+                self._done[entry["key"]] = entry["result"]
         # Drop a torn last line so appends start on a fresh line.
-        self.path.write_text("".join(line + "\n" for line in lines[:1 + len(self._done)]))
+        self.path.write_text("".join(line + "\n" for line in lines[:whole]))
         return True
 
     def _set_aside(self):
@@ -89,22 +99,63 @@ class CaseLog:
         self._done[key] = json.loads(line)["result"]
         return self._done[key]
 
+    def interrupted(self, key: str, time: float | None = None):
+        """Log that Ctrl-C stopped case ``key`` (at simulated ``time``): not done, not
+        failed - a resumed study runs it again."""
+        result = {"status": INTERRUPTED} | ({"time": time} if time is not None else {})
+        self.record(key, result)
+        del self._done[key]
+
     def run(self, key: str, compute: Callable[[], dict]) -> tuple[dict, bool]:
         """The case's result, computed and recorded unless it is already in the log.
 
         Returns ``(result, reused)``.  An exception from ``compute`` is recorded as
         ``{"status": "failed", "error": ..., "where": ...}`` and does not propagate:
-        one failed case must not cost the others.  KeyboardInterrupt does propagate.
+        one failed case must not cost the others.  Ctrl-C (KeyboardInterrupt, e.g.
+        ``harness.engine.interrupt.Interrupted``) is logged as interrupted and propagates.
         """
         if key in self._done:
             return self._done[key], True
         try:
             result = compute()
+        except KeyboardInterrupt as error:
+            self.interrupted(key, getattr(error, "time", None))
+            raise
         except Exception as error:  # noqa: BLE001 - a study records every failure and goes on
             frame = traceback.extract_tb(error.__traceback__)[-1]
             result = {"status": FAILED, "error": f"{type(error).__name__}: {error}",
                       "where": f"{Path(frame.filename).name}:{frame.lineno} in {frame.name}"}
         return self.record(key, result), False
+
+
+def completed(futures, poll_s: float = 0.2):
+    """The futures (of a process pool) as they finish, like ``as_completed``, looking at
+    the Ctrl-C flag between waits: ``Interrupted`` once the finished ones are handed on."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    pending = set(futures)
+    while pending:
+        done, pending = wait(pending, timeout=poll_s, return_when=FIRST_COMPLETED)
+        yield from done
+        interrupt.check()
+
+
+def stop_pool(pool, futures: dict, log: CaseLog, key_of: Callable, logged: int = 0):
+    """Ctrl-C in a study run by a process pool: log the cases under way as interrupted
+    (``logged`` of them are already: a worker that took the Ctrl-C said so), drop the
+    queued ones and end the workers at once (not after the queue)."""
+    # concurrent.futures has no public call for it before Python 3.14 (terminate_workers);
+    # taken before shutdown, which forgets the processes
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    # The pool marks a case running when it enters its call queue, one more than the
+    # workers; the workers take them in order: the first ones are the cases under way.
+    running = [case for future, case in futures.items() if future.running() and key_of(case) not in log]
+    for case in running[:max(0, len(workers) - logged)]:
+        log.interrupted(key_of(case))
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in workers:
+        if process.is_alive():
+            process.terminate()
 
 
 def _jsonable(value):

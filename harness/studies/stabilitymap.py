@@ -30,7 +30,7 @@ import csv
 import math
 import multiprocessing
 import time as clock
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -42,7 +42,8 @@ from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.description import scene as scenes
 from harness.judges import stability
-from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.engine import interrupt
+from harness.studies.cases import FAILED, CaseLog, case_key, completed, stop_pool
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -252,7 +253,13 @@ class StabilityMap:
 def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: bool = True,
           fmu_dir: Path = FMUS, progress=None) -> StabilityMap:
     """Run every case of ``plan`` not yet in ``out/cases.jsonl`` (``jobs`` processes),
-    recording each as it finishes."""
+    recording each as it finishes.  Ctrl-C stops it at once with ``Interrupted``: the
+    cases under way are logged as interrupted (run again on resuming), the rest kept."""
+    with interrupt.deferred():
+        return _sweep(scene, plan, out, jobs, resume, fmu_dir, progress)
+
+
+def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     say = progress or (lambda *_: None)
     started = clock.perf_counter()
     model = stability.model_of(scene)
@@ -301,16 +308,25 @@ def _run_pool(scene, plan, todo, jobs, log, record, fmu_dir):
         broken = False
         with ProcessPoolExecutor(workers, mp_context=context) as pool:
             futures = {pool.submit(_worker, scene, case, plan, fmu_dir): case for case in queue}
-            for future in as_completed(futures):
-                case = futures[future]
-                try:
-                    result = future.result()
-                except BrokenProcessPool:
-                    broken = True
-                    break
-                except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
-                    result = _failed(error, "stability case")
-                record(case, result)
+            logged = 0
+            try:
+                for future in completed(futures):
+                    case = futures[future]
+                    try:
+                        result = future.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        break
+                    except KeyboardInterrupt as error:     # the worker took Ctrl-C at a step
+                        log.interrupted(case.key, getattr(error, "time", None))
+                        logged = 1
+                        raise interrupt.Interrupted() from None
+                    except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
+                        result = _failed(error, "stability case")
+                    record(case, result)
+            except KeyboardInterrupt:
+                stop_pool(pool, futures, log, lambda case: case.key, logged)
+                raise
             if broken:
                 for future in futures:
                     future.cancel()

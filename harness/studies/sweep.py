@@ -24,7 +24,8 @@ import numpy as np
 from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
-from harness.studies.cases import FAILED, CaseLog, case_key
+from harness.engine import interrupt
+from harness.studies.cases import FAILED, CaseLog, case_key, completed, stop_pool
 from harness.paths import DATA, FMUS, RESULTS
 
 SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
@@ -164,7 +165,14 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
           stop: float | None = None, extra: list[str] | None = None, workers: int | None = None,
           dask: str | None = None, progress: bool = True, resume: bool = True, fmu_dir: Path = FMUS) -> dict:
     """Run (or resume) a sweep and write ``sweep.md``, ``sweep.json`` and a plot per axis
-    into ``out``.  Returns the results: {"cases": [...], "trends": [...]}."""
+    into ``out``.  Returns the results: {"cases": [...], "trends": [...]}.  Ctrl-C stops
+    it at once with ``Interrupted``: the cases under way are logged as interrupted (run
+    again on resuming), the finished ones kept; no report is written."""
+    with interrupt.deferred():
+        return _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_dir)
+
+
+def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_dir) -> dict:
     axes = axes or default_axes()
     out = Path(out or RESULTS / "sweep")
     # Refuse a bad scene or assignment before anything runs.
@@ -210,15 +218,24 @@ def _run_local(pending, log, workers, bar):
     # fork: the workers leave with os._exit, skipping pythonfmu's fragile native teardown.
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
         futures = {pool.submit(run_case, case): case for case in pending}
-        for future in cf.as_completed(futures):
-            case = futures[future]
-            try:
-                result = future.result()
-            except Exception as error:  # noqa: BLE001 - e.g. a worker killed by the OS
-                result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "worker process"}
-            log.record(case["key"], result)
-            if bar is not None:
-                bar.update(1)
+        logged = 0
+        try:
+            for future in completed(futures):
+                case = futures[future]
+                try:
+                    result = future.result()
+                except KeyboardInterrupt as error:     # the worker took Ctrl-C at a step
+                    log.interrupted(case["key"], getattr(error, "time", None))
+                    logged = 1
+                    raise interrupt.Interrupted() from None
+                except Exception as error:  # noqa: BLE001 - e.g. a worker killed by the OS
+                    result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "worker process"}
+                log.record(case["key"], result)
+                if bar is not None:
+                    bar.update(1)
+        except KeyboardInterrupt:
+            stop_pool(pool, futures, log, lambda case: case["key"], logged)
+            raise
 
 
 def _run_dask(pending, log, address, bar):
@@ -227,15 +244,23 @@ def _run_dask(pending, log, address, bar):
     with Client(address, timeout="30s") as client:
         futures = {client.submit(run_case, case, pure=False, key=f"lever-sweep-{i}-{case['key'][:40]}"): case
                    for i, case in enumerate(pending)}
-        for future in as_completed(list(futures)):
-            case = futures[future]
-            try:
-                result = future.result()
-            except Exception as error:  # noqa: BLE001 - a lost worker, a cancelled task
-                result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "dask worker"}
-            log.record(case["key"], result)
-            if bar is not None:
-                bar.update(1)
+        finishing = as_completed(list(futures))
+        while not finishing.is_empty():
+            if interrupt.requested():       # Ctrl-C: the unfinished cases are cancelled, not done
+                client.cancel([f for f in futures if not f.done()])
+                interrupt.check()
+            batch = finishing.next_batch(block=False)
+            if not batch:
+                clock.sleep(0.2)
+            for future in batch:
+                case = futures[future]
+                try:
+                    result = future.result()
+                except Exception as error:  # noqa: BLE001 - a lost worker, a cancelled task
+                    result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "dask worker"}
+                log.record(case["key"], result)
+                if bar is not None:
+                    bar.update(1)
 
 
 # ----------------------------------------------------------------------------------------

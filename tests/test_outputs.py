@@ -1,0 +1,209 @@
+"""Outputs you can trust, and SSP archives handled with care.
+
+The output folder is checked before a run (under a file, unwritable: exit 2 and a
+sentence at once) and locked (a second writer is refused); an earlier run's files that a
+run does not write are removed and report.md names only files that exist; a run whose
+traces would not fit in memory is refused with "use --stream".  An SSP archive that would
+unpack too large or to too many files is refused before unpacking; the unpacked copy is a
+temporary folder, removed at the end of the process and at once when refused."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from harness.cli import main as cli
+from harness.description import scene as scenes
+from harness.engine import component
+from harness.formats import outputs, ssp
+
+LEVER = [sys.executable, "-c", "from harness.cli import entry; entry()"]
+SHORT = ["--set", "experiment.stop=0.3", "--set", "experiment.transient=0.1"]
+
+
+def _run(*args):
+    return CliRunner().invoke(cli, ["run", "kavz685", *SHORT, *map(str, args)])
+
+
+# -- the output folder ------------------------------------------------------------------------
+
+def test_out_under_a_file_is_refused_before_the_run(tmp_path, fmu_dir):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    started = time.monotonic()
+    result = _run("--out", blocker / "results")
+    assert result.exit_code == 2
+    assert f"is under {blocker}, which is a file, not a folder" in result.output and "Traceback" not in result.output
+    assert time.monotonic() - started < 5        # said at once, not after the run
+    result = _run("--out", blocker)
+    assert result.exit_code == 2 and "is a file, not a folder" in result.output
+
+
+def test_unwritable_out_is_refused(tmp_path, fmu_dir):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    # root writes whatever a folder's mode says; /sys refuses even root
+    target = Path("/sys/lever-results") if os.geteuid() == 0 else locked / "results"
+    try:
+        result = _run("--out", target)
+        assert result.exit_code == 2 and "cannot write there (permission denied)" in result.output, result.output
+    finally:
+        locked.chmod(0o700)
+
+
+def test_a_folder_that_refuses_writes_is_refused(tmp_path, monkeypatch):
+    # as an unwritable folder does for a user who is not root: the probe write fails
+    def refuse(self, data):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(Path, "write_bytes", refuse)
+    with pytest.raises(outputs.OutputError, match="cannot write there \\(permission denied\\)"):
+        outputs.check(tmp_path / "out")
+
+
+def test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder(tmp_path, fmu_dir):
+    out = tmp_path / "busy"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from harness.formats import outputs; "
+                               f"outputs.claim({str(out)!r}); print('held', flush=True); time.sleep(60)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        second = subprocess.run([*LEVER, "run", "kavz685", *SHORT, "--out", str(out)], capture_output=True, text=True,
+                                timeout=120)
+        assert second.returncode == 2
+        assert "another lever run is writing there" in second.stderr and f"pid {holder.pid}" in second.stderr
+        assert not (out / "traces.csv").exists()
+    finally:
+        holder.kill()                     # a crash: the kernel drops the lock
+        holder.wait()
+    again = subprocess.run([*LEVER, "run", "kavz685", *SHORT, "--no-reference", "--out", str(out)],
+                           capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+
+
+def test_one_process_may_claim_its_folder_twice(tmp_path):
+    with outputs.claimed(tmp_path / "x"):
+        assert outputs.claim(tmp_path / "x") == tmp_path / "x"
+
+
+def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    assert _run("--out", out).exit_code == 0
+    assert (out / "reference.csv").exists() and (out / "vs_reference.png").exists()
+    (out / "notes.txt").write_text("the user's own file")
+    result = _run("--out", out, "--no-reference")
+    assert result.exit_code == 0, result.output
+    assert not (out / "reference.csv").exists() and not (out / "vs_reference.png").exists()
+    assert (out / "notes.txt").exists()                      # not a run's file: kept
+    summary = json.loads((out / "summary.json").read_text())
+    assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir() if p.name not in (".lever.lock",
+                                                                                             "notes.txt"))
+    report = (out / "report.md").read_text()
+    named = set(re.findall(r"[\w.]+\.(?:png|csv)", report))
+    assert named and all((out / name).exists() for name in named)
+    assert "reference.csv" not in report and "vs_reference.png" not in report
+
+
+def test_a_failed_run_leaves_no_reference_of_an_earlier_one(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    assert _run("--out", out).exit_code == 0
+    # diverges after 8 steps: traces and plots of those, no reference
+    result = _run("--out", out, "--set", "coupling.stiffness=1e6", "--master", "jacobi")
+    assert result.exit_code == 1 and "diverged" in result.output
+    assert not (out / "reference.csv").exists() and not (out / "vs_reference.png").exists()
+    assert len((out / "traces.csv").read_text().splitlines()) < 20
+    report = (out / "report.md").read_text()
+    assert "reference.csv" not in report and "vs_reference.png" not in report and "speeds.png" in report
+
+
+def test_traces_that_would_not_fit_in_memory_are_refused_with_a_pointer_to_stream(tmp_path, fmu_dir):
+    started = time.monotonic()
+    result = _run("--step", "1e-9", "--set", "experiment.stop=100", "--out", tmp_path / "huge")
+    assert result.exit_code == 2, result.output
+    assert "use --stream" in result.output and "GiB" in result.output and "Traceback" not in result.output
+    assert time.monotonic() - started < 5
+    assert not (tmp_path / "huge" / "traces.csv").exists()
+
+
+# -- SSP archives -----------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory, fmu_dir) -> Path:
+    return ssp.export(scenes.load("kavz685"), tmp_path_factory.mktemp("ssp") / "kavz685.ssp", fmu_dir)
+
+
+def _scratch_folders() -> set[str]:
+    return set(component._scratch)
+
+
+def test_an_archive_that_unpacks_too_large_is_refused_before_unpacking(exported, tmp_path, monkeypatch):
+    bomb = tmp_path / "bomb.ssp"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("SystemStructure.ssd", "<x/>")
+        z.writestr("resources/zeros.bin", b"\0" * (8 << 20))     # 8 MiB of zeros: 8 kB in the archive
+    assert bomb.stat().st_size < 100_000
+    monkeypatch.setattr(ssp, "MAX_UNPACKED_BYTES", 4 << 20)
+    before = _scratch_folders()
+    with pytest.raises(scenes.SceneError, match=r"would unpack to 8 MiB, more than the 4 MiB allowed"):
+        ssp.read_scene(bomb)
+    assert _scratch_folders() == before                             # nothing was unpacked
+
+
+def test_the_default_limit_refuses_a_gigabyte_bomb_on_the_command_line(tmp_path):
+    bomb = tmp_path / "gigabyte.ssp"
+    # a directory that declares 2 GiB: what unpacking would write (zipfile stops a member at its
+    # declared size); written with a stored member of that declared size but no data needed
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("SystemStructure.ssd", "<x/>")
+    data = bytearray(bomb.read_bytes())
+    # patch the central directory's uncompressed size of the one member to 2 GiB
+    central = data.rindex(b"PK\x01\x02")
+    data[central + 24:central + 28] = (2 << 30).to_bytes(4, "little")
+    bomb.write_bytes(bytes(data))
+    result = CliRunner().invoke(cli, ["run", str(bomb), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    assert "would unpack to 2,048 MiB, more than the 1,024 MiB allowed" in result.output
+
+
+def test_an_archive_of_too_many_files_is_refused(tmp_path, monkeypatch):
+    many = tmp_path / "many.ssp"
+    with zipfile.ZipFile(many, "w") as z:
+        z.writestr("SystemStructure.ssd", "<x/>")
+        for i in range(50):
+            z.writestr(f"resources/{i}.txt", "")
+    monkeypatch.setattr(ssp, "MAX_FILES", 40)
+    with pytest.raises(scenes.SceneError, match="holds 51 files, more than the 40"):
+        ssp.read_scene(many)
+
+
+def test_the_unpacked_copy_is_temporary_and_a_broken_one_is_removed_at_once(exported, tmp_path):
+    scene = ssp.read_scene(exported)
+    where = Path(scene.fmu_dir).parent
+    assert where.is_dir() and where.parent == Path(tempfile.gettempdir()) and str(where) in component._scratch
+    # broken: an SSD that does not parse
+    broken = tmp_path / "broken.ssp"
+    with zipfile.ZipFile(exported) as source, zipfile.ZipFile(broken, "w") as z:
+        for item in source.infolist():
+            z.writestr(item, b"<not xml" if item.filename == "SystemStructure.ssd" else source.read(item))
+    before = _scratch_folders()
+    with pytest.raises(scenes.SceneError, match="does not parse"):
+        ssp.read_scene(broken)
+    assert all(not Path(f).exists() for f in _scratch_folders() - before)
+
+
+def test_a_lever_run_of_an_archive_leaves_no_unpacked_copy(exported, tmp_path):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    done = subprocess.run([*LEVER, "run", str(exported), *SHORT, "--no-reference", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=120, env={**os.environ, "TMPDIR": str(scratch)})
+    assert done.returncode == 0, done.stderr
+    assert list(scratch.iterdir()) == []
