@@ -149,7 +149,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = diagnosis = None
-    recorder = driver = None
+    recorder = driver = calls_before = None
     started = stepping = clock.perf_counter()
     try:
         system.initialize()
@@ -158,6 +158,7 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
         recorder.record(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
+        calls_before = system.calls_by_kind()
         stepping = clock.perf_counter()
         if driver.adaptive:
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
@@ -189,6 +190,9 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
         ended = clock.perf_counter()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
         counters["setup_time"] = stepping - started
+        if calls_before is not None:    # the stepping loop's FMI calls by component and kind
+            counters["calls_by_kind"] = {name: {kind: n - calls_before[name][kind] for kind, n in kinds.items()}
+                                         for name, kinds in system.calls_by_kind().items()}
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
