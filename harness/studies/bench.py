@@ -56,7 +56,7 @@ class Case:
     calls_by_kind: dict = field(default_factory=dict)
     #: where the run time went (``time_split``): crossing, slave, master [s]
     split: dict | None = None
-    #: the "call-prices" case's: {"ours"|"hollow": component -> kind -> seconds a call}
+    #: the "call-prices" case's: {"ours"|"hollow": {repr(step): component -> kind -> seconds a call}}
     prices: dict | None = None
 
     @property
@@ -219,48 +219,68 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
 CALL_KINDS = ("get", "set", "step", "state")
 
 
-def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_calls: int = 2000) -> dict[str, dict[str, float]]:
-    """Seconds per FMI call, by component and kind, each kind timed alone in a bare loop
-    straight through ctypes with the calls a propagation makes: ``step`` a component's
-    fmi2DoStep; ``get`` its reads (the propagation's read and the re-read of its
-    input-dependent outputs, averaged); ``set`` the propagation's sets of its inputs;
-    ``state`` fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate (a third of the three),
-    for the components that can roll back.  Summed over one jacobi step's calls this is the
-    call floor, priced call by call."""
+def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
+                step: float | None = None) -> dict[str, dict[str, float]]:
+    """Seconds per FMI call, by component and kind: the floor's loop (``call_floor``) with
+    every call timed on its own, so that each is priced where it falls in a step (a read
+    after a step pays for the outputs the step left to compute), less the timer's own
+    cost; and ``state``, fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate in turn (a
+    third of the three), for the stateful components that can roll back.  Summed over one
+    step's calls, the prices are the floor.  Steps of ``step`` (default the scene's): a
+    shaft's fmi2DoStep costs more the longer the step (it sub-steps its load)."""
+    timer = clock.perf_counter
     system = System(scene, fmu_dir, record=recorded_names(scene))
     try:
         system.initialize()
-        prices = {}
-        h, t0 = scene.experiment.step, scene.experiment.start
-        for name in system.order:
-            c = system.components[name]
-            reads = [e[1:6] for e in system.propagation_plan + system.dependent_reads
-                     if e[0] is c and e[1] is not None]
-            sends = [s[1:] for e in system.propagation_plan for s in e[7] if s[0] is c]
-            price = {}
-            do_step, handle = c.raw.do_step, c.raw.handle
-            t = c.time
-            started = clock.perf_counter()
-            for _ in range(n_calls):
+        spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
+        made = {name: {"get": 0, "set": 0, "step": 0} for name in system.order}
+        stepping = [(spent[c.name], c.raw.do_step, c.raw.handle) for c in (system.components[n] for n in system.order)]
+        moves = [(spent[c.name] if get_real is not None else None, get_real, handle, vrs, n, values,
+                  [(spent[target.name], set_real, t_handle, t_vrs, t_n, t_values)
+                   for target, set_real, t_handle, t_vrs, t_n, t_values in sends])
+                 for c, get_real, handle, vrs, n, values, _, sends in system.propagation_plan + system.dependent_reads]
+        for c, get_real, *_, sends in system.propagation_plan + system.dependent_reads:
+            made[c.name]["get"] += get_real is not None
+            for target, *_ in sends:
+                made[target.name]["set"] += 1
+        for name in made:
+            made[name]["step"] = 1
+        h = step or scene.experiment.step
+        t = scene.experiment.start
+        for _ in range(n_steps):
+            for account, do_step, handle in stepping:
+                started = timer()
                 do_step(handle, t, h, 1)
-                t += h
-            price["step"] = (clock.perf_counter() - started) / n_calls
+                account["step"] += timer() - started
+            for account, get_real, handle, vrs, n, values, sends in moves:
+                if account is not None:
+                    started = timer()
+                    get_real(handle, vrs, n, values)
+                    account["get"] += timer() - started
+                for target_account, set_real, t_handle, t_vrs, t_n, t_values in sends:
+                    started = timer()
+                    set_real(t_handle, t_vrs, t_n, t_values)
+                    target_account["set"] += timer() - started
+            t += h
+        for c in system.components.values():
             c.time = t
-            for kind, calls in (("get", reads), ("set", sends)):
-                if calls:
-                    started = clock.perf_counter()
-                    for _ in range(n_calls):
-                        for call, target, vrs, n, values in calls:
-                            call(target, vrs, n, values)
-                    price[kind] = (clock.perf_counter() - started) / (n_calls * len(calls))
-            if c.description.coSimulation.canGetAndSetFMUstate and name in system.stateful:
-                started = clock.perf_counter()
-                for _ in range(n_calls):
+        # the timer's own share of an interval, taken from every timed call
+        empty = 0.0
+        for _ in range(n_steps):
+            started = timer()
+            empty += timer() - started
+        own = empty / n_steps
+        prices = {name: {kind: max(0.0, spent[name][kind] / (n_steps * made[name][kind]) - own)
+                         for kind in spent[name] if made[name][kind]} for name in spent}
+        for name in system.stateful:
+            c = system.components[name]
+            if c.description.coSimulation.canGetAndSetFMUstate:
+                started = timer()
+                for _ in range(n_steps):
                     state = c.save_state()
                     c.restore_state(state, c.time)
                     c.free_state(state)
-                price["state"] = (clock.perf_counter() - started) / (3 * n_calls)
-            prices[name] = price
+                prices[name]["state"] = (timer() - started) / (3 * n_steps)
         return prices
     finally:
         system.free()
@@ -360,13 +380,20 @@ def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: lis
         if hollow_per_step:
             say(f"do-nothing FMU floor: {hollow_per_step * 1e6:.1f} us per communication step (same calls)")
 
+    # prices at each fixed step of the plan (a shaft's step costs more the longer it is)
+    # and at the scene's step (for the adaptive masters)
+    priced_steps = sorted({scene.experiment.step, *(h for hs in p["steps"].values() for h in hs)})
+
     def measure_prices() -> Case:
-        measured = {"ours": [], "hollow": []}
-        for _ in range(repeats):
-            measured["ours"].append(call_prices(scene, fmu_dir))
-            measured["hollow"].append(call_prices(scene, twins))
-        return Case("call-prices", "floor", scene.experiment.step,
-                    prices={which: _median_prices(runs) for which, runs in measured.items()})
+        measured = {"ours": {}, "hollow": {}}
+        for h in priced_steps:
+            runs = {"ours": [], "hollow": []}
+            for _ in range(repeats):
+                runs["ours"].append(call_prices(scene, fmu_dir, step=h))
+                runs["hollow"].append(call_prices(scene, twins, step=h))
+            for which in measured:
+                measured[which][repr(h)] = _median_prices(runs[which])
+        return Case("call-prices", "floor", scene.experiment.step, prices=measured)
 
     if twins is not None:
         prices = _logged(log, Case("call-prices", "floor", scene.experiment.step), measure_prices)[0].prices
@@ -396,7 +423,9 @@ def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: lis
                  lambda rtol=rtol: run_monolithic(scene, rtol, scene.experiment.step, repeats))
     for case in cases:
         if prices and case.kind == "master" and case.calls_by_kind and case.wall_times:
-            case.split = time_split(case.wall, case.calls_by_kind, prices["ours"], prices["hollow"])
+            h = repr(case.step if case.tolerance is None else scene.experiment.step)
+            if h in prices["ours"]:
+                case.split = time_split(case.wall, case.calls_by_kind, prices["ours"][h], prices["hollow"][h])
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
             "hollow_floor_per_step_s": hollow_per_step, "prices": prices,
             "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases,
@@ -592,7 +621,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
     if split_rows:
         lines += ["", "## Where the time goes", "",
                   f"Each master's run time split by the calls it made, priced call by call (component and kind: "
-                  f"get, set, step, state), each price the median of bare ctypes loops: *crossing* the calls "
+                  f"get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
+                  f"the scene's for adaptive masters - the median of the repeats): *crossing* the calls "
                   f"priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
                   f"*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
                   f"FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
