@@ -194,8 +194,9 @@ class System:
 
     def _compile_plan(self, names, held=frozenset()):
         """A propagation over the components ``names`` (in propagation order), flattened into
-        tuples of raw calls: ``(component, get_real, handle, vrs, n, values, copies, sends)``
-        (``get_real`` None where nothing is read; ``n`` as the raw calls take it) per component read - its outputs read in one call, copied into its targets' input
+        tuples of raw calls, one per component: ``(component, get_real, handle, vrs, n,
+        values, copies, sends)`` - its outputs read in one call (``get_real`` None where it
+        has none to read; ``n`` as the raw calls take it), copied into its targets' input
         buffers, and then, where it is the last of a target's sources in the plan, that
         target's inputs from the plan's sources set in one call (targets in ``held`` are
         filled but not sent: see held_plan).  Every Python attribute lookup here would
