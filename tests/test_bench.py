@@ -85,6 +85,31 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
         assert claims["speedup_over_baseline"] == pytest.approx(reached["jacobi"] / reached[claims["best_master"]])
     assert math.isfinite(result["floor_per_step_s"]) and result["floor_per_step_s"] > 0
     assert "At an RMS torque error" in (tmp_path / "bench.md").read_text()
+    # Where the time goes: every master case is split, the parts adding up to its time;
+    # a jacobi step makes 11 FMI calls (3 steps, 3 reads, 3 sets - one per target - and
+    # the shafts' accelerations read again), the floor's calls
+    assert result["hollow_floor_per_step_s"] > 0
+    for r in rows[:-1]:
+        parts = [float(r[f"{part}_s"]) for part in ("crossing", "slave", "master")]
+        assert parts[0] > 0 and sum(parts) == pytest.approx(float(r["wall_median_s"])), r
+    assert [float(r["calls_per_step"]) for r in jacobi] == [11.0, 11.0]
+    assert claims["baseline_step"]["over_hollow_floor"] == pytest.approx(
+        float(jacobi[1]["wall_median_s"]) / float(jacobi[1]["steps"]) / result["hollow_floor_per_step_s"])
+    assert "## Where the time goes" in (tmp_path / "bench.md").read_text()
+
+
+def test_the_time_split_prices_each_call_and_leaves_the_rest_to_the_master():
+    # synthetic prices [s a call]: our FMUs and their do-nothing twins
+    ours = {"shaft": {"get": 6e-6, "set": 5e-6, "step": 20e-6, "state": 30e-6}, "coupling": {"get": 9e-6, "step": 4e-6}}
+    hollow = {"shaft": {"get": 3e-6, "set": 3e-6, "step": 3e-6, "state": 10e-6}, "coupling": {"get": 3e-6, "step": 3e-6}}
+    calls = {"shaft": {"get": 200, "set": 100, "step": 100, "state": 0}, "coupling": {"get": 100, "step": 100}}
+    split = bench.time_split(0.01, calls, ours, hollow)
+    crossing = 200 * 3e-6 + 100 * 3e-6 + 100 * 3e-6 + 100 * 3e-6 + 100 * 3e-6        # 1.8 ms
+    slave = 200 * 3e-6 + 100 * 2e-6 + 100 * 17e-6 + 100 * 6e-6 + 100 * 1e-6          # 3.2 ms
+    assert split == pytest.approx({"crossing": crossing, "slave": slave, "master": 0.01 - crossing - slave})
+    assert split["master"] == pytest.approx(5.0e-3)
+    # a kind of call with no price (states of a coupling that cannot roll back): no split
+    assert bench.time_split(0.01, {"coupling": {"state": 3}}, ours, hollow) is None
 
 
 def test_bench_plan_refuses_unknown_masters():
@@ -119,11 +144,13 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     calls = []
     monkeypatch.setattr(bench, "simulate", lambda *a, **k: calls.append(a))
     monkeypatch.setattr(bench, "call_floor", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench, "call_prices", lambda *a, **k: calls.append(a))
     monkeypatch.setattr(bench, "run_monolithic", lambda *a, **k: calls.append(a))
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
-    assert lines[0].startswith("resuming: 4 case(s) already in")
+    # three cases, the two floors (our FMUs', the do-nothing twins') and the call prices
+    assert lines[0].startswith("resuming: 6 case(s) already in")
     assert [bench.table_row(c) for c in again["cases"]] == [bench.table_row(c) for c in first["cases"]]
     assert again["floor_per_step_s"] == first["floor_per_step_s"]
 
@@ -135,3 +162,22 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False)
     assert [c.step for c in grown["cases"] if c.engine == "trapezoidal-newton"] == [2e-3, 4e-3]
     assert (tmp_path / "cases.old1.jsonl").exists()
+
+
+def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir):
+    from fmpy import read_model_description, simulate_fmu
+
+    from harness.studies import hollow
+
+    twin = hollow.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
+    ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LeverCoupling.fmu", twin))
+    same = ("name", "valueReference", "type", "causality", "variability")
+    assert [[getattr(v, a) for a in same] for v in theirs.modelVariables] == \
+           [[getattr(v, a) for a in same] for v in ours.modelVariables]
+    assert {u.variable.name: [d.name for d in u.dependencies] for u in theirs.outputs} == \
+           {u.variable.name: [d.name for d in u.dependencies] for u in ours.outputs}
+    # it steps, with parameters and inputs set, and its outputs stay what they were: it does nothing
+    result = simulate_fmu(str(twin), stop_time=0.01, output_interval=1e-3, fmi_type="CoSimulation",
+                          start_values={"stiffness": 1000.0, "transfer_mode": "elastic", "phi1": 0.3},
+                          output=["tau1", "phi1"])
+    assert len(result) == 11 and (result["tau1"] == 0.0).all() and (result["phi1"] == 0.3).all()

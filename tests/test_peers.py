@@ -45,6 +45,19 @@ def test_libcosim_runs_our_fmus(name, tolerance, fmu_dir):
     assert e["engine.w"]["rms_relative"] < 1e-2 and e["coupling.tau2"]["rms_relative"] < 5e-2, e
 
 
+def test_ecos_runs_the_scene_as_a_peer(fmu_dir):
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    result = peers.simulate_peer("ecos", spec, 1e-3, fmu_dir)
+    assert result.ok, result.failure
+    # ecos logs every communication point but the last, to its 6 printed decimals
+    assert result.times[0] == 0.0 and result.times[-1] == pytest.approx(0.299) and result.wall_time > 0.0
+    assert set(result.traces) == set(run.recorded_names(spec))
+    ref = reference.solve(spec, result.times)
+    e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["engine.w", "coupling.tau2"],
+                       metrics.error_scales(spec, ref.traces))
+    assert e["engine.w"]["rms_relative"] < 1e-2 and e["coupling.tau2"]["rms_relative"] < 5e-2, e
+
+
 def test_libcosim_reports_a_refused_parameter_instead_of_crashing(fmu_dir):
     spec = scene.load("kavz685").with_overrides(SHORT + ["coupling.transfer_mode=bogus"])
     result = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)

@@ -15,18 +15,25 @@ from typing import Any, Callable, Iterable, NamedTuple, Protocol, runtime_checka
 class RawCalls(NamedTuple):
     """``get_real(handle, vrs, n, values)``, ``set_real(handle, vrs, n, values)`` and
     ``do_step(handle, t, h, no_set_prior_state)`` with FMI 2.0's C signatures, each
-    returning an FMI status."""
+    returning an FMI status.  ``n`` is ``count(len(vrs))``: an FMU's getter and setter
+    take their arguments as ctypes objects, unconverted (``handle`` a ``c_void_p``,
+    ``count`` ``c_size_t``), which saves ctypes' per-call argument conversion."""
     handle: Any
     get_real: Callable
     set_real: Callable
     do_step: Callable
+    count: Callable = int
 
 
 @runtime_checkable
 class CoSimComponent(Protocol):
     name: str
     description: Any        # fmpy's ModelDescription
-    calls: int              # calls made on the hot path
+    calls: int              # calls made on the hot path (the sum of the four below)
+    gets: int               # fmi2GetReal calls
+    sets: int               # fmi2SetReal calls
+    steps: int              # fmi2DoStep calls
+    state_calls: int        # fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate calls
     time: float
     raw: RawCalls
 

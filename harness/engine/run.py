@@ -168,7 +168,7 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
     names = recorded_names(scene)
     system = System(scene, fmu_dir, record=names)
     failure = stage = diagnosis = None
-    recorder = driver = bar = None
+    recorder = driver = bar = calls_before = None
     started = stepping = clock.perf_counter()
     try:
         system.initialize()
@@ -178,6 +178,7 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
         recorder.record(e.start)
         interrupt.check(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
+        calls_before = system.calls_by_kind()
         stepping = clock.perf_counter()
         if driver.adaptive:
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
@@ -223,6 +224,9 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
         ended = clock.perf_counter()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
         counters["setup_time"] = stepping - started
+        if calls_before is not None:    # the stepping loop's FMI calls by component and kind
+            counters["calls_by_kind"] = {name: {kind: n - calls_before[name][kind] for kind, n in by_kind.items()}
+                                         for name, by_kind in system.calls_by_kind().items()}
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.

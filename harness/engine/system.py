@@ -3,8 +3,9 @@
 Values flow along the scene's connections by *propagation*: components are visited in
 an order where every component with direct feedthrough (its outputs depend on its
 inputs, as its model description declares) comes after the components feeding it; each
-visited component's outputs are read in one call and written to its targets in one call
-per target.  ``propagate(sources)`` re-propagates only downstream of the given
+visited component's outputs are read in one call, and each target's inputs are set in
+one call once the last of its sources has been read (one fmi2SetReal per target, not
+one per source).  ``propagate(sources)`` re-propagates only downstream of the given
 components (what a Gauss-Seidel master needs after stepping one shaft).
 
 Only the scene's components are instantiated, and only the outputs that are connected
@@ -12,6 +13,7 @@ or recorded are ever read.
 """
 from __future__ import annotations
 
+import ctypes
 from pathlib import Path
 
 from fmpy import read_model_description
@@ -118,24 +120,46 @@ class System:
             comp, _, var = item.partition(".")
             if var not in exposed[comp] and self.components[comp].variable(var).causality == "output":
                 exposed[comp].append(var)
+        # Outputs that depend on inputs (model description) go last in each buffer, so that
+        # reading them again after an input write reads them alone (see dependent_reads).
+        self.input_dependent = {}
+        for name, names in exposed.items():
+            depends = {u.variable.name for u in self.components[name].description.outputs if u.dependencies}
+            exposed[name] = [v for v in names if v not in depends] + [v for v in names if v in depends]
+            self.input_dependent[name] = [v for v in names if v in depends]
         self.exposed = exposed
         self.buffers = {name: self.components[name].real_buffer(names) for name, names in exposed.items()}
         self.index = {(name, var): i for name, names in exposed.items() for i, var in enumerate(names)}
 
         order = self.order = dependency_order(scene, self.feedthrough)
 
-        # For each source: the writes to each target (target buffer and the copy map).
-        self.writes = {}
+        # Each target's connected inputs in one buffer (sources in propagation order), so
+        # that a propagation sets them in one call; each source's share is a view into it.
+        incoming = {}
         for name in order:
-            groups = {}
             for c in scene.connections:
                 if c.source == name:
-                    groups.setdefault(c.target, []).append(c)
+                    incoming.setdefault(c.target, []).append(c)
+        self.inputs = {}
+        self._input_ranges = {}      # target -> {source: (first, count)} in the target's buffer
+        for target, conns in incoming.items():
+            self.inputs[target] = self.components[target].real_buffer([c.input for c in conns])
+            ranges = {}
+            for k, c in enumerate(conns):
+                first, count = ranges.get(c.source, (k, 0))
+                ranges[c.source] = (first, count + 1)
+            self._input_ranges[target] = ranges
+        # For each source: its share of each target's buffer and the copy map.
+        self.writes = {}
+        for name in order:
             writes = []
-            for target, conns in groups.items():
-                vrs, values = self.components[target].real_buffer([c.input for c in conns])
-                writes.append((self.components[target], vrs, values,
-                               [self.index[(name, c.output)] for c in conns]))
+            for target, ranges in self._input_ranges.items():
+                if name in ranges:
+                    first, count = ranges[name]
+                    vrs, values = self._views(target, first, count)
+                    conns = incoming[target][first:first + count]
+                    writes.append((self.components[target], vrs, values,
+                                   [self.index[(name, c.output)] for c in conns]))
             self.writes[name] = writes
         # Components downstream of each one (itself included), in propagation order.
         self.downstream = {}
@@ -148,62 +172,111 @@ class System:
 
         self._compile()
 
-    def _compile(self):
-        """Flatten the plan into tuples of raw calls: propagation runs on every step, and
-        every Python attribute lookup on it shows in the harness's overhead."""
-        self._plan_of = {}
-        for name in self.order:
+    def _views(self, target: str, first: int, count: int):
+        """(value references, values) of ``count`` inputs of ``target``'s buffer from
+        ``first``: ctypes arrays sharing its memory."""
+        vrs, values = self.inputs[target]
+        return ((ctypes.c_uint * count).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)),
+                (ctypes.c_double * count).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)))
+
+    def input_spans(self, target: str, sources) -> list:
+        """``[(value references, values)]`` covering the inputs of ``target`` that come
+        from ``sources``, as few adjacent runs of its buffer as there are (one where the
+        sources' shares adjoin): what one fmi2SetReal each sends."""
+        ranges = self._input_ranges[target]
+        spans = sorted(ranges[s] for s in sources if s in ranges)
+        runs = []
+        for first, count in spans:
+            if runs and first == runs[-1][0] + runs[-1][1]:
+                runs[-1][1] += count
+            else:
+                runs.append([first, count])
+        return [self._views(target, first, count) for first, count in runs]
+
+    def _compile_plan(self, names, held=frozenset()):
+        """A propagation over the components ``names`` (in propagation order), flattened into
+        tuples of raw calls, one per component: ``(component, get_real, handle, vrs, n,
+        values, copies, sends)`` - its outputs read in one call (``get_real`` None where it
+        has none to read; ``n`` as the raw calls take it), copied into its targets' input
+        buffers, and then, where it is the last of a target's sources in the plan, that
+        target's inputs from the plan's sources set in one call (targets in ``held`` are
+        filled but not sent: see held_plan).  Every Python attribute lookup here would
+        show in the harness's overhead."""
+        names = list(names)
+        position = {n: k for k, n in enumerate(names)}
+        plan = []
+        for name in names:
             component = self.components[name]
             vrs, values = self.buffers[name]
-            writes = tuple((target, target.raw.set_real, target.raw.handle, t_vrs, len(t_vrs), t_values,
-                            tuple(enumerate(positions)))
-                           for target, t_vrs, t_values, positions in self.writes[name])
-            # the last field: buffers filled but not sent (see held_plan)
-            self._plan_of[name] = (component, component.raw.get_real, component.raw.handle, vrs, len(vrs), values, writes,
-                                   ())
-        self._full_plan = [self._plan_of[n] for n in self.order]
+            copies = tuple((t_values, tuple(enumerate(positions)))
+                           for _, _, t_values, positions in self.writes[name])
+            sends = []
+            for target, ranges in self._input_ranges.items():
+                mine = [s for s in ranges if s in position]
+                if target in held or name not in mine or max(position[s] for s in mine) != position[name]:
+                    continue
+                t = self.components[target]
+                sends += [(t, t.raw.set_real, t.raw.handle, t_vrs, t.raw.count(len(t_vrs)), t_values)
+                          for t_vrs, t_values in self.input_spans(target, mine)]
+            plan.append((component, component.raw.get_real if len(vrs) else None, component.raw.handle, vrs,
+                         component.raw.count(len(vrs)), values, copies, tuple(sends)))
+        return plan
+
+    def _compile(self):
+        self._full_plan = self._compile_plan(self.order)
         self._partial_plans = {}
         # Components without direct feedthrough whose exposed outputs still depend on their
         # inputs (a shaft's acceleration on its torque): propagation reads them before their
-        # inputs are written, so such an output lags a step unless it is read again.
-        dependent = [name for name in self.order if name not in self.feedthrough
-                     and any(u.dependencies and u.variable.name in self.exposed[name]
-                             for u in self.components[name].description.outputs)]
-        # Plans again: reading them (entries without writes), and - for masters whose last
-        # propagation only filled the buffers - first sending their connected inputs from
-        # those buffers (one entry that reads nothing, with writes that copy nothing).
-        self.dependent_reads = [self._plan_of[name][:6] + ((), ()) for name in dependent]
-        sends = tuple(w[:6] + ((),) for name in self.order for w in self._plan_of[name][6]
-                      if w[0].name in dependent)
-        self._dependent_sends = [(None, None, None, None, 0, None, sends, ())] if sends else []
+        # inputs are written, so such an output lags a step unless it is read again - it
+        # alone: the others cannot have changed (the model description says so).
+        dependent = [name for name in self.order if name not in self.feedthrough and self.input_dependent[name]]
+        self.dependent_reads = []
+        for name in dependent:
+            component = self.components[name]
+            vrs, values = self.buffers[name]
+            n = len(self.input_dependent[name])
+            first = len(vrs) - n
+            self.dependent_reads.append(
+                (component, component.raw.get_real, component.raw.handle,
+                 (ctypes.c_uint * n).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)), component.raw.count(n),
+                 (ctypes.c_double * n).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)), (), ()))
+        # For masters whose last propagation only filled the buffers: first send the
+        # connected inputs of those components from their buffers (one entry that reads
+        # nothing, one call per component).
+        sends = []
+        for name in dependent:
+            if name in self.inputs:
+                component, (vrs, values) = self.components[name], self.inputs[name]
+                sends.append((component, component.raw.set_real, component.raw.handle, vrs,
+                              component.raw.count(len(vrs)), values))
+        sends = tuple(sends)
+        self._dependent_sends = [(None, None, None, None, 0, None, (), sends)] if sends else []
         self.has_dependent_outputs = bool(dependent)
+
+    @property
+    def propagation_plan(self):
+        """The compiled full propagation (see ``_compile_plan``): what ``propagate()`` runs."""
+        return self._full_plan
 
     def held_plan(self, held: set[str]):
         """A propagation plan that fills the input buffers of the components in ``held``
         but does not send them: for a master that writes those inputs itself before the
         next step (saves two FMI calls a step on a driveline)."""
-        plan = []
-        for component, get_real, handle, vrs, n, values, writes, _ in self._full_plan:
-            kept = tuple(w for w in writes if w[0].name not in held)
-            copied = tuple((w[5], w[6]) for w in writes if w[0].name in held)
-            plan.append((component, get_real, handle, vrs, n, values, kept, copied))
-        return plan
+        return self._compile_plan(self.order, frozenset(held))
 
     def propagate_with(self, plan):
         """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
-        for component, get_real, handle, vrs, n, values, writes, copied in plan:
-            if n:
-                component.calls += 1
+        for component, get_real, handle, vrs, n, values, copies, sends in plan:
+            if get_real is not None:
+                component.gets += 1
                 status = get_real(handle, vrs, n, values)
                 if status > 1:
                     component.fail("fmi2GetReal", status)
-            for t_values, pairs in copied:
+            for t_values, pairs in copies:
                 for k, i in pairs:
                     t_values[k] = values[i]
-            for target, set_real, target_handle, t_vrs, t_n, t_values, pairs in writes:
-                for k, i in pairs:
-                    t_values[k] = values[i]
-                target.calls += 1
+            for target, set_real, target_handle, t_vrs, t_n, t_values in sends:
+                target.sets += 1
                 status = set_real(target_handle, t_vrs, t_n, t_values)
                 if status > 1:
                     target.fail("fmi2SetReal", status)
@@ -224,7 +297,7 @@ class System:
             key = tuple(sources)
             plan = self._partial_plans.get(key)
             if plan is None:
-                plan = self._partial_plans[key] = [self._plan_of[n] for n in self._downstream_of(sources)]
+                plan = self._partial_plans[key] = self._compile_plan(self._downstream_of(sources))
         self.propagate_with(plan)
 
     def _downstream_of(self, sources):
@@ -249,6 +322,11 @@ class System:
         for c in self.components.values():
             c.exit_initialization()
         self.propagate()
+
+    def calls_by_kind(self) -> dict[str, dict[str, int]]:
+        """FMI calls made on the hot path so far, by component and kind (get, set, step, state)."""
+        return {name: {"get": c.gets, "set": c.sets, "step": c.steps, "state": c.state_calls}
+                for name, c in self.components.items()}
 
     @property
     def fmu_calls(self) -> int:

@@ -38,6 +38,11 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
   irregular, and the last one may pass the stop time by less than a step (libcosim does
   not shorten the last step).
 
+* ``ecos`` - the C++ engine ecos (PyPI ``ecospy``, ``harness.formats.ecos``): its
+  command-line program on the scene's SSP export in a bare environment, stepping the FMUs
+  in parallel threads (its default) and logging what the harness records; its wall time
+  is its own stepping loop's (from its progress log).
+
 * ``libcosim-ssp`` - ``libcosim-fixed`` with the scene loaded from its SSP export
   (``CosimExecution.from_ssp_file``: libcosim reads the components, connections and
   parameter sets itself).
@@ -89,6 +94,7 @@ PEERS = {
     "libcosim-ssp": "OSP libcosim fixed step on the scene's SSP export (CosimExecution.from_ssp_file)",
     "libcosim-osp": "OSP libcosim fixed step on an OspSystemStructure.xml connecting the FMUs' OSP ports",
     "libcosim-ecco": "OSP libcosim ECCO: step size controlled by the power residual at the coupling's bonds",
+    "ecos": "the C++ engine ecos (ecospy's program) on the scene's SSP export, FMUs in parallel threads",
 }
 
 LIBCOSIMPY_PIN = "libcosimpy==0.0.6"
@@ -124,6 +130,9 @@ def available(name: str) -> str | None:
         except ImportError as error:
             return f"fmpy.ssp does not import: {error}"
         return None
+    if name == "ecos":
+        from harness.formats import ecos
+        return ecos.unavailable()
     try:
         from libcosimpy._internal import libcosimc
         library = libcosimc()
@@ -160,6 +169,8 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
         return _simulate_fmpy_jacobi(setup, float(step))
     if name == "fmpy-ssp":
         return _simulate_fmpy_ssp(setup, float(step))
+    if name == "ecos":
+        return _simulate_ecos(scene, float(step), Path(fmu_dir), names)
     return _simulate_libcosim_in_child(setup, float(step), name,
                                        tolerance=ECCO_TOLERANCE if tolerance is None else float(tolerance))
 
@@ -391,6 +402,29 @@ def _simulate_fmpy_ssp(setup: _SceneSetup, step: float) -> RunResult:
 
 
 # -- libcosim ---------------------------------------------------------------------------------
+
+def _simulate_ecos(scene: scenes.Scene, step: float, fmu_dir: Path, names: list[str]) -> RunResult:
+    """ecos's program on the scene's SSP export (``harness.formats.ecos``), in a bare
+    environment, logging ``names``; its wall time is its own stepping loop's."""
+    from harness.formats import ecos, ssp
+
+    e = scene.experiment
+    if e.start != 0.0:
+        raise ValueError(f"peer 'ecos' simulates from t = 0 only; scene '{scene.name}' starts at {e.start:g} s")
+    with tempfile.TemporaryDirectory(prefix="lever-ecos-") as scratch:
+        scratch = Path(scratch)
+        archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir)
+        try:
+            run = ecos.run_ecos(archive, e.stop, step, scratch / "bin", record=names)
+        except RuntimeError as error:
+            return RunResult(scene, "ecos", step, np.empty(0), {n: np.empty(0) for n in names}, math.nan, {},
+                             str(error), "stepping")
+        times, traces = ecos.ecos_traces(run.csv)
+    missing = [n for n in names if n not in traces]
+    if missing:
+        raise ValueError(f"peer 'ecos' logged no {', '.join(missing)}")
+    return RunResult(scene, "ecos", step, times, {n: traces[n] for n in names}, run.wall_time, {})
+
 
 class LibcosimError(RuntimeError):
     pass

@@ -183,9 +183,13 @@ class _LinearComponent:
         self.variables = {v.name: v for v in description.modelVariables}
         self.values = {v.valueReference: 0.0 for v in description.modelVariables if v.type == "Real"}
         self._vr = {v.name: v.valueReference for v in description.modelVariables}
-        self.calls = 0
+        self.gets = self.sets = self.steps = self.state_calls = 0
         self.time = 0.0
         self.raw = RawCalls(None, self._get, self._set, self._raw_step)
+
+    @property
+    def calls(self) -> int:
+        return self.gets + self.sets + self.steps + self.state_calls
 
     def variable(self, name):
         return self.variables[name]
@@ -219,15 +223,15 @@ class _LinearComponent:
         return 0
 
     def read(self, vrs, values):
-        self.calls += 1
+        self.gets += 1
         self._get(None, vrs, len(vrs), values)
 
     def write(self, vrs, values):
-        self.calls += 1
+        self.sets += 1
         self._set(None, vrs, len(vrs), values)
 
     def do_step(self, t, h):
-        self.calls += 1
+        self.steps += 1
         self._advance(t, h)
         self.time = t + h
 

@@ -30,6 +30,7 @@ from harness.engine import interrupt
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.judges import monolithic as reference
+from harness.studies import hollow
 from harness.studies.cases import FAILED, CaseLog, case_key
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
@@ -52,6 +53,12 @@ class Case:
     floor_time: float | None = None
     failure: str | None = None
     largest_step: float | None = None           # the longest communication step taken [s]
+    #: the stepping loop's FMI calls, component -> kind -> count (a master's run)
+    calls_by_kind: dict = field(default_factory=dict)
+    #: where the run time went (``time_split``): crossing, slave, master [s]
+    split: dict | None = None
+    #: the "call-prices" case's: {"ours"|"hollow": {repr(step): component -> kind -> seconds a call}}
+    prices: dict | None = None
 
     @property
     def wall(self) -> float:
@@ -130,6 +137,7 @@ def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
                           else max(0, len(result.times) - 1))
             case.fmu_calls = int(result.counters.get("fmu_calls", 0))
             case.rollbacks = int(result.counters.get("rollbacks", 0))
+            case.calls_by_kind = result.counters.get("calls_by_kind", {})
             if len(result.times) > 1:
                 case.largest_step = float(np.max(np.diff(result.times)))
             if not result.ok:
@@ -175,22 +183,20 @@ def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
 
 
 def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) -> float:
-    """Seconds per communication step of the FMI calls alone: every component steps once
-    and every connection is read and written once, straight through ctypes, in a bare
-    loop (no master, no recording), and recorded outputs that depend on inputs (a shaft's
-    acceleration) are read again after the writes.  What any master must pay at the least."""
+    """Seconds per communication step of the FMI calls alone: every component steps once,
+    its outputs are read once and every target's inputs set once (the system's compiled
+    propagation), straight through ctypes, in a bare loop (no master, no recording), and
+    recorded outputs that depend on inputs (a shaft's acceleration) are read again after
+    the writes.  What any master must pay at the least."""
     system = System(scene, fmu_dir, record=recorded_names(scene))
     try:
         system.initialize()
         order = [system.components[n] for n in system.order]
         stepping = [(c.raw.do_step, c.raw.handle) for c in order]
-        moves = []
-        for name in system.order:
-            c = system.components[name]
-            vrs, values = system.buffers[name]
-            moves.append((c.raw.get_real, c.raw.handle, vrs, len(vrs), values,
-                          [(t.raw.set_real, t.raw.handle, t_vrs, len(t_vrs), t_values)
-                           for t, t_vrs, t_values, _ in system.writes[name]]))
+        # the propagation's reads and sets as the system compiled them (one set per target)
+        moves = [(get_real, handle, vrs, n, values,
+                  [(set_real, target, t_vrs, t_n, t_values) for _, set_real, target, t_vrs, t_n, t_values in sends])
+                 for _, get_real, handle, vrs, n, values, _, sends in system.propagation_plan]
         rereads = [(get_real, handle, vrs, n, values)
                    for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
         h = scene.experiment.step
@@ -200,7 +206,8 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
             for do_step, handle in stepping:
                 do_step(handle, t, h, 1)
             for get_real, handle, vrs, n, values, writes in moves:
-                get_real(handle, vrs, n, values)
+                if get_real is not None:
+                    get_real(handle, vrs, n, values)
                 for set_real, target, t_vrs, t_n, t_values in writes:
                     set_real(target, t_vrs, t_n, t_values)
             for get_real, handle, vrs, n, values in rereads:
@@ -210,6 +217,102 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
         return (clock.perf_counter() - started) / n_steps
     finally:
         system.free()
+
+
+#: kinds of FMI call a master makes, as ``System.calls_by_kind`` counts them
+CALL_KINDS = ("get", "set", "step", "state")
+
+
+def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
+                step: float | None = None) -> dict[str, dict[str, float]]:
+    """Seconds per FMI call, by component and kind: the floor's loop (``call_floor``) with
+    every call timed on its own, so that each is priced where it falls in a step (a read
+    after a step pays for the outputs the step left to compute), less the timer's own
+    cost; and ``state``, fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate in turn (a
+    third of the three), for the stateful components that can roll back.  Summed over one
+    step's calls, the prices are the floor.  Steps of ``step`` (default the scene's): a
+    shaft's fmi2DoStep costs more the longer the step (it sub-steps its load)."""
+    timer = clock.perf_counter
+    system = System(scene, fmu_dir, record=recorded_names(scene))
+    try:
+        system.initialize()
+        spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
+        made = {name: {"get": 0, "set": 0, "step": 0} for name in system.order}
+        stepping = [(spent[c.name], c.raw.do_step, c.raw.handle) for c in (system.components[n] for n in system.order)]
+        moves = [(spent[c.name] if get_real is not None else None, get_real, handle, vrs, n, values,
+                  [(spent[target.name], set_real, t_handle, t_vrs, t_n, t_values)
+                   for target, set_real, t_handle, t_vrs, t_n, t_values in sends])
+                 for c, get_real, handle, vrs, n, values, _, sends in system.propagation_plan + system.dependent_reads]
+        for c, get_real, *_, sends in system.propagation_plan + system.dependent_reads:
+            made[c.name]["get"] += get_real is not None
+            for target, *_ in sends:
+                made[target.name]["set"] += 1
+        for name in made:
+            made[name]["step"] = 1
+        h = step or scene.experiment.step
+        t = scene.experiment.start
+        for _ in range(n_steps):
+            for account, do_step, handle in stepping:
+                started = timer()
+                do_step(handle, t, h, 1)
+                account["step"] += timer() - started
+            for account, get_real, handle, vrs, n, values, sends in moves:
+                if account is not None:
+                    started = timer()
+                    get_real(handle, vrs, n, values)
+                    account["get"] += timer() - started
+                for target_account, set_real, t_handle, t_vrs, t_n, t_values in sends:
+                    started = timer()
+                    set_real(t_handle, t_vrs, t_n, t_values)
+                    target_account["set"] += timer() - started
+            t += h
+        for c in system.components.values():
+            c.time = t
+        # the timer's own share of an interval, taken from every timed call
+        empty = 0.0
+        for _ in range(n_steps):
+            started = timer()
+            empty += timer() - started
+        own = empty / n_steps
+        prices = {name: {kind: max(0.0, spent[name][kind] / (n_steps * made[name][kind]) - own)
+                         for kind in spent[name] if made[name][kind]} for name in spent}
+        for name in system.stateful:
+            c = system.components[name]
+            if c.description.coSimulation.canGetAndSetFMUstate:
+                started = timer()
+                for _ in range(n_steps):
+                    state = c.save_state()
+                    c.restore_state(state, c.time)
+                    c.free_state(state)
+                prices[name]["state"] = (timer() - started) / (3 * n_steps)
+        return prices
+    finally:
+        system.free()
+
+
+def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, dict[str, float]],
+               hollow: dict[str, dict[str, float]]) -> dict[str, float] | None:
+    """A run's time ``wall`` split by where it went, from the calls it made (component ->
+    kind -> count) and the prices of a call (component -> kind -> seconds) into our FMUs
+    and into their do-nothing twins:
+
+    * ``crossing``: the twins' prices times the calls - what any pythonfmu FMU costs;
+    * ``slave``: our prices minus the twins' times the calls - our FMUs' own work behind
+      the calls (the native entry's checks, the FMI glue, the model's physics);
+    * ``master``: the rest - the master's arithmetic, its Python, the recording.
+
+    None when a call kind was made that has no price (e.g. states of an FMU that cannot
+    roll back)."""
+    crossing = slave = 0.0
+    for name, kinds in calls.items():
+        for kind, count in kinds.items():
+            if not count:
+                continue
+            if kind not in ours.get(name, {}) or kind not in hollow.get(name, {}):
+                return None
+            crossing += count * hollow[name][kind]
+            slave += count * (ours[name][kind] - hollow[name][kind])
+    return {"crossing": crossing, "slave": slave, "master": wall - crossing - slave}
 
 
 # -- the whole benchmark -------------------------------------------------------------------------------
@@ -271,6 +374,39 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         "floor", "floor", scene.experiment.step, wall_times=[call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats)]))
     floor_per_step = floor_case.wall
     say(f"FMU-call floor: {floor_per_step * 1e6:.1f} us per communication step")
+    # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step), and
+    # each kind of call priced in both, interleaved: where a master's time goes.
+    try:
+        twins = hollow.twins(scene, fmu_dir)
+    except Exception as error:  # noqa: BLE001 - the benchmark goes on without the split
+        twins = None
+        say(f"do-nothing FMUs not built ({type(error).__name__}: {error}): no split of the run times")
+    hollow_per_step, prices = None, None
+    if twins is not None:
+        hollow_case, _ = _logged(log, Case("floor-hollow", "floor", scene.experiment.step), lambda: Case(
+            "floor-hollow", "floor", scene.experiment.step,
+            wall_times=[call_floor(scene, fmu_dir=twins) for _ in range(repeats)]))
+        hollow_per_step = hollow_case.wall if hollow_case.wall_times else None
+        if hollow_per_step:
+            say(f"do-nothing FMU floor: {hollow_per_step * 1e6:.1f} us per communication step (same calls)")
+
+    # prices at each fixed step of the plan (a shaft's step costs more the longer it is)
+    # and at the scene's step (for the adaptive masters)
+    priced_steps = sorted({scene.experiment.step, *(h for hs in p["steps"].values() for h in hs)})
+
+    def measure_prices() -> Case:
+        measured = {"ours": {}, "hollow": {}}
+        for h in priced_steps:
+            runs = {"ours": [], "hollow": []}
+            for _ in range(repeats):
+                runs["ours"].append(call_prices(scene, fmu_dir, step=h))
+                runs["hollow"].append(call_prices(scene, twins, step=h))
+            for which in measured:
+                measured[which][repr(h)] = _median_prices(runs[which])
+        return Case("call-prices", "floor", scene.experiment.step, prices=measured)
+
+    if twins is not None:
+        prices = _logged(log, Case("call-prices", "floor", scene.experiment.step), measure_prices)[0].prices
     limit = p["repeats_limit_s"]
     for name, steps in p["steps"].items():
         for h in steps:
@@ -295,8 +431,21 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         for rtol in p["monolithic"]:
             take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
                  lambda rtol=rtol: run_monolithic(scene, rtol, scene.experiment.step, repeats))
+    for case in cases:
+        if prices and case.kind == "master" and case.calls_by_kind and case.wall_times:
+            h = repr(case.step if case.tolerance is None else scene.experiment.step)
+            if h in prices["ours"]:
+                case.split = time_split(case.wall, case.calls_by_kind, prices["ours"][h], prices["hollow"][h])
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
-            "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases, "claims": claims(scene, cases, p)}
+            "hollow_floor_per_step_s": hollow_per_step, "prices": prices,
+            "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases,
+            "claims": claims(scene, cases, p, hollow_per_step)}
+
+
+def _median_prices(runs: list[dict]) -> dict:
+    """Component -> kind -> the median price over ``runs`` of ``call_prices``."""
+    return {name: {kind: stats.median(run[name][kind] for run in runs) for kind in runs[0][name]}
+            for name in runs[0]}
 
 
 def eigenfrequency(scene: scenes.Scene) -> float | None:
@@ -335,7 +484,7 @@ def time_at_error(cases: list[Case], target: float, key: str = "tau_rms") -> flo
     return math.exp(math.log(w0) + x * (math.log(w1) - math.log(w0)))
 
 
-def claims(scene: scenes.Scene, cases: list[Case], p: dict) -> dict:
+def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: float | None = None) -> dict:
     """What the benchmark shows, computed from the cases (not asserted)."""
     target = p["target_error"]
     by_engine: dict[str, list[Case]] = {}
@@ -351,6 +500,17 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict) -> dict:
         out["best_master"] = best
         out["speedup_over_baseline"] = (base_time / best_time) if base_time else None
         out["peers_at_target_s"] = {n: t for n, t in at_target.items() if n not in master_family.MASTERS}
+        if at_target.get("monolithic"):
+            out["best_master_over_monolithic"] = best_time / at_target["monolithic"]
+    # One baseline step at the scene's step against the same calls into do-nothing FMUs.
+    if hollow_per_step:
+        at_step = [c for c in cases if c.engine == baseline and c.kind == "master" and c.tolerance is None
+                   and c.stable and c.steps and c.step == scene.experiment.step]
+        if at_step:
+            per_step = at_step[0].wall / at_step[0].steps
+            out["baseline_step"] = {"step": scene.experiment.step, "per_step_s": per_step,
+                                    "hollow_floor_per_step_s": hollow_per_step,
+                                    "over_hollow_floor": per_step / hollow_per_step}
     # Harness overhead above the FMU-call floor, fixed-step zero-order-hold masters.
     overhead = {}
     for case in cases:
@@ -387,7 +547,8 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict) -> dict:
 
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "repeats", "steps", "fmu_calls", "rollbacks",
            "floor_s", "overhead_above_floor", "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
-           "w_rms_after_transient", "energy_residual", "failure"]
+           "w_rms_after_transient", "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s",
+           "failure"]
 
 
 def table_row(case: Case) -> dict:
@@ -399,7 +560,11 @@ def table_row(case: Case) -> dict:
             "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
                                                  ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
                                                   "w_rms_after_transient")},
-            "energy_residual": case.energy_residual, "failure": case.failure}
+            "energy_residual": case.energy_residual,
+            "calls_per_step": (sum(sum(k.values()) for k in case.calls_by_kind.values()) / case.steps
+                               if case.calls_by_kind and case.steps else None),
+            **{f"{part}_s": (case.split or {}).get(part) for part in ("crossing", "slave", "master")},
+            "failure": case.failure}
 
 
 def write(out: Path, result: dict) -> list[Path]:
@@ -435,7 +600,9 @@ def markdown(result: dict, rows: list[dict]) -> str:
     lines = [f"# Work-precision benchmark: {result['scene']}", "",
              f"Median of up to {result['repeats']} repeats of the stepping loop; errors against the monolithic "
              f"reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
-             f"FMU-call floor: {result['floor_per_step_s'] * 1e6:.1f} us per communication step.", ""]
+             f"FMU-call floor: {result['floor_per_step_s'] * 1e6:.1f} us per communication step"
+             + (f"; the same calls into do-nothing FMUs: {result['hollow_floor_per_step_s'] * 1e6:.1f} us"
+                if result.get("hollow_floor_per_step_s") else "") + ".", ""]
     if result.get("eigenfrequency_rad_s"):
         lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
     lines += ["| engine | step / tol | run time | steps | above floor | tau RMS | tau max | w RMS | "
@@ -457,6 +624,32 @@ def markdown(result: dict, rows: list[dict]) -> str:
         lines += ["", f"Best master: **{c['best_master']}**, "
                   + (f"{speedup:.1f}x faster than {c['baseline']}." if speedup else
                      f"({c['baseline']} does not reach the target).")]
+        if c.get("best_master_over_monolithic"):
+            lines[-1] += (f"  It takes {c['best_master_over_monolithic']:.2f}x the time of the monolithic "
+                          "solution (scipy DOP853 on the unsplit equations) at this error.")
+    split_rows = [r for r in rows if r.get("crossing_s") is not None]
+    if split_rows:
+        lines += ["", "## Where the time goes", "",
+                  f"Each master's run time split by the calls it made, priced call by call (component and kind: "
+                  f"get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
+                  f"the scene's for adaptive masters - the median of the repeats): *crossing* the calls "
+                  f"priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
+                  f"*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
+                  f"FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
+                  f"Python, recording).", "",
+                  "| engine | step / tol | run time | FMI calls per step | crossing | slave | master |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in split_rows:
+            setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
+            wall = r["wall_median_s"]
+            lines.append(f"| {r['engine']} | {setting} | {wall:.3f} s | {r['calls_per_step']:.1f} | "
+                         + " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
+                                      for part in ("crossing", "slave", "master")) + " |")
+    if c.get("baseline_step"):
+        b = c["baseline_step"]
+        lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s: {b['per_step_s'] * 1e6:.1f} us, "
+                  f"{b['over_hollow_floor']:.2f}x the do-nothing FMUs' floor for the same calls "
+                  f"({b['hollow_floor_per_step_s'] * 1e6:.1f} us)."]
     if c.get("overhead_above_floor"):
         lines += ["", "Harness overhead above the FMU-call floor (median over steps; masters that make more "
                   "FMI calls per step than the floor's one step and one propagation show those calls here too): "

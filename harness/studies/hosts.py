@@ -20,35 +20,29 @@ applying the parameters to the last communication point; ecos: the time of its l
 progress line, "90% complete, simulated 9.000s in T s", scaled to the whole span), the median of ``repeats`` runs, and the ratio
 to our harness's median in the same run.
 
-``run_ecos`` and ``ecos_traces`` are also what the tests use to run ecos.
+``run_ecos`` and ``ecos_traces`` (``harness.formats.ecos``, also the benchmark's peer ``ecos``)
+are what the tests use to run ecos.
 """
 from __future__ import annotations
 
-import csv
-import importlib.metadata
 import os
 import re
 import shutil
 import statistics
 import subprocess
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..formats import peers, ssp
+# ecos's runner lives with the peers (layer 4), which run it in `lever bench` too
+from ..formats.ecos import BARE_ENVIRONMENT, EcosRun, EcosUnavailable, ecos_program, ecos_traces, run_ecos  # noqa: F401
 from ..description import scene as scenes
 from ..paths import FMUS, RESULTS, ROOT
 from ..engine.run import simulate
 
 HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "ecos-log-all", "c-importer")
-#: The environment of a host that is not a Python process and was set up for nothing.
-BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
-
-
-class EcosUnavailable(RuntimeError):
-    pass
 
 
 def set_up_environment() -> dict:
@@ -60,99 +54,6 @@ def set_up_environment() -> dict:
     library = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
     return {**BARE_ENVIRONMENT, "LD_PRELOAD": str(library), "PYTHONHOME": sys.base_prefix,
             "PYTHONPATH": sysconfig.get_paths()["purelib"], "PYTHONNOUSERSITE": "1"}
-
-
-def ecos_program(cache: Path) -> tuple[Path, Path]:
-    """(the ecos executable, the directory of libtbb.so.12) from the installed ``ecospy`` and
-    ``tbb`` wheels.  ecospy's wheel ships its program without the executable bit: a copy
-    with it is made in ``cache``."""
-    try:
-        ecos_files = importlib.metadata.distribution("ecospy").files or []
-        tbb_files = importlib.metadata.distribution("tbb").files or []
-    except importlib.metadata.PackageNotFoundError as missing:
-        raise EcosUnavailable(f"{missing.name} is not installed (a test dependency: pip install -e '.[test]')")
-    program = next((f for f in ecos_files if f.parts[-2:] == ("binaries", "ecos")), None)
-    tbb = next((f for f in tbb_files if f.name == "libtbb.so.12"), None)
-    if program is None or tbb is None:
-        raise EcosUnavailable("ecospy's binaries/ecos or tbb's libtbb.so.12 is missing from the installed wheels")
-    cache.mkdir(parents=True, exist_ok=True)
-    executable = cache / "ecos"
-    if not executable.exists():
-        shutil.copy2(Path(program.locate()), executable)
-        executable.chmod(0o755)
-    return executable, Path(tbb.locate()).resolve().parent
-
-
-def _csv_config(record: list[str], path: Path) -> Path:
-    """An ecos CSV configuration (its CsvConfig.xsd) logging the ``component.variable`` names."""
-    from xml.sax.saxutils import quoteattr
-
-    by_component: dict[str, list[str]] = {}
-    for name in record:
-        component, variable = name.split(".", 1)
-        by_component.setdefault(component, []).append(variable)
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             '<ecos:CsvConfig xmlns:ecos="http://github.com/Ecos-platform/libecos/resources/schema/CsvConfig">',
-             "  <ecos:components>"]
-    for component, variables in by_component.items():
-        lines.append(f"    <ecos:component name={quoteattr(component)}>")
-        lines += [f"      <ecos:variable name={quoteattr(v)}/>" for v in variables]
-        lines.append("    </ecos:component>")
-    lines += ["  </ecos:components>", "</ecos:CsvConfig>"]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-@dataclass
-class EcosRun:
-    csv: Path
-    wall_time: float   # the stepping loop, from ecos's own log
-    log: str
-
-
-def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | None = None,
-             parallel: bool = True, record: list[str] | None = None, timeout: float = 600) -> EcosRun:
-    """Runs ``ecos simulate`` on an SSP archive or an FMU (``target``) from 0 to ``stop`` at
-    ``step``, in ``env`` (default: bare), the FMUs stepped in parallel threads or not.  ecos
-    writes ``<target stem>.csv`` next to the target: the ``record`` (``component.variable``
-    names) or, by default, every variable.  Raises RuntimeError with ecos's output if it
-    fails."""
-    program, tbb_dir = ecos_program(cache)
-    environment = dict(BARE_ENVIRONMENT if env is None else env)
-    environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
-    options = [] if parallel else ["--noParallel"]
-    if record is not None:
-        options += ["--csvConfig", str(_csv_config(record, target.with_name(target.stem + "_CsvConfig.xml")))]
-    done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),
-                           "--stepSize", repr(step), "--logLevel", "info", *options],
-                          env=environment, cwd=target.parent,
-                          capture_output=True, text=True, timeout=timeout)
-    log = done.stdout + done.stderr
-    result = target.with_suffix(".csv")
-    if done.returncode != 0 or not result.exists() or "[error]" in log:
-        raise RuntimeError(f"ecos failed on {target.name} (exit {done.returncode}):\n{log[-4000:]}")
-    # ecos's own progress lines ("90% complete, simulated 9.000s in 4.321s"): the last one,
-    # scaled to the whole span (it logs no line at 100 %).
-    progress = re.findall(r"simulated ([0-9.]+)s in ([0-9.]+)s", log)
-    simulated, took = (float(x) for x in progress[-1]) if progress else (float("nan"), float("nan"))
-    wall = took * stop / simulated if simulated > 0 else float("nan")
-    return EcosRun(result, wall, log)
-
-
-def ecos_traces(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """(times, {component.variable: values}) of the real columns of an ecos CSV
-    (header ``iterations, time, component::variable[REAL], ...``)."""
-    with open(path, newline="") as handle:
-        rows = list(csv.reader(handle))
-    header = [h.strip() for h in rows[0]]
-    columns = {}
-    for index, name in enumerate(header):
-        match = re.fullmatch(r"(\w+)::(\w+)\[REAL\]", name)
-        if match:
-            columns[f"{match.group(1)}.{match.group(2)}"] = index
-    table = [[float(row[i]) for i in [header.index("time"), *columns.values()]] for row in rows[1:] if row]
-    data = np.array(table)
-    return data[:, 0], {name: data[:, k + 1] for k, name in enumerate(columns)}
 
 
 def write_result_csv(path: Path, times: np.ndarray, traces: dict[str, np.ndarray], names: list[str]) -> Path:

@@ -220,6 +220,7 @@ class MidpointPredictionMaster(JacobiMaster):
         system.propagate()       # fill the buffers of the newly exposed outputs
         # Per source and feedthrough target: the buffer indices of each input's Taylor terms.
         self._predictions = []
+        predicted = {}
         for source in system.stateful:
             values = system.buffers[source][1]
             names = system.exposed[source]
@@ -227,15 +228,20 @@ class MidpointPredictionMaster(JacobiMaster):
                 if target.name not in system.feedthrough:
                     continue
                 terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in positions]
-                self._predictions.append((values, target, vrs, target_values, terms))
+                self._predictions.append((values, target_values, terms))
+                predicted.setdefault(target, []).append(source)
+        # Each feedthrough target's predicted inputs sent in one call (its buffer's runs)
+        self._sends = [(target, vrs, target_values) for target, sources in predicted.items()
+                       for vrs, target_values in system.input_spans(target.name, sources)]
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
         and propagate the coupling torques they give to the stateful components."""
         factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
-        for values, target, vrs, target_values, terms in self._predictions:
+        for values, target_values, terms in self._predictions:
             for k, indices in enumerate(terms):
                 target_values[k] = sum(f * values[i] for f, i in zip(factors, indices))
+        for target, vrs, target_values in self._sends:
             target.write(vrs, target_values)
         self.system.propagate(self._feedthrough)
 
