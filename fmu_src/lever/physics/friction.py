@@ -48,6 +48,9 @@ class ResistingLoad:
         self.breakaway = float(breakaway)      # Fs >= Fc [N.m]
         self.viscous = float(viscous)          # b_v [N.m.s/rad]
         self.mean = base.mean
+        #: whether the shaft can stick (Coulomb friction, stiction or a brake); without, the
+        #: load is smooth (viscous only) and the shaft takes plain RK4 substeps
+        self.sticks = self.resistive or self.coulomb > 0.0 or self.breakaway > 0.0
 
     # -- the parts of the law -------------------------------------------------------------
     def parts(self, t, phi) -> tuple[float, float, float]:

@@ -22,7 +22,7 @@ class Shaft:
         self.max_substep = float(max_substep)
         #: a load that resists the motion (friction, a brake): its torque at rest depends
         #: on the coupling torque, and its stops and breakaways are located in the step
-        self.resisting = isinstance(external, ResistingLoad)
+        self.resisting = isinstance(external, ResistingLoad) and external.sticks
 
     def rates(self, t, phi, w, tau):
         """``(a, M_ext)``: the acceleration with coupling torque ``tau`` and the
