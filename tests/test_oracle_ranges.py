@@ -56,9 +56,9 @@ RANGES = [
     ("LoadShaft", "friction_torque", 0.0, 1e6, False, False, "issue 17: a Coulomb friction resists, Fc >= 0"),
     ("LoadShaft", "breakaway_torque", 0.0, 1e6, False, False, "issue 17: static friction Fs >= 0 (and >= Fc)"),
     ("LoadShaft", "viscous_damping", 0.0, 1e6, False, False, "issue 17: viscous friction dissipates, b_v >= 0"),
-    ("LoadShaft", "order_amplitude", 0.0, 1e6, False, False, "MODEL.md s.5: an amplitude of the spectrum, >= 0"),
+    ("LoadShaft", "order_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
     ("LoadShaft", "order_phase", -1e3, 1e3, False, False, "FMU docs: a phase [rad]"),
-    ("LoadShaft", "narrowband_amplitude", 0.0, 1e6, False, False, "MODEL.md s.5: an amplitude of the spectrum, >= 0"),
+    ("LoadShaft", "narrowband_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
     ("LoadShaft", "narrowband_low", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
     ("LoadShaft", "narrowband_high", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
     # -- the freewheel rectifier (MODEL.md section 8; the paper's eqs. (1)-(18)) --

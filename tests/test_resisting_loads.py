@@ -143,20 +143,33 @@ def test_the_reference_switches_stick_and_slip_at_the_physics_events():
 # --------------------------------------------------------------------------------------
 
 
-def test_the_spectrum_load_is_its_random_part_plus_an_order_and_a_narrow_band():
-    spectrum = Spectrum(order=1, order_amplitude=5.5, order_phase=0.3, narrowband_amplitude=3.3)
-    load = SpectrumLoad(107.5, 0.0, 1, 6, 2.0, 450.0, spectrum)
-    again = SpectrumLoad(107.5, 0.0, 1, 6, 2.0, 450.0, spectrum)
-    assert [load.resistance(0.01 * k, 0.7 * k, 0.0) for k in range(50)] == \
-        [again.resistance(0.01 * k, 0.7 * k, 0.0) for k in range(50)]
+def test_the_spectrum_load_splits_the_bound_into_an_order_a_narrow_band_and_the_rest():
+    spectrum = Spectrum(order=1, order_share=0.6, order_phase=0.3, narrowband_share=0.3)
+    load = SpectrumLoad(107.5, 10.0, 1, 6, 2.0, 450.0, spectrum)
+    again = SpectrumLoad(107.5, 10.0, 1, 6, 2.0, 450.0, spectrum)
+    samples = [load.resistance(0.0137 * k, 0.7 * k, 0.0) for k in range(2000)]
+    assert samples == [again.resistance(0.0137 * k, 0.7 * k, 0.0) for k in range(2000)]
+    assert max(abs(m - 107.5) for m in samples) <= 10.0 + 1e-12          # |Mc - Mm| <= dM
     assert all(415.0 <= f <= 425.0 for _, f, _ in load.narrowband) and len(load.narrowband) == 5
-    assert sum(a for a, _, _ in load.narrowband) == pytest.approx(3.3, rel=1e-12)
-    # angle-locked: at time 0 the narrow band's part is fixed, the order part follows phi
-    band0 = load.resistance(0.0, 0.0, 0.0) - 107.5 - 5.5 * math.sin(0.3)
+    assert sum(a for a, _, _ in load.narrowband) == pytest.approx(3.0, rel=1e-12)
+    assert load.order_amplitude == 6.0 and sum(load.weights) == pytest.approx(1.0, rel=1e-12)
+    # angle-locked: at a fixed time only the order part moves with phi
+    rest = load.resistance(0.2, 0.0, 0.0) - 6.0 * math.sin(0.3)
     for phi in (0.5, 2.0, 4.0):
-        assert load.resistance(0.0, phi, 0.0) == pytest.approx(107.5 + band0 + 5.5 * math.sin(phi + 0.3), abs=1e-12)
-    # the broad multisine is RandomLoad's own for the seed
-    broad = SpectrumLoad(107.5, 8.8, 3, 6, 2.0, 450.0, Spectrum())
-    plain = RandomLoad(107.5, 8.8, 3, 6, 2.0, 450.0)
-    assert broad.frequencies == plain.frequencies and broad.resistance(0.37, 1.0, 0.0) == \
-        pytest.approx(plain.resistance(0.37, 1.0, 0.0), abs=1e-12)
+        assert load.resistance(0.2, phi, 0.0) == pytest.approx(rest + 6.0 * math.sin(phi + 0.3), abs=1e-12)
+    # the broad multisine is RandomLoad's own for the seed, scaled to the rest of dM
+    plain = RandomLoad(107.5, 1.0, 1, 6, 2.0, 450.0)
+    assert load.frequencies == plain.frequencies and load.phases == plain.phases
+    with pytest.raises(ParameterError) as info:
+        SpectrumLoad(107.5, 10.0, 1, 6, 2.0, 450.0, Spectrum(order_share=0.7, narrowband_share=0.4))
+    assert info.value.name == "narrowband_share"
+
+
+def test_without_an_order_part_the_spectrum_shaft_steps_in_closed_form():
+    load = SpectrumLoad(107.5, 8.8, 2, 6, 2.0, 450.0, Spectrum(narrowband_share=0.5))
+    exact = Shaft(0.161, load)
+    assert load.advance(0.161, 0.0, 0.0, 39.0, 100.0, 1e-3) is not None
+    stepped = Shaft(0.161, load, max_substep=1e-6)
+    phi, w, _ = exact.advance(0.3, 1.0, 39.0, 100.0, 2e-3)
+    phi_rk, w_rk = stepped._rk4(0.3, 1.0, 39.0, 100.0, 2e-3)
+    assert phi == pytest.approx(phi_rk, abs=1e-12) and w == pytest.approx(w_rk, abs=1e-10)

@@ -70,7 +70,7 @@ def load_range(load) -> tuple[float, float]:
             low, high = -max(-low, high), max(-low, high)
         return low - load.breakaway, high + load.breakaway
     if isinstance(load, SpectrumLoad):
-        return load.mean - load.spread, load.mean + load.spread
+        return load.mean - load.bound, load.mean + load.bound
     if isinstance(load, ConstantLoad):
         return load.mean, load.mean
     if isinstance(load, RandomLoad):

@@ -96,11 +96,11 @@ LOAD = (
     # The spectrum the monograph's oscillograms show (MODEL.md section 5): load_kind 'spectrum'.
     Parameter("order", 1, "", "shaft order k of the angle-locked component (k per revolution of the driven "
               "shaft)", 1, 64, kind="integer"),
-    Parameter("order_amplitude", 0.0, "N.m", "amplitude of the angle-locked component A_k sin(k*phi + psi)",
-              0.0, 1e6),
+    Parameter("order_share", 0.0, "1", "share of the bound dM that the angle-locked component "
+              "dM*order_share*sin(k*phi + psi) takes (spectrum)", 0.0, 1.0),
     Parameter("order_phase", 0.0, "rad", "phase psi of the angle-locked component", -1e3, 1e3),
-    Parameter("narrowband_amplitude", 0.0, "N.m", "bound of the narrow-band component (seeded tones in "
-              "narrowband_low...narrowband_high, weights summing to it)", 0.0, 1e6),
+    Parameter("narrowband_share", 0.0, "1", "share of the bound dM that the narrow band takes (seeded tones in "
+              "narrowband_low...narrowband_high; the broad multisine takes the rest: |Mc - Mm| <= dM)", 0.0, 1.0),
     Parameter("narrowband_low", 415.0, "rad/s", "lowest angular frequency of the narrow band", 0.0, 1e5,
               low_open=True),
     Parameter("narrowband_high", 425.0, "rad/s", "highest angular frequency of the narrow band", 0.0, 1e5,
@@ -158,7 +158,7 @@ def engine_from(values: dict) -> Shaft:
 
 def load_from(values: dict) -> Shaft:
     p = check_all(LOAD, values)
-    spectrum = Spectrum(p["order"], p["order_amplitude"], p["order_phase"], p["narrowband_amplitude"],
+    spectrum = Spectrum(p["order"], p["order_share"], p["order_phase"], p["narrowband_share"],
                         p["narrowband_low"], p["narrowband_high"], p["narrowband_tones"])
     load = load_model(p["load_kind"], p["mean_torque"], p["random_amplitude"], p["seed"], p["tones"],
                       p["band_low"], p["band_high"], p["fourier"], p["table"], spectrum)

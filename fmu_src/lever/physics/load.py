@@ -119,38 +119,43 @@ class RandomLoad(_TimeLoad):
 
 
 class Spectrum(NamedTuple):
-    """What ``load_kind = "spectrum"`` adds to the random part (MODEL.md section 5: the
-    oscillograms show a component at the shaft's rotation frequency and one at
-    415-425 rad/s): ``order_amplitude * sin(order * phi + order_phase)``, locked to the
-    driven shaft's angle, and ``narrowband_tones`` seeded tones in
+    """What ``load_kind = "spectrum"`` makes of the random part's bound ``dM`` (MODEL.md
+    section 5: the oscillograms show a component at the shaft's rotation frequency and one
+    at 415-425 rad/s): ``order_share * dM * sin(order * phi + order_phase)``, locked to the
+    driven shaft's angle, ``narrowband_tones`` seeded tones in
     ``[narrowband_low, narrowband_high]`` rad/s whose weights sum to
-    ``narrowband_amplitude``."""
+    ``narrowband_share * dM``, and the broad multisine with the rest of ``dM``."""
     order: int = 1
-    order_amplitude: float = 0.0
+    order_share: float = 0.0
     order_phase: float = 0.0
-    narrowband_amplitude: float = 0.0
+    narrowband_share: float = 0.0
     narrowband_low: float = 415.0
     narrowband_high: float = 425.0
     narrowband_tones: int = 5
 
 
 class SpectrumLoad(RandomLoad):
-    """``Mc = Mm + (seeded multisine bounded by dM) + A_k sin(k phi + psi) + (narrow band)``.
-
-    The broad multisine is ``RandomLoad``'s, drawn first from the seed (the same tones as
-    ``load_kind = "random"`` with that seed); the narrow band's frequencies (uniform in its
-    band), phases and weights are the seed's next draws.  ``|Mc - Mm| <= dM + A_k +
-    narrowband_amplitude`` always holds.  Still a deterministic function of time and the
-    driven angle for a given seed.  With ``A_k = 0`` the load depends on time only and the
-    shaft steps exactly (closed-form integrals over all tones); otherwise by RK4."""
+    """``Mc = Mm + A_k sin(k phi + psi) + (narrow band) + (broad multisine)``, the three
+    amplitudes summing to the bound ``dM``, so ``|Mc - Mm| <= dM`` holds as for
+    ``RandomLoad``: ``A_k = order_share * dM``, the narrow band's weights sum to
+    ``narrowband_share * dM``, the broad multisine (``RandomLoad``'s tones for the seed, drawn
+    first) is bounded by the rest.  The narrow band's frequencies (uniform in its band),
+    phases and weights are the seed's next draws.  A deterministic function of time and the
+    driven angle for a given seed.  With ``order_share = 0`` the load depends on time only and
+    the shaft steps exactly (closed-form integrals over all tones); otherwise by RK4."""
 
     def __init__(self, mean: float, amplitude: float, seed: int, tones: int, band_low: float, band_high: float,
                  spectrum: Spectrum):
-        super().__init__(mean, amplitude, seed, tones, band_low, band_high)
+        shares = spectrum.order_share + spectrum.narrowband_share
+        if not shares <= 1.0:
+            raise ParameterError("narrowband_share", f"parameter 'narrowband_share' = {spectrum.narrowband_share:g} "
+                                 f"and 'order_share' = {spectrum.order_share:g} sum to {shares:g}: the shares of "
+                                 "the bound dM may sum to 1 at most")
         low, high = spectrum.narrowband_low, spectrum.narrowband_high
         if not 0.0 < low <= high:
             raise ParameterError("narrowband_low", f"parameter 'narrowband_low' = {low} must be > 0 and <= "
                                  f"narrowband_high = {high} rad/s")
+        super().__init__(mean, amplitude * max(0.0, 1.0 - shares), seed, tones, band_low, band_high)
         rng = SeededUniform(int(seed))
         rng.uniform(0.0, 1.0, 3 * int(tones))          # the broad multisine's draws
         n = int(spectrum.narrowband_tones)
@@ -158,17 +163,16 @@ class SpectrumLoad(RandomLoad):
         phases = rng.uniform(0.0, 2.0 * math.pi, n)
         weights = rng.uniform(0.5, 1.0, n)
         total = pairwise_sum(weights)
-        self.narrowband = [(spectrum.narrowband_amplitude * w / total, f, p)
-                           for w, f, p in zip(weights, frequencies, phases)]
+        band = spectrum.narrowband_share * amplitude
+        self.narrowband = [(band * w / total, f, p) for w, f, p in zip(weights, frequencies, phases)]
         self._tones = self._tones + self.narrowband
         self.spectrum = spectrum
+        self.bound = float(amplitude)                  # dM: |Mc - Mm| <= dM
         self.order = int(spectrum.order)
-        self.order_amplitude = float(spectrum.order_amplitude)
+        self.order_amplitude = spectrum.order_share * amplitude
         self.order_phase = float(spectrum.order_phase)
         #: bound of |dMc/dphi| [N.m/rad]: sets the RK4 substep that stays stable
         self.angle_stiffness = self.order * self.order_amplitude
-        #: bound of |Mc - Mm| [N.m]
-        self.spread = self.amplitude + self.order_amplitude + spectrum.narrowband_amplitude
 
     def rate(self, inertia: float) -> float:
         return math.sqrt(self.angle_stiffness / inertia)
