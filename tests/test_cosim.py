@@ -156,7 +156,7 @@ def test_unknown_master_is_refused_by_simulate():
 
 # The KAVZ-685 scene as shipped (jacobi-quadratic, 1 ms, 10 s, the spectrum load of issue 17:
 # shaft order and 415-425 rad/s) against the monolithic reference, re-measured with that load
-# (/tmp script on the shared 2-core machine, the pinned numpy/scipy; issue 17 closing note): RMS
+# (this test's own computation, run once on the shared 2-core machine, the pinned numpy/scipy): RMS
 # errors relative to the scale (the mean transmitted torque, the mean speed) of tau1 6.98e-6,
 # tau2 6.98e-6, w1 1.62e-6, w2 1.35e-6 (the old multisine gave 8.01e-6, 8.01e-6, 1.87e-6,
 # 1.57e-6); co-simulation energy residual 1.98e-8 of the engine's work (was 2.24e-8); the
