@@ -110,8 +110,8 @@ SETUP = {
     ("LoadShaft", "band_low"): {"band_high": 1e5},
     ("LoadShaft", "band_high"): {"band_low": 5e-324},
     ("LoadShaft", "friction_torque"): {"breakaway_torque": 1e6},     # Fs >= Fc
-    ("LoadShaft", "narrowband_low"): {"load_kind": "spectrum", "narrowband_high": 1e5},
-    ("LoadShaft", "narrowband_high"): {"load_kind": "spectrum", "narrowband_low": 5e-324},
+    ("LoadShaft", "narrowband_low"): {"narrowband_share": 0.5, "narrowband_high": 1e5},
+    ("LoadShaft", "narrowband_high"): {"narrowband_share": 0.5, "narrowband_low": 5e-324},
     ("FreewheelRectifier", "ramp_angle"): {"ball_friction": 0.0},   # f_k tan(alpha) < 1 near 90 deg
 }
 

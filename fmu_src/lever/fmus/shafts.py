@@ -101,8 +101,8 @@ class LoadShaft(_ShaftSlave):
     EQUATIONS = (
         "dphi/dt = w",
         "I2*dw/dt = tau(t) - Mc(t, phi, w) - F(w, tau),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
-        "Mc = Mm (constant); Mm + seeded multisine bounded by dM (random); random plus Ak*sin(k*phi + psi) and "
-        "seeded tones in 415...425 rad/s (spectrum); angle-periodic Fourier series (fourier); linear interpolation "
+        "Mc = Mm (constant); Mm + seeded multisine bounded by dM, with shares of dM at Ak*sin(k*phi + psi) and in "
+        "seeded tones at 415...425 rad/s (random); angle-periodic Fourier series (fourier); linear interpolation "
         "in a time series (table)",
         "load_direction resistive: Mc is a brake, max(Mc, 0)*sign(w) against the motion, holding at rest",
         "F = Fc*sign(w) + b_v*w while w != 0; at w = 0 the shaft stays at rest while |net| <= Fs (+ the brake), "

@@ -66,9 +66,9 @@ ENGINE = (
 
 LOAD = (
     Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 1e-6, 1e6),
-    Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part), "
-              "spectrum (random plus a shaft-order component and a narrow band), fourier (angle-periodic series) or "
-              "table (time series)", kind="string", choices=LOAD_KINDS),
+    Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part, "
+              "which may carry a shaft-order component and a narrow band: order_share, narrowband_share), fourier "
+              "(angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
     Parameter("mean_torque", 107.5, "N.m", "mean technological resistance Mm", -1e6, 1e6),
     Parameter("random_amplitude", 8.8, "N.m", "bound dM of the random part: |Mc - Mm| <= dM", 0.0, 1e6),
     Parameter("seed", 1, "", "seed of the random part (same seed, same load)", 0, 2 ** 31 - 1, kind="integer"),
@@ -93,11 +93,12 @@ LOAD = (
               "the shaft from rest (Fs >= Fc)", 0.0, 1e6),
     Parameter("viscous_damping", 0.0, "N.m.s/rad", "viscous friction b_v on the driven shaft: torque -b_v*w",
               0.0, 1e6),
-    # The spectrum the monograph's oscillograms show (MODEL.md section 5): load_kind 'spectrum'.
+    # The spectrum the monograph's oscillograms show (MODEL.md section 5), carried by the random
+    # part when a share is above 0 (Real parameters only: a String the fmpy.ssp peer cannot set).
     Parameter("order", 1, "", "shaft order k of the angle-locked component (k per revolution of the driven "
               "shaft)", 1, 64, kind="integer"),
     Parameter("order_share", 0.0, "1", "share of the bound dM that the angle-locked component "
-              "dM*order_share*sin(k*phi + psi) takes (spectrum)", 0.0, 1.0),
+              "dM*order_share*sin(k*phi + psi) takes (load_kind random; 0: no such component)", 0.0, 1.0),
     Parameter("order_phase", 0.0, "rad", "phase psi of the angle-locked component", -1e3, 1e3),
     Parameter("narrowband_share", 0.0, "1", "share of the bound dM that the narrow band takes (seeded tones in "
               "narrowband_low...narrowband_high; the broad multisine takes the rest: |Mc - Mm| <= dM)", 0.0, 1.0),

@@ -21,7 +21,7 @@ from .numerics import SeededUniform, pairwise_sum
 from .parameters import TABLE_LIMIT, ParameterError, parse_table
 from .signals import TimeTable
 
-LOAD_KINDS = ("constant", "random", "spectrum", "fourier", "table")
+LOAD_KINDS = ("constant", "random", "fourier", "table")
 
 
 def _sinc(y: float) -> float:
@@ -119,12 +119,14 @@ class RandomLoad(_TimeLoad):
 
 
 class Spectrum(NamedTuple):
-    """What ``load_kind = "spectrum"`` makes of the random part's bound ``dM`` (MODEL.md
+    """What the random part (``load_kind = "random"``) makes of its bound ``dM`` when it
+    carries the spectrum of the oscillograms (a share above 0) (MODEL.md
     section 5: the oscillograms show a component at the shaft's rotation frequency and one
     at 415-425 rad/s): ``order_share * dM * sin(order * phi + order_phase)``, locked to the
     driven shaft's angle, ``narrowband_tones`` seeded tones in
     ``[narrowband_low, narrowband_high]`` rad/s whose weights sum to
-    ``narrowband_share * dM``, and the broad multisine with the rest of ``dM``."""
+    ``narrowband_share * dM``, and the broad multisine with the rest of ``dM``.  Both shares
+    0: the broad multisine alone, ``RandomLoad`` as it always was."""
     order: int = 1
     order_share: float = 0.0
     order_phase: float = 0.0
@@ -327,9 +329,9 @@ def load_model(kind: str, Mm: float, dM: float = 0.0, seed: int = 1, tones: int 
     if kind == "constant":
         return ConstantLoad(Mm)
     if kind == "random":
+        if spectrum.order_share or spectrum.narrowband_share:
+            return SpectrumLoad(Mm, dM, seed, tones, band_low, band_high, spectrum)
         return RandomLoad(Mm, dM, seed, tones, band_low, band_high)
-    if kind == "spectrum":
-        return SpectrumLoad(Mm, dM, seed, tones, band_low, band_high, spectrum)
     if kind == "fourier":
         return FourierLoad.parse(fourier)
     if kind == "table":
