@@ -98,7 +98,7 @@ def test_the_reference_and_the_fmus_agree_on_a_lagged_run_up():
 
 
 def test_the_lag_is_a_fourth_state_of_the_linear_model():
-    model = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35, 0.16)
+    model = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35, engine_lag=0.16)
     values = model.continuous_eigenvalues()
     assert len(values) == 4 and np.all(values.real < 0.0)
     h = 1e-3

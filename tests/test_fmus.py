@@ -15,7 +15,7 @@ from lever.physics import catalogue
 DEG = math.pi / 180.0
 FMI2_ERROR = 3
 FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
-DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12"}
+DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12", "order_share", "narrowband_share"}
 COUPLING_INPUTS = {"phi1", "w1", "phi2", "w2", "misalignment"}
 
 
@@ -104,9 +104,11 @@ def test_output_dependencies(fmu_dir):
     for fmu in ("EngineShaft", "LoadShaft"):
         md = fmpy.read_model_description(str(Path(fmu_dir) / f"{fmu}.fmu"))
         assert {o.variable.name for o in md.outputs} >= {"phi", "w", "a"}
-        # The state outputs do not depend on the inputs; the acceleration does, on the torque.
+        # The state outputs do not depend on the inputs; the acceleration does, on the torque,
+        # and so does the load torque (at rest static friction holds the coupling's torque).
         for output in md.outputs:
-            expected = ["tau"] if output.variable.name == "a" else []
+            depends = {"a"} | ({"load_torque"} if fmu == "LoadShaft" else set())
+            expected = ["tau"] if output.variable.name in depends else []
             assert [d.name for d in output.dependencies] == expected, (fmu, output.variable.name)
         # Derivative chains a master can use to predict: w = d(phi)/dt, a = d(w)/dt,
         # tau_rate = d(tau)/dt.
@@ -559,6 +561,35 @@ def test_a_serialized_state_continues_exactly_wherever_it_is_restored(fmu_dir, f
                 target.slave.reset()
         target.slave.setFMUstate(target.slave.deSerializeFMUstate(data))
         assert target.run(inputs, 30, 30) == uninterrupted
+    finally:
+        saved.free()
+        target.free()
+
+
+def test_a_state_saved_while_friction_holds_the_load_continues_exactly(fmu_dir):
+    """A resisting load's stuck flag is its speed at exactly 0 (lever.physics.friction):
+    a state serialized while static friction holds the shaft, restored into a fresh
+    instance, goes on through the next breakaways and stops bit for bit as the
+    uninterrupted run."""
+    parameters = {"load_kind": "constant", "mean_torque": 20.0, "load_direction": "resistive",
+                  "friction_torque": 2.0, "breakaway_torque": 3.0, "viscous_damping": 0.1, "w_start": 0.5,
+                  "inertia": 0.05}
+
+    def inputs(k):   # swings beyond the 23 N.m held at rest and back: slips, stops, sticks
+        return {"tau": 30.0 * math.sin(0.21 * k), "tau_rate": 6.3 * math.cos(0.21 * k)}
+
+    saved, target = _Fmi(fmu_dir, "LoadShaft", "saved"), _Fmi(fmu_dir, "LoadShaft", "target")
+    try:
+        saved.start(parameters)
+        before = saved.run(inputs, 0, 32)
+        w = saved.vr["w"].valueReference
+        assert saved.slave.getReal([w]) == [0.0]          # held since step 30
+        data = saved.slave.serializeFMUstate(saved.slave.getFMUstate())
+        uninterrupted = saved.run(inputs, 32, 28)
+        target.slave.setFMUstate(target.slave.deSerializeFMUstate(data))
+        assert target.run(inputs, 32, 28) == uninterrupted
+        speeds = [row[saved.outputs.index(w)] for row in before + uninterrupted]
+        assert any(s > 0 for s in speeds) and any(s < 0 for s in speeds) and speeds.count(0.0) >= 10
     finally:
         saved.free()
         target.free()

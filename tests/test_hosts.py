@@ -49,6 +49,11 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
         assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "ecos applies none of the SSV parameter sets' values (found in issue 17: with kavz685's load "
+    "order_share = 0.55 and narrowband_share = 0.45 its load torque is the FMU default's, 14 N*m off; "
+    "load.mean_torque = 200 is ignored too, 93 N*m off, and coupling.support_deformation = 0.08): the "
+    "scene passed before only because every value it sets equals the FMUs' default"))
 def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_path):
     spec = scene.load("kavz685")
     archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)

@@ -55,6 +55,14 @@ RANGES = [
     ("LoadShaft", "phi_start", -1e9, 1e9, False, False, "FMU docs"),
     ("LoadShaft", "w_start", -1e5, 1e5, False, False, "FMU docs"),
     ("LoadShaft", "max_substep", 0.0, 1.0, True, False, "FMU docs: an integration step, > 0"),
+    ("LoadShaft", "friction_torque", 0.0, 1e6, False, False, "issue 17: a Coulomb friction resists, Fc >= 0"),
+    ("LoadShaft", "breakaway_torque", 0.0, 1e6, False, False, "issue 17: static friction Fs >= 0 (and >= Fc)"),
+    ("LoadShaft", "viscous_damping", 0.0, 1e6, False, False, "issue 17: viscous friction dissipates, b_v >= 0"),
+    ("LoadShaft", "order_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
+    ("LoadShaft", "order_phase", -1e3, 1e3, False, False, "FMU docs: a phase [rad]"),
+    ("LoadShaft", "narrowband_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
+    ("LoadShaft", "narrowband_low", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
+    ("LoadShaft", "narrowband_high", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
     # -- the freewheel rectifier (MODEL.md section 8; the paper's eqs. (1)-(18)) --
     ("FreewheelRectifier", "input_speed", 0.0, 1e4, True, False, "MODEL.md s.8: rocker frequency, > 0"),
     ("FreewheelRectifier", "rocker_amplitude", 0.0, 1.5, True, False, "MODEL.md s.8: phi0 > 0"),
@@ -88,6 +96,8 @@ RANGES = [
 INTEGER_RANGES = [
     ("LoadShaft", "seed", 0, 2 ** 31 - 1, "FMU docs: a seed, >= 0"),
     ("LoadShaft", "tones", 1, 256, "FMU docs: at least one sinusoid"),
+    ("LoadShaft", "order", 1, 64, "MODEL.md s.5: the shaft rotation frequency and its orders, k >= 1"),
+    ("LoadShaft", "narrowband_tones", 1, 256, "FMU docs: at least one sinusoid in the band"),
     ("FreewheelRectifier", "friction_pairs", 1, 1000, "MODEL.md s.8: n friction pairs, >= 1"),
     ("FreewheelRectifier", "max_events", 1, 10 ** 9, "FMU docs: at least one event per step"),
 ]
@@ -101,6 +111,9 @@ SETUP = {
     ("LeverCoupling", "misalignment"): {"transfer_mode": "synchronous"},
     ("LoadShaft", "band_low"): {"band_high": 1e5},
     ("LoadShaft", "band_high"): {"band_low": 5e-324},
+    ("LoadShaft", "friction_torque"): {"breakaway_torque": 1e6},     # Fs >= Fc
+    ("LoadShaft", "narrowband_low"): {"narrowband_share": 0.5, "narrowband_high": 1e5},
+    ("LoadShaft", "narrowband_high"): {"narrowband_share": 0.5, "narrowband_low": 5e-324},
     ("FreewheelRectifier", "ramp_angle"): {"ball_friction": 0.0},   # f_k tan(alpha) < 1 near 90 deg
 }
 

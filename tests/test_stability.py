@@ -143,6 +143,35 @@ def test_stand_in_steps_like_the_real_fmus(name):
     assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
 
 
+@pytest.mark.parametrize("name", ["jacobi", "trapezoidal-newton"])
+def test_stand_in_with_a_viscous_load_steps_like_the_real_fmus(name):
+    """A load's viscous friction b_v is the one feedback of a load in the linear model
+    (issue 17): the stand-in carries it (the same smooth load of lever.physics.friction)
+    and steps like the FMUs, and it damps the coupling mode by b_v (I1/(I1 + I2))^2."""
+    c, b, viscous = 1e4, 0.5, 3.0
+    spec = scene.load("kavz685").with_overrides(
+        ["coupling.transfer_mode=synchronous", "load.load_kind=constant", f"coupling.stiffness={c}",
+         f"coupling.damping={b}", "experiment.transient=0", f"load.viscous_damping={viscous}"])
+    model = stability.model_of(spec)
+    assert model.driven_slope == viscous
+    share = 0.128 / (0.128 + 0.161)
+    without = stability.TwoInertia(0.128, 0.161, 14.06, c, b)
+    assert model.zeta - without.zeta == pytest.approx(viscous * share ** 2 / (2 * math.sqrt(c * 0.161 * share)),
+                                                      rel=1e-12)
+    # the continuous model's least damped pair has that damping ratio (to the modal approximation)
+    pair = max(stability.TwoInertia.continuous_eigenvalues(model), key=lambda z: abs(z.imag))
+    assert -pair.real / abs(pair) == pytest.approx(model.zeta, rel=0.02)
+    step, n = model.step_for(0.4), 60
+    options = {"tolerance": 1e-12} if "tolerance" in masters.MASTERS[name].options else {}
+    spec = spec.with_overrides([f"experiment.stop={n * step!r}"])
+    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options)
+            for extra in ([], ["engine.phi_start=0.002", "load.w_start=39.5"])]
+    assert all(r.ok for r in runs), [r.failure for r in runs]
+    real = runs[1].traces["coupling.tau2"][1:] - runs[0].traces["coupling.tau2"][1:]
+    linear = _replay(model, name, step, n, (0.002, 0.0, 0.0, 0.5), options)
+    assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
+
+
 def test_predicted_growth_rate_matches_the_real_run():
     """Above its edge, zero-order hold grows on the full KAVZ scene (kinematic transfer,
     random load) at the rate the spectral radius of the linear map predicts."""

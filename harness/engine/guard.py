@@ -33,7 +33,8 @@ from dataclasses import dataclass
 from lever.physics import catalogue
 from lever.physics.elastic import LinearElasticLaw
 from lever.physics.engine import LinearCharacteristic
-from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad
+from lever.physics.friction import ResistingLoad
+from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, SpectrumLoad, TabulatedLoad
 from lever.physics.parameters import ParameterError
 
 from harness.description import kinds
@@ -61,6 +62,15 @@ class Bound:
 
 def load_range(load) -> tuple[float, float]:
     """Smallest and largest resistance a load model can give."""
+    if isinstance(load, ResistingLoad):
+        # friction (and a brake) resist either way: the resistance ranges over +- its largest
+        low, high = load_range(load.base)
+        if load.resistive:
+            low, high = min(low, 0.0), max(high, 0.0)
+            low, high = -max(-low, high), max(-low, high)
+        return low - load.breakaway, high + load.breakaway
+    if isinstance(load, SpectrumLoad):
+        return load.mean - load.bound, load.mean + load.bound
     if isinstance(load, ConstantLoad):
         return load.mean, load.mean
     if isinstance(load, RandomLoad):

@@ -39,6 +39,10 @@ def summarize(result: RunResult, reference=None) -> dict:
                                  for short, full in names.items() if full in result.traces}
     if "energy_balance" in scene.features and result.ok:
         summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
+    load_torque = f"{kinds.roles(scene)[2]}.load_torque"
+    if len(result.times) > 1 and result.ok:
+        summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
+                                                          names["w2"], scene.experiment.transient)
     if reference is not None and len(result.times):
         summary["error_vs_reference"] = metrics.driveline_errors(scene, result.times, result.traces,
                                                                  reference.times, reference.traces)
@@ -85,6 +89,18 @@ def write_report(path: Path, summary: dict):
                   f"{eb['kinetic_change_J']:.4g} J - elastic change {eb['elastic_change_J']:.4g} J - dissipated "
                   f"{eb['dissipated_J']:.4g} J = residual {eb['residual_J']:.4g} J "
                   f"(**{100 * eb['residual_relative']:.2g} %** of the work in)."]
+    spectrum = summary.get("spectrum")
+    if spectrum:
+        lines += ["", "## Spectrum (spectrum.png)", "",
+                  f"Amplitudes after the transient at the driven shaft's rotation frequency (mean w2 = "
+                  f"{spectrum['rotation_frequency_rad_s']:.4g} rad/s) and in the oscillograms' band 415-425 rad/s "
+                  "(MODEL.md section 5):", "",
+                  "| signal | at the rotation frequency | in 415-425 rad/s |", "|---|---|---|"]
+        for name, entry in spectrum.items():
+            if isinstance(entry, dict):
+                cells = [f"{entry[k]['amplitude']:.3g} N*m at {entry[k]['frequency_rad_s']:.4g} rad/s"
+                         if k in entry else "-" for k in ("rotation", "band")]
+                lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
     lines += ["", files_line(summary)]
     if "revolution.png" in (summary.get("files") or []):
         lines.append(f"revolution.png and revolutions.png are over the driven shaft's angle, as the monograph draws "
@@ -172,6 +188,7 @@ def plot(out: Path, result: RunResult, reference=None):
                                                              (names["a2"], "a2 driven", "-")])], title)
     figure("transfer_function.png", [("U12 [1]", [(names["U12"], "U12", "-")])], title)
     plot_over_angle(out, result.scene, t, tr, title)
+    _plot_spectrum(out, result, title, plt)
     if reference is not None:
         fig, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
         n = min(len(t), len(reference.times))
@@ -227,6 +244,39 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
         fig.tight_layout()
         fig.savefig(out / filename, dpi=110)
         plt.close(fig)
+
+
+def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
+    """spectrum.png: amplitude spectra of the driven-shaft torque and the load torque after
+    the transient, the driven shaft's rotation frequency and the oscillograms' 415-425 rad/s
+    band marked (MODEL.md section 5)."""
+    names = metrics.signals(result.scene)
+    load_torque = f"{kinds.roles(result.scene)[2]}.load_torque"
+    transient = result.scene.experiment.transient
+    t, tr = result.times, result.traces
+    keep = t >= t[0] + transient
+    if keep.sum() < 8:
+        return
+    rotation = float(abs(tr[names["w2"]][keep].mean()))
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for ax, (name, label) in zip(axes, ((names["tau2"], "tau2, torque on the driven shaft"),
+                                        (load_torque, "load torque Mc"))):
+        if name not in tr:
+            continue
+        omega, amplitude = metrics.amplitude_spectrum(t, tr[name], transient)
+        ax.semilogy(omega, np.maximum(amplitude, 1e-6), "C0-", lw=0.7, label=label)
+        ax.axvline(rotation, color="C3", ls="--", lw=0.8, label=f"shaft rotation {rotation:.3g} rad/s")
+        ax.axvspan(*metrics.OSCILLOGRAM_BAND, color="C2", alpha=0.3, label="415-425 rad/s (oscillograms)")
+        ax.set_ylabel("amplitude [N*m]")
+        ax.set_ylim(1e-4, None)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlim(0.0, 600.0)
+    axes[-1].set_xlabel("angular frequency [rad/s]")
+    fig.suptitle(f"{title}: spectrum after t = {t[0] + transient:g} s")
+    fig.tight_layout()
+    fig.savefig(out / "spectrum.png", dpi=110)
+    plt.close(fig)
 
 
 def write_driveline(out: Path, result: RunResult, reference=None) -> dict:

@@ -106,6 +106,50 @@ def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, referen
     return out
 
 
+#: the band of the oscillograms' high-frequency component (MODEL.md section 5) [rad/s]
+OSCILLOGRAM_BAND = (415.0, 425.0)
+
+
+def amplitude_spectrum(times: np.ndarray, y: np.ndarray, transient: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided amplitude spectrum of ``y`` after ``transient``: angular frequencies
+    [rad/s] and the amplitude of a sinusoid at each (Hann window, its coherent gain
+    divided out; the mean removed).  A variable-step trace is first put on a uniform grid
+    of its median step."""
+    keep = times >= times[0] + transient
+    t, v = times[keep], np.asarray(y, dtype=float)[keep]
+    if len(t) < 8:
+        return np.zeros(0), np.zeros(0)
+    dt = float(np.median(np.diff(t)))
+    if not np.allclose(np.diff(t), dt, rtol=1e-6, atol=0):
+        grid = np.arange(t[0], t[-1], dt)
+        v, t = np.interp(grid, t, v), grid
+    window = np.hanning(len(v))
+    amplitude = 2.0 * np.abs(np.fft.rfft((v - v.mean()) * window)) / window.sum()
+    return 2.0 * np.pi * np.fft.rfftfreq(len(v), dt), amplitude
+
+
+def spectral_components(times: np.ndarray, traces: dict, names: list[str], shaft_speed: str,
+                        transient: float = 0.0, band: tuple[float, float] = OSCILLOGRAM_BAND) -> dict:
+    """The two components the monograph's oscillograms show, in each signal of ``names``:
+    the peak amplitude within 10 % of the mean speed of ``shaft_speed`` (the shaft's rotation
+    frequency) and the peak in ``band``, with their frequencies."""
+    keep = times >= times[0] + transient
+    rotation = float(np.mean(traces[shaft_speed][keep]))
+    out = {"rotation_frequency_rad_s": rotation}
+    for name in names:
+        if name not in traces:
+            continue
+        omega, amplitude = amplitude_spectrum(times, traces[name], transient)
+        entry = {}
+        for label, (low, high) in (("rotation", (0.9 * abs(rotation), 1.1 * abs(rotation))), ("band", band)):
+            inside = np.flatnonzero((omega >= low) & (omega <= high))
+            if inside.size:
+                k = inside[np.argmax(amplitude[inside])]
+                entry[label] = {"frequency_rad_s": float(omega[k]), "amplitude": float(amplitude[k])}
+        out[name] = entry
+    return out
+
+
 #: the driveline signals runs are judged by
 JUDGED = ("w1", "w2", "tau1", "tau2")
 

@@ -93,32 +93,40 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     fixed = coupling.evaluate if misalignment is None else None
     lagged = isinstance(engine, LaggedShaft)
 
+    if lagged:
+        def drive(t, y, tau1):
+            # the engine torque M lags its characteristic: an eighth state, after the works
+            a1, m1 = engine.rates(t, y[0], y[1], tau1, y[7])
+            return a1, m1, [engine.torque_rate(t, y[0], y[1], y[7])]
+    else:
+        def drive(t, y, tau1):
+            a1, m1 = drive_rates(t, y[0], y[1], tau1)
+            return a1, m1, []
+
     def rhs(t, y):
         p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
         r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
-        a1, m1 = drive_rates(t, p1, v1, r.tau1)
+        a1, m1, lag_rate = drive(t, y, r.tau1)
         a2, m2 = driven_rates(t, p2, v2, r.tau2)
-        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation]
-
-    def rhs_lagged(t, y):
-        # the engine torque M lags its characteristic: an eighth state, after the works
-        p1, v1, p2, v2, m = y[0], y[1], y[2], y[3], y[7]
-        r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
-        a1, m1 = engine.rates(t, p1, v1, r.tau1, m)
-        a2, m2 = driven_rates(t, p2, v2, r.tau2)
-        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation, engine.torque_rate(t, p1, v1, m)]
+        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation] + lag_rate
 
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
-    start = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
-    solution = solve_ivp(rhs_lagged if lagged else rhs, (float(times[0]), float(times[-1])), start,
-                         method=method, t_eval=times, rtol=rtol, atol=atol,
-                         first_step=min(1e-4, 0.1 / omega))
+    y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
+    if load.resisting:
+        couple = fixed if fixed else (lambda p1, v1, p2, v2, t: evaluate(p1, v1, p2, v2, t))
+        t, y, nfev = _solve_stick_slip(couple, drive, load, times, y0, method, rtol, atol,
+                                       min(1e-4, 0.1 / omega), fixed is not None)
+    else:
+        solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), y0,
+                             method=method, t_eval=times, rtol=rtol, atol=atol,
+                             first_step=min(1e-4, 0.1 / omega))
+        if not solution.success:
+            raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: "
+                                       f"{solution.message}")
+        t, y, nfev = solution.t, solution.y, int(solution.nfev)
     wall = clock.perf_counter() - started
-    if not solution.success:
-        raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: {solution.message}")
-    p1, v1, p2, v2, work_in, work_out, dissipated = solution.y[:7]
-    t = solution.t
+    p1, v1, p2, v2, work_in, work_out, dissipated = y[:7]
     # the physics takes scalars (it runs in the FMUs on the standard library alone)
     if misalignment is None:
         rows = [coupling.evaluate(*row) for row in zip(p1, v1, p2, v2)]
@@ -126,7 +134,7 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         rows = [evaluate(*row) for row in zip(p1, v1, p2, v2, t)]
     r = type(rows[0])(*(np.array(column) for column in zip(*rows)))
     if lagged:
-        m1 = solution.y[7]
+        m1 = y[7]
         a1 = (m1 + np.asarray(r.tau1)) / engine.inertia
     else:
         a1, m1 = _shaft_rates(engine, t, p1, v1, np.asarray(r.tau1))
@@ -145,10 +153,102 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         source = next(c.source for c in scene.connections if c.target == coupling_name and c.input == "misalignment")
         traces[f"{source}.misalignment"] = np.array([misalignment.value(x) for x in t])
         traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
-    reference = MonolithicSolution(t, traces, wall, int(solution.nfev), f"{method} rtol={rtol:g} atol={atol:g}")
+    reference = MonolithicSolution(t, traces, wall, nfev, f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
         store(path, reference)
     return reference
+
+
+#: mode switches (stops, breakaways) one reference run may hold before it is refused as chatter
+MAX_SWITCHES = 100_000
+
+
+def _solve_stick_slip(couple, drive, load, times, y0, method, rtol, atol, first_step, time_free):
+    """The driveline with a resisting load (``lever.physics.friction``): integrated in
+    segments of one mode each - the driven shaft slipping in a fixed direction, or held
+    at rest - switched at scipy's located events: the speed through zero (stop; the
+    stick condition decides) and the breakaway margin through zero (slip off in the
+    direction of the net torque).  The same functions of the physics as the FMU's
+    integrator.  ``drive(t, y, tau1) -> (a1, M1, [dM1/dt] or [])`` is the drive shaft's
+    (a lagged engine's torque is state ``y[7]``).  Returns ``(t, y, nfev)`` at ``times``."""
+    shaft = load
+    friction = shaft.external
+    inertia = shaft.inertia
+
+    def coupling_at(t, y):
+        return couple(y[0], y[1], y[2], y[3]) if time_free else couple(y[0], y[1], y[2], y[3], t)
+
+    def slipping(direction):
+        def rhs(t, y):
+            r = coupling_at(t, y)
+            a1, m1, lag_rate = drive(t, y, r.tau1)
+            m2 = friction.slip_torque(t, y[2], y[3], direction)
+            return [y[1], a1, y[3], (m2 + r.tau2) / inertia, m1 * y[1], -m2 * y[3], r.dissipation] + lag_rate
+
+        def stop(t, y):
+            return y[3]
+        stop.terminal = True
+        stop.direction = -direction
+        return rhs, stop
+
+    def held(t, y):
+        r = coupling_at(t, y)
+        a1, m1, lag_rate = drive(t, y, r.tau1)
+        return [y[1], a1, 0.0, 0.0, m1 * y[1], 0.0, r.dissipation] + lag_rate
+
+    def breakaway(t, y):
+        return friction.breakaway_margin(t, y[2], coupling_at(t, y).tau2)[0]
+    breakaway.terminal = True
+    breakaway.direction = 1.0
+
+    def mode_at(t, y):
+        """(held?, direction) by the memoryless law of the physics."""
+        tau2 = coupling_at(t, y).tau2
+        if friction.stuck(t, y[2], y[3], tau2):
+            return True, 0.0
+        if y[3] != 0.0:
+            return False, np.copysign(1.0, y[3])
+        return False, float(np.copysign(1.0, friction.breakaway_margin(t, y[2], tau2)[1]))
+
+    t_out, y_out, nfev = [], [], 0
+    start, stop_time = float(times[0]), float(times[-1])
+    y = list(map(float, y0))
+    done = 0
+    step = first_step
+    mode = mode_at(start, y)
+    for _ in range(MAX_SWITCHES):
+        is_held, direction = mode
+        if is_held:
+            y[3] = 0.0
+            rhs, events = held, [breakaway]
+        else:
+            rhs, stop = slipping(direction)
+            events = [stop]
+        remaining = times[done:]
+        solution = solve_ivp(rhs, (start, stop_time), y, method=method, t_eval=remaining, rtol=rtol, atol=atol,
+                             first_step=step, events=events)
+        nfev += int(solution.nfev)
+        if solution.status == -1:
+            raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: "
+                                       f"{solution.message}")
+        t_out.append(solution.t)
+        y_out.append(solution.y)
+        done += len(solution.t)
+        if solution.status == 0:
+            break
+        start = float(solution.t_events[0][0])
+        y = [float(v) for v in solution.y_events[0][0]]
+        if is_held:         # broke away: slips off in the direction of the net torque
+            net = friction.breakaway_margin(start, y[2], coupling_at(start, y).tau2)[1]
+            mode = (False, float(np.copysign(1.0, net)))
+        else:               # stopped, exactly: the stick condition decides
+            y[3] = 0.0
+            mode = mode_at(start, y)
+        step = min(first_step, max(1e-12, 1e-3 * (stop_time - start)))
+    else:
+        raise ReferenceUnavailable(f"the driven shaft stopped and broke away more than {MAX_SWITCHES} times "
+                               "(chattering friction): the reference gives up")
+    return np.concatenate(t_out), np.concatenate(y_out, axis=1), nfev
 
 
 #: the reference solver of each kind of scene (harness.description.kinds); the rectifier

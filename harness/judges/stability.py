@@ -5,7 +5,7 @@ The model (linearised about the steady operating point):
 
     I1 * dw1/dt = M + tau1                 drive shaft; M = -K1 * w1 (K1 = -dMg/dw, the engine's
     Te * dM/dt = -K1 * w1 - M              slope) at once when its torque lag Te = 0, else a state
-    I2 * dw2/dt = tau2                     driven shaft; the loads here do not depend on w
+    I2 * dw2/dt = -b_v * w2 + tau2         driven shaft; b_v the load's viscous friction
     T = c * (phi1 - phi2) + b * (w1 - w2), tau1 = -T, tau2 = T
 
 in deviations from the steady motion.  Linearisation: the transfer function is taken
@@ -14,7 +14,9 @@ under 1 % about it: a parametric modulation left out; the ``scaled`` mode's 14 %
 small and is only roughly covered), a tabulated elastic law by its nominal stiffness,
 a tabulated engine characteristic by its slope at the starting speed; the mean load and
 the engine's stall torque set the operating point and drop out of the deviations, the
-random and periodic parts of the load are forcing, not feedback.
+random and periodic parts of the load are forcing, not feedback; a Coulomb friction or a
+brake is constant while the shaft slips (it drops out too; a shaft held at rest has no
+coupling mode to lose).
 
 Coupling mode: ``omega_n = sqrt(c / I_red)`` with ``I_red = I1*I2/(I1 + I2)``, the
 undamped eigenfrequency, and the modal damping ratio of its mode shape (the drive
@@ -59,6 +61,7 @@ from fmpy import read_model_description
 from lever.physics import catalogue
 from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
+from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad
 from lever.physics.parameters import check_all
 from lever.physics.shaft import LaggedShaft, Shaft
@@ -94,6 +97,8 @@ class TwoInertia:
     stiffness: float
     damping: float
     engine_lag: float = 0.0
+    #: b_v, the load's viscous friction [N*m*s/rad] (the one slope of a load in w)
+    driven_slope: float = 0.0
 
     @property
     def omega_n(self) -> float:
@@ -110,12 +115,13 @@ class TwoInertia:
         omega, _ = coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia)
         effective_slope = self.engine_slope / (1.0 + (omega * self.engine_lag) ** 2)
         return coupling_mode(self.stiffness, self.damping, self.drive_inertia, self.driven_inertia,
-                             effective_slope)
+                             effective_slope, self.driven_slope)
 
     def with_coupling(self, stiffness: float | None = None, damping: float | None = None) -> "TwoInertia":
         return TwoInertia(self.drive_inertia, self.driven_inertia, self.engine_slope,
                           self.stiffness if stiffness is None else float(stiffness),
-                          self.damping if damping is None else float(damping), self.engine_lag)
+                          self.damping if damping is None else float(damping), engine_lag=self.engine_lag,
+                          driven_slope=self.driven_slope)
 
     def step_for(self, h_omega: float) -> float:
         """The communication step [s] at which ``h * omega_n`` is ``h_omega``."""
@@ -126,15 +132,16 @@ class TwoInertia:
         when it lags."""
         c, b, k1, te = self.stiffness, self.damping, self.engine_slope, self.engine_lag
         i1, i2 = self.drive_inertia, self.driven_inertia
+        bv = self.driven_slope
         if te > 0.0:
             a = np.array([[0.0, 1.0, -1.0, 0.0],
                           [-c / i1, -b / i1, b / i1, 1.0 / i1],
-                          [c / i2, b / i2, -b / i2, 0.0],
+                          [c / i2, b / i2, -(b + bv) / i2, 0.0],
                           [0.0, -k1 / te, 0.0, -1.0 / te]])
         else:
             a = np.array([[0.0, 1.0, -1.0],
                           [-c / i1, -(b + k1) / i1, b / i1],
-                          [c / i2, b / i2, -b / i2]])
+                          [c / i2, b / i2, -(b + bv) / i2]])
         return np.linalg.eigvals(a)
 
 
@@ -152,7 +159,8 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
         w, dw = drive["w_start"], max(1e-3, 1e-3 * abs(drive["w_start"]))
         slope = -(characteristic.torque(0.0, 0.0, w + dw) - characteristic.torque(0.0, 0.0, w - dw)) / (2 * dw)
     return TwoInertia(drive["inertia"], driven["inertia"], max(0.0, slope), law.law.nominal_stiffness,
-                      law.damping, drive["torque_lag"] if drive["torque_lag"] >= catalogue.SHORTEST_LAG else 0.0)
+                      law.damping, engine_lag=drive["torque_lag"] if drive["torque_lag"] >= catalogue.SHORTEST_LAG
+                      else 0.0, driven_slope=driven["viscous_damping"])
 
 
 # -- the stand-in system -----------------------------------------------------------------------
@@ -299,6 +307,14 @@ DRIVELINE_CONNECTIONS = ("engine.phi -> coupling.phi1", "engine.w -> coupling.w1
                          "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", "coupling.tau2 -> load.tau")
 
 
+def _driven_load(model: TwoInertia):
+    """The linear load of the stand-in: none, or the load's viscous friction alone (smooth:
+    ``lever.physics.friction``, no sticking without Coulomb friction)."""
+    if not model.driven_slope:
+        return ConstantLoad(0.0)
+    return ResistingLoad(ConstantLoad(0.0), "active", 0.0, 0.0, model.driven_slope)
+
+
 class LinearDriveline(System):
     """``System`` with the linear two-inertia model in place of the FMUs (same wiring,
     same model descriptions, same propagation code)."""
@@ -321,7 +337,7 @@ class LinearDriveline(System):
         self.components = {
             "engine": engine,
             "coupling": _LinearCoupling("coupling", descriptions["LeverCoupling"], model.stiffness, model.damping),
-            "load": _LinearShaft("load", descriptions["LoadShaft"], Shaft(model.driven_inertia, ConstantLoad(0.0))),
+            "load": _LinearShaft("load", descriptions["LoadShaft"], Shaft(model.driven_inertia, _driven_load(model))),
         }
         self.feedthrough = feedthrough_components(self.scene, {n: c.description for n, c in self.components.items()})
         self.stateful = [n for n in self.scene.components if n not in self.feedthrough]

@@ -148,17 +148,31 @@ class LoadShaft(_ShaftSlave):
     DESCRIPTION = "Driven shaft with the technological load: I2*a = tau - Mc(t, phi, w)"
     PARAMETERS = catalogue.LOAD
     OUTPUTS = _SHAFT_OUTPUTS + (
-        Output("load_torque", "N.m", "technological resistance Mc (positive when it opposes positive rotation)"),
-        Output("load_work", "J", "work absorbed by the load since the start, integral of Mc*w dt"),
+        # At rest static friction balances the coupling torque: then the load torque
+        # depends on the input directly.
+        Output("load_torque", "N.m", "torque the load and the friction resist the shaft with (positive when it "
+               "opposes positive rotation; at rest the holding torque)", depends_on=("tau",)),
+        Output("load_work", "J", "work absorbed by the load and the friction since the start, integral of "
+               "load_torque*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "load_torque", "load_work", -1.0
     EQUATIONS = (
         "dphi/dt = w",
-        "I2*dw/dt = tau(t) - Mc(t, phi, w),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
-        "Mc = Mm (constant); Mm + seeded multisine bounded by dM (random); angle-periodic Fourier series "
-        "(fourier); linear interpolation in a time series (table)",
-        "load_work = integral of Mc*w dt",
+        "I2*dw/dt = tau(t) - Mc(t, phi, w) - F(w, tau),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "Mc = Mm (constant); Mm + seeded multisine bounded by dM, with shares of dM at Ak*sin(k*phi + psi) and in "
+        "seeded tones at 415...425 rad/s (random); angle-periodic Fourier series (fourier); linear interpolation "
+        "in a time series (table)",
+        "load_direction resistive: Mc is a brake, max(Mc, 0)*sign(w) against the motion, holding at rest",
+        "F = Fc*sign(w) + b_v*w while w != 0; at w = 0 the shaft stays at rest while |net| <= Fs (+ the brake), "
+        "net = tau - Mc (active) or tau (resistive); stops and breakaways are located inside doStep",
+        "load_work = integral of (Mc + F)*w dt",
     )
 
     def _make_shaft(self):
         return catalogue.load_from(self._values())
+
+    def _compute_input_outputs(self):
+        if self._shaft.resisting:       # the holding torque at rest depends on tau
+            self._compute_outputs()
+        else:
+            super()._compute_input_outputs()

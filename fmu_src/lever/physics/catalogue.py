@@ -13,7 +13,8 @@ from .coupling import CouplingFamily, LeverCoupling, build_coupling
 from .elastic import TabulatedElasticLaw, elastic_law
 from .engine import engine_characteristic
 from .kinematics import GEOMETRIC_LIMIT, MODES, TransferFunction
-from .load import LOAD_KINDS, FourierLoad, TabulatedLoad, load_model
+from .friction import DIRECTIONS, ResistingLoad
+from .load import LOAD_KINDS, FourierLoad, Spectrum, TabulatedLoad, load_model
 from .parameters import Parameter, ParameterError, check_all
 from .signals import TimeTable
 from .shaft import LaggedShaft, Shaft
@@ -73,8 +74,9 @@ ENGINE = (
 
 LOAD = (
     Parameter("inertia", 0.161, "kg.m2", "reduced moment of inertia I2 of the driven shaft", 1e-6, 1e6),
-    Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part), "
-              "fourier (angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
+    Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part, "
+              "which may carry a shaft-order component and a narrow band: order_share, narrowband_share), fourier "
+              "(angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
     Parameter("mean_torque", 107.5, "N.m", "mean technological resistance Mm", -1e6, 1e6),
     Parameter("random_amplitude", 8.8, "N.m", "bound dM of the random part: |Mc - Mm| <= dM", 0.0, 1e6),
     Parameter("seed", 1, "", "seed of the random part (same seed, same load)", 0, 2 ** 31 - 1, kind="integer"),
@@ -89,6 +91,30 @@ LOAD = (
     Parameter("w_start", 39.0, "rad/s", "driven shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",
               0.0, 1.0, low_open=True),
+    # Resisting loads (issue 17): friction and the technological resistance as a brake.
+    Parameter("load_direction", "active", "", "how Mc acts: active (a torque of fixed direction whatever the "
+              "motion, e.g. a hoist) or resistive (a brake: against the motion with magnitude max(Mc, 0), holding "
+              "the shaft at rest up to it)", kind="string", choices=DIRECTIONS),
+    Parameter("friction_torque", 0.0, "N.m", "Coulomb friction Fc on the driven shaft, against the motion while "
+              "it slips", 0.0, 1e6),
+    Parameter("breakaway_torque", 0.0, "N.m", "static friction Fs: the largest net torque that does not move "
+              "the shaft from rest (Fs >= Fc)", 0.0, 1e6),
+    Parameter("viscous_damping", 0.0, "N.m.s/rad", "viscous friction b_v on the driven shaft: torque -b_v*w",
+              0.0, 1e6),
+    # The spectrum the monograph's oscillograms show (MODEL.md section 5), carried by the random
+    # part when a share is above 0 (Real parameters only: a String the fmpy.ssp peer cannot set).
+    Parameter("order", 1, "", "shaft order k of the angle-locked component (k per revolution of the driven "
+              "shaft)", 1, 64, kind="integer"),
+    Parameter("order_share", 0.0, "1", "share of the bound dM that the angle-locked component "
+              "dM*order_share*sin(k*phi + psi) takes (load_kind random; 0: no such component)", 0.0, 1.0),
+    Parameter("order_phase", 0.0, "rad", "phase psi of the angle-locked component", -1e3, 1e3),
+    Parameter("narrowband_share", 0.0, "1", "share of the bound dM that the narrow band takes (seeded tones in "
+              "narrowband_low...narrowband_high; the broad multisine takes the rest: |Mc - Mm| <= dM)", 0.0, 1.0),
+    Parameter("narrowband_low", 415.0, "rad/s", "lowest angular frequency of the narrow band", 0.0, 1e5,
+              low_open=True),
+    Parameter("narrowband_high", 425.0, "rad/s", "highest angular frequency of the narrow band", 0.0, 1e5,
+              low_open=True),
+    Parameter("narrowband_tones", 5, "", "number of sinusoids in the narrow band", 1, 256, kind="integer"),
 )
 
 
@@ -151,8 +177,19 @@ def engine_from(values: dict) -> Shaft | LaggedShaft:
 
 def load_from(values: dict) -> Shaft:
     p = check_all(LOAD, values)
+    spectrum = Spectrum(p["order"], p["order_share"], p["order_phase"], p["narrowband_share"],
+                        p["narrowband_low"], p["narrowband_high"], p["narrowband_tones"])
     load = load_model(p["load_kind"], p["mean_torque"], p["random_amplitude"], p["seed"], p["tones"],
-                      p["band_low"], p["band_high"], p["fourier"], p["table"])
+                      p["band_low"], p["band_high"], p["fourier"], p["table"], spectrum)
+    resisting = (p["load_direction"] != "active" or p["friction_torque"] or p["breakaway_torque"]
+                 or p["viscous_damping"])
+    if resisting:
+        if p["breakaway_torque"] < p["friction_torque"]:
+            raise ParameterError("breakaway_torque", f"parameter 'breakaway_torque' = {p['breakaway_torque']:g} N.m "
+                                 f"is below 'friction_torque' = {p['friction_torque']:g} N.m: static friction must "
+                                 "hold at least what sliding friction resists (Fs >= Fc)")
+        load = ResistingLoad(load, p["load_direction"], p["friction_torque"], p["breakaway_torque"],
+                             p["viscous_damping"])
     return Shaft(p["inertia"], load, p["max_substep"])
 
 

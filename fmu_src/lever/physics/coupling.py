@@ -63,15 +63,18 @@ class LeverCoupling:
 
 
 def coupling_mode(stiffness: float, damping: float, inertia_drive: float, inertia_driven: float,
-                  engine_slope: float = 0.0) -> tuple[float, float]:
+                  engine_slope: float = 0.0, driven_slope: float = 0.0) -> tuple[float, float]:
     """Undamped eigenfrequency ``omega_n = sqrt(c / I_red)`` [rad/s], ``I_red = I1*I2/(I1 + I2)``,
     and modal damping ratio of the two-inertia chain's coupling mode about U12 = 1.  The
     drive shaft moves ``I2/(I1 + I2)`` of the deflection, so an engine slope ``K1`` damps
-    the mode too: ``zeta = (b + K1 (I2/(I1 + I2))^2) / (2 sqrt(c I_red))``."""
+    the mode too, and the driven shaft's ``I1/(I1 + I2)`` lets a viscous load ``b_v`` damp it:
+    ``zeta = (b + K1 (I2/(I1 + I2))^2 + b_v (I1/(I1 + I2))^2) / (2 sqrt(c I_red))``."""
     reduced = inertia_drive * inertia_driven / (inertia_drive + inertia_driven)
     share = inertia_driven / (inertia_drive + inertia_driven)
+    driven_share = inertia_drive / (inertia_drive + inertia_driven)
     return (math.sqrt(stiffness / reduced),
-            (damping + engine_slope * share ** 2) / (2.0 * math.sqrt(stiffness * reduced)))
+            (damping + engine_slope * share ** 2 + driven_slope * driven_share ** 2)
+            / (2.0 * math.sqrt(stiffness * reduced)))
 
 
 class CouplingFamily:

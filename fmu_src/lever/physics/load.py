@@ -15,7 +15,7 @@ import cmath
 import csv
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from .numerics import SeededUniform, pairwise_sum
 from .parameters import TABLE_LIMIT, ParameterError, parse_table
@@ -116,6 +116,77 @@ class RandomLoad(_TimeLoad):
             impulse += ah * math.sin(start + half) * sinc_half
             second += aah * (math.sin(start + quarter) * sinc_quarter + math.cos(start + half) * rest_half)
         return impulse, second
+
+
+class Spectrum(NamedTuple):
+    """What the random part (``load_kind = "random"``) makes of its bound ``dM`` when it
+    carries the spectrum of the oscillograms (a share above 0) (MODEL.md
+    section 5: the oscillograms show a component at the shaft's rotation frequency and one
+    at 415-425 rad/s): ``order_share * dM * sin(order * phi + order_phase)``, locked to the
+    driven shaft's angle, ``narrowband_tones`` seeded tones in
+    ``[narrowband_low, narrowband_high]`` rad/s whose weights sum to
+    ``narrowband_share * dM``, and the broad multisine with the rest of ``dM``.  Both shares
+    0: the broad multisine alone, ``RandomLoad`` as it always was."""
+    order: int = 1
+    order_share: float = 0.0
+    order_phase: float = 0.0
+    narrowband_share: float = 0.0
+    narrowband_low: float = 415.0
+    narrowband_high: float = 425.0
+    narrowband_tones: int = 5
+
+
+class SpectrumLoad(RandomLoad):
+    """``Mc = Mm + A_k sin(k phi + psi) + (narrow band) + (broad multisine)``, the three
+    amplitudes summing to the bound ``dM``, so ``|Mc - Mm| <= dM`` holds as for
+    ``RandomLoad``: ``A_k = order_share * dM``, the narrow band's weights sum to
+    ``narrowband_share * dM``, the broad multisine (``RandomLoad``'s tones for the seed, drawn
+    first) is bounded by the rest.  The narrow band's frequencies (uniform in its band),
+    phases and weights are the seed's next draws.  A deterministic function of time and the
+    driven angle for a given seed.  With ``order_share = 0`` the load depends on time only and
+    the shaft steps exactly (closed-form integrals over all tones); otherwise by RK4."""
+
+    def __init__(self, mean: float, amplitude: float, seed: int, tones: int, band_low: float, band_high: float,
+                 spectrum: Spectrum):
+        shares = spectrum.order_share + spectrum.narrowband_share
+        if not shares <= 1.0:
+            raise ParameterError("narrowband_share", f"parameter 'narrowband_share' = {spectrum.narrowband_share:g} "
+                                 f"and 'order_share' = {spectrum.order_share:g} sum to {shares:g}: the shares of "
+                                 "the bound dM may sum to 1 at most")
+        low, high = spectrum.narrowband_low, spectrum.narrowband_high
+        if not 0.0 < low <= high:
+            raise ParameterError("narrowband_low", f"parameter 'narrowband_low' = {low} must be > 0 and <= "
+                                 f"narrowband_high = {high} rad/s")
+        super().__init__(mean, amplitude * max(0.0, 1.0 - shares), seed, tones, band_low, band_high)
+        rng = SeededUniform(int(seed))
+        rng.uniform(0.0, 1.0, 3 * int(tones))          # the broad multisine's draws
+        n = int(spectrum.narrowband_tones)
+        frequencies = rng.uniform(low, high, n)
+        phases = rng.uniform(0.0, 2.0 * math.pi, n)
+        weights = rng.uniform(0.5, 1.0, n)
+        total = pairwise_sum(weights)
+        band = spectrum.narrowband_share * amplitude
+        self.narrowband = [(band * w / total, f, p) for w, f, p in zip(weights, frequencies, phases)]
+        self._tones = self._tones + self.narrowband
+        self.spectrum = spectrum
+        self.bound = float(amplitude)                  # dM: |Mc - Mm| <= dM
+        self.order = int(spectrum.order)
+        self.order_amplitude = spectrum.order_share * amplitude
+        self.order_phase = float(spectrum.order_phase)
+        #: bound of |dMc/dphi| [N.m/rad]: sets the RK4 substep that stays stable
+        self.angle_stiffness = self.order * self.order_amplitude
+
+    def rate(self, inertia: float) -> float:
+        return math.sqrt(self.angle_stiffness / inertia)
+
+    def resistance(self, t, phi, w):
+        return (self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._tones)
+                + self.order_amplitude * math.sin(self.order * phi + self.order_phase))
+
+    def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
+        if self.order_amplitude:
+            return None     # depends on the angle: the shaft integrates numerically
+        return super().advance(inertia, t, phi, w, tau, h, tau_rate)
 
 
 class TabulatedLoad(_TimeLoad):
@@ -252,11 +323,14 @@ def read_harmonics(path: Path | str, cycle: str | int = "mean") -> FourierLoad:
 
 
 def load_model(kind: str, Mm: float, dM: float = 0.0, seed: int = 1, tones: int = 6,
-               band_low: float = 2.0, band_high: float = 450.0, fourier: str = "", table: str = ""):
+               band_low: float = 2.0, band_high: float = 450.0, fourier: str = "", table: str = "",
+               spectrum: Spectrum = Spectrum()):
     """The one constructor of a load, shared by the FMU, the reference solver and the tests."""
     if kind == "constant":
         return ConstantLoad(Mm)
     if kind == "random":
+        if spectrum.order_share or spectrum.narrowband_share:
+            return SpectrumLoad(Mm, dM, seed, tones, band_low, band_high, spectrum)
         return RandomLoad(Mm, dM, seed, tones, band_low, band_high)
     if kind == "fourier":
         return FourierLoad.parse(fourier)

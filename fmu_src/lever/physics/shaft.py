@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 from .engine import LinearCharacteristic
+from .friction import ResistingLoad, integrate
 from .parameters import ParameterError
 
 
@@ -20,11 +21,17 @@ class Shaft:
         self.inertia = float(inertia)
         self.external = external
         self.max_substep = float(max_substep)
+        #: a load that resists the motion (friction, a brake): its torque at rest depends
+        #: on the coupling torque, and its stops and breakaways are located in the step
+        self.resisting = isinstance(external, ResistingLoad) and external.sticks
 
     def rates(self, t, phi, w, tau):
         """``(a, M_ext)``: the acceleration with coupling torque ``tau`` and the
         external torque on the shaft (scalars: the harness maps it over arrays)."""
-        external = self.external.torque(t, phi, w)
+        if self.resisting:
+            external = self.external.torque_with(t, phi, w, tau)
+        else:
+            external = self.external.torque(t, phi, w)
         return (external + tau) / self.inertia, external
 
     def acceleration(self, t, phi, w, tau):
@@ -35,6 +42,11 @@ class Shaft:
         ``(phi, w, external_work)``, where ``external_work`` is the work the external
         torque did on the shaft in the step, from the shaft's own energy balance
         ``dKE = W_ext + W_coupling``."""
+        if self.resisting:
+            phi1, w1, moment, _ = integrate(self.external, self.inertia, t, phi, w, tau, h, tau_rate,
+                                            self._substeps(h))
+            work = 0.5 * self.inertia * (w1 * w1 - w * w) - tau * (phi1 - phi) - tau_rate * moment
+            return phi1, w1, work
         exact = self.external.advance(self.inertia, t, phi, w, tau, h, tau_rate)
         if exact is not None:
             phi1, w1 = exact
@@ -61,7 +73,8 @@ class Shaft:
     #: stay below it for the external torque model's fastest rate
     STABLE = 2.5
 
-    def _rk4(self, t, phi, w, tau, h, tau_rate=0.0):
+    def _substeps(self, h):
+        """RK4 substeps a step of ``h`` takes (refused beyond ``MAX_SUBSTEPS``)."""
         ratio = h / self.max_substep
         rate = self.external.rate(self.inertia) if hasattr(self.external, "rate") else 0.0
         needed = max(ratio, h * rate / self.STABLE)
@@ -71,7 +84,10 @@ class Shaft:
             raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {needed:.3g} RK4 substeps {why}, "
                                  f"more than the {self.MAX_SUBSTEPS} allowed per step: take smaller communication "
                                  "steps, a larger 'max_substep' or a smoother characteristic")
-        n = max(1, math.ceil(needed - 1e-9))
+        return max(1, math.ceil(needed - 1e-9))
+
+    def _rk4(self, t, phi, w, tau, h, tau_rate=0.0):
+        n = self._substeps(h)
         dt = h / n
 
         def acc(ti, p, v):
