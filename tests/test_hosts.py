@@ -49,11 +49,6 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
         assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "ecos applies none of the SSV parameter sets' values (found in issue 17: with kavz685's load "
-    "order_share = 0.55 and narrowband_share = 0.45 its load torque is the FMU default's, 14 N*m off; "
-    "load.mean_torque = 200 is ignored too, 93 N*m off, and coupling.support_deformation = 0.08): the "
-    "scene passed before only because every value it sets equals the FMUs' default"))
 def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_path):
     spec = scene.load("kavz685")
     archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
@@ -65,6 +60,20 @@ def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_
     csv_path = hosts.write_result_csv(tmp_path / "ecos.csv", times, traces, names)
     outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v")])
     assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
+
+
+def test_ecos_applies_the_exported_parameter_values(fmu_dir, ecos_bin, tmp_path):
+    """Values that differ from the FMUs' defaults reach the FMUs in ecos: every component's
+    parameter set in the export has one name, which ecos is told to apply (it applied none
+    while each set was named after its component: the KAVZ-685 run above passed only while
+    every value it set was a default)."""
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.3", "experiment.transient=0.1",
+                                                 "load.mean_torque=200", "load.random_amplitude=0"])
+    archive = ssp.export(spec, tmp_path / "k.ssp", fmu_dir)
+    result = hosts.run_ecos(archive, 0.3, 1e-3, ecos_bin, record=["load.load_torque"])
+    _, traces = hosts.ecos_traces(result.csv)
+    assert np.allclose(traces["load.load_torque"], 200.0, rtol=0, atol=1e-9), \
+        "ecos ignored the SSP parameter set: the load torque is not the exported mean_torque = 200 N*m"
 
 
 def test_ecos_says_what_failed(tmp_path, ecos_bin):

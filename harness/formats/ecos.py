@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.formats import ssp
+
 #: The environment of a host that is not a Python process and was set up for nothing.
 BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
 
@@ -100,6 +102,8 @@ def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | No
     environment = dict(BARE_ENVIRONMENT if env is None else env)
     environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
     options = [] if parallel else ["--noParallel"]
+    if target.suffix == ".ssp":       # ecos applies only the parameter set it is told to
+        options += ["--parameterSet", ssp.PARAMETER_SET]
     if record is not None:
         options += ["--csvConfig", str(_csv_config(record, target.with_name(target.stem + "_CsvConfig.xml")))]
     done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),

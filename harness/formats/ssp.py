@@ -11,7 +11,9 @@ An exported archive holds
 * ``resources/<Fmu>.fmu`` and ``resources/<Fmu>_OspModelDescription.xml``;
 * ``resources/<component>.ssv``: each component's parameter set (the values the scene
   gives, in SI), bound to its component (variable names relative to the component, as
-  libcosim reads them);
+  libcosim reads them), every one named ``PARAMETER_SET``: ecos gathers the sets of one
+  name across components and applies the one named on its command line
+  (``--parameterSet``), so sets named per component could never all be applied;
 * an annotation ``org.lever-cosim.scene`` with what SSP has no place for (master,
   transient, recorded variables, features, notes), so an exported scene loads back
   as the same scene.  An SSP from elsewhere loads too: it records its connected outputs
@@ -38,6 +40,8 @@ SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 LEVER = "https://lever-cosim.org/ssp/scene"
 LEVER_ANNOTATION = "org.lever-cosim.scene"
+#: the name of every component's parameter set in an exported archive (see above)
+PARAMETER_SET = "scene"
 OSP_ANNOTATION = "com.opensimulationplatform"
 # libcosim reads the SSD with fixed prefixes (boost property trees know no namespaces).
 PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
@@ -181,7 +185,7 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
 
 def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
     variables = {v.name: v for v in md.modelVariables}
-    root = ET.Element(_q("ssv", "ParameterSet"), {"version": "1.0", "name": name})
+    root = ET.Element(_q("ssv", "ParameterSet"), {"version": "1.0", "name": PARAMETER_SET})
     parameters = ET.SubElement(root, _q("ssv", "Parameters"))
     for param, raw in spec.parameters.items():
         var = variables[param]
