@@ -145,9 +145,9 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     step = float(step or e.step)
     options = dict(options or {})
     master_family.check(master)
-    n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
-    system = System(scene, fmu_dir, record=names)
+    system = System(scene, fmu_dir, record=names)      # refuses an unsound scene (SceneInvalid) first
+    n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     failure = stage = diagnosis = None
     recorder = driver = None
     started = stepping = clock.perf_counter()

@@ -30,7 +30,7 @@ from lever.physics.parameters import UNITS
 
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
-from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
+from harness.engine.system import SceneInvalid, converted, descriptions_for, fmu_path
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -157,7 +157,7 @@ def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
     parameters = ET.SubElement(root, _q("ssv", "Parameters"))
     for param, raw in spec.parameters.items():
         var = variables[param]
-        value = scenes.quantity(raw, f"{name}.{param}")
+        value = converted(var, raw, f"{name}.{param}")
         parameter = ET.SubElement(parameters, _q("ssv", "Parameter"), {"name": param})
         if var.type == "Real":
             attrs = {"value": _number(value)}
