@@ -308,6 +308,9 @@ def _measured_report(files, out: Path, stiffness: float | None = None, cycles: b
 
     if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
         raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+    _, unusable = measured.pair_tables(list(files) or measured.default_files())
+    if unusable:       # the files are at fault, not the model: bad input
+        raise UserError("the measurement files cannot be used:\n  - " + "\n  - ".join(unusable))
     ensure_fmus(quiet=True)
     findings = measured.validate_measured(list(files) or measured.default_files(), out, stiffness=stiffness,
                                           cycles=cycles)
