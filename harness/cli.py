@@ -102,11 +102,13 @@ def list_scenes():
               help="Tolerance of an adaptive master (relative torque error per step) or of an iterative "
                    "master's coupling iteration.")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
+@click.option("--strict", is_flag=True, help="Refuse the scene when an input is connected to nothing and not set "
+              "(as experiment.strict = true); without it such an input is named and held at its start value.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 @click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
               "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
               "the reference (the energy balance, integrated over every row, judges the run).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, progress, stream):
+def run(scene, assignments, master, step, tolerance, out, no_reference, strict, progress, stream):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
     from harness.engine import masters as family
@@ -116,7 +118,7 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     from harness.judges.stability import run_advice
     from harness.engine.system import SceneInvalid
 
-    spec = _scene(scene, assignments)
+    spec = _scene(scene, tuple(assignments) + (("experiment.strict=true",) if strict else ()))
     chosen = master or spec.experiment.master
     _check_masters(chosen)
     if step is not None and (problem := scenes.step_problem(step, "--step")):
@@ -145,6 +147,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     result.warnings = warnings
+    if result.unconnected_inputs:
+        click.echo(f"warning: {scenes.unconnected_message(result.unconnected_inputs)}", err=True)
     reference = None
     if "reference" in spec.features and not no_reference and not stream and result.ok:
         try:
@@ -178,6 +182,8 @@ def _print_summary(summary: dict, out: Path):
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("energy_balance_unavailable"):
+        click.echo(f"  energy balance: not computed: {summary['energy_balance_unavailable']}")
     if summary.get("stream"):
         s = summary["stream"]
         click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "

@@ -383,6 +383,8 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             findings.append(f"record '{item}': {comp}.{var} is an {variables[comp][var].causality}; only outputs "
                             f"are recorded (outputs of {comp}: {outputs})")
     findings += experiment_findings(scene.experiment)
+    if scene.experiment.strict and (unconnected := unconnected_inputs(scene, descriptions)):
+        findings.append("experiment.strict: " + unconnected_message(unconnected))
     findings += _check_limits(scene.limits)
     for feature in scene.features - set(FEATURES):
         findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
@@ -484,7 +486,7 @@ def unconnected_inputs(scene: Scene, descriptions: dict) -> list[str]:
     return found
 
 
-def unconnected_message(inputs: list[str], descriptions_of: dict | None = None) -> str:
+def unconnected_message(inputs: list[str]) -> str:
     """The sentence naming the unconnected inputs."""
     return (f"input{'s' if len(inputs) > 1 else ''} {', '.join(inputs)} "
             f"{'are' if len(inputs) > 1 else 'is'} connected to nothing and not set: held at the start value "

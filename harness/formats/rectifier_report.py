@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from harness.description import kinds
+from harness.description import scene as scenes
 from harness.formats.run_files import reference_error_lines, write_run
 from harness.judges.rectifier import analyse, errors
 
@@ -17,6 +18,9 @@ def summarize(result, reference=None) -> dict:
         "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient, "ok": result.ok,
         "failure": result.failure, "wall_time_s": result.wall_time, "counters": result.counters,
     }
+    if result.unconnected_inputs:
+        summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
+                                         "note": scenes.unconnected_message(result.unconnected_inputs)}
     if len(result.times) > 1:
         summary["freewheel"] = analyse(scene, result.times, result.traces)
         summary["energy_balance"] = summary["freewheel"]["energy_balance"]
@@ -43,6 +47,8 @@ def write_report(path, summary: dict):
              "(docs/decisions.md: why one FMU)."]
     if summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "", "The traces up to the failure are in traces.csv."]
+    if summary.get("unconnected_inputs"):
+        lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
     fw = summary.get("freewheel")
     if fw:
         d = fw["derived"]
