@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from harness.cli import main
@@ -360,6 +360,7 @@ def _ends_well(result):
     """Exit 0, 1 (a genuine run failure: the run's message, never an exception) or 2 with a
     message; never a traceback."""
     assert result.exit_code in (0, 1, 2), (result.exit_code, result.output)
+    event(f"exit {result.exit_code}")
     if result.exception is not None and not isinstance(result.exception, SystemExit):
         import traceback
         raise AssertionError("".join(traceback.format_exception(result.exception)))
