@@ -216,6 +216,13 @@ def test_committed_driveline_scenes_are_the_driveline_and_others_say_why_not(tmp
                        '"coupling.tau2 -> gear.tau", "gear.w -> load.tau"]\n[components.gear]\nfmu = "LoadShaft"\n')
     problem = kinds.driveline_problem(scenes.load(foreign))
     assert "2 LoadShaft components" in problem
+    # a foreign FMU's torque in the torque path instead of the coupling's
+    other = tmp_path / "other.toml"
+    other.write_text('extends = "kavz685"\nconnections = ["engine.phi -> coupling.phi1", "engine.w -> coupling.w1", '
+                     '"load.phi -> coupling.phi2", "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", '
+                     '"coupling.tau2 -> load.tau", "gear.mesh_torque -> engine.tau_rate"]\n'
+                     '[components.gear]\nfmu = "FreewheelRectifier"\n')
+    assert "drives the driveline from FreewheelRectifier" in kinds.driveline_problem(scenes.load(other))
     from harness.judges import monolithic
     with pytest.raises(monolithic.ReferenceUnavailable, match="LoadShaft"):
         monolithic.solve(scenes.load(foreign), np.linspace(0, 0.1, 11), use_cache=False)
