@@ -603,14 +603,12 @@ def fmu_start_values(model: str, assignments) -> dict:
         if var is None or var.causality not in ("parameter", "input"):
             known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
             raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
-        try:
-            value = scenes.quantity(scenes.coerce(raw), key)
-        except scenes.SceneError as error:
-            raise UserError(str(error)) from None
-        problems = scenes.value_findings(f"{model}.{name}", var, value)
+        from harness.engine.system import converted
+        value = scenes.coerce(raw)
+        problems = scenes.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
         if problems:
             raise UserError("; ".join(problems))
-        values[name] = value
+        values[name] = converted(var, value, key)
     return values
 
 

@@ -422,3 +422,10 @@ def test_cli_fuzz_csvs(tmp_path_factory, data, bom):
     measured = invoke("measured", table, _measurement(folder, "driven", "200"), "--no-cycles", "--out", folder / "m")
     _ends_well(measured)
     assert measured.exit_code == 2, measured.output     # these tables are never usable
+
+
+def test_an_fmu_run_stand_alone_checks_units_and_types_too(fmu_dir, tmp_path):
+    assert_user_error(invoke("validate", "LeverCoupling", "--set", "stiffness=1000 deg", "--out", tmp_path / "v"),
+                      "LeverCoupling.stiffness", "N.m/rad")
+    assert_user_error(invoke("validate", "LeverCoupling", "--set", "misalignment=true", "--out", tmp_path / "v"),
+                      "boolean true")
