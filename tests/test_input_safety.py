@@ -223,6 +223,9 @@ def test_committed_driveline_scenes_are_the_driveline_and_others_say_why_not(tmp
                      '"coupling.tau2 -> load.tau", "gear.mesh_torque -> engine.tau_rate"]\n'
                      '[components.gear]\nfmu = "FreewheelRectifier"\n')
     assert "drives the driveline from FreewheelRectifier" in kinds.driveline_problem(scenes.load(other))
+    # an input held at a value the scene sets (found by the CLI fuzz: the energy balance raised)
+    held = scenes.load("kavz685").with_overrides(["engine.tau=0"])
+    assert "sets engine.tau, which the driveline's equations do not take" in kinds.driveline_problem(held)
     from harness.judges import monolithic
     with pytest.raises(monolithic.ReferenceUnavailable, match="LoadShaft"):
         monolithic.solve(scenes.load(foreign), np.linspace(0, 0.1, 11), use_cache=False)

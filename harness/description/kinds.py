@@ -85,6 +85,13 @@ def driveline_problem(scene: scenes.Scene) -> str | None:
         if len(several) > 1:
             return f"scene '{scene.name}' has {len(several)} {fmu} components ({', '.join(several)}); the driveline has one"
     role = {"engine": names.engine, "coupling": names.coupling, "load": names.load}
+    declared = {names.engine: catalogue.ENGINE, names.coupling: catalogue.COUPLING + (catalogue.MISALIGNMENT,),
+                names.load: catalogue.LOAD}
+    for name, known in declared.items():
+        extra = sorted(set(scene.components[name].parameters) - {p.name for p in known})
+        if extra:      # e.g. an input held at a value: a torque from outside the reference's equations
+            return (f"scene '{scene.name}' sets {', '.join(f'{name}.{x}' for x in extra)}, which the driveline's "
+                    f"equations do not take (they take: {', '.join(p.name for p in known)})")
     wired = {(c.source, c.output, c.target, c.input) for c in scene.connections}
     expected = {(role[a], out, role[b], into) for a, out, b, into in DRIVELINE_WIRING}
     missing = [f"{a}.{o} -> {b}.{i}" for a, o, b, i in sorted(expected - wired)]
