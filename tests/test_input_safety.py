@@ -378,7 +378,7 @@ def _ends_well(result):
         assert "error:" in result.output or "FAIL" in result.output or "finding" in result.output, result.output
 
 
-@fuzz(40)
+@fuzz(100)
 @given(st.lists(st.tuples(KEYS, VALUES), min_size=1, max_size=3))
 def test_cli_fuzz_set_values(fmu_dir, tmp_path_factory, pairs):
     out = tmp_path_factory.mktemp("fz")
@@ -389,7 +389,7 @@ def test_cli_fuzz_set_values(fmu_dir, tmp_path_factory, pairs):
     _ends_well(invoke(*args))
 
 
-@fuzz(40)
+@fuzz(100)
 @given(st.sampled_from(["experiment", "components.coupling.parameters", "components.load.parameters",
                         "components.engine.parameters", "limits"]),
        st.sampled_from(["stop", "step", "start", "transient", "stiffness", "seed", "misalignment", "inertia",
@@ -408,7 +408,7 @@ def test_cli_fuzz_scene_files(fmu_dir, tmp_path_factory, table, key, value, top,
     _ends_well(invoke("run", path, "--out", folder / "o", "--no-progress", "--no-reference"))
 
 
-@fuzz(40)
+@fuzz(100)
 @given(st.one_of(st.binary(max_size=200),
                  st.lists(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
                                              st.sampled_from(["", "x", "time", "engine.w", '"q"'])),
