@@ -29,10 +29,11 @@ bench: $(STAMP)
 	$(BIN)/lever bench kavz685
 	$(BIN)/lever bench kavz685_stiff
 
-# A longer, randomised property-based fuzz run (20x the CI examples; see tests/test_fuzz.py).
+# A longer, randomised property-based fuzz run (20x the CI examples; see tests/test_fuzz.py),
+# the physics and FMUs' fuzz and the command line's (tests/test_input_safety.py).
 fuzz: $(STAMP)
 	$(BIN)/lever build
-	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py --hypothesis-show-statistics
+	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py tests/test_input_safety.py -k fuzz --hypothesis-show-statistics
 
 # Mutation testing (mutmut) of the physics and the masters with the tests that cover them:
 # tens of minutes, outside CI's budget and not part of `make test` (docs/testing.md).

@@ -115,11 +115,13 @@ def list_scenes():
               help="Tolerance of an adaptive master (relative torque error per step) or of an iterative "
                    "master's coupling iteration.")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
+@click.option("--strict", is_flag=True, help="Refuse the scene when an input is connected to nothing and not set "
+              "(as experiment.strict = true); without it such an input is named and held at its start value.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
 @click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
               "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
               "the reference (the energy balance, integrated over every row, judges the run).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, progress, stream):
+def run(scene, assignments, master, step, tolerance, out, no_reference, strict, progress, stream):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
     from harness.engine import masters as family
@@ -129,7 +131,7 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
     from harness.judges.stability import run_advice
     from harness.engine.system import SceneInvalid
 
-    spec = _scene(scene, assignments)
+    spec = _scene(scene, tuple(assignments) + (("experiment.strict=true",) if strict else ()))
     chosen = master or spec.experiment.master
     _check_masters(chosen)
     if step is not None and (problem := scenes.step_problem(step, "--step")):
@@ -162,6 +164,8 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, progress
         outputs.abandon(out)             # refused before the run: no empty folder left
         raise UserError(str(error)) from None
     result.warnings = warnings
+    if result.unconnected_inputs:
+        click.echo(f"warning: {scenes.unconnected_message(result.unconnected_inputs)}", err=True)
     reference = None
     try:
         if "reference" in spec.features and not no_reference and not stream and result.ok:
@@ -243,6 +247,8 @@ def _print_summary(summary: dict, out: Path):
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("energy_balance_unavailable"):
+        click.echo(f"  energy balance: not computed: {summary['energy_balance_unavailable']}")
     if summary.get("stream"):
         s = summary["stream"]
         click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "
@@ -402,6 +408,9 @@ def _measured_report(files, out: Path, stiffness: float | None = None, cycles: b
 
     if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
         raise UserError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+    _, unusable = measured.pair_tables(list(files) or measured.default_files())
+    if unusable:       # the files are at fault, not the model: bad input
+        raise UserError("the measurement files cannot be used:\n  - " + "\n  - ".join(unusable))
     ensure_fmus(quiet=True)
     findings = measured.validate_measured(list(files) or measured.default_files(), out, stiffness=stiffness,
                                           cycles=cycles)
@@ -690,14 +699,12 @@ def fmu_start_values(model: str, assignments) -> dict:
         if var is None or var.causality not in ("parameter", "input"):
             known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
             raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
-        try:
-            value = scenes.quantity(scenes.coerce(raw), key)
-        except scenes.SceneError as error:
-            raise UserError(str(error)) from None
-        problems = scenes.value_findings(f"{model}.{name}", var, value)
+        from harness.engine.system import converted
+        value = scenes.coerce(raw)
+        problems = scenes.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
         if problems:
             raise UserError("; ".join(problems))
-        values[name] = value
+        values[name] = converted(var, value, key)
     return values
 
 

@@ -244,5 +244,6 @@ def test_measured_option_checks_a_grade(tmp_path):
     result = _invoke("validate", "--measured", *grade, "--out", str(tmp_path))
     assert result.exit_code == 0, result.output
     assert "7IRP" in result.output and (tmp_path / "measured.md").exists()
-    result = _invoke("validate", "--measured", grade[0], "--out", str(tmp_path / "lonely"))
-    assert result.exit_code == 1 and "finding" in result.output
+    # a table without its pair is bad input (exit 2), not a grade that misses its target (exit 1)
+    result = CliRunner().invoke(main, ["validate", "--measured", grade[0], "--out", str(tmp_path / "lonely")])
+    assert result.exit_code == 2 and "no driven-shaft table to pair with" in result.output

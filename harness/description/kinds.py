@@ -61,6 +61,54 @@ def driveline(scene: scenes.Scene) -> Driveline:
     return Driveline(engine, coupling, load)
 
 
+#: the driveline's wiring as its monolithic reference and energy balance assume it:
+#: (source role, output, target role, input), roles as in ``Driveline``
+DRIVELINE_WIRING = (("engine", "phi", "coupling", "phi1"), ("engine", "w", "coupling", "w1"),
+                    ("load", "phi", "coupling", "phi2"), ("load", "w", "coupling", "w2"),
+                    ("coupling", "tau1", "engine", "tau"), ("coupling", "tau2", "load", "tau"))
+MISALIGNMENT_SOURCE_FMU = "MisalignmentSource"
+
+
+def driveline_problem(scene: scenes.Scene) -> str | None:
+    """Why the standard driveline's reference and energy balance do not describe ``scene``
+    (None when they do): they solve engine shaft - lever coupling - load shaft, each once,
+    wired shaft angle and speed into the coupling and its torques back into the shafts, the
+    misalignment set or driven by a MisalignmentSource.  A torque path through another FMU,
+    an input left open, a second shaft is another system, whose error against this
+    reference would mean nothing."""
+    try:
+        names = driveline(scene)
+    except NotADriveline as error:
+        return str(error)
+    for fmu in DRIVELINE_FMUS:
+        several = [n for n, c in scene.components.items() if c.fmu == fmu]
+        if len(several) > 1:
+            return f"scene '{scene.name}' has {len(several)} {fmu} components ({', '.join(several)}); the driveline has one"
+    role = {"engine": names.engine, "coupling": names.coupling, "load": names.load}
+    declared = {names.engine: catalogue.ENGINE, names.coupling: catalogue.COUPLING + (catalogue.MISALIGNMENT,),
+                names.load: catalogue.LOAD}
+    for name, known in declared.items():
+        extra = sorted(set(scene.components[name].parameters) - {p.name for p in known})
+        if extra:      # e.g. an input held at a value: a torque from outside the reference's equations
+            return (f"scene '{scene.name}' sets {', '.join(f'{name}.{x}' for x in extra)}, which the driveline's "
+                    f"equations do not take (they take: {', '.join(p.name for p in known)})")
+    wired = {(c.source, c.output, c.target, c.input) for c in scene.connections}
+    expected = {(role[a], out, role[b], into) for a, out, b, into in DRIVELINE_WIRING}
+    missing = [f"{a}.{o} -> {b}.{i}" for a, o, b, i in sorted(expected - wired)]
+    if missing:
+        return (f"scene '{scene.name}' is not wired as the driveline (engine shaft - lever coupling - load shaft): "
+                f"no connection {', '.join(missing)}")
+    for c in scene.connections:
+        if c.target not in role.values() or (c.source, c.output, c.target, c.input) in expected:
+            continue
+        source_fmu = scene.components[c.source].fmu if c.source in scene.components else None
+        if (c.target, c.input) == (names.coupling, "misalignment") and source_fmu == MISALIGNMENT_SOURCE_FMU:
+            continue
+        return (f"scene '{scene.name}': connection '{c}' drives the driveline from {source_fmu or c.source}, "
+                "outside the engine shaft - lever coupling - load shaft torque path the reference solves")
+    return None
+
+
 def parameters(scene: scenes.Scene, name: str) -> dict:
     """The parameter values the scene gives component ``name`` (quantities with units
     converted; the catalogue's defaults are not filled in)."""

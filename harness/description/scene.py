@@ -12,20 +12,19 @@ Values may carry a unit, ``"15 deg"`` or ``"374.8 rpm"``; they are converted to 
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from lever.physics.parameters import UNITS
-
+from harness.description import units
 from harness.description.tables import MeasuredDataError, load_series, read_table
 from harness.paths import DATA, SCENES
 
 FEATURES = ("reference", "energy_balance", "plots")
 #: the ``[limits]`` a scene may set for the divergence guard (harness.engine.guard)
 LIMIT_KEYS = ("speed", "torque", "margin")
+LIMIT_UNITS = {"speed": "rad/s", "torque": "N.m", "margin": "1"}
 
 
 class SceneError(ValueError):
@@ -70,6 +69,9 @@ class Experiment:
     #: start-up time left out of amplitude statistics [s]; unstated: ``default_transient``
     #: of the experiment's length, following it when --set changes start or stop
     transient: float | None = None
+    #: refuse the run when an input is left unconnected (and not given a value), instead
+    #: of naming it and running on with its start value (``strict = true``, ``--strict``)
+    strict: bool = False
 
     def __post_init__(self):
         self.transient_follows_length = self.transient is None
@@ -84,6 +86,10 @@ def default_transient(start: float, stop: float) -> float:
         return min(2.0, 0.2 * (float(stop) - float(start)))
     except (TypeError, ValueError):
         return 2.0
+
+
+#: the experiment's fields that are times [s]
+EXPERIMENT_TIMES = ("start", "stop", "step", "transient")
 
 
 @dataclass
@@ -125,15 +131,7 @@ class Scene:
                 continue
             if key.startswith("experiment."):
                 attr = key.split(".", 1)[1]
-                if not hasattr(experiment, attr):
-                    raise SceneError(f"--set {key}: the experiment has no field '{attr}'")
-                if attr == "master":
-                    setattr(experiment, attr, str(value))
-                    continue
-                try:
-                    setattr(experiment, attr, float(quantity(value, key)))
-                except (TypeError, ValueError):
-                    raise SceneError(f"--set {key}={raw}: expected a number (seconds)") from None
+                setattr(experiment, attr, experiment_value(attr, value, f"--set {key}"))
                 continue
             if "." in key:
                 comp, param = key.split(".", 1)
@@ -155,7 +153,10 @@ class Scene:
 
 
 def coerce(raw: str):
-    """A ``--set`` value as written: an integer, a number, or a string (quotes stripped)."""
+    """A ``--set`` value as written: an integer, a number, true/false, or a string (quotes
+    stripped)."""
+    if raw in ("true", "false"):
+        return raw == "true"
     try:
         return int(raw)
     except ValueError:
@@ -166,11 +167,10 @@ def coerce(raw: str):
         return raw.strip("'\"")
 
 
-_QUANTITY = re.compile(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/.0-9]+)\s*$")
-
-
-def quantity(value, name: str = "value"):
-    """A number, or a string ``"<number> <unit>"`` converted to SI; other strings as is.
+def quantity(value, name: str = "value", unit: str | None = None):
+    """A number, or a string ``"<number> <unit>"`` converted to ``unit`` (the variable's,
+    e.g. "N.m/rad"; None: the SI base units kg, m, s, rad) - a unit of another dimension
+    is refused (``SceneError``, harness.description.units); other strings as is.
     A table ``{harmonics = "monograph/harmonics_driven.csv", cycle = "mean"}`` becomes
     the load's Fourier series text (file relative to resources/data); so does
     ``{samples = "monograph/torque_driven_7V-14MVS.csv", cycle = "mean"}``, the series
@@ -179,28 +179,61 @@ def quantity(value, name: str = "value"):
         return samples_parameter(value, name)
     if isinstance(value, dict) and "harmonics" in value:
         from lever.physics.load import read_harmonics
+        if not isinstance(value["harmonics"], str) or not isinstance(value.get("cycle", "mean"), str):
+            raise SceneError(f"{name}: harmonics = {value['harmonics']!r}, cycle = {value.get('cycle')!r}: "
+                             "expected a file name and a cycle name (strings)")
         path = DATA / value["harmonics"]
-        if not path.exists():
+        if not path.is_file():
             raise SceneError(f"{name}: no harmonics file {path}")
-        return read_harmonics(path, value.get("cycle", "mean")).to_text()
-    if isinstance(value, str):
-        m = _QUANTITY.match(value)
-        if m and m.group(2) in UNITS:
-            try:
-                return float(m.group(1)) * UNITS[m.group(2)][1]
-            except ValueError:
-                raise SceneError(f"{name}: {value!r} is not a number with a unit") from None
+        try:
+            return read_harmonics(path, value.get("cycle", "mean")).to_text()
+        except (ValueError, KeyError, OSError, UnicodeDecodeError) as error:
+            raise SceneError(f"{name}: the harmonics file {path} cannot be read ({error})") from None
+    if isinstance(value, str) and units.split(value) is not None:
+        try:
+            return units.convert(value, unit)
+        except units.UnitProblem as problem:
+            if unit is not None:
+                raise SceneError(f"{name} = {value!r}: {problem}") from None
+            # no variable to check against here: left as written, and refused by
+            # ``value_findings`` if its variable is a number
     return value
 
 
 def samples_parameter(value: dict, name: str) -> str:
     """A scene's ``fourier = {samples = "<table>.csv", cycle = "mean"}``: the load series
     through a measured table's ordinates (path relative to resources/data)."""
+    if not isinstance(value["samples"], str) or not isinstance(value.get("cycle", "mean"), str):
+        raise SceneError(f"{name}: samples = {value['samples']!r}, cycle = {value.get('cycle')!r}: expected a "
+                         "file name and a cycle name (strings)")
     path = DATA / value["samples"]
     try:
         return load_series(read_table(path), value.get("cycle", "mean")).to_text()
     except MeasuredDataError as error:
         raise SceneError(f"{name}: {error}") from None
+
+
+def experiment_value(field_name: str, value, label: str):
+    """The experiment's field ``field_name`` from a scene's or ``--set``'s ``value``: a time
+    (a number in s, or "<number> <time unit>": "500 ms"), the master's name, or ``strict``
+    (true/false); ``SceneError`` naming ``label`` and what is allowed otherwise."""
+    if field_name == "master":
+        if not isinstance(value, str):
+            raise SceneError(f"{label} = {units.kind_of_value(value)}: expected the name of a master (a string)")
+        return value
+    if field_name == "strict":
+        if not isinstance(value, bool):
+            raise SceneError(f"{label} = {units.kind_of_value(value)}: expected true or false")
+        return value
+    if field_name not in EXPERIMENT_TIMES:
+        raise SceneError(f"{label}: the experiment has no field '{field_name}' (fields: "
+                         f"{', '.join(EXPERIMENT_TIMES + ('master', 'strict'))})")
+    if isinstance(value, str):
+        value = quantity(value, label, "s")
+    if not units.is_number(value):
+        raise SceneError(f"{label} = {units.kind_of_value(value)}: expected a time in seconds (a number, "
+                         "or a number with a time unit, e.g. '500 ms')")
+    return float(value)
 
 
 def resolve(name_or_path: str | Path) -> Path:
@@ -227,9 +260,15 @@ def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
     base scene (``extends = "kavz685"``: a scene beside it or in resources/scenes, or a
     .toml path relative to it) and states only what differs."""
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{path}: {error}") from None
+        raise SceneError(f"{path}: not a valid TOML file: {error}") from None
+    except UnicodeDecodeError as error:
+        raise SceneError(f"{path}: not a UTF-8 text file (byte {error.start}: {error.reason}); a scene is "
+                         "TOML in UTF-8") from None
+    except OSError as error:
+        raise SceneError(f"{path}: cannot read it ({error.strerror or error})") from None
+    check_shape(data, path)
     # An FMU by path is relative to the file that names it (a base scene's to the base).
     for spec in (data.get("components") or {}).values():
         if isinstance(spec, dict) and isinstance(spec.get("fmu"), str) and is_fmu_path(spec["fmu"]):
@@ -277,19 +316,52 @@ def load(name_or_path: str | Path) -> Scene:
                          "(the lever commands take one as SCENE)")
     path = resolve(name_or_path)
     data = read_data(path)
+    if "components" not in data:
+        raise SceneError(f"{path}: no [components] table (a scene names its FMUs there)")
     try:
         components = {name: ComponentSpec(spec["fmu"], dict(spec.get("parameters", {})))
                       for name, spec in data["components"].items()}
         connections = [parse_connection(text) for text in data.get("connections", [])]
-        experiment = Experiment(**{k: (v if k == "master" else float(quantity(v, k)))
+        experiment = Experiment(**{k: experiment_value(k, v, f"{path.name}: experiment.{k}")
                                    for k, v in data.get("experiment", {}).items()})
-    except (KeyError, TypeError) as error:
-        raise SceneError(f"{path}: malformed scene ({error})") from None
+    except KeyError as error:
+        raise SceneError(f"{path}: malformed scene (missing {error})") from None
     return Scene(name=data.get("name", path.stem), description=data.get("description", ""),
                  components=components, connections=connections, experiment=experiment,
                  record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
                  notes=data.get("notes", ""), bench=dict(data.get("bench", {})),
                  limits=dict(data.get("limits", {})))
+
+
+#: the shape of a scene file: key -> (what it must be, in words; test)
+_SHAPE = {
+    "name": ("a string", lambda v: isinstance(v, str)),
+    "description": ("a string", lambda v: isinstance(v, str)),
+    "notes": ("a string", lambda v: isinstance(v, str)),
+    "extends": ("the name or .toml path of a scene", lambda v: isinstance(v, str)),
+    "features": ("a list of strings", lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
+    "record": ("a list of strings", lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
+    "connections": ("a list of strings 'component.output -> component.input'",
+                    lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
+    "experiment": ("a table", lambda v: isinstance(v, dict)),
+    "limits": ("a table", lambda v: isinstance(v, dict)),
+    "bench": ("a table", lambda v: isinstance(v, dict)),
+    "components": ("a table of components, each a table with fmu = \"<FMU name>\" and a [parameters] table",
+                   lambda v: isinstance(v, dict) and all(
+                       isinstance(c, dict) and isinstance(c.get("fmu", ""), str)
+                       and isinstance(c.get("parameters", {}), dict) for c in v.values())),
+}
+
+
+def check_shape(data: dict, path: Path):
+    """``SceneError`` naming the key when a scene file's table is not of the scene's shape
+    (``_SHAPE``; unknown keys too)."""
+    for key, value in data.items():
+        if key not in _SHAPE:
+            raise SceneError(f"{path}: unknown key '{key}' (a scene has: {', '.join(_SHAPE)})")
+        what, test = _SHAPE[key]
+        if not test(value):
+            raise SceneError(f"{path}: {key} = {units.kind_of_value(value)}: expected {what}")
 
 
 def parse_connection(text: str) -> Connection:
@@ -323,7 +395,7 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             elif var.causality not in ("parameter", "input"):
                 findings.append(f"component '{name}': '{param}' is an {var.causality}, not a parameter or input")
             else:
-                findings += value_findings(f"{name}.{param}", var, quantity(value, f"{name}.{param}"))
+                findings += value_findings(f"{name}.{param}", var, value)
     driven = {}
     for c in scene.connections:
         for comp, var, causality in ((c.source, c.output, "output"), (c.target, c.input, "input")):
@@ -334,6 +406,7 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             elif comp in variables and variables[comp][var].causality != causality:
                 findings.append(f"connection '{c}': {comp}.{var} is an {variables[comp][var].causality}, "
                                 f"expected an {causality}")
+        findings += connection_findings(c, variables)
         key = (c.target, c.input)
         if key in driven:
             findings.append(f"connection '{c}': {c.target}.{c.input} is already driven by '{driven[key]}'")
@@ -344,7 +417,13 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
             findings.append(f"record '{item}': no component '{comp}'")
         elif comp in variables and var not in variables[comp]:
             findings.append(f"record '{item}': {comp} has no variable '{var}'")
+        elif comp in variables and variables[comp][var].causality != "output":
+            outputs = ", ".join(v for v, mv in variables[comp].items() if mv.causality == "output")
+            findings.append(f"record '{item}': {comp}.{var} is an {variables[comp][var].causality}; only outputs "
+                            f"are recorded (outputs of {comp}: {outputs})")
     findings += experiment_findings(scene.experiment)
+    if scene.experiment.strict and (unconnected := unconnected_inputs(scene, descriptions)):
+        findings.append("experiment.strict: " + unconnected_message(unconnected))
     findings += _check_limits(scene.limits)
     for feature in scene.features - set(FEATURES):
         findings.append(f"unknown feature '{feature}' (known: {', '.join(FEATURES)})")
@@ -362,13 +441,26 @@ def step_problem(step: float, label: str = "experiment.step") -> str | None:
 def experiment_findings(e: Experiment) -> list[str]:
     """Findings about an experiment's values (empty when they are sound)."""
     findings = [problem for problem in [step_problem(e.step)] if problem]
-    if not (math.isfinite(e.stop) and e.stop > e.start):
+    if not math.isfinite(e.start):
+        findings.append(f"experiment.start = {e.start} must be a finite time [s]")
+    elif not (math.isfinite(e.stop) and e.stop > e.start):
         findings.append(f"experiment.stop = {e.stop} must be > experiment.start = {e.start} s")
     elif e.step > e.stop - e.start:
         findings.append(f"experiment.step = {e.step} s is longer than the experiment ({e.stop - e.start} s)")
+    elif e.step > 0 and math.isfinite(e.step) and e.step < TIME_RESOLUTION * max(abs(e.start), abs(e.stop)):
+        # a time t holds only ~16 digits: at t = 1e9 s a 1 ms step is lost to rounding in
+        # the 7th digit, and every FMU and the reference integrate across steps of that length
+        findings.append(f"experiment.start = {e.start:g} s, stop = {e.stop:g} s: a step of {e.step:g} s is below "
+                        f"{TIME_RESOLUTION:g} of the time, too fine for the times to resolve (allowed: step >= "
+                        f"{TIME_RESOLUTION:g} x max(|start|, |stop|), here "
+                        f"{TIME_RESOLUTION * max(abs(e.start), abs(e.stop)):g} s; or start nearer 0)")
     if not 0.0 <= e.transient < e.stop - e.start:
         findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
     return findings
+
+
+#: the smallest step relative to the experiment's times (see ``experiment_findings``)
+TIME_RESOLUTION = 1e-9
 
 
 def _check_limits(limits: dict) -> list[str]:
@@ -378,28 +470,114 @@ def _check_limits(limits: dict) -> list[str]:
         if key not in LIMIT_KEYS:
             findings.append(f"limits.{key}: unknown limit (known: {', '.join(LIMIT_KEYS)})")
             continue
+        unit = LIMIT_UNITS[key]
         try:
-            value = float(quantity(raw, f"limits.{key}"))
-        except (TypeError, ValueError):
-            findings.append(f"limits.{key} = {raw!r}: expected a number")
+            value = quantity(raw, f"limits.{key}", unit)
+        except SceneError as error:
+            findings.append(str(error))
+            continue
+        if not units.is_number(value):
+            findings.append(f"limits.{key} = {units.kind_of_value(raw)}: expected a number in {unit} "
+                            "(or inf, or a number with a unit of the same dimension)")
             continue
         if not value > 0.0:
             findings.append(f"limits.{key} = {value:g} must be > 0 (inf: check finiteness only)")
     return findings
 
 
+def connection_findings(c: Connection, variables: dict) -> list[str]:
+    """A connection between variables of different quantities (their units' dimensions
+    differ: a torque into a speed) is a finding; so is one between different types."""
+    try:
+        out, into = variables[c.source][c.output], variables[c.target][c.input]
+    except KeyError:
+        return []            # a missing variable is already a finding
+    if out.type != into.type:
+        return [f"connection '{c}': {c.source}.{c.output} is a {out.type}, {c.target}.{c.input} a {into.type}"]
+    if out.type != "Real":
+        return []
+    try:
+        same = units.same_dimension(out.unit, into.unit)
+    except units.UnitProblem as problem:
+        return [f"connection '{c}': {problem}"]
+    if same:
+        return []
+    what = lambda mv: f"{mv.unit or '1'}, {units.dimension(mv.unit or '')}"
+    return [f"connection '{c}': {c.source}.{c.output} is a different quantity ({what(out)}) from "
+            f"{c.target}.{c.input} ({what(into)}); only variables of the same dimension are connected"]
+
+
+def unconnected_inputs(scene: Scene, descriptions: dict) -> list[str]:
+    """The inputs (``component.input``) that no connection drives and the scene gives no
+    value: they stay at their start value for the whole run.  An input that is the time
+    derivative of another input (a shaft's ``tau_rate``: FMI ``derivative``) follows that
+    one and is not counted."""
+    driven = {(c.target, c.input) for c in scene.connections}
+    found = []
+    for name, spec in scene.components.items():
+        md = descriptions.get(spec.fmu)
+        if md is None:
+            continue
+        for v in md.modelVariables:
+            if (v.causality == "input" and v.derivative is None and (name, v.name) not in driven
+                    and v.name not in spec.parameters):
+                found.append(f"{name}.{v.name}")
+    return found
+
+
+def unconnected_message(inputs: list[str]) -> str:
+    """The sentence naming the unconnected inputs."""
+    return (f"input{'s' if len(inputs) > 1 else ''} {', '.join(inputs)} "
+            f"{'are' if len(inputs) > 1 else 'is'} connected to nothing and not set: held at the start value "
+            "for the whole run (connect it, give it a value among the component's parameters, or run with "
+            "experiment.strict = true / --strict to refuse such a scene)")
+
+
+#: the range of FMI 2.0's fmi2Integer (a C int)
+INTEGER_RANGE = (-2 ** 31, 2 ** 31 - 1)
+
+
 def value_findings(label: str, var, value) -> list[str]:
-    """Findings about ``value`` for the model variable ``var`` (its type and its [min, max])."""
+    """Findings about ``value`` for the model variable ``var``: its type (strict: a TOML
+    boolean is no number, a fraction no integer, a list, table or date no parameter), its
+    unit (a value with a unit must be of the variable's dimension) and its [min, max]."""
+    given = units.kind_of_value(value)
+    if isinstance(value, dict) and ("samples" in value or "harmonics" in value):
+        try:
+            value = quantity(value, label)
+        except SceneError as error:
+            return [str(error)]
     if var.type == "String":
-        return [] if isinstance(value, str) else [f"{label}: expected a string, got {value!r}"]
+        return [] if isinstance(value, str) else [f"{label} = {given}: expected a string"]
+    if var.type == "Boolean":
+        return [] if isinstance(value, bool) else [f"{label} = {given}: expected true or false"]
+    if var.type in ("Integer", "Enumeration"):
+        if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+            value = int(value)
+        if not isinstance(value, int) or isinstance(value, bool):
+            return [f"{label} = {given}: expected a whole number ({var.description})"]
+        low = max(int(var.min) if var.min is not None else INTEGER_RANGE[0], INTEGER_RANGE[0])
+        high = min(int(var.max) if var.max is not None else INTEGER_RANGE[1], INTEGER_RANGE[1])
+        if not low <= value <= high:
+            return [f"{label} = {value} is outside its allowed range [{low}, {high}] ({var.description})"]
+        return []
+    unit_text = f" {var.unit}" if var.unit else ""
     if isinstance(value, str):
-        return [f"{label}: expected a number (optionally with a unit, e.g. '15 deg'), got {value!r}"]
+        if units.split(value) is None:
+            return [f"{label} = {value!r}: expected a number in{unit_text or ' 1 (no unit)'} or a number with a "
+                    f"unit of the same dimension (e.g. '15 deg' for an angle)"]
+        try:
+            value = units.convert(value, var.unit or "")
+        except units.UnitProblem as problem:
+            return [f"{label} = {given}: {problem}; {label} is in{unit_text or ' 1 (no unit)'} ({var.description})"]
+    if not units.is_number(value):
+        return [f"{label} = {given}: expected a number in{unit_text or ' 1 (no unit)'} (or a string with a unit, "
+                "e.g. '15 deg')"]
     if not math.isfinite(float(value)):
         return [f"{label} = {value} is not finite"]
     low = float(var.min) if var.min is not None else -math.inf
     high = float(var.max) if var.max is not None else math.inf
     if not low <= float(value) <= high:
-        unit = f" {var.unit}" if var.unit else ""
-        return [f"{label} = {value:.6g}{unit} is outside its allowed range [{low:.6g}, {high:.6g}]{unit} "
+        return [f"{label} = {value:.6g}{unit_text} is outside its allowed range [{low:.6g}, {high:.6g}]{unit_text} "
                 f"({var.description})"]
     return []

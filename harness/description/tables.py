@@ -19,6 +19,11 @@ _STIFFNESS = re.compile(r"stiffness[^:\n]*:\s*([0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0
 _NAME = re.compile(r"torque_(drive|driven)_(.+)\.csv$", re.IGNORECASE)
 
 
+#: the largest torque a table may hold [N*m]: the shafts' torque range (lever.physics.catalogue:
+#: stall_torque, mean_torque in [-1e6, 1e6] N*m)
+TORQUE_LIMIT = 1e6
+
+
 class MeasuredDataError(ValueError):
     """A measurement file that cannot be read as the format above."""
 
@@ -41,11 +46,18 @@ class Table:
 def read_table(path: Path | str) -> Table:
     path = Path(path)
     try:
-        lines = path.read_text().splitlines()
+        # utf-8-sig: a byte-order mark (as spreadsheets write one) is not part of the first line
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except OSError as error:
         raise MeasuredDataError(f"{path}: cannot read ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        raise MeasuredDataError(f"{path}: not a text file in UTF-8 (byte {error.start}: {error.reason}); expected "
+                                "# comment lines and a CSV table") from None
     comments = "\n".join(line.lstrip("# ") for line in lines if line.lstrip().startswith("#"))
-    rows = list(csv.DictReader(line for line in lines if line.strip() and not line.lstrip().startswith("#")))
+    try:
+        rows = list(csv.DictReader(line for line in lines if line.strip() and not line.lstrip().startswith("#")))
+    except csv.Error as error:
+        raise MeasuredDataError(f"{path}: not a CSV table ({error})") from None
     if not rows:
         raise MeasuredDataError(f"{path}: no table rows")
     columns = [c for c in rows[0] if c and c.strip().startswith("cycle_")]
@@ -63,6 +75,11 @@ def read_table(path: Path | str) -> Table:
                                 f"revolution (at least 4 ordinates), got {angles.tolist()}")
     if not np.all(np.isfinite(cycles)):
         raise MeasuredDataError(f"{path}: non-finite torque values")
+    if np.max(np.abs(cycles)) > TORQUE_LIMIT:
+        raise MeasuredDataError(f"{path}: a torque of {np.max(np.abs(cycles)):.6g} N*m: the tables hold N*m within "
+                                f"+-{TORQUE_LIMIT:g} (the shafts' torque range)")
+    if not np.any(cycles):
+        raise MeasuredDataError(f"{path}: every torque is zero: a table of zeros measures nothing")
     name = _NAME.search(path.name)
     text = comments.lower()
     if name:

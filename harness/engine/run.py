@@ -42,6 +42,9 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)
     #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.engine.traces)
     stream: dict | None = None
+    #: inputs no connection drives and the scene gives no value (``scenes.unconnected_inputs``):
+    #: held at their start values; named in the run's output and report
+    unconnected_inputs: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -164,9 +167,11 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
     step = float(step or e.step)
     options = dict(options or {})
     master_family.check(master)
-    n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     names = recorded_names(scene)
-    system = System(scene, fmu_dir, record=names)
+    system = System(scene, fmu_dir, record=names)      # refuses an unsound scene (SceneInvalid) first
+    unconnected = scenes.unconnected_inputs(scene, {scene.components[n].fmu: c.description
+                                                    for n, c in system.components.items()})
+    n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     failure = stage = diagnosis = None
     recorder = driver = bar = calls_before = None
     started = stepping = clock.perf_counter()
@@ -231,7 +236,7 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     [], recorder.stream.report() if recorder and recorder.stream else None)
+                     [], recorder.stream.report() if recorder and recorder.stream else None, unconnected)
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:

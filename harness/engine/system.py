@@ -70,6 +70,15 @@ def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
     return order
 
 
+def converted(var, value, label: str):
+    """A scene's ``value`` for the model variable ``var`` as the FMU takes it: a number with
+    a unit converted to the variable's unit (``scenes.validate`` has checked its dimension),
+    a harmonics or samples table to its text; other values as they are."""
+    if var.type == "Real" or isinstance(value, dict):
+        return scenes.quantity(value, label, (var.unit or "") if var.type == "Real" else None)
+    return value
+
+
 class System:
     def __init__(self, scene: scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
                  record: list[str] | None = None):
@@ -314,7 +323,8 @@ class System:
     def initialize(self):
         e = self.scene.experiment
         for name, spec in self.scene.components.items():
-            params = {k: scenes.quantity(v, f"{name}.{k}") for k, v in spec.parameters.items()}
+            params = {k: converted(self.components[name].variable(k), v, f"{name}.{k}")
+                      for k, v in spec.parameters.items()}
             self.components[name].set_parameters(params)
         for c in self.components.values():
             c.initialize(e.start, e.stop)

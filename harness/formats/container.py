@@ -25,7 +25,8 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.paths import FMUS
-from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
+from harness.engine.system import (SceneInvalid, converted, dependency_order, descriptions_for, feedthrough_components,
+                                   fmu_path)
 
 
 def container_name(item: str) -> str:
@@ -59,7 +60,7 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
     for name, spec in scene.components.items():
         for param, raw in spec.parameters.items():
             inner = variables[name][param]
-            value = scenes.quantity(raw, f"{name}.{param}")
+            value = converted(inner, raw, f"{name}.{param}")
             start = repr(float(value)) if inner.type == "Real" else (
                 str(int(value)) if inner.type in ("Integer", "Enumeration") else str(value))
             outer = ModelVariable(name=container_name(f"{name}.{param}"), type=inner.type, causality="parameter",

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.paths import FMUS
-from harness.engine.system import fmu_path
+from harness.engine.system import converted, fmu_path
 
 SYSTEM_NAMESPACE = "http://opensimulationplatform.com/MSMI/OSPSystemStructure"
 #: OSP-IS bond groups: kind -> (effort group, flow group)
@@ -128,7 +128,7 @@ def system_structure(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str:
             variables = {v.name: v for v in descriptions[spec.fmu].modelVariables}
             initial = ET.SubElement(simulator, "InitialValues")
             for param, raw in spec.parameters.items():
-                value = scenes.quantity(raw, f"{name}.{param}")
+                value = converted(variables[param], raw, f"{name}.{param}")
                 kind = variables[param].type
                 text = repr(float(value)) if kind == "Real" else (
                     str(int(value)) if kind in ("Integer", "Enumeration") else str(value))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from harness.description import kinds
+from harness.description import scene as scenes
 from harness.formats.run_files import files_line, reference_error_lines, write_run
 from harness.judges.rectifier import analyse, errors
 
@@ -18,6 +19,9 @@ def summarize(result, reference=None) -> dict:
         "failure": result.failure, "diagnosis": result.diagnosis, "wall_time_s": result.wall_time,
         "counters": result.counters,
     }
+    if result.unconnected_inputs:
+        summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
+                                         "note": scenes.unconnected_message(result.unconnected_inputs)}
     if len(result.times) > 1:
         summary["freewheel"] = analyse(scene, result.times, result.traces)
         summary["energy_balance"] = summary["freewheel"]["energy_balance"]
@@ -46,6 +50,8 @@ def write_report(path, summary: dict):
         interrupted = (summary.get("diagnosis") or {}).get("kind") == "interrupted"
         lines += ["", f"**The run {'was interrupted (Ctrl-C)' if interrupted else 'failed'}:** {summary['failure']}",
                   "", "The traces up to the " + ("interruption" if interrupted else "failure") + " are in traces.csv."]
+    if summary.get("unconnected_inputs"):
+        lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
     fw = summary.get("freewheel")
     if fw:
         d = fw["derived"]

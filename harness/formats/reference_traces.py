@@ -94,10 +94,16 @@ def read_csv(path: Path) -> Traces:
     any case), every other column a signal.  Quoted names and blank lines are allowed."""
     path = Path(path)
     try:
-        with open(path, newline="") as f:
+        # utf-8-sig: a byte-order mark (as spreadsheets write one) is not part of the first name
+        with open(path, newline="", encoding="utf-8-sig") as f:
             rows = [row for row in csv.reader(f) if row and any(cell.strip() for cell in row)]
     except OSError as error:
         raise TraceFileError(f"{path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise TraceFileError(f"{path}: not a text file in UTF-8 (byte {error.start}: {error.reason}); expected a "
+                             "CSV table") from None
+    except csv.Error as error:
+        raise TraceFileError(f"{path}: not a CSV table ({error})") from None
     if len(rows) < 2:
         raise TraceFileError(f"{path}: expected a header row and at least one data row")
     names = [cell.strip().strip('"').strip() for cell in rows[0]]
@@ -106,13 +112,13 @@ def read_csv(path: Path) -> Traces:
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
         raise TraceFileError(f"{path}: duplicate column(s) {', '.join(duplicates)}")
+    widths = sorted({len(row) for row in rows[1:]})
+    if widths != [len(names)]:
+        raise TraceFileError(f"{path}: rows have {widths} columns, the header {len(names)}")
     try:
         data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
     except ValueError as error:
         raise TraceFileError(f"{path}: not a number ({error})") from None
-    if data.ndim != 2 or data.shape[1] != len(names):
-        widths = sorted({len(row) for row in rows[1:]})
-        raise TraceFileError(f"{path}: rows have {widths} columns, the header {len(names)}")
     return Traces(data[:, 0].copy(), {n: data[:, i].copy() for i, n in enumerate(names) if i})
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.description import kinds
+from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import rectifier_report
@@ -33,14 +34,20 @@ def summarize(result: RunResult, reference=None) -> dict:
     }
     if result.stream:
         summary["stream"] = result.stream
+    if result.unconnected_inputs:
+        summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
+                                         "note": scenes.unconnected_message(result.unconnected_inputs)}
     if len(result.times) > 1:
         summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
                                                            scene.experiment.transient).get(full)
                                  for short, full in names.items() if full in result.traces}
     if "energy_balance" in scene.features and result.ok:
-        summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
+        if (problem := kinds.driveline_problem(scene)) is None:
+            summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
+        else:       # the balance books the driveline's works and energies: not this system's
+            summary["energy_balance_unavailable"] = f"{problem}: the driveline's energy balance does not apply"
     load_torque = f"{kinds.roles(scene)[2]}.load_torque"
-    if len(result.times) > 1 and result.ok:
+    if len(result.times) > 1 and result.ok and names.get("w2") in result.traces:
         summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
                                                           names["w2"], scene.experiment.transient)
     if reference is not None and len(result.times):
@@ -65,6 +72,8 @@ def write_report(path: Path, summary: dict):
     elif summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "",
                   "The traces up to the failure are in traces.csv."]
+    if summary.get("unconnected_inputs"):
+        lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
     if summary.get("stream"):
         st = summary["stream"]
         lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
@@ -82,6 +91,8 @@ def write_report(path: Path, summary: dict):
                   "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
     lines += reference_error_lines(summary, "Error against the monolithic reference",
                                    "torques relative to the mean transmitted torque, speeds to the mean speed")
+    if summary.get("energy_balance_unavailable"):
+        lines += ["", "## Energy balance", "", f"Not computed: {summary['energy_balance_unavailable']}."]
     eb = summary.get("energy_balance")
     if eb:
         lines += ["", "## Energy balance", "",

@@ -30,9 +30,10 @@ from pathlib import Path
 from lever.physics.parameters import UNITS
 
 from harness.description import scene as scenes
+from harness.description import units
 from harness.paths import FMUS
 from harness.engine.component import scratch_folder
-from harness.engine.system import SceneInvalid, descriptions_for, fmu_path
+from harness.engine.system import SceneInvalid, converted, descriptions_for, fmu_path
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
@@ -189,7 +190,7 @@ def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
     parameters = ET.SubElement(root, _q("ssv", "Parameters"))
     for param, raw in spec.parameters.items():
         var = variables[param]
-        value = scenes.quantity(raw, f"{name}.{param}")
+        value = converted(var, raw, f"{name}.{param}")
         parameter = ET.SubElement(parameters, _q("ssv", "Parameter"), {"name": param})
         if var.type == "Real":
             attrs = {"value": _number(value)}
@@ -248,19 +249,28 @@ def read_scene(path: str | Path) -> scenes.Scene:
     where = unpack(path)
     try:
         return _read_unpacked(path, where)
-    except (ET.ParseError, OSError) as error:
-        shutil.rmtree(where, ignore_errors=True)
-        raise scenes.SceneError(f"{path}: a file of the archive cannot be read: {error}") from None
     except BaseException:
-        shutil.rmtree(where, ignore_errors=True)
+        shutil.rmtree(where, ignore_errors=True)    # a refused archive leaves no unpacked copy
         raise
 
 
 def _read_unpacked(path: Path, where: Path) -> scenes.Scene:
     try:
-        root = ET.parse(where / "SystemStructure.ssd").getroot()
+        return _scene_from(path, where)
+    except scenes.SceneError:
+        raise
     except ET.ParseError as error:
-        raise scenes.SceneError(f"{path}: SystemStructure.ssd does not parse: {error}") from None
+        raise scenes.SceneError(f"{path}: an XML file of the archive does not parse: {error}") from None
+    except (ValueError, TypeError) as error:
+        raise scenes.SceneError(f"{path}: a value in the archive is malformed ({type(error).__name__}: {error}); "
+                                "times and steps are numbers in s") from None
+    except OSError as error:
+        raise scenes.SceneError(f"{path}: a file the archive refers to cannot be read ({error})") from None
+
+
+def _scene_from(path: Path, where: Path) -> scenes.Scene:
+    root = ET.parse(where / "SystemStructure.ssd").getroot()
+    ssd_units = defined_units(root)
     system = root.find(_q("ssd", "System"))
     if system is None:
         raise scenes.SceneError(f"{path}: SystemStructure.ssd has no System")
@@ -278,7 +288,7 @@ def _read_unpacked(path: Path, where: Path) -> scenes.Scene:
             else:
                 parameter_set = binding.find(f"{_q('ssd', 'ParameterValues')}/{_q('ssv', 'ParameterSet')}")
             if parameter_set is not None:
-                parameters.update(parameter_values(parameter_set, binding.get("prefix", "")))
+                parameters.update(parameter_values(parameter_set, binding.get("prefix", ""), ssd_units))
         components[name] = scenes.ComponentSpec(fmu.stem, parameters)
     if len(fmu_dirs) > 1:
         raise scenes.SceneError(f"{path}: the harness runs FMUs from one folder; this SSP has them in "
@@ -314,9 +324,12 @@ def _read_unpacked(path: Path, where: Path) -> scenes.Scene:
                         path=path, notes=notes, fmu_dir=fmu_dirs.pop() if fmu_dirs else None)
 
 
-def parameter_values(parameter_set: ET.Element, prefix: str = "") -> dict:
-    """``{name: value}`` of an SSV parameter set (Real in SI: a unit other than the
-    variable's is converted when we know it)."""
+def parameter_values(parameter_set: ET.Element, prefix: str = "", defined_units: dict | None = None) -> dict:
+    """``{name: value}`` of an SSV parameter set.  A Real with a unit is kept as the string
+    "<value> <unit>", so that the scene's check converts it to its variable's unit or refuses
+    it (a unit of another dimension, or one nobody defines); a unit the SSD defines in its
+    ``Units`` (``defined_units``: name -> SI value of one of it, as "<factor> <SI unit>") is
+    read by that definition.  Malformed values are a ``SceneError`` naming the parameter."""
     values = {}
     for parameter in parameter_set.iterfind(f"{_q('ssv', 'Parameters')}/{_q('ssv', 'Parameter')}"):
         name = parameter.get("name")
@@ -326,18 +339,66 @@ def parameter_values(parameter_set: ET.Element, prefix: str = "") -> dict:
         if typed is None:
             continue
         kind, raw = typed.tag.rsplit("}", 1)[-1], typed.get("value")
+        values[name] = _typed_value(name, kind, raw, typed.get("unit"), defined_units or {})
+    return values
+
+
+def _typed_value(name: str, kind: str, raw, unit: str | None, defined_units: dict):
+    allowed = {"Real": "a number", "Integer": "a whole number", "Enumeration": "a whole number",
+               "Boolean": "true, false, 1 or 0", "String": "a string"}
+    if raw is None:
+        raise scenes.SceneError(f"SSP parameter {name}: its {kind} has no value attribute")
+    try:
         if kind == "Real":
             value = float(raw)
-            unit = typed.get("unit")
-            if unit in UNITS:
-                value *= UNITS[unit][1]
             if not math.isfinite(value):
-                raise scenes.SceneError(f"parameter {name} = {raw} is not finite")
-        elif kind in ("Integer", "Enumeration"):
-            value = int(raw)
-        elif kind == "Boolean":
-            value = raw in ("true", "1")
-        else:
-            value = raw
-        values[name] = value
-    return values
+                raise scenes.SceneError(f"SSP parameter {name} = {raw} is not finite")
+            if not unit:
+                return value
+            if unit in defined_units and not _pint_knows(unit):
+                scale, si = defined_units[unit]
+                return f"{value * scale!r} {si}"
+            return f"{value!r} {unit}"
+        if kind in ("Integer", "Enumeration"):
+            return int(raw)
+        if kind == "Boolean":
+            if raw not in ("true", "false", "1", "0"):
+                raise ValueError(raw)
+            return raw in ("true", "1")
+        if kind == "String":
+            return raw
+    except ValueError:
+        raise scenes.SceneError(f"SSP parameter {name} = {raw!r}: expected {allowed[kind]} ({kind})") from None
+    raise scenes.SceneError(f"SSP parameter {name}: unknown type {kind} (known: {', '.join(allowed)})")
+
+
+def _pint_knows(unit: str) -> bool:
+    try:
+        units.parse_unit(unit)
+        return True
+    except units.UnitProblem:
+        return False
+
+
+#: SSP's BaseUnit exponents and the SI unit of each
+_SSP_BASE = {"kg": "kg", "m": "m", "s": "s", "A": "A", "K": "K", "mol": "mol", "cd": "cd", "rad": "rad"}
+
+
+def defined_units(root: ET.Element) -> dict:
+    """The SSD's ``Units``: name -> (factor to SI, the SI unit as pint reads it).  A unit
+    with an offset is left out (a temperature scale: no parameter of ours)."""
+    out = {}
+    for unit in root.iterfind(f"{_q('ssd', 'Units')}/{_q('ssc', 'Unit')}"):
+        base = unit.find(_q("ssc", "BaseUnit"))
+        if base is None or unit.get("name") is None:
+            continue
+        try:
+            if float(base.get("offset", 0.0)) != 0.0:
+                continue
+            scale = float(base.get("factor", 1.0))
+            exponents = {k: int(base.get(k, 0)) for k in _SSP_BASE}
+        except ValueError:
+            raise scenes.SceneError(f"SSD unit {unit.get('name')!r}: its BaseUnit has a value that is not a number")
+        si = "*".join(f"{_SSP_BASE[k]}**{e}" for k, e in exponents.items() if e) or "dimensionless"
+        out[unit.get("name")] = (scale, si)
+    return out

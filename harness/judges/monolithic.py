@@ -27,10 +27,10 @@ ATOL = 1e-10
 
 
 def _roles(scene: scenes.Scene):
-    try:
-        names = kinds.driveline(scene)
-    except kinds.NotADriveline as error:
-        raise ReferenceUnavailable(f"{error}: the monolithic reference has no solver for it") from None
+    problem = kinds.driveline_problem(scene)
+    if problem:
+        raise ReferenceUnavailable(f"{problem}: the monolithic reference has no solver for it")
+    names = kinds.driveline(scene)
     return names.engine, names.coupling, names.load
 
 
@@ -122,8 +122,8 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
                              method=method, t_eval=times, rtol=rtol, atol=atol,
                              first_step=min(1e-4, 0.1 / omega))
         if not solution.success:
-            raise ReferenceUnavailable(f"the reference solver failed at t = {solution.t[-1]:.6g} s: "
-                                       f"{solution.message}")
+            where = f" at t = {solution.t[-1]:.6g} s" if len(solution.t) else ""
+            raise ReferenceUnavailable(f"the reference solver failed{where}: {solution.message}")
         t, y, nfev = solution.t, solution.y, int(solution.nfev)
     wall = clock.perf_counter() - started
     p1, v1, p2, v2, work_in, work_out, dissipated = y[:7]

@@ -242,6 +242,31 @@ def match_columns(reference_names: list[str], result_names: list[str]) -> tuple[
     return mapping, missing
 
 
+#: a result sample beyond this many times the reference's largest magnitude (plus 1) is no
+#: physical value of the signal, whatever the band says (a band forgives a sample its
+#: neighbours bracket, and an RMS error of 1e300 overflows)
+ABSURD = 1e6
+
+
+def value_problems(signal: str, times: np.ndarray, values: np.ndarray, reference: np.ndarray) -> list[str]:
+    """Problems that fail a result whatever its band: a NaN or infinite sample, or a sample
+    absurdly far from anything the reference holds (``ABSURD``)."""
+    problems = []
+    finite = np.isfinite(values)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        problems.append(f"signal '{signal}' has {len(bad)} non-finite value(s) ({values[bad[0]]} at t = "
+                        f"{times[bad[0]]:.6g} s): a result with NaN or inf fails")
+    scale = ABSURD * (float(np.max(np.abs(reference[np.isfinite(reference)]), initial=0.0)) + 1.0)
+    absurd = finite & (np.abs(np.where(finite, values, 0.0)) > scale)
+    if absurd.any():
+        first = int(np.flatnonzero(absurd)[0])
+        problems.append(f"signal '{signal}' has {int(absurd.sum())} sample(s) beyond {scale:.3g} "
+                        f"({ABSURD:g} x the reference's largest magnitude + 1), e.g. {values[first]:.6g} at t = "
+                        f"{times[first]:.6g} s: no value of this signal")
+    return problems
+
+
 def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], reference_times: np.ndarray,
             reference: dict[str, np.ndarray], tolerance: Tolerance = TOLERANCES["lever"],
             start: float | None = None, stop: float | None = None) -> tuple[Findings, dict[str, Band]]:
@@ -256,6 +281,10 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
     stop = float(reference_times[-1]) if stop is None else float(stop)
     if len(times) < 2:
         findings.problems.append(f"the result has {len(times)} sample(s); at least two are needed")
+        return findings, bands
+    if not np.all(np.isfinite(times)):
+        bad = int(np.flatnonzero(~np.isfinite(times))[0])
+        findings.problems.append(f"the result's time column has a non-finite value ({times[bad]}) in row {bad + 1}")
         return findings, bands
     if np.any(np.diff(times) < 0):
         findings.problems.append("the result's time column is not monotonic")
@@ -272,6 +301,8 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
     if extra:
         findings.notes.append("not in the reference (not compared): " + ", ".join(extra))
     for signal, column in mapping.items():
+        findings.problems += value_problems(signal, times, np.asarray(traces[column], dtype=float),
+                                            np.asarray(reference[signal], dtype=float))
         finding, b = compare_signal(signal, times, traces[column], reference_times, reference[signal], tolerance)
         findings.signals.append(finding)
         bands[signal] = b

@@ -60,6 +60,7 @@ from lever.physics.parameters import ParameterError
 from harness.description import scene as scenes
 from harness.description.tables import (MeasuredDataError, Table, cycle_of, load_series,
                                         read_table)
+from harness.engine.system import SceneInvalid
 from harness.paths import DATA, RESULTS
 
 #: The monograph's stated model-experiment difference (Fig. 4.8): 6.5-8.5 %.  A grade
@@ -145,6 +146,9 @@ def check_pair(drive: Table, driven: Table) -> list[str]:
     if len(drive.cycles) != len(driven.cycles):
         findings.append(f"grade {drive.grade}: {len(drive.cycles)} drive cycles but {len(driven.cycles)} driven "
                         "cycles; cycles are compared one to one")
+    if not drive.mean_curve.mean() > 0:
+        findings.append(f"{drive.path}: the mean drive torque is {drive.mean_curve.mean():.6g} N*m; the errors are "
+                        "relative to it, so it must be > 0 (the torque the coupling transmits)")
     return findings
 
 
@@ -427,7 +431,7 @@ def validate_measured(files, out: Path | str, stiffness: float | None = None, cy
             run = lambda how, cycle: _predict(how, drive, driven, conditions, cycle)  # noqa: E731
             mean_prediction = run(reading, "mean")
             per_cycle = [run(reading, k + 1) for k in range(len(drive.cycles))] if cycles else None
-        except (MeasuredDataError, scenes.SceneError, ParameterError) as error:
+        except (MeasuredDataError, scenes.SceneError, SceneInvalid, ParameterError) as error:
             findings.append(str(error))
             continue
         except RuntimeError as error:
@@ -437,7 +441,7 @@ def validate_measured(files, out: Path | str, stiffness: float | None = None, cy
         if alternative:
             try:
                 second = run(other, "mean")
-            except (scenes.SceneError, ParameterError, RuntimeError) as error:
+            except (scenes.SceneError, SceneInvalid, ParameterError, RuntimeError) as error:
                 findings.append(f"grade {drive.grade}: the {other} reading (for comparison) failed: {error}")
         numbers = compare(drive, driven, mean_prediction, per_cycle, second)
         numbers["reading"] = reading

@@ -1,0 +1,155 @@
+"""Quantities with dimensions: every value a user writes with a unit ("15 deg", "2 kN.m/rad",
+an SSP parameter's unit) is checked against the dimension of the variable it is for and
+converted to that variable's unit, with pint.
+
+**Angle is a dimension of its own here.**  In SI the radian is 1 (m/m), so pint's own
+registry would take "1000 deg" for a stiffness in N.m/rad (17.45 N.m/rad) and "0.5 rpm"
+(1/s) for an angle per ... nothing.  The registry below is pint's default one with a
+single change: ``radian = [angle]`` instead of ``radian = []``, so that deg, rev, rpm,
+N.m/rad and N.m.s/rad carry the angle and a value of the wrong kind is refused.  The
+price: an angle is never dimensionless (a ratio given as "0.1 rad" is refused), and rad/s
+is not Hz (a cycle is 2*pi rad, Hz is 1/s) - both what a shaft's units mean.
+
+Units are written as pint reads them ("N*m/rad", "kg*m**2") or as FMI/Modelica model
+descriptions write them ("N.m/rad", "kg.m2", "rad/s2"); "1" and "" are dimensionless.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import re
+from pathlib import Path
+
+#: a number followed by a unit: "15 deg", "-2.5e3 N.m/rad", "374.8rpm"
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?inf|nan)\s*([^\s\d.+-].*?)\s*$",
+                       re.IGNORECASE)
+
+
+class UnitProblem(ValueError):
+    """A value's unit is unknown or of another dimension than its variable's."""
+
+
+@functools.lru_cache(maxsize=1)
+def registry():
+    """pint's default registry with the angle as a base dimension (see the module's text);
+    built once per process (about a second)."""
+    import pint
+
+    folder = Path(pint.__file__).parent
+    text = (folder / "default_en.txt").read_text(encoding="utf-8")
+    constants = (folder / "constants_en.txt").read_text(encoding="utf-8")
+    radian = "radian = [] = rad\n"
+    if text.count(radian) != 1 or text.count("@import constants_en.txt\n") != 1:
+        raise RuntimeError(f"pint {pint.__version__}: its default units file changed; harness/description/units.py "
+                           "makes the radian a base dimension by editing one line of it")
+    text = text.replace(radian, "radian = [angle] = rad\n").replace("@import constants_en.txt\n", constants)
+    return pint.UnitRegistry(text.splitlines(), autoconvert_offset_to_baseunit=False)
+
+
+def pint_syntax(unit: str) -> str:
+    """A unit as pint reads it: FMI/Modelica's "N.m.s/rad", "kg.m2" become "N*m*s/rad",
+    "kg*m**2"; "1" and "" become "dimensionless"."""
+    unit = (unit or "").strip()
+    if unit in ("", "1"):
+        return "dimensionless"
+    unit = re.sub(r"(?<=[A-Za-z)])\.(?=[A-Za-z(])", "*", unit)     # N.m -> N*m
+    return re.sub(r"(?<=[A-Za-z)])(-?\d+)", r"**\1", unit)          # m2 -> m**2, s-1 -> s**-1
+
+
+@functools.lru_cache(maxsize=256)
+def parse_unit(unit: str):
+    """The pint unit of ``unit``; ``UnitProblem`` when pint does not know it."""
+    try:
+        return registry().parse_units(pint_syntax(unit))
+    except Exception as error:    # noqa: BLE001 - pint parses with Python's tokenizer: user text raises
+        # PintError, SyntaxError, tokenize.TokenError ("0{"), ... - all mean the same: not a unit
+        raise UnitProblem(f"unknown unit {unit!r} ({type(error).__name__}: {error})") from None
+
+
+def dimension(unit: str) -> str:
+    """The dimension of ``unit`` in words, e.g. "[mass] * [length] ** 2 / [time] ** 2 / [angle]"."""
+    dims = parse_unit(unit).dimensionality
+    return str(dims) if dims else "dimensionless"
+
+
+def same_dimension(a: str | None, b: str | None) -> bool:
+    """Whether units ``a`` and ``b`` measure the same kind of quantity (None: dimensionless)."""
+    return parse_unit(a or "").dimensionality == parse_unit(b or "").dimensionality
+
+
+#: the SI unit of each base dimension (pint's own root of [mass] is the gram)
+_SI = {"[mass]": "kg", "[length]": "m", "[time]": "s", "[angle]": "rad", "[current]": "A",
+       "[temperature]": "K", "[substance]": "mol", "[luminosity]": "cd"}
+
+
+def si_unit(unit):
+    """The SI unit (kg, m, s, rad, ...) of the pint unit ``unit``'s dimension."""
+    dims = unit.dimensionality
+    unknown = [d for d in dims if d not in _SI]
+    if unknown:
+        raise UnitProblem(f"{unit}: no SI unit for the dimension {', '.join(unknown)}")
+    target = registry().parse_units("dimensionless")
+    for d, exponent in dims.items():
+        target = target * registry().parse_units(_SI[d]) ** exponent
+    return target
+
+
+def split(text: str) -> tuple[float, str] | None:
+    """``(number, unit)`` of a string "<number> <unit>", None when it is not of that form."""
+    m = _QUANTITY.match(text) if isinstance(text, str) else None
+    return (float(m.group(1)), m.group(2)) if m else None
+
+
+def factor(unit: str, target: str | None) -> float:
+    """What a value in ``unit`` is multiplied by to be in ``target`` (None: the SI base
+    units, kg m s rad); ``UnitProblem`` when the dimensions differ or a unit is unknown."""
+    import pint
+
+    source = parse_unit(unit)
+    goal = parse_unit(target) if target is not None else None
+    if goal is not None and source.dimensionality != goal.dimensionality:
+        raise UnitProblem(f"a value in {unit} ({dimension(unit)}) cannot be a value in {target} "
+                          f"({dimension(target)})")
+    try:
+        one = registry().Quantity(1.0, source)
+        if not (one._is_multiplicative and (goal is None or registry().Quantity(1.0, goal)._is_multiplicative)):
+            raise UnitProblem(f"{unit}: a unit with an offset (a temperature scale) is not taken here")
+        converted = one.to(goal if goal is not None else si_unit(source))
+    except pint.errors.PintError as error:   # offset units (degC) and the like
+        raise UnitProblem(f"{unit}: cannot be converted ({error})") from None
+    return float(converted.magnitude)
+
+
+def convert(text: str, target: str | None = None) -> float:
+    """The string "<number> <unit>" as a number in ``target`` (None: the SI base units).
+    ``UnitProblem`` when it is not a number with a known unit of ``target``'s dimension."""
+    parsed = split(text)
+    if parsed is None:
+        raise UnitProblem(f"{text!r} is not a number with a unit (e.g. '15 deg')")
+    number, unit = parsed
+    scale = factor(unit, target)
+    # the same arithmetic as a table of factors: number * factor (bit for bit what
+    # "15 deg" gave before the units were checked)
+    return number * scale if scale != 1.0 else number
+
+
+def is_number(value) -> bool:
+    """A real number as a scene may write one: int or float, never a boolean."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def kind_of_value(value) -> str:
+    """What a TOML value is, in words, for messages."""
+    import datetime
+
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, (datetime.date, datetime.time, datetime.datetime)):
+        return f"the date/time {value.isoformat()}"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{value}"
+    return repr(value)
