@@ -222,6 +222,8 @@ def _refuse_unstreamed(spec: scenes.Scene, step: float | None):
     """Exit 2 before a run whose traces would not fit in memory: say to use --stream."""
     from harness.engine.run import available_memory, trace_memory
 
+    if scenes.experiment_findings(spec.experiment):
+        return      # no estimate from unsound times: the run refuses them, naming each (exit 2)
     needed, rows = trace_memory(spec, step)
     free = available_memory()
     if free is not None and needed > 0.8 * free:

@@ -174,6 +174,10 @@ def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir)
     same = ("name", "valueReference", "type", "causality", "variability")
     assert [[getattr(v, a) for a in same] for v in theirs.modelVariables] == \
            [[getattr(v, a) for a in same] for v in ours.modelVariables]
+    # the units too: a scene's "15 deg" is judged against the twin's unit as against ours
+    assert [v.unit for v in theirs.modelVariables] == \
+           [v.unit or (v.declaredType.unit if v.declaredType else None) if v.type == "Real" else None
+            for v in ours.modelVariables]
     assert {u.variable.name: [d.name for d in u.dependencies] for u in theirs.outputs} == \
            {u.variable.name: [d.name for d in u.dependencies] for u in ours.outputs}
     # it steps, with parameters and inputs set, and its outputs stay what they were: it does nothing
