@@ -389,6 +389,9 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         hollow_per_step = hollow_case.wall if hollow_case.wall_times else None
         if hollow_per_step:
             say(f"do-nothing FMU floor: {hollow_per_step * 1e6:.1f} us per communication step (same calls)")
+        else:
+            say(f"do-nothing FMU floor not measured ({hollow_case.failure}): no split of the run times")
+            twins = None
 
     # prices at each fixed step of the plan (a shaft's step costs more the longer it is)
     # and at the scene's step (for the adaptive masters)
