@@ -131,16 +131,7 @@ def test_stand_in_steps_like_the_real_fmus(name):
         ["coupling.transfer_mode=synchronous", "load.load_kind=constant", f"coupling.stiffness={c}",
          f"coupling.damping={b}", "experiment.transient=0"])
     model = stability.model_of(spec)
-    step, n = model.step_for(0.4), 60
-    options = {"tolerance": 1e-12} if "tolerance" in masters.MASTERS[name].options else {}
-    spec = spec.with_overrides([f"experiment.stop={n * step!r}"])
-    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options)
-            for extra in ([], ["engine.phi_start=0.002", "load.w_start=39.5"])]
-    assert all(r.ok for r in runs), [r.failure for r in runs]
-    real = runs[1].traces["coupling.tau2"][1:] - runs[0].traces["coupling.tau2"][1:]
-    linear = _replay(model, name, step, n, (0.002, 0.0, 0.0, 0.5), options)
-    assert np.max(np.abs(linear)) > 10.0                  # the difference is not nothing
-    assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
+    _steps_like_the_fmus(spec, model, name)
 
 
 @pytest.mark.parametrize("name", ["jacobi", "trapezoidal-newton"])
@@ -161,15 +152,7 @@ def test_stand_in_with_a_viscous_load_steps_like_the_real_fmus(name):
     # the continuous model's least damped pair has that damping ratio (to the modal approximation)
     pair = max(stability.TwoInertia.continuous_eigenvalues(model), key=lambda z: abs(z.imag))
     assert -pair.real / abs(pair) == pytest.approx(model.zeta, rel=0.02)
-    step, n = model.step_for(0.4), 60
-    options = {"tolerance": 1e-12} if "tolerance" in masters.MASTERS[name].options else {}
-    spec = spec.with_overrides([f"experiment.stop={n * step!r}"])
-    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options)
-            for extra in ([], ["engine.phi_start=0.002", "load.w_start=39.5"])]
-    assert all(r.ok for r in runs), [r.failure for r in runs]
-    real = runs[1].traces["coupling.tau2"][1:] - runs[0].traces["coupling.tau2"][1:]
-    linear = _replay(model, name, step, n, (0.002, 0.0, 0.0, 0.5), options)
-    assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
+    _steps_like_the_fmus(spec, model, name)
 
 
 def test_predicted_growth_rate_matches_the_real_run():
@@ -316,3 +299,19 @@ def test_a_case_that_raises_is_recorded_and_the_sweep_goes_on(tmp_path, monkeypa
     # a re-run keeps the failed case (it does not retry a recorded failure)
     again = stabilitymap.sweep(spec, plan, tmp_path)
     assert again.reused == 2
+
+
+def _steps_like_the_fmus(spec, model, name):
+    """The stand-in's replay of a small deviation (drive angle +0.002 rad, driven speed
+    +0.5 rad/s) against the same deviation between two runs of the real FMUs, 60 steps at
+    h*omega_n = 0.4: the driven torques agree to 1e-6 of the deviation's size."""
+    step, n = model.step_for(0.4), 60
+    options = {"tolerance": 1e-12} if "tolerance" in masters.MASTERS[name].options else {}
+    spec = spec.with_overrides([f"experiment.stop={n * step!r}"])
+    runs = [run.simulate(spec.with_overrides(extra), name, step, options=options)
+            for extra in ([], ["engine.phi_start=0.002", "load.w_start=39.5"])]
+    assert all(r.ok for r in runs), [r.failure for r in runs]
+    real = runs[1].traces["coupling.tau2"][1:] - runs[0].traces["coupling.tau2"][1:]
+    linear = _replay(model, name, step, n, (0.002, 0.0, 0.0, 0.5), options)
+    assert np.max(np.abs(linear)) > 10.0                  # the difference is not nothing
+    assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
