@@ -406,10 +406,10 @@ def iteration_contraction(model: TwoInertia, master: str, step: float, fmu_dir: 
     system = LinearDriveline(model, step, fmu_dir)
     driver = master_family.make(cls.name, system, step)
     system.set_state(0.0, 0.0, 0.0, 0.0)
-    start = driver._current_inputs()
-    states = driver._save_states()
-    base = np.array(driver._evaluate([0.0] * len(start), 0.0, step, states, start, rolled=True))
-    jacobian = np.array([np.array(driver._evaluate(list(np.eye(len(start))[j]), 0.0, step, states, start, rolled=True))
+    start = driver.current_inputs()
+    states = driver.save_states()
+    base = np.array(driver.evaluate([0.0] * len(start), 0.0, step, states, start, rolled=True))
+    jacobian = np.array([np.array(driver.evaluate(list(np.eye(len(start))[j]), 0.0, step, states, start, rolled=True))
                          - base for j in range(len(start))]).T
     return float(np.max(np.abs(np.linalg.eigvals(jacobian))))
 
@@ -437,7 +437,7 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
     system = LinearDriveline(model, step, fmu_dir)
     driver = _analysed_master(master, system, step)
     slots = _history_slots(driver)
-    inputs = driver._inputs if slots else []
+    inputs = driver.coupled_inputs if slots else []
     width = sum(len(values) for _, _, values in inputs)       # torques per communication point
     # Outputs of the shafts a master reads from the last propagation besides their states
     # (jacobi-midpoint's accelerations): propagation reads them before it writes the new
@@ -463,9 +463,9 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
                     values.append(flat[:len(buffer)])
                     flat = flat[len(buffer):]
                 points.append((-(k + 1) * step, values))
-            driver._history = deque(points, maxlen=slots)
+            driver.history = deque(points, maxlen=slots)
         elif hasattr(driver, "_history"):
-            driver._history.clear()          # an iterative master's first guess: converged anyway
+            driver.history.clear()          # an iterative master's first guess: converged anyway
         driver.t = 0.0
         try:
             driver.step(step, t_next=step)
@@ -473,7 +473,7 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
             raise MapUndefined(str(error)) from None
         out = system.state() + [values[index] for values, index, _ in buffered]
         if slots:
-            history = list(driver._history)  # oldest first; the newest is the step's start
+            history = list(driver.history)  # oldest first; the newest is the step's start
             for k in range(slots):
                 out += [v for values in history[-1 - k][1] for v in values]
         return np.array(out)

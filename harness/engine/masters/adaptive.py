@@ -46,13 +46,13 @@ class StepControl:
         """Step from ``t`` with ``attempt(h, states)`` (it steps the stateful components
         and returns ``(error, result)``) until the error is within tolerance or ``h`` at
         ``min_step``; propose the next step.  Returns ``(h, error, result)``."""
-        states = self._save_states()
+        states = self.save_states()
         try:
             while True:
                 error, result = attempt(h, states)
                 if error <= 1.0 or h <= self.min_step:
                     break
-                self._restore_states(states, t)
+                self.restore_states(states, t)
                 self.n_rejected += 1
                 shrink = max(self.SHRINK, self.SAFETY * error ** (-1.0 / self.ESTIMATE_ORDER))
                 h = max(self.min_step, h * shrink)
@@ -129,7 +129,7 @@ class AdaptiveTrapezoidalMaster(StepControl, TrapezoidalNewtonMaster):
         self._ends: deque = deque(maxlen=2)     # (time, torques) at the last communication points before t
 
     def _step_impl(self, t, h):
-        start = self._current_inputs()
+        start = self.current_inputs()
         self._scale = max(self._scale, max(abs(x) for x in start))
         points = list(self._ends) + [(t, start)]
         times = [p[0] for p in points]
@@ -145,7 +145,7 @@ class AdaptiveTrapezoidalMaster(StepControl, TrapezoidalNewtonMaster):
                 if h <= self.min_step:
                     raise
                 return 1.0 / self.SHRINK ** 3, None      # not converged: shrink hard and retry
-            end = self._current_inputs()                 # tau(t + h) with the converged torques
+            end = self.current_inputs()                 # tau(t + h) with the converged torques
             if full:
                 r = h ** 3 / (2.0 * math.prod(t + h - x for x in times))
                 fraction = r / (1.0 + r)
@@ -202,7 +202,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         component's exposed output in rad/s, if it has one."""
         system = self.system
         speeds = []
-        for target, _, _ in self._inputs:
+        for target, _, _ in self.coupled_inputs:
             candidates = [v for v in system.exposed[target.name] if _unit(target, v) == "rad/s"]
             index = system.index[(target.name, candidates[0])] if candidates else None
             speeds.append((system.buffers[target.name][1], index))
@@ -215,16 +215,16 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
 
     def _step_impl(self, t, h):
-        start = [list(values) for _, _, values in self._inputs]
+        start = [list(values) for _, _, values in self.coupled_inputs]
         speeds = self._read_speeds()
-        points = list(self._history) + [(t, start)]
+        points = list(self.history) + [(t, start)]
         fraction = self.MEAN_FRACTION[len(points) - 1]
 
         def attempt(h, states):
             predicted = self._hold(t, h, points)
             self._step_stateful(t, h)
             self.system.propagate()
-            end = [list(values) for _, _, values in self._inputs]
+            end = [list(values) for _, _, values in self.coupled_inputs]
             self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
             difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
             return fraction * difference / (self.tolerance * (self._scale or 1.0)), end
@@ -240,7 +240,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             for i in range(n):
                 mean = values[i] + (0.5 * values[n + i] * h if ramped else 0.0)
                 self.bond_energy_residual += h * (mean - 0.5 * (ss[i] + es[i])) * 0.5 * (w0 + w1)
-        self._history.append((t, start))
+        self.history.append((t, start))
         self._step_feedthrough(t, h)
         return h
 

@@ -40,6 +40,16 @@ class MasterFailure(RuntimeError):
 
 
 class Master:
+    """One co-simulation master: ``step(h)`` advances the system by one communication step.
+
+    What the linear stability analysis (``harness.judges.stability``) replays a master's
+    step through, public for that reason and kept stable: ``save_states()`` /
+    ``restore_states(states, t)`` (the stateful FMUs' full states); and, where a family has
+    them, ``coupled_inputs`` (the ``(component, vrs, values)`` buffers of the inputs it
+    predicts), ``history`` (the past communication points ``(t, values)`` its predictor
+    uses, oldest first), ``current_inputs()`` and ``evaluate(...)`` (an iterative master's
+    fixed-point map ``u -> G(u)``)."""
+
     name = "abstract"
     order = 0
     description = ""
@@ -119,10 +129,10 @@ class Master:
         return out
 
     # Full FMU states of the stateful components, for masters that roll back.
-    def _save_states(self) -> list:
+    def save_states(self) -> list:
         return [component.save_state() for component in self._stateful]
 
-    def _restore_states(self, states, t):
+    def restore_states(self, states, t):
         for component, state in zip(self._stateful, states):
             component.restore_state(state, t)
         self.n_rollbacks += 1

@@ -87,11 +87,11 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
-        self._inputs = self._coupled_inputs()
-        rates = self._rate_inputs(self._inputs) if self.ramp else [None] * len(self._inputs)
+        self.coupled_inputs = self._coupled_inputs()
+        rates = self._rate_inputs(self.coupled_inputs) if self.ramp else [None] * len(self.coupled_inputs)
         # One write per component: the inputs and, after them, their rates.
         self._held = []
-        for (target, vrs, values), rate in zip(self._inputs, rates):
+        for (target, vrs, values), rate in zip(self.coupled_inputs, rates):
             n = len(values)
             if rate is None:
                 self._held.append((target, vrs, (ctypes.c_double * n)(), n, False))
@@ -99,12 +99,12 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 both = (ctypes.c_uint * (2 * n))(*vrs, *rate[0])
                 self._held.append((target, both, (ctypes.c_double * (2 * n))(), n, True))
         # The last ``degree`` communication points before the current one.
-        self._history: deque = deque(maxlen=self.degree)
+        self.history: deque = deque(maxlen=self.degree)
         self._weights_cache: dict = {}
         self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
                                   for n in system.stateful)
         self._all_components = list(system.components.values())
-        self._held_plan = system.held_plan({target.name for target, _, _ in self._inputs})
+        self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
 
     def _hold(self, t, h, points):
         """Write the inputs for the step ``[t, t + h]`` from the polynomial through
@@ -142,11 +142,11 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
     def _starting(self) -> bool:
         """Whether the history is still too short for the full degree and the stateful
         components can roll back to make up for it."""
-        return len(self._history) < self.degree and self._can_roll_back
+        return len(self.history) < self.degree and self._can_roll_back
 
     def _step_impl(self, t, h):
-        start = [list(values) for _, _, values in self._inputs]
-        points = list(self._history) + [(t, start)]
+        start = [list(values) for _, _, values in self.coupled_inputs]
+        points = list(self.history) + [(t, start)]
         if self._starting():
             self._start_step(t, h, points)
         else:
@@ -156,24 +156,24 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             # The shafts' torques are written by the next _hold: only fill the buffers.
             self.system.propagate_with(self._held_plan)
             self._inputs_unsent = True
-        self._history.append((t, start))
+        self.history.append((t, start))
 
     def _start_step(self, t, h, points):
         """A start-up step of the master's order although the history is short: step
         with what extrapolation there is, then roll back and step again with the
         polynomial that also passes through the torques found at the end of the step,
         ``degree + 1`` times over (each pass gains an order)."""
-        states = self._save_states()
+        states = self.save_states()
         try:
             through = points
             for iteration in range(self.degree + 2):
                 if iteration:
-                    self._restore_states(states, t)
+                    self.restore_states(states, t)
                     self.n_iterations += 1
                 self._hold(t, h, through)
                 self._step_stateful(t, h)
                 self.system.propagate()
-                through = points + [(t + h, [list(values) for _, _, values in self._inputs])]
+                through = points + [(t + h, [list(values) for _, _, values in self.coupled_inputs])]
         finally:
             self._free_states(states)
         self._step_feedthrough(t, h)

@@ -117,63 +117,63 @@ class IterativeMaster(Master):
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
-        self._inputs = self._coupled_inputs()
-        self._history: deque = deque(maxlen=2)
+        self.coupled_inputs = self._coupled_inputs()
+        self.history: deque = deque(maxlen=2)
         self._jacobians = InterfaceJacobian()
         self._jacobian = None       # d G / d u at the step ``_jacobian_step``, Broyden-updated
         self._jacobian_step = None
         self.n_jacobians = 0
         # Evaluations write the held torques themselves: propagation only fills the
         # buffers; the converged end-of-step torques are sent once per step.
-        self._held_plan = system.held_plan({target.name for target, _, _ in self._inputs})
+        self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
 
     def counters(self) -> dict:
         return {**super().counters(), "jacobians": self.n_jacobians}
 
-    # u is a flat list over the coupled inputs, in the order of self._inputs (plain
+    # u is a flat list over the coupled inputs, in the order of self.coupled_inputs (plain
     # lists: see _solve_linear)
-    def _current_inputs(self) -> list[float]:
-        return [v for _, _, values in self._inputs for v in values]
+    def current_inputs(self) -> list[float]:
+        return [v for _, _, values in self.coupled_inputs for v in values]
 
-    def _evaluate(self, u, t, h, states, start, rolled):
+    def evaluate(self, u, t, h, states, start, rolled):
         """Step the stateful components from their saved ``states`` holding ``u`` and
         return ``G(u)``; ``rolled`` says whether they must be rolled back first."""
         if rolled:
-            self._restore_states(states, t)
+            self.restore_states(states, t)
         k = 0
-        for target, vrs, values in self._inputs:
+        for target, vrs, values in self.coupled_inputs:
             for i in range(len(values)):
                 values[i] = u[k]
                 k += 1
             target.write(vrs, values)
         self._step_stateful(t, h)
         self.system.propagate_with(self._held_plan)     # the inputs' buffers now hold tau(t + h)
-        end = self._current_inputs()
+        end = self.current_inputs()
         return end if self.scheme == "implicit" else [0.5 * (a + b) for a, b in zip(start, end)]
 
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
         at the end of the step (the evaluations left the held ones in place)."""
-        for target, vrs, values in self._inputs:
+        for target, vrs, values in self.coupled_inputs:
             target.write(vrs, values)
 
     def _guess(self, t, h, start):
-        if len(self._history) < 2:
+        if len(self.history) < 2:
             return list(start)
-        (t0, u0), (t1, u1) = self._history
+        (t0, u0), (t1, u1) = self.history
         if not t1 > t0:
             return list(u1)
         ratio = (t + h - t1) / (t1 - t0)
         return [b + (b - a) * ratio for a, b in zip(u0, u1)]
 
     def _step_impl(self, t, h):
-        start = self._current_inputs()
-        states = self._save_states()
+        start = self.current_inputs()
+        states = self.save_states()
         try:
             u = self._solve(t, h, states, start, self.tolerance, self._guess(t, h, start))
         finally:
             self._free_states(states)
-        self._history.append((t + h, u))
+        self.history.append((t + h, u))
         self._send_end_torques()
         self._step_feedthrough(t, h)
 
@@ -184,7 +184,7 @@ class IterativeMaster(Master):
         scale = max(1.0, max(abs(x) for x in start))
         tolerance = relative_tolerance * scale
         newton = self.solver == "newton"
-        g = self._evaluate(u, t, h, states, start, rolled=False)
+        g = self.evaluate(u, t, h, states, start, rolled=False)
         residual = [b - a for a, b in zip(u, g)]
         norm = max(abs(r) for r in residual)
         previous = math.inf
@@ -213,7 +213,7 @@ class IterativeMaster(Master):
                 change = residual
             previous = norm
             u_new = [a + d for a, d in zip(u, change)]
-            g_new = self._evaluate(u_new, t, h, states, start, rolled=True)
+            g_new = self.evaluate(u_new, t, h, states, start, rolled=True)
             self.n_iterations += 1
             if newton:
                 # Broyden: J += (secant - J change) change^T / |change|^2
@@ -244,7 +244,7 @@ class IterativeMaster(Master):
             delta = 1e-6 * max(abs(u[j]), scale)
             shifted = list(u)
             shifted[j] += delta
-            g_shifted = self._evaluate(shifted, t, h, states, start, rolled=True)
+            g_shifted = self.evaluate(shifted, t, h, states, start, rolled=True)
             columns.append([(b - a) / delta for a, b in zip(g, g_shifted)])
             self.n_iterations += 1
         return [list(row) for row in zip(*columns)]
