@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 from lever.physics import catalogue
 from lever.physics.elastic import LinearElasticLaw
-from lever.physics.engine import LinearCharacteristic
+from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
 from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, SpectrumLoad, TabulatedLoad
 from lever.physics.parameters import ParameterError
@@ -76,7 +76,7 @@ def load_range(load) -> tuple[float, float]:
     if isinstance(load, RandomLoad):
         return load.mean - load.amplitude, load.mean + load.amplitude
     if isinstance(load, TabulatedLoad):
-        return min(load._m), max(load._m)
+        return min(load.torques), max(load.torques)
     if isinstance(load, FourierLoad):
         spread = sum(math.hypot(a, b) for a, b in zip(load.cosines, load.sines))
         return load.mean - spread, load.mean + spread
@@ -94,9 +94,11 @@ def plausible_speed(scene: scenes.Scene, physics: kinds.DrivelinePhysics) -> tup
     if isinstance(char, LinearCharacteristic) and char.slope > 0.0:
         candidates["steady speed of the engine line"] = max(abs(char.steady_speed(m)) for m in (0.0, low, high))
     else:
-        torques = [abs(m) for m in char._m] if hasattr(char, "_m") else [abs(char.stall_torque)]
-        if hasattr(char, "_w"):
-            candidates["speeds of the engine table"] = max(abs(w) for w in char._w)
+        if isinstance(char, TabulatedCharacteristic):
+            torques = [abs(m) for m in char.torques]
+            candidates["speeds of the engine table"] = max(abs(w) for w in char.speeds)
+        else:
+            torques = [abs(char.stall_torque)]
         span = scene.experiment.stop - scene.experiment.start
         candidates["free acceleration over the run"] = (max(torques) + max(abs(low), abs(high))) * span / (
             engine.inertia + load.inertia)

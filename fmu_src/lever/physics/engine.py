@@ -93,6 +93,16 @@ class TabulatedCharacteristic:
         #: largest |dMg/dw| [N.m.s/rad]: sets the RK4 substep that stays stable
         self.speed_stiffness = max(abs(k) for k in slopes)
 
+    @property
+    def speeds(self) -> list[float]:
+        """The table's speeds [rad/s], ascending."""
+        return list(self._w)
+
+    @property
+    def torques(self) -> list[float]:
+        """The table's torques [N.m], at ``speeds``."""
+        return list(self._m)
+
     def rate(self, inertia: float) -> float:
         """Fastest rate [1/s] of the shaft's own dynamics (for a stable explicit substep)."""
         return self.speed_stiffness / inertia

@@ -198,6 +198,11 @@ class TabulatedLoad(_TimeLoad):
         self._t, self._m = self.table._t, self.table._y
         self.mean = sum(self._m) / len(self._m)
 
+    @property
+    def torques(self) -> list[float]:
+        """The table's torques [N.m]: the resistance ranges over them (linear between)."""
+        return list(self._m)
+
     @classmethod
     def parse(cls, text: str, name: str = "table") -> "TabulatedLoad":
         return cls(parse_table(text, name), name)
