@@ -16,6 +16,14 @@ from .friction import ResistingLoad, integrate
 from .parameters import ParameterError
 
 
+def speed_moment_factor(h, w0, w1, a0, a1):
+    """``integral of s * w(s) ds / h^2`` over a step of ``h``, from the cubic Hermite
+    interpolant of the speed (ends ``w0``, ``w1``, slopes ``a0``, ``a1``; error O(h^6), far
+    below the coupling's): the ramped coupling torque's work needs it.  Callers multiply by
+    ``h * h`` themselves, each in the order it always had (the traces stay bit for bit)."""
+    return 0.15 * w0 + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0)
+
+
 class Shaft:
     def __init__(self, inertia: float, external, max_substep: float = 2.5e-4):
         self.inertia = float(inertia)
@@ -63,7 +71,7 @@ class Shaft:
         of the speed (error O(h^6), far below the coupling's)."""
         a0 = self.acceleration(t, phi, w, tau)
         a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h)
-        return h * h * (0.15 * w + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0))
+        return h * h * speed_moment_factor(h, w, w1, a0, a1)
 
     #: RK4 substeps one step may take: beyond it the step is refused, not ground through
     #: for minutes (an importer waiting on doStep would hang).
@@ -153,7 +161,7 @@ class LaggedShaft:
         if tau_rate:
             a0 = self.acceleration(t, phi, w, tau, torque)
             a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h, m1)
-            coupling_work += tau_rate * h * h * (0.15 * w + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0))
+            coupling_work += tau_rate * h * h * speed_moment_factor(h, w, w1, a0, a1)
         return phi1, w1, m1, 0.5 * self.inertia * (w1 * w1 - w * w) - coupling_work
 
     # -- the linear zone, exactly: x' = A x on x = (phi, w, M, 1, tau, q, tau_rate), q = tau_rate*s --
