@@ -98,8 +98,12 @@ class Shaft:
         n = self._substeps(h)
         dt = h / n
 
+        # rates()' own expression for a load that does not resist (a resisting one steps by
+        # friction.integrate), without its two calls in between: four per substep
+        torque, inertia = self.external.torque, self.inertia
+
         def acc(ti, p, v):
-            return self.acceleration(ti, p, v, tau + tau_rate * (ti - t))
+            return (torque(ti, p, v) + (tau + tau_rate * (ti - t))) / inertia
 
         for i in range(n):
             ti = t + i * dt
