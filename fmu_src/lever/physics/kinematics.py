@@ -18,6 +18,7 @@ half-coupling function ``g`` instead, as the brief prescribes.
 from __future__ import annotations
 
 import cmath
+import functools
 import math
 
 from .numerics import irfft, least_squares, pairwise_sum_complex, rfft
@@ -44,9 +45,11 @@ MONOGRAPH_AMPLITUDES = (
 )
 
 
-def _fit_reported_amplitude() -> tuple[float, float, float, float]:
+@functools.cache
+def reported_fit() -> tuple[float, float, float, float]:
     """Least-squares fit of ``dU = k sin(alpha)^p ((D2s/l2)^q + (D2h/lc2)^r)`` in logs to
-    the reported points: ``k`` and ``p`` linear for given exponents, ``q`` and ``r`` by
+    the reported points (on first use, by the scaled mode only: at import it cost every FMU
+    about 0.2 s of loading): ``k`` and ``p`` linear for given exponents, ``q`` and ``r`` by
     alternating golden-section searches.  It vanishes at alpha = 0 and when both
     deformations are zero - not when only one is, like the kinematic mode, whose driven
     half is displaced by either deformation alone - and varies smoothly between the few
@@ -74,16 +77,13 @@ def _fit_reported_amplitude() -> tuple[float, float, float, float]:
     return math.exp(coef[0]), coef[1], q, r
 
 
-_REPORTED_FIT = _fit_reported_amplitude()
-
-
 def reported_amplitude(alpha: float, support_deformation: float, hinge_deformation: float) -> float:
     """The monograph's reported dU12 (Fig. 3.7), interpolated by ``k sin(alpha)^p
     ((D2s/l2)^q + (D2h/lc2)^r)``.  Zero when alpha is zero or both deformations are (the
     coupling is then synchronous), as the kinematic mode's amplitude is."""
     if alpha <= 0.0 or (support_deformation <= 0.0 and hinge_deformation <= 0.0):
         return 0.0
-    k, p, q, r = _REPORTED_FIT
+    k, p, q, r = reported_fit()
     return k * math.sin(alpha) ** p * (support_deformation ** q + hinge_deformation ** r)
 
 
