@@ -173,3 +173,65 @@ def test_without_an_order_part_the_spectrum_shaft_steps_in_closed_form():
     phi, w, _ = exact.advance(0.3, 1.0, 39.0, 100.0, 2e-3)
     phi_rk, w_rk = stepped._rk4(0.3, 1.0, 39.0, 100.0, 2e-3)
     assert phi == pytest.approx(phi_rk, abs=1e-12) and w == pytest.approx(w_rk, abs=1e-10)
+
+
+# --------------------------------------------------------------------------------------
+# The spectrum shaft's split step (issue 14): exact in time, RK4 on the order term only
+# --------------------------------------------------------------------------------------
+
+KAVZ_SPECTRUM = Spectrum(order=1, order_share=0.55, order_phase=-2.12, narrowband_share=0.45)
+
+
+def _spectrum_load(spectrum=KAVZ_SPECTRUM, seed=1, tones=6):
+    return SpectrumLoad(107.5, 8.8, seed, tones, 2.0, 450.0, spectrum)
+
+
+def _plain_rk4(load, max_substep):
+    shaft = Shaft(0.161, load, max_substep)
+    shaft.split = False            # the generic RK4 on the whole torque, the split step's yardstick
+    return shaft
+
+
+@pytest.mark.parametrize("h, tau_rate", [(1e-3, 0.0), (1e-3, 800.0), (6e-3, -300.0), (2e-2, 50.0)])
+def test_the_split_step_agrees_with_fine_rk4_on_the_whole_load(h, tau_rate):
+    # One substep per communication step (the KAVZ-685 scene's setting) against RK4 on the
+    # whole torque with 1 us substeps: the narrow band at 415-425 rad/s is exact in the split
+    # step, the order term (37 rad/s at this speed) is what its RK4 resolves.
+    split = Shaft(0.161, _spectrum_load(), max_substep=1.0)
+    fine = _plain_rk4(_spectrum_load(), 1e-6)
+    got = split.advance(0.37, 2.0, 36.6, 107.0, h, tau_rate)
+    want = fine.advance(0.37, 2.0, 36.6, 107.0, h, tau_rate)
+    # RK4's local error on the order term, O(h^5): measured 1.9e-8 rad, 9e-8 rad/s, 2.5e-6 J
+    # at 6 ms (the fine RK4's own rounding is about 1e-12)
+    scale = (h / 6e-3) ** 5
+    assert got[0] == pytest.approx(want[0], abs=4e-8 * scale + 1e-11)
+    assert got[1] == pytest.approx(want[1], abs=2e-7 * scale + 1e-11)
+    assert got[2] == pytest.approx(want[2], abs=5e-6 * scale + 1e-9)
+    # and it converges at fourth order: ten times the substeps, 1e-4 of the error (to rounding)
+    n = split._substeps(h, 36.6)
+    finer = Shaft(0.161, _spectrum_load(), max_substep=h / (10 * n)).advance(0.37, 2.0, 36.6, 107.0, h, tau_rate)
+    assert abs(finer[1] - want[1]) <= max(3e-4 * abs(got[1] - want[1]), 1e-11)
+
+
+@pytest.mark.parametrize("substeps", [1, 3, 8])
+def test_without_an_order_term_the_split_step_is_the_closed_form(substeps):
+    # the kernels of the tones' time integrals, checked against RandomLoad's closed form
+    for spectrum in (Spectrum(narrowband_share=0.45), Spectrum(narrowband_share=0.3)):
+        load = _spectrum_load(spectrum, seed=3, tones=12)
+        for h, tau_rate in ((1e-3, 0.0), (5e-3, 400.0), (0.05, -30.0)):
+            split = load.advance_split(0.161, 0.37, 2.0, 36.6, 107.0, h, tau_rate, substeps)
+            exact = load.advance(0.161, 0.37, 2.0, 36.6, 107.0, h, tau_rate)
+            assert split == pytest.approx(exact, rel=1e-14, abs=1e-13)
+
+
+def test_the_split_step_follows_the_order_terms_phase_and_refuses_a_runaway():
+    load = _spectrum_load()
+    shaft = Shaft(0.161, load, max_substep=1.0)
+    assert shaft.split and load.advance(0.161, 0.0, 0.0, 36.6, 107.0, 1e-3) is None
+    # at most PHASE_STEP = 0.25 rad of k*phi per substep: 1 at 37 rad/s and 6 ms, 24 at 1000 rad/s
+    assert shaft._substeps(6e-3, 36.6) == 1
+    assert shaft._substeps(6e-3, -1000.0) == 24
+    assert Shaft(0.161, load)._substeps(1e-3, 36.6) == 4          # max_substep's default still bounds it
+    with pytest.raises(ParameterError, match="order term at w = 1e\\+09 rad/s") as info:
+        shaft.advance(0.0, 0.0, 1e9, 0.0, 1.0)
+    assert info.value.name == "max_substep"

@@ -32,6 +32,9 @@ class Shaft:
         #: a load that resists the motion (friction, a brake): its torque at rest depends
         #: on the coupling torque, and its stops and breakaways are located in the step
         self.resisting = isinstance(external, ResistingLoad) and external.sticks
+        #: a load with a time part in closed form and an angle part (SpectrumLoad's order
+        #: term): it steps itself, exact in time, RK4 on the angle part only
+        self.split = hasattr(external, "advance_split")
 
     def rates(self, t, phi, w, tau):
         """``(a, M_ext)``: the acceleration with coupling torque ``tau`` and the
@@ -58,6 +61,8 @@ class Shaft:
         exact = self.external.advance(self.inertia, t, phi, w, tau, h, tau_rate)
         if exact is not None:
             phi1, w1 = exact
+        elif self.split:
+            phi1, w1 = self.external.advance_split(self.inertia, t, phi, w, tau, h, tau_rate, self._substeps(h, w))
         else:
             phi1, w1 = self._rk4(t, phi, w, tau, h, tau_rate)
         coupling_work = tau * (phi1 - phi)
@@ -81,13 +86,16 @@ class Shaft:
     #: stay below it for the external torque model's fastest rate
     STABLE = 2.5
 
-    def _substeps(self, h):
-        """RK4 substeps a step of ``h`` takes (refused beyond ``MAX_SUBSTEPS``)."""
+    def _substeps(self, h, w=0.0):
+        """RK4 substeps a step of ``h`` takes (refused beyond ``MAX_SUBSTEPS``); a split
+        step at speed ``w`` also resolves its angle part's phase."""
         ratio = h / self.max_substep
         rate = self.external.rate(self.inertia) if hasattr(self.external, "rate") else 0.0
-        needed = max(ratio, h * rate / self.STABLE)
+        turning = h * self.external.phase_rate(w) / self.external.PHASE_STEP if self.split else 0.0
+        needed = max(ratio, h * rate / self.STABLE, turning)
         if not needed <= self.MAX_SUBSTEPS:
             why = (f"of max_substep = {self.max_substep:.6g} s" if needed == ratio else
+                   f"to follow the load's order term at w = {w:.6g} rad/s" if needed == turning else
                    f"to stay stable with the external torque's rate {rate:.3g} 1/s")
             raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {needed:.3g} RK4 substeps {why}, "
                                  f"more than the {self.MAX_SUBSTEPS} allowed per step: take smaller communication "
