@@ -193,17 +193,13 @@ class SpectrumLoad(RandomLoad):
         self.order_phase = float(spectrum.order_phase)
         #: bound of |dMc/dphi| [N.m/rad]: sets the RK4 substep that stays stable
         self.angle_stiffness = self.order * self.order_amplitude
-        # The shaft's RK4 evaluates the load at a step's few node times, each several times
-        # (two stages share a node, the step's end is the next step's start and its output
-        # time): the part that depends on time only is kept for the last nodes.  Tones of
-        # weight 0 (a share of 1 leaves the broad multisine none) add exact zeros: left
-        # out, the same sums.
+        # Tones of weight 0 (a share of 1 leaves the broad multisine none) add exact zeros:
+        # left out, the same sums.
         self._live_tones = [tone for tone in self._tones if tone[0] != 0.0]
-        self._time_parts: dict[float, float] = {}
+        # The time part at the last time asked: a step's end is its outputs' time and the
+        # next step's start (a ramped torque's work evaluates the load at both ends).
+        self._last_time = self._last_part = math.nan
         self._kernels: dict[float, list] = {}
-
-    #: node times whose time part is kept (a step takes about 3 per RK4 substep)
-    NODE_CACHE = 32
 
     def rate(self, inertia: float) -> float:
         return math.sqrt(self.angle_stiffness / inertia)
@@ -211,11 +207,10 @@ class SpectrumLoad(RandomLoad):
     def time_part(self, t: float) -> float:
         """``Mm`` plus the tones at time ``t`` [N.m]: the part of ``Mc`` that does not
         depend on the angle."""
-        value = self._time_parts.get(t)
-        if value is None:
-            if len(self._time_parts) >= self.NODE_CACHE:
-                self._time_parts.clear()
-            value = self._time_parts[t] = self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._live_tones)
+        if t == self._last_time:
+            return self._last_part
+        value = self.mean + sum(a * math.sin(f * t + p) for a, f, p in self._live_tones)
+        self._last_time, self._last_part = t, value
         return value
 
     def resistance(self, t, phi, w):
