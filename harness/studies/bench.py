@@ -193,10 +193,12 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
         system.initialize()
         order = [system.components[n] for n in system.order]
         stepping = [(c.raw.do_step, c.raw.handle) for c in order]
-        # the propagation's reads and sets as the system compiled them (one set per target)
-        moves = [(get_real, handle, vrs, n, values,
+        # the propagation's reads, copies and sets as the system compiled them (one set per
+        # target): the copies carry the values, so the models run the scene's motion (a
+        # shaft's substeps may depend on its speed)
+        moves = [(get_real, handle, vrs, n, values, copies,
                   [(set_real, target, t_vrs, t_n, t_values) for _, set_real, target, t_vrs, t_n, t_values in sends])
-                 for _, get_real, handle, vrs, n, values, _, sends in system.propagation_plan]
+                 for _, get_real, handle, vrs, n, values, copies, sends in system.propagation_plan]
         rereads = [(get_real, handle, vrs, n, values)
                    for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
         h = scene.experiment.step
@@ -205,9 +207,12 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
         for _ in range(n_steps):
             for do_step, handle in stepping:
                 do_step(handle, t, h, 1)
-            for get_real, handle, vrs, n, values, writes in moves:
+            for get_real, handle, vrs, n, values, copies, writes in moves:
                 if get_real is not None:
                     get_real(handle, vrs, n, values)
+                for t_values, pairs in copies:
+                    for k, i in pairs:
+                        t_values[k] = values[i]
                 for set_real, target, t_vrs, t_n, t_values in writes:
                     set_real(target, t_vrs, t_n, t_values)
             for get_real, handle, vrs, n, values in rereads:
@@ -239,10 +244,11 @@ def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
         spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
         made = {name: {"get": 0, "set": 0, "step": 0} for name in system.order}
         stepping = [(spent[c.name], c.raw.do_step, c.raw.handle) for c in (system.components[n] for n in system.order)]
-        moves = [(spent[c.name] if get_real is not None else None, get_real, handle, vrs, n, values,
+        moves = [(spent[c.name] if get_real is not None else None, get_real, handle, vrs, n, values, copies,
                   [(spent[target.name], set_real, t_handle, t_vrs, t_n, t_values)
                    for target, set_real, t_handle, t_vrs, t_n, t_values in sends])
-                 for c, get_real, handle, vrs, n, values, _, sends in system.propagation_plan + system.dependent_reads]
+                 for c, get_real, handle, vrs, n, values, copies, sends in
+                 system.propagation_plan + system.dependent_reads]
         for c, get_real, *_, sends in system.propagation_plan + system.dependent_reads:
             made[c.name]["get"] += get_real is not None
             for target, *_ in sends:
@@ -256,11 +262,14 @@ def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
                 started = timer()
                 do_step(handle, t, h, 1)
                 account["step"] += timer() - started
-            for account, get_real, handle, vrs, n, values, sends in moves:
+            for account, get_real, handle, vrs, n, values, copies, sends in moves:
                 if account is not None:
                     started = timer()
                     get_real(handle, vrs, n, values)
                     account["get"] += timer() - started
+                for t_values, pairs in copies:        # untimed: the master's, not a call's
+                    for k, i in pairs:
+                        t_values[k] = values[i]
                 for target_account, set_real, t_handle, t_vrs, t_n, t_values in sends:
                     started = timer()
                     set_real(t_handle, t_vrs, t_n, t_values)
