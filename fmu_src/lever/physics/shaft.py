@@ -62,7 +62,11 @@ class Shaft:
         if exact is not None:
             phi1, w1 = exact
         elif self.split:
-            phi1, w1 = self.external.advance_split(self.inertia, t, phi, w, tau, h, tau_rate, self._substeps(h, w))
+            # the order term turns at k*|w| over the whole step: the speed at its end too,
+            # predicted by one Euler step (a shaft spinning up within a step)
+            ahead = w + h * self.acceleration(t, phi, w, tau + 0.5 * tau_rate * h)
+            phi1, w1 = self.external.advance_split(self.inertia, t, phi, w, tau, h, tau_rate,
+                                                   self._substeps(h, max(abs(w), abs(ahead))))
         else:
             phi1, w1 = self._rk4(t, phi, w, tau, h, tau_rate)
         coupling_work = tau * (phi1 - phi)
