@@ -42,16 +42,12 @@ def _first_integral(f: float, s: float) -> complex:
 
 
 def _second_integral(f: float, s: float) -> complex:
-    """``int_0^s (s - r) e^{i f r} dr = s^2 (e^x - 1 - x)/x^2`` with ``x = i f s``: by its
-    series where ``|x|`` is small (the closed form cancels there)."""
-    x = 1j * f * s
-    if abs(x) < 0.5:
-        total, term = 0j, 0.5 + 0j
-        for n in range(2, 20):           # x^(n-2)/n!: 18 terms, far below rounding for |x| < 0.5
-            total += term
-            term *= x / (n + 1)
-        return s * s * total
-    return s * s * (cmath.exp(x) - 1.0 - x) / (x * x)
+    """``int_0^s (s - r) e^{i f r} dr = s^2 (e^{iy} - 1 - iy)/(iy)^2`` with ``y = f s``: its
+    real part ``s^2 (1 - cos y)/y^2 = s^2 sinc(y/2)^2 / 2``, its imaginary part
+    ``s^2 (y - sin y)/y^2``, both without cancellation (RandomLoad's closed form writes the
+    same terms)."""
+    y = f * s
+    return s * s * complex(0.5 * _sinc(0.5 * y) ** 2, _one_minus_sinc_over_y(y))
 
 
 class _TimeLoad:
