@@ -372,3 +372,14 @@ def test_unit_mean_and_periodicity_property(alpha_deg, support, hinge, mode):
     np.testing.assert_allclose(shifted, position + 2.0 * np.pi, rtol=0, atol=1e-9)
     np.testing.assert_allclose(shifted_ratio, ratio, rtol=0, atol=1e-9)
     assert abs(tf.position(0.0)) <= 1e-14
+
+
+def test_loading_the_physics_does_not_fit_the_reported_amplitudes():
+    # Every FMU imports the kinematics: the fit (0.2 s) waits for the scaled mode to need it.
+    import subprocess
+    import sys
+    code = ("import lever.physics, lever.fmus.coupling, lever.physics.kinematics as k; "
+            "assert k.reported_fit.cache_info().currsize == 0; "
+            "k.TransferFunction('kinematic', 0.26, 0.03, 0.03); assert k.reported_fit.cache_info().currsize == 0; "
+            "k.TransferFunction('scaled', 0.26, 0.03, 0.03); assert k.reported_fit.cache_info().currsize == 1")
+    subprocess.run([sys.executable, "-c", code], check=True)
