@@ -3,7 +3,8 @@
 Each load gives its resistance ``Mc`` (positive when it opposes positive rotation) and,
 as a shaft's external torque model, ``torque = -Mc``.  Loads that depend on time only
 (constant, random, tabulated) integrate in closed form over a step, so the load shaft is
-exact for them; the angle-periodic measured load is integrated numerically.
+exact for them; the angle-periodic measured load is integrated numerically, and the
+spectrum load's shaft-order term alone (``SpectrumLoad.advance_split``).
 
 The random part is a deterministic function of time for a given seed, the same whatever
 the step or the master, so every master, every engine and the monolithic reference see
@@ -158,7 +159,8 @@ class SpectrumLoad(RandomLoad):
     first) is bounded by the rest.  The narrow band's frequencies (uniform in its band),
     phases and weights are the seed's next draws.  A deterministic function of time and the
     driven angle for a given seed.  With ``order_share = 0`` the load depends on time only and
-    the shaft steps exactly (closed-form integrals over all tones); otherwise by RK4."""
+    the shaft steps exactly (closed-form integrals over all tones); otherwise exactly in
+    time and by RK4 on the order term alone (``advance_split``)."""
 
     def __init__(self, mean: float, amplitude: float, seed: int, tones: int, band_low: float, band_high: float,
                  spectrum: Spectrum):

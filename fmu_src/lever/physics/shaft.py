@@ -5,7 +5,9 @@ The coupling torque over a communication step is ``tau + tau_rate * s`` (``s`` t
 into the step): held constant (zero-order hold, ``tau_rate = 0``) or ramped (first-order
 hold), as a co-simulation master gives it.  Where the external torque model has a closed-form
 solution (linear engine zone, loads that depend on time only) the step is exact, so the
-only error a co-simulation makes is the coupling's; otherwise classical RK4 substeps.
+only error a co-simulation makes is the coupling's; a load with a closed-form time part and
+an angle-locked part (the spectrum load's shaft order) steps itself, exact in time and by
+RK4 on the angle part; otherwise classical RK4 substeps.
 """
 from __future__ import annotations
 
