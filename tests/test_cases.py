@@ -54,3 +54,43 @@ def test_torn_last_line_and_changed_fingerprint(tmp_path):
 
 def test_case_key_is_stable():
     assert case_key("jacobi", 1e-3, 2) == "jacobi|0.001|2"
+
+
+def _square_or_fail(x):
+    if x == 3:
+        raise ValueError("three is refused")
+    if x == 4:
+        import os
+        os._exit(1)             # a worker the OS kills: the pool breaks
+    return {"status": "ok", "value": x * x}
+
+
+def _pool_run(tmp_path, xs, passes=()):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from harness.studies.cases import collect
+    log, recorded = CaseLog(tmp_path, {"study": "pool"}), {}
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = {pool.submit(_square_or_fail, x): x for x in xs}
+        collect(pool, futures, log, str, lambda error: {"status": FAILED, "error": str(error)},
+                lambda x, result: recorded.__setitem__(x, result), passes)
+    return recorded
+
+
+def test_a_pool_collects_every_case_and_a_failure_does_not_cost_the_others(tmp_path):
+    recorded = _pool_run(tmp_path, [1, 2, 3, 5])
+    assert {x: r.get("value") for x, r in recorded.items()} == {1: 1, 2: 4, 3: None, 5: 25}
+    assert recorded[3] == {"status": FAILED, "error": "three is refused"}
+
+
+def test_a_broken_pool_ends_the_collection_only_for_a_caller_that_resubmits(tmp_path):
+    import pytest
+    from concurrent.futures.process import BrokenProcessPool
+
+    # recorded as failed for a caller that does not resubmit (the sweep) ...
+    recorded = _pool_run(tmp_path / "a", [1, 4])
+    assert recorded[1]["value"] == 1 and recorded[4]["status"] == FAILED
+    # ... passed on to one that does (the stability map)
+    with pytest.raises(BrokenProcessPool):
+        _pool_run(tmp_path / "b", [1, 4], passes=(BrokenProcessPool,))

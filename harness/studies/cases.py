@@ -140,6 +140,34 @@ def completed(futures, poll_s: float = 0.2):
         interrupt.check()
 
 
+def collect(pool, futures: dict, log: CaseLog, key_of: Callable, failed: Callable, record: Callable,
+            passes: tuple = ()):
+    """Hand each case's result to ``record(case, result)`` as its worker finishes: a case
+    whose worker raised gets ``failed(error)`` instead (one failed case must not cost the
+    others), except for the exceptions in ``passes``, which end the collection (a broken
+    pool, for a caller that resubmits).  Ctrl-C: a worker that took it at a step logs its
+    case as interrupted; then, or on Ctrl-C here, the cases under way are logged as
+    interrupted and the pool is stopped (``stop_pool``) before ``Interrupted`` goes on."""
+    logged = 0
+    try:
+        for future in completed(futures):
+            case = futures[future]
+            try:
+                result = future.result()
+            except passes:
+                raise
+            except KeyboardInterrupt as error:     # the worker took Ctrl-C at a step
+                log.interrupted(key_of(case), getattr(error, "time", None))
+                logged = 1
+                raise interrupt.Interrupted() from None
+            except Exception as error:  # noqa: BLE001 - e.g. a worker killed by the OS
+                result = failed(error)
+            record(case, result)
+    except KeyboardInterrupt:
+        stop_pool(pool, futures, log, key_of, logged)
+        raise
+
+
 def stop_pool(pool, futures: dict, log: CaseLog, key_of: Callable, logged: int = 0):
     """Ctrl-C in a study run by a process pool: log the cases under way as interrupted
     (``logged`` of them are already: a worker that took the Ctrl-C said so), drop the

@@ -43,7 +43,7 @@ from harness.judges import metrics
 from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
-from harness.studies.cases import FAILED, CaseLog, case_key, completed, stop_pool
+from harness.studies.cases import FAILED, CaseLog, case_key, collect
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -308,26 +308,11 @@ def _run_pool(scene, plan, todo, jobs, log, record, fmu_dir):
         broken = False
         with ProcessPoolExecutor(workers, mp_context=context) as pool:
             futures = {pool.submit(_worker, scene, case, plan, fmu_dir): case for case in queue}
-            logged = 0
             try:
-                for future in completed(futures):
-                    case = futures[future]
-                    try:
-                        result = future.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        break
-                    except KeyboardInterrupt as error:     # the worker took Ctrl-C at a step
-                        log.interrupted(case.key, getattr(error, "time", None))
-                        logged = 1
-                        raise interrupt.Interrupted() from None
-                    except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
-                        result = _failed(error, "stability case")
-                    record(case, result)
-            except KeyboardInterrupt:
-                stop_pool(pool, futures, log, lambda case: case.key, logged)
-                raise
-            if broken:
+                collect(pool, futures, log, lambda case: case.key, lambda error: _failed(error, "stability case"),
+                        record, passes=(BrokenProcessPool,))
+            except BrokenProcessPool:
+                broken = True
                 for future in futures:
                     future.cancel()
         remaining = [c for c in queue if c.key not in log]

@@ -25,7 +25,7 @@ from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
 from harness.engine import interrupt
-from harness.studies.cases import FAILED, CaseLog, case_key, completed, stop_pool
+from harness.studies.cases import FAILED, CaseLog, case_key, collect
 from harness.paths import DATA, FMUS, RESULTS
 
 SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
@@ -218,24 +218,15 @@ def _run_local(pending, log, workers, bar):
     # fork: the workers leave with os._exit, skipping pythonfmu's fragile native teardown.
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
         futures = {pool.submit(run_case, case): case for case in pending}
-        logged = 0
-        try:
-            for future in completed(futures):
-                case = futures[future]
-                try:
-                    result = future.result()
-                except KeyboardInterrupt as error:     # the worker took Ctrl-C at a step
-                    log.interrupted(case["key"], getattr(error, "time", None))
-                    logged = 1
-                    raise interrupt.Interrupted() from None
-                except Exception as error:  # noqa: BLE001 - e.g. a worker killed by the OS
-                    result = {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "worker process"}
-                log.record(case["key"], result)
-                if bar is not None:
-                    bar.update(1)
-        except KeyboardInterrupt:
-            stop_pool(pool, futures, log, lambda case: case["key"], logged)
-            raise
+
+        def record(case, result):
+            log.record(case["key"], result)
+            if bar is not None:
+                bar.update(1)
+
+        collect(pool, futures, log, lambda case: case["key"],
+                lambda error: {"status": FAILED, "error": f"{type(error).__name__}: {error}", "where": "worker process"},
+                record)
 
 
 def _run_dask(pending, log, address, bar):
