@@ -250,7 +250,7 @@ class SpectrumLoad(RandomLoad):
         for j in range(substeps):
             torque = tau + tau_rate * (j * d) - mean        # the polynomial part at the substep's start
             impulse = second_half = second = 0.0
-            for z, (turn, e1, e2_half, e2) in zip(phasors, kernels):
+            for z, (_, e1, e2_half, e2) in zip(phasors, kernels):
                 impulse += (z * e1).imag
                 second_half += (z * e2_half).imag
                 second += (z * e2).imag

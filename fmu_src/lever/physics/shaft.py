@@ -61,27 +61,30 @@ class Shaft:
             work = 0.5 * self.inertia * (w1 * w1 - w * w) - tau * (phi1 - phi) - tau_rate * moment
             return phi1, w1, work
         exact = self.external.advance(self.inertia, t, phi, w, tau, h, tau_rate)
+        start = None            # the external torque at the step's start, where it was needed
         if exact is not None:
             phi1, w1 = exact
         elif self.split:
             # the order term turns at k*|w| over the whole step: the speed at its end too,
             # predicted by one Euler step (a shaft spinning up within a step)
-            ahead = w + h * self.acceleration(t, phi, w, tau + 0.5 * tau_rate * h)
+            start = self.external.torque(t, phi, w)
+            ahead = w + h * ((start + (tau + 0.5 * tau_rate * h)) / self.inertia)
             phi1, w1 = self.external.advance_split(self.inertia, t, phi, w, tau, h, tau_rate,
                                                    self._substeps(h, max(abs(w), abs(ahead))))
         else:
             phi1, w1 = self._rk4(t, phi, w, tau, h, tau_rate)
         coupling_work = tau * (phi1 - phi)
         if tau_rate:
-            coupling_work += tau_rate * self._first_moment_of_speed(t, phi, w, tau, h, tau_rate, phi1, w1)
+            a0 = self.acceleration(t, phi, w, tau) if start is None else (start + tau) / self.inertia
+            coupling_work += tau_rate * self._first_moment_of_speed(t, h, tau + tau_rate * h, phi1, w, w1, a0)
         work = 0.5 * self.inertia * (w1 * w1 - w * w) - coupling_work
         return phi1, w1, work
 
-    def _first_moment_of_speed(self, t, phi, w, tau, h, tau_rate, phi1, w1):
+    def _first_moment_of_speed(self, t, h, tau_end, phi1, w, w1, a0):
         """``integral of s * w(s) ds`` over the step, from the cubic Hermite interpolant
-        of the speed (error O(h^6), far below the coupling's)."""
-        a0 = self.acceleration(t, phi, w, tau)
-        a1 = self.acceleration(t + h, phi1, w1, tau + tau_rate * h)
+        of the speed (error O(h^6), far below the coupling's): ``a0`` the acceleration at
+        its start, the one at its end from ``(phi1, w1)`` and the torque ``tau_end``."""
+        a1 = self.acceleration(t + h, phi1, w1, tau_end)
         return h * h * speed_moment_factor(h, w, w1, a0, a1)
 
     #: RK4 substeps one step may take: beyond it the step is refused, not ground through
