@@ -335,7 +335,6 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     """The stability map of SCENE: every case classified (stable / energy-drifting /
     divergent) against the edges the linear analysis predicts; writes stability.md,
     stability.csv, stability_map.png and the resumable case log cases.jsonl."""
-    from harness.judges import stability as analysis
     from harness.studies import stabilitymap
 
     try:

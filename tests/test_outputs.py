@@ -91,8 +91,11 @@ def test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder(tmp_path, 
 
 
 def test_one_process_may_claim_its_folder_twice(tmp_path):
-    with outputs.claimed(tmp_path / "x"):
+    first = outputs.claim(tmp_path / "x")
+    try:
         assert outputs.claim(tmp_path / "x") == tmp_path / "x"
+    finally:
+        outputs.release(first)
 
 
 def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists(tmp_path, fmu_dir):

@@ -11,7 +11,6 @@ from __future__ import annotations
 import errno
 import os
 import sys
-from contextlib import contextmanager
 from pathlib import Path
 
 try:
@@ -105,16 +104,3 @@ def release(out: Path):
     handle = _held.pop(Path(out).resolve(), None)
     if handle is not None:
         handle.close()
-
-
-@contextmanager
-def claimed(out: Path, option: str = "--out"):
-    """``claim`` for the time of a ``with`` block (released after it unless it was held
-    before)."""
-    held = Path(out).resolve() in _held if Path(out).exists() else False
-    path = claim(out, option)
-    try:
-        yield path
-    finally:
-        if not held:
-            release(path)

@@ -313,8 +313,8 @@ def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, di
     None when a call kind was made that has no price (e.g. states of an FMU that cannot
     roll back)."""
     crossing = slave = 0.0
-    for name, kinds in calls.items():
-        for kind, count in kinds.items():
+    for name, by_kind in calls.items():
+        for kind, count in by_kind.items():
             if not count:
                 continue
             if kind not in ours.get(name, {}) or kind not in hollow.get(name, {}):
@@ -642,13 +642,13 @@ def markdown(result: dict, rows: list[dict]) -> str:
     split_rows = [r for r in rows if r.get("crossing_s") is not None]
     if split_rows:
         lines += ["", "## Where the time goes", "",
-                  f"Each master's run time split by the calls it made, priced call by call (component and kind: "
-                  f"get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
-                  f"the scene's for adaptive masters - the median of the repeats): *crossing* the calls "
-                  f"priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
-                  f"*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
-                  f"FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
-                  f"Python, recording).", "",
+                  "Each master's run time split by the calls it made, priced call by call (component and kind: "
+                  "get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
+                  "the scene's for adaptive masters - the median of the repeats): *crossing* the calls "
+                  "priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
+                  "*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
+                  "FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
+                  "Python, recording).", "",
                   "| engine | step / tol | run time | FMI calls per step | crossing | slave | master |",
                   "|---|---|---|---|---|---|---|"]
         for r in split_rows:
