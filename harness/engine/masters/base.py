@@ -77,6 +77,9 @@ class Master:
         self._stateful = [system.components[n] for n in system.stateful]
         self._feedthrough = [n for n in system.order if n in system.feedthrough]
         self._feedthrough_components = [system.components[n] for n in self._feedthrough]
+        # every component's doStep, compiled once (a step costs about 100 us: each
+        # attribute lookup saved shows)
+        self._steps = system.step_plan(system.components)
         #: set by a step that left the coupled inputs in their buffers only (a held plan)
         self._inputs_unsent = False
 

@@ -20,8 +20,7 @@ class JacobiMaster(Master):
 
     def _step_impl(self, t, h):
         system = self.system
-        for component in system.components.values():
-            component.do_step(t, h)
+        system.step_with(self._steps, t, h)
         system.propagate()
 
 
@@ -103,20 +102,25 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._weights_cache: dict = {}
         self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
                                   for n in system.stateful)
-        self._all_components = list(system.components.values())
         self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
+        # The held inputs' writes compiled once, as a propagation that reads nothing.
+        self._sends = system.send_plan([(target, vrs, values) for target, vrs, values, _, _ in self._held])
 
-    def _hold(self, t, h, points):
+    def _hold(self, t, h, points, predict: bool = True):
         """Write the inputs for the step ``[t, t + h]`` from the polynomial through
-        ``points`` (``[(time, values per input)]``); return its values at ``t + h``."""
+        ``points`` (``[(time, values per input)]``); return its values at ``t + h``
+        (``None`` unless ``predict``)."""
         weights = self._weights([p[0] for p in points], t, h)
-        ends = []
-        for k, (target, vrs, values, n, ramped) in enumerate(self._held):
+        ends = [] if predict else None
+        k = -1
+        for _, _, values, n, ramped in self._held:
+            k += 1
+            column = [p[1][k] for p in points]       # this component's inputs at each point
             component_ends = []
             for i in range(n):
                 mean = change = end = 0.0
-                for (w_mean, w_slope, w_end), point in zip(weights, points):
-                    u = point[1][k][i]
+                for (w_mean, w_slope, w_end), inputs in zip(weights, column):
+                    u = inputs[i]
                     mean += w_mean * u
                     change += w_slope * u         # slope * h
                     end += w_end * u
@@ -126,12 +130,13 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 else:
                     values[i] = mean
                 component_ends.append(end)
-            target.write(vrs, values)
-            ends.append(component_ends)
+            if predict:
+                ends.append(component_ends)
+        self.system.propagate_with(self._sends)
         return ends
 
     def _weights(self, times, t, h):
-        key = tuple(round((x - t) / h, 9) for x in times)
+        key = tuple([round((x - t) / h, 9) for x in times])
         weights = self._weights_cache.get(key)
         if weights is None:
             if len(self._weights_cache) > 32:      # variable steps: do not grow without bound
@@ -146,15 +151,15 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
 
     def _step_impl(self, t, h):
         start = [list(values) for _, _, values in self.coupled_inputs]
-        points = list(self.history) + [(t, start)]
+        points = [*self.history, (t, start)]
         if self._starting():
             self._start_step(t, h, points)
         else:
-            self._hold(t, h, points)
-            for component in self._all_components:
-                component.do_step(t, h)
+            self._hold(t, h, points, predict=False)
+            system = self.system
+            system.step_with(self._steps, t, h)
             # The shafts' torques are written by the next _hold: only fill the buffers.
-            self.system.propagate_with(self._held_plan)
+            system.propagate_with(self._held_plan)
             self._inputs_unsent = True
         self.history.append((t, start))
 
