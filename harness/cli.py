@@ -302,6 +302,9 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
         b = claims["baseline_step"]
         click.echo(f"  one {claims['baseline']} step: {b['per_step_s'] * 1e6:.1f} us, {b['over_hollow_floor']:.2f}x "
                    f"the do-nothing FMUs' floor ({b['hollow_floor_per_step_s'] * 1e6:.1f} us, same calls)")
+        if "bound_without_master" in b:
+            click.echo(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that cost "
+                       f"nothing would take {b['bound_without_master']:.2f}x the floor")
     for case in result["cases"]:
         if case.split:
             click.echo(f"  {case.label:34s} " + ", ".join(

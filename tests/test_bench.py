@@ -95,6 +95,12 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     assert [float(r["calls_per_step"]) for r in jacobi] == [11.0, 11.0]
     assert claims["baseline_step"]["over_hollow_floor"] == pytest.approx(
         float(jacobi[1]["wall_median_s"]) / float(jacobi[1]["steps"]) / result["hollow_floor_per_step_s"])
+    # the bound a master that cost nothing would meet: the floor plus our slaves' own work
+    slave_per_step = float(jacobi[1]["slave_s"]) / float(jacobi[1]["steps"])
+    assert claims["baseline_step"]["slave_per_step_s"] == pytest.approx(slave_per_step)
+    assert claims["baseline_step"]["bound_without_master"] == pytest.approx(
+        1.0 + slave_per_step / result["hollow_floor_per_step_s"])
+    assert "even a master that cost nothing" in (tmp_path / "bench.md").read_text()
     assert "## Where the time goes" in (tmp_path / "bench.md").read_text()
 
 
