@@ -111,9 +111,9 @@ def test_output_dependencies(fmu_dir):
             expected = ["tau"] if output.variable.name in depends else []
             assert [d.name for d in output.dependencies] == expected, (fmu, output.variable.name)
         # Derivative chains a master can use to predict: w = d(phi)/dt, a = d(w)/dt,
-        # tau_rate = d(tau)/dt.
+        # tau_rate = d(tau)/dt, tau_accel = d(tau_rate)/dt.
         derivative_of = {v.name: v.derivative.name for v in md.modelVariables if v.derivative is not None}
-        assert derivative_of == {"w": "phi", "a": "w", "tau_rate": "tau"}
+        assert derivative_of == {"w": "phi", "a": "w", "tau_rate": "tau", "tau_accel": "tau_rate"}
 
 
 # --------------------------------------------------------------------------------------
@@ -433,7 +433,8 @@ slave.enter_initialization_mode()
 slave.exit_initialization_mode()
 rows, t = [], 0.0
 for k in range(50):
-    values = {"tau": 80.0 * math.sin(0.3 * k), "tau_rate": 24.0 * math.cos(0.3 * k), "phi1": 0.04 * k + 0.01,
+    values = {"tau": 80.0 * math.sin(0.3 * k), "tau_rate": 24.0 * math.cos(0.3 * k),
+              "tau_accel": -7.2 * math.sin(0.3 * k), "phi1": 0.04 * k + 0.01,
               "w1": 40.0, "phi2": 0.038 * k, "w2": 38.0, "misalignment": 0.26}
     slave.set_real([vr[n] for n in inputs], [values[n] for n in inputs])
     assert slave.do_step(t, 1e-3), errors
@@ -484,9 +485,11 @@ RESTORE_RUNS = {
                       lambda k: {"phi1": 0.04 * k + 0.02, "w1": 40.0 + 0.1 * k, "phi2": 0.039 * k, "w2": 38.0,
                                  "misalignment": 0.26 + 0.0007 * k}),
     "EngineShaft": ({"inertia": 0.15}, {"inertia": 0.3},
-                    lambda k: {"tau": -100.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+                    lambda k: {"tau": -100.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k),
+                               "tau_accel": -1.8 * math.sin(0.3 * k)}),
     "LoadShaft": ({"seed": 3, "load_kind": "random"}, {"seed": 4},
-                  lambda k: {"tau": 110.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k)}),
+                  lambda k: {"tau": 110.0 + 20.0 * math.sin(0.3 * k), "tau_rate": 6.0 * math.cos(0.3 * k),
+                             "tau_accel": -1.8 * math.sin(0.3 * k)}),
     "MisalignmentSource": ({"table": "0:0.2; 1:0.3"}, {"table": "0:0.1; 1:0.1"}, lambda k: {}),
     "FreewheelRectifier": ({}, {}, lambda k: {"tau": 0.5 * math.sin(0.2 * k)}),
 }

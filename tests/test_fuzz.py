@@ -266,8 +266,8 @@ def _initialised(instance, values) -> bool:
 
 
 @pytest.mark.parametrize("fmu,declared,inputs", [
-    ("EngineShaft", catalogue.ENGINE, ("tau", "tau_rate")),
-    ("LoadShaft", catalogue.LOAD, ("tau", "tau_rate")),
+    ("EngineShaft", catalogue.ENGINE, ("tau", "tau_rate", "tau_accel")),
+    ("LoadShaft", catalogue.LOAD, ("tau", "tau_rate", "tau_accel")),
 ])
 @fuzz(150)
 @given(data=st.data())
@@ -278,7 +278,8 @@ def test_shaft_fmus_never_fail_fatally_and_report_finite_outputs(instances, fmu,
         return                         # refused (the values do not fit together): said why
     t = 0.0
     for _ in range(data.draw(st.integers(1, 4))):
-        instance.set_all({"tau": data.draw(st.floats(-1e12, 1e12)), "tau_rate": data.draw(st.floats(-1e15, 1e15))})
+        instance.set_all({"tau": data.draw(st.floats(-1e12, 1e12)), "tau_rate": data.draw(st.floats(-1e15, 1e15)),
+                          "tau_accel": data.draw(st.floats(-1e18, 1e18))})
         h = data.draw(st.floats(1e-6, 0.1))
         status = instance.slave.call("doStep", t, h)
         _no_fatal_and_errors_say_why(instance, status)

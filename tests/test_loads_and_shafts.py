@@ -462,3 +462,43 @@ def test_ramped_torque_step_is_exact(label, make, h):
 def test_ramp_of_zero_is_the_held_step():
     shaft = Shaft(0.128, LinearCharacteristic(623.0, 14.06))
     assert shaft.advance(0.0, 0.5, 39.0, -90.0, 1e-3, 0.0) == shaft.advance(0.0, 0.5, 39.0, -90.0, 1e-3)
+
+
+def _solve_quadratic_torque(shaft: Shaft, t, phi, w, tau, rate, accel, h):
+    """The shaft under the coupling torque ``tau + rate*s + accel*s^2/2`` itself (no ramp)."""
+    def rhs(s, y):
+        q = s - t
+        return [y[1], (shaft.external.torque(s, y[0], y[1]) + tau + rate * q + 0.5 * accel * q * q) / shaft.inertia]
+
+    sol = solve_ivp(rhs, (t, t + h), [phi, w], method="DOP853", rtol=1e-13, atol=1e-13)
+    return sol.y[0, -1], sol.y[1, -1]
+
+
+@pytest.mark.parametrize("engine", ["flat", "linear"])
+@pytest.mark.parametrize("h", [1e-3, 5e-3])
+def test_a_quadratic_torque_steps_as_its_equivalent_ramp(engine, h):
+    # tau_accel: the shaft takes the ramp with the quadratic's mean and first moment.  A
+    # shaft whose external torque does not depend on its state ("flat") ends exactly where
+    # the quadratic itself takes it; with the engine's slope K the angle differs by
+    # accel K h^5 / (720 I^2) to first order in K h / I, the speed at second order.
+    shaft = Shaft(0.128, ENGINES[engine])
+    t, phi, w, tau, rate, accel = 0.4, 3.0, 39.0, -107.0, 2.0e3, 1.5e5
+    phi1, w1, _ = shaft.advance(t, phi, w, tau, h, rate, accel)
+    phi_ref, w_ref = _solve_quadratic_torque(shaft, t, phi, w, tau, rate, accel, h)
+    first_order = accel * ENGINES[engine].slope * h ** 5 / (720.0 * shaft.inertia ** 2)
+    assert abs(phi1 - phi_ref) <= 2.0 * first_order + 1e-12, (phi1 - phi_ref, first_order)
+    assert abs(w1 - w_ref) <= 2.0 * first_order * ENGINES[engine].slope / shaft.inertia + 1e-11, (w1 - w_ref)
+    if engine == "linear":        # the bound is the size of the difference, not a loose cap
+        assert abs(phi1 - phi_ref) > 0.3 * first_order
+
+
+def test_the_equivalent_ramp_has_the_quadratics_mean_and_first_moment():
+    from lever.physics.shaft import equivalent_ramp
+    tau, rate, accel, h = 12.0, -3.0, 40.0, 0.3
+    start, slope = equivalent_ramp(tau, rate, accel, h)
+    quadratic = lambda s: tau + rate * s + 0.5 * accel * s * s          # noqa: E731
+    ramp = lambda s: start + slope * s                                   # noqa: E731
+    assert quad(ramp, 0.0, h)[0] == pytest.approx(quad(quadratic, 0.0, h)[0], rel=1e-14)
+    assert quad(lambda s: s * ramp(s), 0.0, h)[0] == pytest.approx(quad(lambda s: s * quadratic(s), 0.0, h)[0],
+                                                                  rel=1e-14)
+    assert equivalent_ramp(tau, rate, 0.0, h) == (tau, rate)

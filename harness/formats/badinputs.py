@@ -35,8 +35,8 @@ REFUSED = (FMI2_DISCARD, FMI2_ERROR)
 #: FMU -> (parameters, inputs), as the adapters declare them
 DECLARED = {
     "LeverCoupling": (catalogue.COUPLING, ("phi1", "w1", "phi2", "w2", "misalignment")),
-    "EngineShaft": (catalogue.ENGINE, ("tau", "tau_rate")),
-    "LoadShaft": (catalogue.LOAD, ("tau", "tau_rate")),
+    "EngineShaft": (catalogue.ENGINE, ("tau", "tau_rate", "tau_accel")),
+    "LoadShaft": (catalogue.LOAD, ("tau", "tau_rate", "tau_accel")),
 }
 PHASES = ("instantiated", "initialization", "stepping")
 DEG = math.pi / 180.0

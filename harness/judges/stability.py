@@ -273,11 +273,16 @@ class _LinearShaft(_LinearComponent):
         super().__init__(name, description)
         self.shaft = shaft
 
+    @property
+    def accel(self) -> float:
+        """``tau_accel``, where the model description (an FMU of this build) declares it."""
+        return self["tau_accel"] if "tau_accel" in self._vr else 0.0
+
     def _outputs(self):
         self["a"] = self.shaft.acceleration(self.time, self["phi"], self["w"], self["tau"])
 
     def _advance(self, t, h):
-        phi, w, _ = self.shaft.advance(t, self["phi"], self["w"], self["tau"], h, self["tau_rate"])
+        phi, w, _ = self.shaft.advance(t, self["phi"], self["w"], self["tau"], h, self["tau_rate"], self.accel)
         self["phi"], self["w"] = phi, w
 
 
@@ -290,7 +295,7 @@ class _LinearLaggedShaft(_LinearShaft):
 
     def _advance(self, t, h):
         phi, w, torque, _ = self.shaft.advance(t, self["phi"], self["w"], self["engine_torque"], self["tau"], h,
-                                               self["tau_rate"])
+                                               self["tau_rate"], self.accel)
         self["phi"], self["w"], self["engine_torque"] = phi, w, torque
 
 

@@ -19,6 +19,11 @@ class _ShaftSlave(LeverSlave):
         # master that knows how the torque changes over the step passes its slope here.
         Parameter("tau_rate", 0.0, "N.m/s", "rate of change of tau over the coming step (first-order hold; "
                   "0: tau held)", -1e15, 1e15, fixed=False, derivative_of="tau"),
+        # A master extrapolating the torque by a quadratic sends it whole: tau stays the
+        # coupling's torque now (so the acceleration read with it is consistent).
+        Parameter("tau_accel", 0.0, "N.m/s2", "second derivative of tau over the coming step (the shaft takes "
+                  "the ramp with the same mean and first moment; 0: tau + tau_rate*s)", -1e18, 1e18, fixed=False,
+                  derivative_of="tau_rate"),
     )
     PORTS = (MechanicalPort("flange", "tau", "w", "phi", "the shaft's flange to the coupling"),)
     #: name of the output carrying the external torque and its work, set by subclasses
@@ -50,7 +55,7 @@ class _ShaftSlave(LeverSlave):
         self.a = (self._external + self.tau) / self._shaft.inertia
 
     def _advance(self, t, h):
-        phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h, self.tau_rate)
+        phi, w, work = self._shaft.advance(t, self.phi, self.w, self.tau, h, self.tau_rate, self.tau_accel)
         if not (abs(phi) < 1e15 and abs(w) < 1e12):
             # name the offending state variable first: the importer's diagnosis reads it
             bad = "w" if not abs(w) < 1e12 else "phi"
@@ -82,7 +87,8 @@ class EngineShaft(_ShaftSlave):
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "engine_torque", "engine_work", 1.0
     EQUATIONS = (
         "dphi/dt = w",
-        "I1*dw/dt = M + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "I1*dw/dt = M + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k (with tau_accel: the ramp "
+        "with the mean and first moment of tau + tau_rate*s + tau_accel*s^2/2)",
         "Mg(w) = M1 - K1*w   (stall_torque, torque_slope), or the tabulated characteristic",
         "M = Mg(w) when torque_lag Te = 0; else Te*dM/dt = Mg(w) - M, M(0) = torque_start",
         "engine_work = integral of M*w dt",
@@ -112,7 +118,8 @@ class EngineShaft(_ShaftSlave):
     def _advance(self, t, h):
         if not self._lagged:
             return super()._advance(t, h)
-        phi, w, torque, work = self._shaft.advance(t, self.phi, self.w, self._torque, self.tau, h, self.tau_rate)
+        phi, w, torque, work = self._shaft.advance(t, self.phi, self.w, self._torque, self.tau, h, self.tau_rate,
+                                                   self.tau_accel)
         if not (abs(phi) < 1e15 and abs(w) < 1e12 and abs(torque) < 1e15):
             bad = "w" if not abs(w) < 1e12 else "phi" if not abs(phi) < 1e15 else "engine_torque"
             return (f"state variable '{bad}' became non-finite or unbounded (phi = {phi:.6g} rad, w = {w:.6g} rad/s, "
@@ -158,7 +165,8 @@ class LoadShaft(_ShaftSlave):
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "load_torque", "load_work", -1.0
     EQUATIONS = (
         "dphi/dt = w",
-        "I2*dw/dt = tau(t) - Mc(t, phi, w) - F(w, tau),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k",
+        "I2*dw/dt = tau(t) - Mc(t, phi, w) - F(w, tau),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k "
+        "(with tau_accel: the ramp with the mean and first moment of tau + tau_rate*s + tau_accel*s^2/2)",
         "Mc = Mm (constant); Mm + seeded multisine bounded by dM, with shares of dM at Ak*sin(k*phi + psi) and in "
         "seeded tones at 415...425 rad/s (random); angle-periodic Fourier series (fourier); linear interpolation "
         "in a time series (table)",

@@ -3,7 +3,10 @@
 
 The coupling torque over a communication step is ``tau + tau_rate * s`` (``s`` the time
 into the step): held constant (zero-order hold, ``tau_rate = 0``) or ramped (first-order
-hold), as a co-simulation master gives it.  Where the external torque model has a closed-form
+hold), as a co-simulation master gives it.  A master that extrapolates the torque by a
+quadratic gives its second derivative too (``tau_accel``): the shaft then takes the ramp
+with the quadratic's mean and first moment over the step (``equivalent_ramp``), which gives
+a free inertia's speed and angle at the step's end exactly.  Where the external torque model has a closed-form
 solution (linear engine zone, loads that depend on time only) the step is exact, so the
 only error a co-simulation makes is the coupling's; a load with a closed-form time part and
 an angle-locked part (the spectrum load's shaft order) steps itself, exact in time and by
@@ -24,6 +27,20 @@ def speed_moment_factor(h, w0, w1, a0, a1):
     below the coupling's): the ramped coupling torque's work needs it.  Callers multiply by
     ``h * h`` themselves, each in the order it always had (the traces stay bit for bit)."""
     return 0.15 * w0 + 0.35 * w1 + h * (a0 / 30.0 - a1 / 20.0)
+
+
+def equivalent_ramp(tau, tau_rate, tau_accel, h):
+    """``(tau0, rate)``: the ramp ``tau0 + rate * s`` over a step of ``h`` with the mean
+    and the first moment of the torque ``tau + tau_rate * s + tau_accel * s^2 / 2``.
+
+    A shaft's speed at the step's end sees the torque's mean, its angle the first moment;
+    what the ramp leaves out, ``tau_accel / 2 * (s^2 - h s + h^2 / 6)``, has neither, so it
+    changes the end state only through the state's own feedback on the external torque:
+    with the engine's slope ``K`` the angle by ``-tau_accel K h^5 / (720 I^2)`` to first
+    order in ``K h / I``, the speed at second order (a master extrapolating the torque
+    errs by O(h^4) a step).  The coupling torque's work differs by
+    ``tau_accel * h^5 * w''(t) / 720``."""
+    return tau - tau_accel * h * h / 12.0, tau_rate + 0.5 * tau_accel * h
 
 
 class Shaft:
@@ -50,11 +67,13 @@ class Shaft:
     def acceleration(self, t, phi, w, tau):
         return self.rates(t, phi, w, tau)[0]
 
-    def advance(self, t, phi, w, tau, h, tau_rate=0.0):
-        """State after ``h`` seconds with coupling torque ``tau + tau_rate * s``:
-        ``(phi, w, external_work)``, where ``external_work`` is the work the external
-        torque did on the shaft in the step, from the shaft's own energy balance
-        ``dKE = W_ext + W_coupling``."""
+    def advance(self, t, phi, w, tau, h, tau_rate=0.0, tau_accel=0.0):
+        """State after ``h`` seconds with coupling torque ``tau + tau_rate * s`` (with
+        ``tau_accel``: its ``equivalent_ramp``): ``(phi, w, external_work)``, where
+        ``external_work`` is the work the external torque did on the shaft in the step,
+        from the shaft's own energy balance ``dKE = W_ext + W_coupling``."""
+        if tau_accel:
+            tau, tau_rate = equivalent_ramp(tau, tau_rate, tau_accel, h)
         if self.resisting:
             phi1, w1, moment, _ = integrate(self.external, self.inertia, t, phi, w, tau, h, tau_rate,
                                             self._substeps(h))
@@ -171,9 +190,11 @@ class LaggedShaft:
         """``dM/dt = (Ms(w) - M) / Te``."""
         return (self.external.torque(t, phi, w) - torque) / self.lag
 
-    def advance(self, t, phi, w, torque, tau, h, tau_rate=0.0):
+    def advance(self, t, phi, w, torque, tau, h, tau_rate=0.0, tau_accel=0.0):
         """State after ``h`` seconds: ``(phi, w, M, engine_work)`` (the work from the
         shaft's energy balance, as ``Shaft.advance``)."""
+        if tau_accel:
+            tau, tau_rate = equivalent_ramp(tau, tau_rate, tau_accel, h)
         if isinstance(self.external, LinearCharacteristic):
             phi1, w1, m1 = self._exact(phi, w, torque, tau, h, tau_rate)
         else:
