@@ -65,3 +65,49 @@ def test_linear_extrapolation_beats_zero_order_hold_on_kavz():
                            metrics.error_scales(spec, ref.traces))
         out[name] = e["coupling.tau2"]["rms_relative"]
     assert out["jacobi-linear"] < out["jacobi"] / 4, out
+
+
+def test_derivative_weights_are_the_polynomials_derivatives_at_the_last_point():
+    first, second = masters.derivative_weights([0.8, 0.9, 1.0], 0.1)
+    assert np.allclose(first, [0.5, -2.0, 1.5]) and np.allclose(second, [1.0, -2.0, 1.0])
+    # exact for a quadratic sampled at uneven times: u = 3 + 2 t - 5 t^2 at t = 1.3
+    times = [0.2, 0.9, 1.3]
+    u = [3.0 + 2.0 * x - 5.0 * x * x for x in times]
+    first, second = masters.derivative_weights(times, 0.4)
+    assert np.dot(first, u) / 0.4 == pytest.approx(2.0 - 10.0 * 1.3, rel=1e-12)
+    assert np.dot(second, u) / 0.4 ** 2 == pytest.approx(-10.0, rel=1e-12)
+    first, second = masters.derivative_weights([0.9, 1.0], 0.1)
+    assert np.allclose(first, [-1.0, 1.0], rtol=1e-14) and second == [0.0, 0.0]
+
+
+def _torques_and_calls(spec, name, step):
+    result = run.simulate(spec, master=name, step=step)
+    assert result.ok, result.failure
+    return result.traces["coupling.tau2"], result.counters["calls_by_kind"], result.counters["steps"]
+
+
+@pytest.mark.parametrize("name", ["jacobi-linear", "jacobi-quadratic"])
+def test_extrapolating_masters_send_the_polynomial_ahead_in_the_calls_of_jacobi(name, monkeypatch):
+    # With tau_rate and tau_accel declared, the next step's polynomial goes out with the
+    # torque that makes the recorded accelerations consistent: no write before the step,
+    # after the start-up the 11 calls of a jacobi step (3 doSteps, 3 reads, 3 sets - one
+    # to the coupling, one to each shaft - and the accelerations read again).  The shafts
+    # reduce it to the ramp the hold would have written: the same run, to rounding.
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.5", "experiment.transient=0.1"])
+    ahead, calls, steps = _torques_and_calls(spec, name, 2e-3)
+    made = sum(c["step"] for c in calls.values())
+    sets = sum(c["set"] for c in calls.values())
+    # (the start-up steps roll back and step again, up to four passes each)
+    assert 3 * steps <= made <= 3 * steps + 20 and 3 * steps <= sets <= 3 * steps + 40, (made, sets, steps)
+    # the same master holding the ramp instead (what FMUs without the derivative inputs get)
+    original = masters.ExtrapolatingJacobiMaster.__init__
+
+    def holding(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        self.sends_ahead = False
+
+    monkeypatch.setattr(masters.ExtrapolatingJacobiMaster, "__init__", holding)
+    held, calls_held, _ = _torques_and_calls(spec, name, 2e-3)
+    assert sum(c["set"] for c in calls_held.values()) - sets >= 2 * (steps - 3)
+    np.testing.assert_allclose(ahead, held, rtol=1e-10, atol=1e-9)
+    assert not np.array_equal(ahead, held) or name == "jacobi-linear"

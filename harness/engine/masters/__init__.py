@@ -6,14 +6,16 @@ from harness.engine.masters.adaptive import AdaptiveMaster, AdaptiveTrapezoidalM
 from harness.engine.masters.base import Master, MasterFailure
 from harness.engine.masters.explicit import (ExtrapolatingJacobiMaster, GaussSeidelMaster, JacobiMaster,
                                              LinearExtrapolationMaster, MidpointPredictionMaster,
-                                             QuadraticExtrapolationMaster, extrapolation_weights, lagrange_weights)
+                                             QuadraticExtrapolationMaster, derivative_weights, extrapolation_weights,
+                                             lagrange_weights)
 from harness.engine.masters.iterative import (ImplicitFixedPointMaster, ImplicitNewtonMaster, InterfaceJacobian,
                                               IterativeMaster, TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster)
 from harness.engine.masters.registry import MASTERS, UnknownMaster, check, make, master_class
 
 __all__ = ["AdaptiveMaster", "AdaptiveTrapezoidalMaster", "StepControl", "Master", "MasterFailure",
            "ExtrapolatingJacobiMaster", "GaussSeidelMaster", "JacobiMaster", "LinearExtrapolationMaster",
-           "MidpointPredictionMaster", "QuadraticExtrapolationMaster", "extrapolation_weights", "lagrange_weights",
+           "MidpointPredictionMaster", "QuadraticExtrapolationMaster", "derivative_weights", "extrapolation_weights",
+           "lagrange_weights",
            "ImplicitFixedPointMaster", "ImplicitNewtonMaster", "InterfaceJacobian", "IterativeMaster",
            "TrapezoidalFixedPointMaster", "TrapezoidalNewtonMaster", "MASTERS", "UnknownMaster", "check", "make",
            "master_class"]

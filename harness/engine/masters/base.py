@@ -119,18 +119,6 @@ class Master:
         return [(target, vrs, values) for writes in system.writes.values()
                 for target, vrs, values, _ in writes if target.name in system.stateful]
 
-    def _rate_inputs(self, inputs):
-        """For each ``(component, vrs, values)`` of ``inputs``: the buffer of the inputs
-        declared as their time derivatives (FMI ``derivative`` attribute; a shaft's
-        ``tau_rate``), or None where a component has none for one of them."""
-        out = []
-        for target, vrs, _ in inputs:
-            rate_of = {v.derivative.valueReference: v.name for v in target.description.modelVariables
-                       if v.derivative is not None and v.causality == "input"}
-            names = [rate_of.get(vr) for vr in vrs]
-            out.append(target.real_buffer(names) if all(names) else None)
-        return out
-
     # Full FMU states of the stateful components, for masters that roll back.
     def save_states(self) -> list:
         return [component.save_state() for component in self._stateful]

@@ -42,6 +42,22 @@ class GaussSeidelMaster(Master):
         self._step_feedthrough(t, h)
 
 
+def _lagrange_basis(nodes) -> list[list[float]]:
+    """For each node ``x_j``: the coefficients (lowest power first) of the Lagrange basis
+    polynomial ``L_j`` (1 at ``x_j``, 0 at the other nodes)."""
+    bases = []
+    for j, xj in enumerate(nodes):
+        basis = [1.0]
+        for m, xm in enumerate(nodes):
+            if m != j:
+                scale = 1.0 / (xj - xm)
+                shifted = [0.0] + basis                 # x * L
+                basis = [(shifted[k] - xm * (basis[k] if k < len(basis) else 0.0)) * scale
+                         for k in range(len(shifted))]
+        bases.append(basis)
+    return bases
+
+
 def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, list]:
     """Weights ``(m_j, r_j, e_j)`` over past values ``u(t_j)`` of the polynomial ``p``
     through them: ``sum_j m_j u(t_j)`` is the mean of ``p`` over ``[t, t + h]``,
@@ -54,18 +70,22 @@ def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, l
     Pure Python over the Lagrange basis: this runs on every step of an adaptive master."""
     nodes = [(x - t) / h for x in past_times]          # <= 0, scaled to the step
     means, slopes, ends = [], [], []
-    for j, xj in enumerate(nodes):
-        basis = [1.0]                                   # coefficients of L_j, lowest power first
-        for m, xm in enumerate(nodes):
-            if m != j:
-                scale = 1.0 / (xj - xm)
-                shifted = [0.0] + basis                 # x * L
-                basis = [(shifted[k] - xm * (basis[k] if k < len(basis) else 0.0)) * scale
-                         for k in range(len(shifted))]
+    for basis in _lagrange_basis(nodes):
         means.append(sum(c / (k + 1) for k, c in enumerate(basis)))
         slopes.append(12.0 * sum(c * (1.0 / (k + 2) - 0.5 / (k + 1)) for k, c in enumerate(basis)))
         ends.append(sum(basis))
     return means, slopes, ends
+
+
+def derivative_weights(times, scale: float) -> tuple[list, list]:
+    """Weights ``(d1_j, d2_j)`` over values ``u(t_j)`` at ``times`` (the last one ``t``)
+    such that ``sum_j d1_j u(t_j) / scale`` and ``sum_j d2_j u(t_j) / scale^2`` are the
+    first and second derivatives at ``t`` of the polynomial through them (uniform steps
+    of ``scale``, degree 2: 1/2, -2, 3/2 and 1, -2, 1)."""
+    t = times[-1]
+    bases = _lagrange_basis([(x - t) / scale for x in times])
+    return ([basis[1] if len(basis) > 1 else 0.0 for basis in bases],
+            [2.0 * basis[2] if len(basis) > 2 else 0.0 for basis in bases])
 
 
 def lagrange_weights(nodes, x: float) -> list[float]:
@@ -79,7 +99,15 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
     a derivative input (a shaft's ``tau_rate``) it gets the ramp that matches the
     extrapolating polynomial's mean and first moment over the step (first-order hold),
     otherwise the mean, held.  Order ``degree + 1`` with the ramp, at most 2 without;
-    the first steps use the history there is."""
+    the first steps use the history there is.
+
+    Where a component declares the polynomial's derivatives up to its degree as inputs
+    (a shaft's ``tau_rate`` and ``tau_accel``), the polynomial is sent whole at the end of
+    each step instead - the torque the coupling gives now, its slope and curvature, which
+    the shaft reduces to the same ramp - in the same call that makes the shaft's
+    acceleration consistent for recording: no write before the next step (11 FMI calls a
+    step on a driveline, against 13).  Components without them (a foreign FMU) get the
+    hold before each step, as before."""
 
     degree = 1
     options = {"ramp": True}
@@ -87,34 +115,63 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
         self.coupled_inputs = self._coupled_inputs()
-        rates = self._rate_inputs(self.coupled_inputs) if self.ramp else [None] * len(self.coupled_inputs)
-        # One write per component: the inputs and, after them, their rates.
+        chains = self._derivative_inputs(self.coupled_inputs) if self.ramp else [[] for _ in self.coupled_inputs]
+        # One write per component: the inputs and, after them, their derivatives (the
+        # hold gives rates and sets any higher ones to 0).
         self._held = []
-        for (target, vrs, values), rate in zip(self.coupled_inputs, rates):
+        for (target, vrs, values), chain in zip(self.coupled_inputs, chains):
             n = len(values)
-            if rate is None:
+            if not chain:
                 self._held.append((target, vrs, (ctypes.c_double * n)(), n, False))
             else:
-                both = (ctypes.c_uint * (2 * n))(*vrs, *rate[0])
-                self._held.append((target, both, (ctypes.c_double * (2 * n))(), n, True))
+                every = (ctypes.c_uint * (n * (1 + len(chain))))(*vrs, *(vr for vrs_k in chain for vr in vrs_k))
+                self._held.append((target, every, (ctypes.c_double * len(every))(), n, True))
+        # The components whose inputs get the polynomial whole at the end of each step (see
+        # the class); the others (a foreign FMU without the derivative inputs) the hold.
+        ahead = [k for k, chain in enumerate(chains) if len(chain) >= self.degree]
+        self._rest = tuple(k for k in range(len(self._held)) if k not in ahead)
+        self._ahead = tuple(ahead)
+        self.sends_ahead = bool(ahead)
+        self._ahead_after = None        # the history point after which it was last sent
         # The last ``degree`` communication points before the current one.
         self.history: deque = deque(maxlen=self.degree)
         self._weights_cache: dict = {}
         self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
                                   for n in system.stateful)
         self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
-        # The held inputs' writes compiled once, as a propagation that reads nothing.
-        self._sends = system.send_plan([(target, vrs, values) for target, vrs, values, _, _ in self._held])
+        # The held inputs' writes compiled once, as propagations that read nothing: all of
+        # them, those sent ahead, the rest.
+        writes = [(target, vrs, values) for target, vrs, values, _, _ in self._held]
+        self._sends = system.send_plan(writes)
+        self._sends_ahead = system.send_plan([writes[k] for k in self._ahead])
+        self._sends_rest = system.send_plan([writes[k] for k in self._rest])
 
-    def _hold(self, t, h, points, predict: bool = True):
+    def _derivative_inputs(self, inputs) -> list[list]:
+        """For each ``(component, vrs, values)`` of ``inputs``: the value references of
+        their declared time derivatives (FMI ``derivative``), first, second, ... as far as
+        every input of the component has one (``[]`` where one has none)."""
+        out = []
+        for target, vrs, _ in inputs:
+            rate_of = {v.derivative.valueReference: v.valueReference
+                       for v in target.description.modelVariables
+                       if v.derivative is not None and v.causality == "input"}
+            chain, current = [], list(vrs)
+            while all(vr in rate_of for vr in current) and len(chain) < 3:
+                current = [rate_of[vr] for vr in current]
+                chain.append(current)
+            out.append(chain)
+        return out
+
+    def _hold(self, t, h, points, predict: bool = True, rest_only: bool = False):
         """Write the inputs for the step ``[t, t + h]`` from the polynomial through
         ``points`` (``[(time, values per input)]``); return its values at ``t + h``
-        (``None`` unless ``predict``)."""
+        (``None`` unless ``predict``).  ``rest_only``: only the components whose inputs
+        were not sent ahead."""
         weights = self._weights([p[0] for p in points], t, h)
         ends = [] if predict else None
-        k = -1
-        for _, _, values, n, ramped in self._held:
-            k += 1
+        held = self._held
+        for k in (self._rest if rest_only else range(len(held))):
+            _, _, values, n, ramped = held[k]
             column = [p[1][k] for p in points]       # this component's inputs at each point
             component_ends = []
             for i in range(n):
@@ -127,13 +184,56 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 if ramped:
                     values[i] = mean - 0.5 * change
                     values[n + i] = change / h
+                    for j in range(2 * n + i, len(values), n):
+                        values[j] = 0.0           # higher derivatives: the ramp is all
                 else:
                     values[i] = mean
                 component_ends.append(end)
             if predict:
                 ends.append(component_ends)
-        self.system.propagate_with(self._sends)
+        self.system.propagate_with(self._sends_rest if rest_only else self._sends)
         return ends
+
+    def _send_ahead(self, t_end):
+        """Write each component's inputs at ``t_end`` (the step just made's end, where the
+        coupling's torques are in the input buffers) and the derivatives there of the
+        polynomial through the history and them: what the next step holds."""
+        history = self.history
+        times = [p[0] for p in history] + [t_end]
+        scale = t_end - times[-2]
+        first, second = self._derivatives(times, scale)
+        for k in self._ahead:
+            _, _, values, n, _ = self._held[k]
+            now = self.coupled_inputs[k][2]
+            column = [p[1][k] for p in history] + [now]
+            higher = len(values) > 2 * n
+            for i in range(n):
+                rate = curvature = 0.0
+                for w_first, w_second, inputs in zip(first, second, column):
+                    u = inputs[i]
+                    rate += w_first * u
+                    curvature += w_second * u
+                values[i] = now[i]
+                values[n + i] = rate / scale
+                if higher:
+                    values[2 * n + i] = curvature / (scale * scale)
+        self.system.propagate_with(self._sends_ahead)
+        self._ahead_after = history[-1]
+        # what was not sent ahead is still only in the buffers
+        self._inputs_unsent = bool(self._rest)
+
+    def _derivatives(self, times, scale):
+        key = ("d",) + tuple([round((x - times[-1]) / scale, 9) for x in times])
+        weights = self._weights_cache.get(key)
+        if weights is None:
+            if len(self._weights_cache) > 32:
+                self._weights_cache.clear()
+            weights = self._weights_cache[key] = derivative_weights(times, scale)
+        return weights
+
+    def restore_states(self, states, t):
+        super().restore_states(states, t)
+        self._ahead_after = None        # the inputs sent ahead belong to another state
 
     def _weights(self, times, t, h):
         key = tuple([round((x - t) / h, 9) for x in times])
@@ -151,17 +251,26 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
 
     def _step_impl(self, t, h):
         start = [list(values) for _, _, values in self.coupled_inputs]
-        points = [*self.history, (t, start)]
+        history = self.history
+        points = [*history, (t, start)]
         if self._starting():
             self._start_step(t, h, points)
         else:
-            self._hold(t, h, points, predict=False)
+            # Sent ahead after the last step - unless something (a restored state, a
+            # history set from outside) came in between.
+            if self._ahead_after is None or not history or history[-1] is not self._ahead_after:
+                self._hold(t, h, points, predict=False)
+            elif self._rest:
+                self._hold(t, h, points, predict=False, rest_only=True)
+            self._ahead_after = None
             system = self.system
             system.step_with(self._steps, t, h)
-            # The shafts' torques are written by the next _hold: only fill the buffers.
+            # The shafts' torques are written before the next step: only fill the buffers.
             system.propagate_with(self._held_plan)
             self._inputs_unsent = True
-        self.history.append((t, start))
+        history.append((t, start))
+        if self.sends_ahead and not self._starting():
+            self._send_ahead(t + h)
 
     def _start_step(self, t, h, points):
         """A start-up step of the master's order although the history is short: step
