@@ -175,6 +175,11 @@ def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir)
 
     from harness.studies import hollow
 
+    shaft = hollow.build_twin(fmu_dir / "LoadShaft.fmu", tmp_path / "LoadShaft.fmu")
+    ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LoadShaft.fmu", shaft))
+    # the derivative attributes too: an extrapolating master sends a twin what it sends ours
+    assert {v.name: v.derivative.name for v in theirs.modelVariables if v.derivative is not None} == \
+           {v.name: v.derivative.name for v in ours.modelVariables if v.derivative is not None} != {}
     twin = hollow.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
     ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LeverCoupling.fmu", twin))
     same = ("name", "valueReference", "type", "causality", "variability")

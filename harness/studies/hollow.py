@@ -2,8 +2,10 @@
 
 A hollow twin is a pythonfmu FMU with the same variables as the FMU it stands for (names,
 types, causality, variability, start values and units, in the same order, so the same value
-references and a scene's values with units are judged alike) and the same output dependencies in its model description, so that a
-``System`` wires it exactly as the real one and makes the same calls; its ``do_step``
+references and a scene's values with units are judged alike) and the same output
+dependencies and ``derivative`` attributes in its model description, so that a ``System``
+wires it exactly as the real one and every master makes the same calls (an extrapolating
+master sends a shaft's ramp only where ``tau_rate`` is declared the derivative of ``tau``); its ``do_step``
 returns at once and its getters and setters are pythonfmu's own.  What a call into it costs
 is the price of crossing from the host into pythonfmu's Python and back: the part of a
 master's time no slave can save.
@@ -36,6 +38,8 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 VARIABLES = {variables!r}
 #: output -> the inputs it depends on (the model description of {model})
 DEPENDENCIES = {dependencies!r}
+#: variable -> the variable it is the time derivative of
+DERIVATIVES = {derivatives!r}
 _KINDS = {{"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}}
 
 
@@ -65,6 +69,9 @@ class {cls}(Fmi2Slave):
             for variable, (*_, unit) in zip(root.find("ModelVariables"), VARIABLES):
                 if unit:
                     variable.find("Real").set("unit", unit)
+        for variable in root.find("ModelVariables"):
+            if variable.get("name") in DERIVATIVES:
+                variable.find("Real").set("derivative", str(names.index(DERIVATIVES[variable.get("name")]) + 1))
         for unknown in root.find("ModelStructure").find("Outputs"):
             sources = DEPENDENCIES.get(names[int(unknown.get("index")) - 1], [])
             unknown.set("dependencies", " ".join(str(names.index(n) + 1) for n in sources))
@@ -76,8 +83,9 @@ class {cls}(Fmi2Slave):
 _DEFAULT_START = {"Real": 0.0, "Integer": 0, "Boolean": False, "String": ""}
 
 
-def _variables(description) -> tuple[list, dict]:
-    """(variables, dependencies) of a model description as the twin's script declares them."""
+def _variables(description) -> tuple[list, dict, dict]:
+    """(variables, dependencies, derivatives) of a model description as the twin's script
+    declares them."""
     variables = []
     for v in description.modelVariables:
         start = v.start
@@ -93,14 +101,16 @@ def _variables(description) -> tuple[list, dict]:
         unit = (v.unit or (v.declaredType.unit if v.declaredType is not None else None)) if v.type == "Real" else None
         variables.append((v.name, v.type, v.causality, v.variability, initial, start, unit))
     dependencies = {u.variable.name: [d.name for d in (u.dependencies or [])] for u in description.outputs}
-    return variables, dependencies
+    derivatives = {v.name: v.derivative.name for v in description.modelVariables if v.derivative is not None}
+    return variables, dependencies, derivatives
 
 
 def twin_key(description) -> str:
     """What a twin depends on: the variables, the dependencies, pythonfmu's version and this
     module's script."""
-    variables, dependencies = _variables(description)
-    text = json.dumps([variables, dependencies, importlib.metadata.version("pythonfmu"), _SCRIPT], sort_keys=True)
+    variables, dependencies, derivatives = _variables(description)
+    text = json.dumps([variables, dependencies, derivatives, importlib.metadata.version("pythonfmu"), _SCRIPT],
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -111,13 +121,14 @@ def build_twin(fmu: Path, dest: Path) -> Path:
 
     description = read_model_description(str(fmu))
     model = description.coSimulation.modelIdentifier
-    variables, dependencies = _variables(description)
+    variables, dependencies, derivatives = _variables(description)
     key = twin_key(description)
     cls = f"Hollow{model}"
     with tempfile.TemporaryDirectory(prefix="lever-hollow-") as stage:
         # a module name of its own: twins loaded into one process share no module
         script = Path(stage) / f"hollow_{model}_{key}.py"
-        script.write_text(_SCRIPT.format(model=model, cls=cls, variables=variables, dependencies=dependencies))
+        script.write_text(_SCRIPT.format(model=model, cls=cls, variables=variables, dependencies=dependencies,
+                                         derivatives=derivatives))
         dest.parent.mkdir(parents=True, exist_ok=True)
         sys.path.insert(0, stage)
         try:
