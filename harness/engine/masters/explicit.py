@@ -223,25 +223,25 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._inputs_unsent = bool(self._rest)
 
     def _derivatives(self, times, scale):
-        key = ("d",) + tuple([round((x - times[-1]) / scale, 9) for x in times])
-        weights = self._weights_cache.get(key)
-        if weights is None:
-            if len(self._weights_cache) > 32:
-                self._weights_cache.clear()
-            weights = self._weights_cache[key] = derivative_weights(times, scale)
-        return weights
+        return self._cached(("d",) + tuple([round((x - times[-1]) / scale, 9) for x in times]),
+                            lambda: derivative_weights(times, scale))
 
     def restore_states(self, states, t):
         super().restore_states(states, t)
         self._ahead_after = None        # the inputs sent ahead belong to another state
 
     def _weights(self, times, t, h):
-        key = tuple([round((x - t) / h, 9) for x in times])
+        return self._cached(tuple([round((x - t) / h, 9) for x in times]),
+                            lambda: list(zip(*extrapolation_weights(times, t, h))))
+
+    def _cached(self, key, compute):
+        """Weights by the pattern of the points' times, scaled to the step (to 9 digits: a
+        fixed step's patterns repeat although its times carry rounding)."""
         weights = self._weights_cache.get(key)
         if weights is None:
             if len(self._weights_cache) > 32:      # variable steps: do not grow without bound
                 self._weights_cache.clear()
-            weights = self._weights_cache[key] = list(zip(*extrapolation_weights(times, t, h)))
+            weights = self._weights_cache[key] = compute()
         return weights
 
     def _starting(self) -> bool:
@@ -252,16 +252,14 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
     def _step_impl(self, t, h):
         start = [list(values) for _, _, values in self.coupled_inputs]
         history = self.history
-        points = [*history, (t, start)]
         if self._starting():
-            self._start_step(t, h, points)
+            self._start_step(t, h, [*history, (t, start)])
         else:
             # Sent ahead after the last step - unless something (a restored state, a
             # history set from outside) came in between.
-            if self._ahead_after is None or not history or history[-1] is not self._ahead_after:
-                self._hold(t, h, points, predict=False)
-            elif self._rest:
-                self._hold(t, h, points, predict=False, rest_only=True)
+            ahead = self._ahead_after is not None and bool(history) and history[-1] is self._ahead_after
+            if not ahead or self._rest:
+                self._hold(t, h, [*history, (t, start)], predict=False, rest_only=ahead)
             self._ahead_after = None
             system = self.system
             system.step_with(self._steps, t, h)
