@@ -111,3 +111,20 @@ def test_extrapolating_masters_send_the_polynomial_ahead_in_the_calls_of_jacobi(
     assert sum(c["set"] for c in calls_held.values()) - sets >= 2 * (steps - 3)
     np.testing.assert_allclose(ahead, held, rtol=1e-10, atol=1e-9)
     assert not np.array_equal(ahead, held) or name == "jacobi-linear"
+
+
+def test_a_refused_dostep_in_a_step_plan_is_named_as_component_do_step_names_it():
+    from harness.engine.component import step_call
+    from harness.engine.system import System
+    failures = []
+
+    class Refusing:
+        steps, time = 0, 0.0
+
+        def fail(self, call, status):
+            failures.append((call, status))
+
+    component = Refusing()
+    System.step_with(((component, lambda handle, t, h, flag: 3, None),), 0.25, 1e-3)
+    assert failures == [("fmi2DoStep(t = 0.25, h = 0.001)", 3)] == [(step_call(0.25, 1e-3), 3)]
+    assert component.steps == 1

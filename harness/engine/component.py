@@ -141,6 +141,11 @@ def _unconverted(function):
     return ctypes.CFUNCTYPE(function.restype)(ctypes.cast(function, ctypes.c_void_p).value)
 
 
+def step_call(t: float, h: float) -> str:
+    """How a refused fmi2DoStep is named in its error: the step's time and size."""
+    return f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})"
+
+
 class FmuCallError(RuntimeError):
     """An FMI call returned error/fatal (or discard): which component, which call,
     at what time, and what the FMU said."""
@@ -259,7 +264,7 @@ class Component:
         self.steps += 1
         status = self.raw.do_step(self.raw.handle, t, h, 1)
         if status > 1:
-            self.fail(f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})", status)
+            self.fail(step_call(t, h), status)
         self.time = t + h
 
     def get(self, names: Sequence[str]) -> list[float]:

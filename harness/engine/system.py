@@ -19,7 +19,7 @@ from pathlib import Path
 from fmpy import read_model_description
 
 from harness.description import scene as scenes
-from harness.engine.component import Component
+from harness.engine.component import Component, step_call
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS
 
@@ -274,7 +274,7 @@ class System:
             component.steps += 1
             status = do_step(handle, t, h, 1)
             if status > 1:
-                component.fail(f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})", status)
+                component.fail(step_call(t, h), status)
             component.time = t + h
 
     @property
