@@ -1,5 +1,5 @@
 """The coupling as a compliant element: torques, power balance, elastic laws
-(MODEL.md sections 3 and 7; lever.physics.coupling, lever.physics.elastic)."""
+(docs/physics.md#elastic-element; lever.physics.coupling, lever.physics.elastic)."""
 from __future__ import annotations
 
 import math
@@ -15,7 +15,7 @@ from lever.physics.kinematics import TransferFunction
 from lever.physics.parameters import ParameterError
 
 DEG = math.pi / 180.0
-# MODEL.md section 7: the cam-shaped characteristic with two plateaus.
+# docs/physics.md#nonlinear-elastic-law-the-plateaus-scene: the cam-shaped characteristic with two plateaus.
 TABLE = "0.05:10; 0.1:16; 0.2:16.5; 0.3:26.5; 0.45:50"
 TABLE_POINTS = [(0.0, 0.0), (0.05, 10.0), (0.1, 16.0), (0.2, 16.5), (0.3, 26.5), (0.45, 50.0)]
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import math
+import os
 import subprocess
 import sys
 import zipfile
@@ -428,8 +429,9 @@ def test_a_c_host_on_a_bare_system_cpython(fmu, fmu_dir, c_host, tmp_path):
 
 
 #: The oldest CPython the FMUs promise to run on (docs/hosts.md), where this machine has one
-#: (pyenv's builds carry a shared libpython).
-OLDEST_PYTHON = sorted(Path("/root/.pyenv/versions").glob("3.9.*/lib/libpython3.9.so.1.0"))
+#: (pyenv's builds carry a shared libpython; pyenv's root is $PYENV_ROOT, else ~/.pyenv).
+OLDEST_PYTHON = sorted((Path(os.environ.get("PYENV_ROOT") or Path.home() / ".pyenv") / "versions")
+                       .glob("3.9.*/lib/libpython3.9.so.1.0"))
 
 
 @pytest.mark.skipif(not OLDEST_PYTHON, reason="no CPython 3.9 shared library on this machine")

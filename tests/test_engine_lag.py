@@ -66,7 +66,7 @@ def test_which_engine_a_parameter_set_builds():
 
 
 def test_the_fig_3_9_table():
-    # start-up torque, nominal point, idle: the monograph's figures (MODEL.md sections 4, 6)
+    # start-up torque, nominal point, idle: the monograph's figures (docs/physics.md#the-table)
     table = engine_characteristic(0.0, 0.0, "kavz685")
     assert table.torque(0, 0, 0.0) == 623.0                       # start-up torque (M1 of (3.23))
     assert table.torque(0, 0, 33.6) == 450.0                      # nominal point

@@ -1,4 +1,4 @@
-"""The freewheel rectifier (MODEL.md section 8): its physics (energy balance, gaps,
+"""The freewheel rectifier (docs/physics.md#freewheel-rectifier): its physics (energy balance, gaps,
 engagement and free-wheeling, stick/slip), its FMU through FMI, the stop-mode scene end
 to end, and the FMU's agreement with the monolithic reference."""
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The coupling's kinematics: transfer function U12 and position function Phi
-(MODEL.md section 2; lever.physics.kinematics)."""
+(docs/physics.md#kinematics; lever.physics.kinematics)."""
 from __future__ import annotations
 
 import math
@@ -34,7 +34,7 @@ def kinematically_defined(alpha_deg: float, support: float, margin_deg: float = 
 
 
 def g(phi, alpha):
-    """The half-coupling function of MODEL.md section 2, written out independently."""
+    """The half-coupling function (docs/physics.md#the-half-coupling-function), written out independently."""
     s2 = math.sin(alpha) ** 2
     return np.sqrt((1.0 - 2.0 * s2 * np.cos(2.0 * phi)) / (1.0 - 2.0 * s2 * np.cos(phi) ** 2))
 
@@ -98,7 +98,7 @@ def test_scaled_and_kinematic_are_synchronous_in_the_same_cases(alpha_deg, suppo
 
 
 def test_u12_is_continuous_as_alpha_goes_to_zero():
-    # U12 = 1 exactly at alpha = 0 (MODEL.md); before issue 17 the kinematic mode tended to
+    # U12 = 1 exactly at alpha = 0 (docs/physics.md#kinematics); before issue 17 the kinematic mode tended to
     # 1 +- 4.5e-4 as alpha -> 0+ (the support's full tilt asin(0.03) = 1.7 deg with nothing
     # to tilt against).  Now the tilt is at most alpha: the ripple vanishes with alpha as
     # 1.5 alpha^2 (measured: 1.5e-6 at 1e-3 rad, 1.5e-4 at 1e-2 rad, 4.6e-4 at 1 deg); the
@@ -111,7 +111,7 @@ def test_u12_is_continuous_as_alpha_goes_to_zero():
     assert 0.0 < scaled[0] < 4e-5 and scaled[0] < scaled[1] < 5e-3
     tiny = TransferFunction("kinematic", 1e-6, 0.03, 0.03)
     assert all(abs(tiny.ratio(x) - 1.0) < 1e-11 for x in REVOLUTION)
-    # away from zero the tilt is the full asin(D2s/l2): the brief's figures hold (below)
+    # away from zero the tilt is the full asin(D2s/l2): docs/physics.md's figures hold (below)
     assert TransferFunction("kinematic", 5 * DEG, 0.03, 0.03).tilt == math.asin(0.03)
 
 
@@ -241,7 +241,7 @@ def test_the_reported_amplitude_fit_agrees_with_scipy():
 @pytest.mark.parametrize("alpha_deg,support,hinge", [(5.0, 0.03, 0.03), (15.0, 0.03, 0.03), (30.0, 0.05, 0.05),
                                                      (20.0, 0.09, 0.02), (38.0, 0.0, 0.09)])
 def test_kinematic_mode_is_the_renormalised_half_coupling_ratio(alpha_deg, support, hinge):
-    # MODEL.md: U12 ~ g(phi + d_phi, alpha + d_alpha) / g(phi, alpha), renormalised to unit mean.
+    # docs/physics.md#the-three-modes: U12 ~ g(phi + d_phi, alpha + d_alpha) / g(phi, alpha), renormalised to unit mean.
     alpha = alpha_deg * DEG
     phi = 2.0 * np.pi * np.arange(1 << 15) / (1 << 15)
     raw = g(phi + math.asin(hinge), alpha + math.asin(support)) / g(phi, alpha)
@@ -252,7 +252,7 @@ def test_kinematic_mode_is_the_renormalised_half_coupling_ratio(alpha_deg, suppo
 
 @pytest.mark.parametrize("alpha_deg,deformation,stated", [(5.0, 0.03, 0.003), (30.0, 0.05, 0.022)])
 def test_kinematic_amplitude_matches_the_brief(alpha_deg, deformation, stated):
-    # MODEL.md section 2: "about 0.003 at alpha = 5 deg, D/l = 0.03 and about 0.022 at 30 deg, 0.05".
+    # docs/physics.md#the-three-modes: about 0.003 at alpha = 5 deg, D/l = 0.03 and about 0.022 at 30 deg, 0.05.
     tf = TransferFunction("kinematic", alpha_deg * DEG, deformation, deformation)
     ratio = over(tf.ratio)(np.linspace(0.0, 2.0 * np.pi, 20001))
     measured = (ratio.max() - ratio.min()) / 2.0

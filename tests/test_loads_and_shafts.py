@@ -1,4 +1,4 @@
-"""Loads, engine characteristics and the shaft integrator (MODEL.md sections 4-5;
+"""Loads, engine characteristics and the shaft integrator (docs/physics.md#engine, #loads;
 lever.physics.load, lever.physics.engine, lever.physics.shaft)."""
 from __future__ import annotations
 

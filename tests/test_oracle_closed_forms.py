@@ -18,7 +18,7 @@ from harness.description import scene
 from harness.engine import run
 from harness.judges import stability
 
-I1, I2 = 0.128, 0.161            # the KAVZ-685 inertias (MODEL.md section 6)
+I1, I2 = 0.128, 0.161            # the KAVZ-685 inertias (docs/physics.md#kavz-685)
 I_RED = I1 * I2 / (I1 + I2)
 
 

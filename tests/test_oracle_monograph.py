@@ -1,10 +1,11 @@
 """The sources' printed numbers, typed into this file from the texts themselves, against the model.
 
-Sources (all under /work/shared/): ``seeds/monograph_lever_couplings.txt`` (Fig. 3.7's
-amplitudes, printed in the text at lines 912-914), ``spec/MODEL.md`` section 2 (the
-half-coupling function's and the kinematic construction's amplitudes),
-``seeds/nonlinear_elastic_coupling_paper_uk.txt`` (Table 1, "input parameters of the
-synthesis of the target elastic characteristic") and ``seeds/freewheel_rectifier_paper_ru.txt``
+Sources (docs/physics.md#bibliography): the monograph by Davidbaev, Juraev, Zulpiev and
+Davidbaeva (Fig. 3.7's amplitudes, printed in the text of section 3.2 below the figure),
+docs/physics.md#the-half-coupling-function and #the-three-modes (the half-coupling
+function's and the kinematic construction's amplitudes), the nonlinear elastic coupling
+paper by Sydorenko and Kurgan (Table 1, "input parameters of the synthesis of the target
+elastic characteristic") and the freewheel rectifier paper by Khudorozhkov and Yurkevich
 (Table 1, "input data for the calculation of the dynamics").  Nothing here is read from
 the code under test: where the model is compared with a printed figure, the tolerance
 says how far the model is allowed to be and why.
@@ -107,7 +108,7 @@ def test_scaled_mode_through_the_fmu_at_the_30_degree_point(fmu_dir):
 
 
 def test_half_coupling_function_amplitudes_of_model_md():
-    """MODEL.md section 2: g's peak deviation from 1 is 0.030 at 10 deg and 0.22 at 30 deg
+    """docs/physics.md#the-half-coupling-function: g's peak deviation from 1 is 0.030 at 10 deg and 0.22 at 30 deg
     (the text swaps them).  With s2 = sin^2 alpha, g = sqrt((1 - 2 s2 cos 2phi)/(1 - 2 s2 cos^2 phi))
     is 1 at phi = 0 and largest at phi = pi/2, sqrt(1 + 2 s2): the peak deviation is
     sqrt(1 + 2 sin^2 alpha) - 1 = 0.0297 (10 deg), 0.2247 (30 deg)."""
@@ -120,14 +121,14 @@ def test_half_coupling_function_amplitudes_of_model_md():
 
 @pytest.mark.parametrize("alpha_deg,deformation,stated", [(5.0, 0.03, 0.003), (30.0, 0.05, 0.022)])
 def test_kinematic_amplitudes_of_model_md(alpha_deg, deformation, stated):
-    """MODEL.md section 2: the kinematic construction's dU12 is "about 0.003 at alpha = 5 deg,
+    """docs/physics.md#the-three-modes: the kinematic construction's dU12 is "about 0.003 at alpha = 5 deg,
     D/l = 0.03 and about 0.022 at 30 deg, 0.05" (both deformations equal).  The text gives
     one significant figure's worth ("about"): 5 %."""
     found = amplitude(TransferFunction("kinematic", alpha_deg * DEG, deformation, deformation))
     assert found == pytest.approx(stated, rel=0.05)
 
 
-# -- the nonlinear law: Table 1 of nonlinear_elastic_coupling_paper_uk.txt ----------------------------------
+# -- the nonlinear law: Table 1 of the nonlinear elastic coupling paper (Sydorenko & Kurgan) ---------------
 
 # Row number: (what, value), as printed (decimal commas made points).
 NONLINEAR_TABLE_1 = {
@@ -181,11 +182,11 @@ def test_plateau_scenes_law_through_the_fmu_is_the_papers_table_1(fmu_dir):
         f"plateau 1 of the nonlinear law's Table 1 is not flat at {t[6]} N*m over {t[8]} rad: {inside}")
 
 
-# -- the freewheel: Table 1 of freewheel_rectifier_paper_ru.txt ----------------------------------------------
+# -- the freewheel: Table 1 of the freewheel rectifier paper (Khudorozhkov & Yurkevich) ---------------------
 
 # Parameter -> value as printed (gaps in degrees there; stored in rad).  m2 = 0.28 kg
 # (mass of a half-coupling) has no parameter: the model's axial dynamics use P_pr and the
-# ramps' geometry only (MODEL.md section 8 lists it with Table 1).
+# ramps' geometry only (docs/physics.md#freewheel-rectifier says why).
 FREEWHEEL_TABLE_1 = {
     "disc_friction": 0.05,             # f_s
     "ball_friction": 0.001,            # f_k
@@ -208,7 +209,7 @@ FREEWHEEL_TABLE_1 = {
     "torsion_stiffness": 3798.0,        # C_t, N*m/rad
     "mesh_stiffness": 25000.0,          # C_z, N*m/rad
     "msm_stiffness": 10313.0,           # C_fi, N*m/rad
-    "input_speed": 42.41,               # the stop-mode test at 405 rpm (MODEL.md section 8)
+    "input_speed": 42.41,               # the stop-mode test at 405 rpm (the paper's test)
 }
 
 

@@ -70,7 +70,7 @@ def test_lagrange_weights_extrapolate_a_parabola():
 # -- the engine's characteristics ---------------------------------------------------------------------------------
 
 def test_linear_characteristic_through_an_operating_point_and_back():
-    """MODEL.md section 4: K1 = 14.06 puts the steady speed at 37.2 rad/s under 100 N*m, so
+    """docs/physics.md#the-line: K1 = 14.06 puts the steady speed at 37.2 rad/s under 100 N*m, so
     M1 = Mc + K1 w = 100 + 14.06 * 37.2 = 623.032 N*m (the monograph's 623), and back
     (M1 - Mc)/K1 = 37.2.  Mg(w) = M1 - K1 w: at 30 rad/s 623.032 - 421.8 = 201.232."""
     line = LinearCharacteristic.through(37.2, 100.0, 14.06)
@@ -190,7 +190,7 @@ def test_coupling_family_is_exact_at_nodes_and_blends_linearly_between():
     assert family.at(alpha).damping == 6.35 and family.at(alpha).law.stiffness == 715.4
 
 
-# -- refusals that name the parameter and its range (MODEL.md section 3) -----------------------------------------
+# -- refusals that name the parameter and its range (docs/physics.md#linear-law-and-damping) ----------------------
 
 def test_stiffness_and_damping_bounds_in_the_physics():
     """c > 0 and b >= 0, each refused outside with a ParameterError naming it and its
@@ -235,7 +235,7 @@ def test_the_smallest_tables_are_accepted():
 
 
 def test_misalignment_limits_of_the_transfer_function():
-    """MODEL.md section 2: g exists for alpha < 45 deg, and the kinematic and scaled modes
+    """docs/physics.md#the-half-coupling-function: g exists for alpha < 45 deg, and the kinematic and scaled modes
     evaluate it at alpha + asin(D2s/l2) (the support's tilt): asin(0.1) = 5.739 deg, so
     alpha = 39.2 deg (44.939) is accepted and 39.3 deg (45.039) refused; the working range
     ends at 75 deg for every mode; a scaled U12 that falls to 0.05 locks the coupling and

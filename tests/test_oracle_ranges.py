@@ -3,7 +3,7 @@
 The table below is typed from the sources, not read from ``lever.physics.catalogue``:
 the physical bounds (a spring's stiffness > 0, a damping or a load's random bound >= 0,
 a relative deformation >= 0, the misalignment's geometric working range alpha < 75 deg,
-the engine slope K1 >= 0...) from /work/shared/spec/MODEL.md (section given per row), the
+the engine slope K1 >= 0...) from docs/physics.md (section given per row), the
 computability bounds from docs/decisions.md ("Ranges that keep every admitted value
 computable": inertias from 1e-6 kg*m2), and the engineering caps (1e9 N*m/rad...) from the
 FMUs' own documentation (``documentation/_main.html``, generated at build).  The
@@ -31,25 +31,25 @@ DEG = math.pi / 180.0
 
 # (FMU, parameter, low, high, low_open, high_open, where the range comes from)
 RANGES = [
-    # -- the coupling (MODEL.md sections 2-3) --
-    ("LeverCoupling", "stiffness", 0.0, 1e9, True, False, "MODEL.md s.3: c of a spring, > 0; cap: FMU docs"),
-    ("LeverCoupling", "damping", 0.0, 1e7, False, False, "MODEL.md s.3: b*thetadot^2 is dissipated, b >= 0"),
-    ("LeverCoupling", "support_deformation", 0.0, 0.5, False, True, "MODEL.md s.2: relative deformation D2s/l2"),
-    ("LeverCoupling", "hinge_deformation", 0.0, 0.5, False, True, "MODEL.md s.2: relative deformation D2h/lc2"),
-    ("LeverCoupling", "misalignment", 0.0, 75 * DEG, False, True, "MODEL.md s.2: geometric working range < 75 deg"),
-    # -- the engine shaft (MODEL.md section 4) --
+    # -- the coupling (docs/physics.md#kinematics, #elastic-element) --
+    ("LeverCoupling", "stiffness", 0.0, 1e9, True, False, "physics.md#linear-law-and-damping: c of a spring, > 0; cap: FMU docs"),
+    ("LeverCoupling", "damping", 0.0, 1e7, False, False, "physics.md#linear-law-and-damping: b*thetadot^2 is dissipated, b >= 0"),
+    ("LeverCoupling", "support_deformation", 0.0, 0.5, False, True, "physics.md#the-driven-halfs-displacement: relative deformation D2s/l2"),
+    ("LeverCoupling", "hinge_deformation", 0.0, 0.5, False, True, "physics.md#the-driven-halfs-displacement: relative deformation D2h/lc2"),
+    ("LeverCoupling", "misalignment", 0.0, 75 * DEG, False, True, "physics.md#misalignment-range-and-time-varying-input: geometric working range < 75 deg"),
+    # -- the engine shaft (docs/physics.md#engine) --
     ("EngineShaft", "inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("EngineShaft", "stall_torque", -1e6, 1e6, False, False, "FMU docs"),
-    ("EngineShaft", "torque_slope", 0.0, 1e6, False, False, "MODEL.md s.4: Mg = M1 - K1*w falls with speed, K1 >= 0"),
+    ("EngineShaft", "torque_slope", 0.0, 1e6, False, False, "physics.md#the-line: Mg = M1 - K1*w falls with speed, K1 >= 0"),
     ("EngineShaft", "torque_lag", 0.0, 100.0, False, False, "a time constant, >= 0 (0: no lag); cap: FMU docs"),
     ("EngineShaft", "torque_start", -1e6, 1e6, False, False, "FMU docs (as stall_torque)"),
     ("EngineShaft", "phi_start", -1e9, 1e9, False, False, "FMU docs"),
     ("EngineShaft", "w_start", -1e5, 1e5, False, False, "FMU docs"),
     ("EngineShaft", "max_substep", 0.0, 1.0, True, False, "FMU docs: an integration step, > 0"),
-    # -- the load shaft (MODEL.md section 5) --
+    # -- the load shaft (docs/physics.md#loads) --
     ("LoadShaft", "inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("LoadShaft", "mean_torque", -1e6, 1e6, False, False, "FMU docs"),
-    ("LoadShaft", "random_amplitude", 0.0, 1e6, False, False, "MODEL.md s.5 / decisions.md: |Mc - Mm| <= dM, dM >= 0"),
+    ("LoadShaft", "random_amplitude", 0.0, 1e6, False, False, "physics.md#constant-and-random: |Mc - Mm| <= dM, dM >= 0"),
     ("LoadShaft", "band_low", 0.0, 1e5, True, False, "FMU docs: a frequency of the random part, > 0"),
     ("LoadShaft", "band_high", 0.0, 1e5, True, False, "FMU docs: a frequency of the random part, > 0"),
     ("LoadShaft", "phi_start", -1e9, 1e9, False, False, "FMU docs"),
@@ -58,14 +58,14 @@ RANGES = [
     ("LoadShaft", "friction_torque", 0.0, 1e6, False, False, "issue 17: a Coulomb friction resists, Fc >= 0"),
     ("LoadShaft", "breakaway_torque", 0.0, 1e6, False, False, "issue 17: static friction Fs >= 0 (and >= Fc)"),
     ("LoadShaft", "viscous_damping", 0.0, 1e6, False, False, "issue 17: viscous friction dissipates, b_v >= 0"),
-    ("LoadShaft", "order_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
+    ("LoadShaft", "order_share", 0.0, 1.0, False, False, "physics.md#the-oscillograms-spectrum: a share of the bound dM, in [0, 1]"),
     ("LoadShaft", "order_phase", -1e3, 1e3, False, False, "FMU docs: a phase [rad]"),
-    ("LoadShaft", "narrowband_share", 0.0, 1.0, False, False, "MODEL.md s.5: a share of the bound dM, in [0, 1]"),
-    ("LoadShaft", "narrowband_low", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
-    ("LoadShaft", "narrowband_high", 0.0, 1e5, True, False, "MODEL.md s.5: a frequency of the 415-425 band, > 0"),
-    # -- the freewheel rectifier (MODEL.md section 8; the paper's eqs. (1)-(18)) --
-    ("FreewheelRectifier", "input_speed", 0.0, 1e4, True, False, "MODEL.md s.8: rocker frequency, > 0"),
-    ("FreewheelRectifier", "rocker_amplitude", 0.0, 1.5, True, False, "MODEL.md s.8: phi0 > 0"),
+    ("LoadShaft", "narrowband_share", 0.0, 1.0, False, False, "physics.md#the-oscillograms-spectrum: a share of the bound dM, in [0, 1]"),
+    ("LoadShaft", "narrowband_low", 0.0, 1e5, True, False, "physics.md#the-oscillograms-spectrum: a frequency of the 415-425 band, > 0"),
+    ("LoadShaft", "narrowband_high", 0.0, 1e5, True, False, "physics.md#the-oscillograms-spectrum: a frequency of the 415-425 band, > 0"),
+    # -- the freewheel rectifier (docs/physics.md#freewheel-rectifier; the paper's eqs. (1)-(18)) --
+    ("FreewheelRectifier", "input_speed", 0.0, 1e4, True, False, "physics.md#freewheel-rectifier: rocker frequency, > 0"),
+    ("FreewheelRectifier", "rocker_amplitude", 0.0, 1.5, True, False, "physics.md#freewheel-rectifier: phi0 > 0"),
     ("FreewheelRectifier", "half_coupling_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("FreewheelRectifier", "driven_parts_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
     ("FreewheelRectifier", "torsion_end_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
@@ -96,9 +96,9 @@ RANGES = [
 INTEGER_RANGES = [
     ("LoadShaft", "seed", 0, 2 ** 31 - 1, "FMU docs: a seed, >= 0"),
     ("LoadShaft", "tones", 1, 256, "FMU docs: at least one sinusoid"),
-    ("LoadShaft", "order", 1, 64, "MODEL.md s.5: the shaft rotation frequency and its orders, k >= 1"),
+    ("LoadShaft", "order", 1, 64, "physics.md#the-oscillograms-spectrum: the shaft rotation frequency and its orders, k >= 1"),
     ("LoadShaft", "narrowband_tones", 1, 256, "FMU docs: at least one sinusoid in the band"),
-    ("FreewheelRectifier", "friction_pairs", 1, 1000, "MODEL.md s.8: n friction pairs, >= 1"),
+    ("FreewheelRectifier", "friction_pairs", 1, 1000, "physics.md#freewheel-rectifier: n friction pairs, >= 1"),
     ("FreewheelRectifier", "max_events", 1, 10 ** 9, "FMU docs: at least one event per step"),
 ]
 

@@ -139,7 +139,7 @@ def test_the_reference_switches_stick_and_slip_at_the_physics_events():
 
 
 # --------------------------------------------------------------------------------------
-# The spectrum of MODEL.md section 5
+# The spectrum of docs/physics.md#the-oscillograms-spectrum
 # --------------------------------------------------------------------------------------
 
 

@@ -105,7 +105,7 @@ def write_report(path: Path, summary: dict):
         lines += ["", "## Spectrum (spectrum.png)", "",
                   f"Amplitudes after the transient at the driven shaft's rotation frequency (mean w2 = "
                   f"{spectrum['rotation_frequency_rad_s']:.4g} rad/s) and in the oscillograms' band 415-425 rad/s "
-                  "(MODEL.md section 5):", "",
+                  "(docs/physics.md#the-oscillograms-spectrum):", "",
                   "| signal | at the rotation frequency | in 415-425 rad/s |", "|---|---|---|"]
         for name, entry in spectrum.items():
             if isinstance(entry, dict):
@@ -260,7 +260,7 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
 def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     """spectrum.png: amplitude spectra of the driven-shaft torque and the load torque after
     the transient, the driven shaft's rotation frequency and the oscillograms' 415-425 rad/s
-    band marked (MODEL.md section 5)."""
+    band marked (docs/physics.md#the-oscillograms-spectrum)."""
     names = metrics.signals(result.scene)
     load_torque = f"{kinds.roles(result.scene)[2]}.load_torque"
     transient = result.scene.experiment.transient

@@ -106,7 +106,7 @@ def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, referen
     return out
 
 
-#: the band of the oscillograms' high-frequency component (MODEL.md section 5) [rad/s]
+#: the band of the oscillograms' high-frequency component (docs/physics.md#loads) [rad/s]
 OSCILLOGRAM_BAND = (415.0, 425.0)
 
 

@@ -1,4 +1,4 @@
-"""The freewheel rectifier scene (MODEL.md section 8): its monolithic reference, the
+"""The freewheel rectifier scene (docs/physics.md#freewheel-rectifier): its monolithic reference, the
 analysis of a run (engagement and free-wheeling phases, gaps closing and opening, energy
 balance, the kinematics set beside the source's description).  Its report is written
 by harness.formats.rectifier_report.

@@ -10,7 +10,7 @@ What a gauge measures decides how the driven torque enters the model (``READINGS
 * ``transmitted`` (default): strain gauges glued on a shaft measure the torque the shaft
   transmits at the gauge.  The gauges sit on the drive and driven shafts on either side of
   the coupling (monograph section 4.1, Fig. 4.2), so they read the coupling's own torques,
-  ``T`` on the drive side and ``U12*T`` on the driven side (MODEL.md section 3; the coupling
+  ``T`` on the drive side and ``U12*T`` on the driven side (docs/physics.md#linear-law-and-damping; the coupling
   is massless).  The driven table then fixes ``T = M2 / U12(phi2)`` at every instant,
   whatever the dynamics: stiffness, damping, inertias, engine and speed do not enter.
   Assumed: no inertia between a gauge and the coupling (the monograph gives no gauge
@@ -165,7 +165,7 @@ def operating_speed(load: float) -> float:
 
 @dataclass
 class Conditions:
-    """What the model assumes about one grade's experiment (MODEL.md sections 6-7)."""
+    """What the model assumes about one grade's experiment (docs/physics.md#measurements)."""
     stiffness: float                 # c [N*m/rad], from the file or given
     stiffness_source: str
     mean_load: float                 # Mm [N*m]: mean measured driven torque

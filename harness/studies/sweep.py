@@ -1,10 +1,10 @@
 """``lever sweep``: the monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12) rerun
 with the project's model, with what the monograph reports overlaid, and a trend report
-that says, with the numbers, which of its qualitative findings (MODEL.md section 6) the
+that says, with the numbers, which of its qualitative findings (docs/physics.md#what-the-monograph-reports) the
 model reproduces.
 
 A sweep is a set of *axes*; each varies one quantity of a base scene (default
-``kavz685``) over the range MODEL.md section 6 gives, at the conditions of the figure it
+``kavz685``) over the range the monograph studies (docs/physics.md#kavz-685), at the conditions of the figure it
 mirrors, and records means and amplitudes ``A = (max - min)/2`` of the shafts' speeds,
 accelerations and torques after the start-up transient.  Cases run on local processes
 (``concurrent.futures``) or on a Dask cluster (``address``); each finished or failed case
@@ -255,7 +255,7 @@ def _run_dask(pending, log, address, bar):
 
 
 # ----------------------------------------------------------------------------------------
-# Trends (MODEL.md section 6) - pure functions of the results
+# Trends (docs/physics.md#what-the-monograph-reports) - pure functions of the results
 
 
 def _series(axis: str, results: list[dict], quantity: str):
@@ -301,7 +301,7 @@ def _verdict(holds: list[str], of: list[str]) -> str:
 
 
 def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
-    """Each qualitative finding of MODEL.md section 6 (and Fig. 3.16's inertia curve),
+    """Each qualitative finding of the monograph (docs/physics.md#what-the-monograph-reports),
     judged on the sweep's numbers: "yes", "partly" (``holds_for`` says for which
     quantities) or "no", with the numbers it rests on."""
     names = {a.name for a in axes}
@@ -360,8 +360,8 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
         # an angle-locked load part moves the model's by some 0.002 % (issue 17's spectrum load)
         holds = (["mean w"] if _monotone(w, -1) and _moves(w) else []) + \
             (["mean torque"] if _monotone(t, +1) and _moves(t) else [])
-        add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16; not in "
-            "MODEL.md's list)", holds, ["mean w", "mean torque"],
+        add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16)",
+            holds, ["mean w", "mean torque"],
             f"mean w [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
             "the steady means are set by the engine characteristic and the mean load alone; I2 enters only the "
             f"fluctuations (the means move by {100 * _span(w):.2g} % and {100 * _span(t):.2g} % over the axis; "
@@ -381,7 +381,7 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
     lines = [f"# Parameter sweep of the {report['scene']} scene against the monograph's figures", "",
              "Amplitudes A = (max - min)/2 and means after the start-up transient; index 1 the drive shaft, 2 the "
              "driven shaft; dA = A2 - A1 (the monograph's difference).  Each axis varies one quantity at the "
-             "conditions of the figure it mirrors.", "", "## Trends (MODEL.md section 6)", "",
+             "conditions of the figure it mirrors.", "", "## Trends (docs/physics.md#what-the-monograph-reports)", "",
              "| trend | reproduced | numbers |", "|---|---|---|"]
     for t in report["trends"]:
         verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**"}[t["reproduced"]]

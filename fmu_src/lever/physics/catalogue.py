@@ -1,4 +1,4 @@
-"""The parameters of each component, with the KAVZ-685 values (MODEL.md section 6) as
+"""The parameters of each component, with the KAVZ-685 values (docs/physics.md#kavz-685) as
 defaults, and the constructors that turn a parameter dict into physics objects.
 
 The FMU adapters declare their FMI variables from these lists and build their models with
@@ -101,7 +101,7 @@ LOAD = (
               "the shaft from rest (Fs >= Fc)", 0.0, 1e6),
     Parameter("viscous_damping", 0.0, "N.m.s/rad", "viscous friction b_v on the driven shaft: torque -b_v*w",
               0.0, 1e6),
-    # The spectrum the monograph's oscillograms show (MODEL.md section 5), carried by the random
+    # The spectrum the monograph's oscillograms show (docs/physics.md#the-oscillograms-spectrum), carried by the random
     # part when a share is above 0 (Real parameters only: a String the fmpy.ssp peer cannot set).
     Parameter("order", 1, "", "shaft order k of the angle-locked component (k per revolution of the driven "
               "shaft)", 1, 64, kind="integer"),
@@ -198,7 +198,7 @@ def start_state(values: dict, declared) -> tuple[float, float]:
     return p["phi_start"], p["w_start"]
 
 
-# -- the freewheel rectifier (MODEL.md section 8; the paper's Table 1) ------------------------------
+# -- the freewheel rectifier (docs/physics.md#freewheel-rectifier; the paper's Table 1) -------------
 # Table 1 gives the gaps in degrees; they are stored in rad (scenes may write "1.74 deg").
 FREEWHEEL = (
     Parameter("input_speed", 42.41, "rad/s", "angular frequency omega of the rocker's oscillation (speed of the "

@@ -1,4 +1,4 @@
-"""The coupling as a compliant two-flange element (MODEL.md section 3).
+"""The coupling as a compliant two-flange element (docs/physics.md#linear-law-and-damping).
 
     theta    = phi1 - Phi(phi2)                 elastic deflection
     thetadot = w1 - U12(phi2) * w2

@@ -1,5 +1,5 @@
 """Elastic laws of the coupling's rubber elements: ``T_el(theta)`` and its potential
-``V(theta)`` (MODEL.md sections 3 and 7).
+``V(theta)`` (docs/physics.md#elastic-element).
 
 A law is linear (``c * theta``) or tabulated: a monotone (non-decreasing), odd-symmetric
 characteristic given by points for ``theta >= 0``, interpolated by a monotone cubic

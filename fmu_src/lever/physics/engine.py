@@ -1,4 +1,4 @@
-"""Engine static characteristic ``Mg(w1)`` on the drive shaft (MODEL.md section 4):
+"""Engine static characteristic ``Mg(w1)`` on the drive shaft (docs/physics.md#engine):
 ``I1 * a1 = Mg(w1) + tau1``.
 """
 from __future__ import annotations
@@ -126,7 +126,7 @@ class TabulatedCharacteristic:
 
 #: Full static characteristics a scene may name instead of writing the points out.
 #: ``kavz685``: the shape of the monograph's Fig. 3.9 (start-up torque, nominal point,
-#: idle) through the figures the monograph states (MODEL.md sections 4 and 6), speed in
+#: idle) through the figures the monograph states (docs/physics.md#the-table), speed in
 #: rad/s : torque in N.m -
 #:   0 : 623     start-up torque M_r, taken as the M1 of the monograph's line (3.23)
 #:   23.4 : 550  the largest load the text allows the operating mode (section 3.3)

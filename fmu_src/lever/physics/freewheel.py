@@ -1,6 +1,6 @@
 """The axial freewheel (overrunning clutch) used as a vibration rectifier, with its torsion
-shaft, gear mesh and output flywheel (MODEL.md section 8; Khudorozhkov & Yurkevich,
-``freewheel_rectifier_paper_ru.txt``, equations (1)-(18) and Table 1).
+shaft, gear mesh and output flywheel (docs/physics.md#freewheel-rectifier; the paper of
+Khudorozhkov & Yurkevich, equations (1)-(18) and Table 1).
 
 The chain, from the drive to the output (the paper's Fig. 2):
 

@@ -1,5 +1,5 @@
 """Kinematics of the lever-articulated coupling: the transfer function ``U12`` and the
-position function ``Phi`` (MODEL.md section 2).
+position function ``Phi`` (docs/physics.md#kinematics).
 
 ``Phi(phi2)`` is the drive-side angle that a rigid coupling would hold for driven angle
 ``phi2``; ``U12 = dPhi/dphi2``.  Both are represented by one truncated Fourier series,
@@ -11,9 +11,9 @@ so ``U12`` has unit mean and ``Phi(phi + 2 pi) = Phi(phi) + 2 pi`` hold by const
 arithmetic.  Scalars only (the FMU runs on the standard library): the harness maps it
 over arrays.
 
-The printed driven-half formula (3.14) and transfer function (3.16) are garbled (see
-MODEL.md); they are not used.  The kinematic mode builds ``U12`` from the Cardan-like
-half-coupling function ``g`` instead, as the brief prescribes.
+The printed driven-half formula (3.14) and transfer function (3.16) are garbled
+(docs/physics.md#defects-of-the-sources); they are not used.  The kinematic mode builds
+``U12`` from the Cardan-like half-coupling function ``g`` instead.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ GEOMETRIC_LIMIT = math.radians(75.0)
 MODES = ("synchronous", "kinematic", "scaled")
 
 # Amplitudes dU12 = (max - min)/2 that the monograph reports from its own (defective)
-# formula, Fig. 3.7 / MODEL.md section 2: (alpha [deg], D2s/l2, D2h/lc2, dU12).  Where
+# formula, Fig. 3.7 / docs/physics.md#the-three-modes: (alpha [deg], D2s/l2, D2h/lc2, dU12).  Where
 # the text does not say the other deformation, it is taken as 0.03 (the figure's
 # alpha curves are drawn at 0.03): a stated assumption.
 MONOGRAPH_AMPLITUDES = (

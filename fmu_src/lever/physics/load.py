@@ -1,4 +1,4 @@
-"""Technological load on the driven shaft (MODEL.md section 5): ``I2 * a2 = tau2 - Mc``.
+"""Technological load on the driven shaft (docs/physics.md#loads): ``I2 * a2 = tau2 - Mc``.
 
 Each load gives its resistance ``Mc`` (positive when it opposes positive rotation) and,
 as a shaft's external torque model, ``torque = -Mc``.  Loads that depend on time only
@@ -135,9 +135,10 @@ class RandomLoad(_TimeLoad):
 
 class Spectrum(NamedTuple):
     """What the random part (``load_kind = "random"``) makes of its bound ``dM`` when it
-    carries the spectrum of the oscillograms (a share above 0) (MODEL.md
-    section 5: the oscillograms show a component at the shaft's rotation frequency and one
-    at 415-425 rad/s): ``order_share * dM * sin(order * phi + order_phase)``, locked to the
+    carries the spectrum of the oscillograms (a share above 0)
+    (docs/physics.md#the-oscillograms-spectrum: the oscillograms show a component at the
+    shaft's rotation frequency and one at 415-425 rad/s):
+    ``order_share * dM * sin(order * phi + order_phase)``, locked to the
     driven shaft's angle, ``narrowband_tones`` seeded tones in
     ``[narrowband_low, narrowband_high]`` rad/s whose weights sum to
     ``narrowband_share * dM``, and the broad multisine with the rest of ``dM``.  Both shares

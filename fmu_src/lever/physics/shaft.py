@@ -1,5 +1,5 @@
 """A shaft: an inertia driven by an external torque model and the coupling torque,
-``I * a = M_ext(t, phi, w) + tau`` (MODEL.md sections 4-5).
+``I * a = M_ext(t, phi, w) + tau`` (docs/physics.md#how-a-shaft-steps).
 
 The coupling torque over a communication step is ``tau + tau_rate * s`` (``s`` the time
 into the step): held constant (zero-order hold, ``tau_rate = 0``) or ramped (first-order

@@ -1,0 +1,80 @@
+"""The repository stands on its own: no tracked file points at material a user who clones
+the project does not have (the developers' folder beside the checkout, the brief and
+source texts in it, an absolute path of a developer's machine), and every pointer into
+docs/physics.md names a section that exists."""
+from __future__ import annotations
+
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PHYSICS = ROOT / "docs" / "physics.md"
+
+# Written in pieces so that this file does not match itself.
+SHARED = "sha" + "red"
+FORBIDDEN = re.compile("|".join([
+    r"\.\./" + SHARED + r"\b",                       # the developers' folder beside the checkout
+    SHARED + r"/(spec|seeds|data|hooks)\b",           # ... and what is in it
+    r"\bMODEL" + r"\.md\b",                           # the physics brief kept there
+    r"\bseeds/",                                      # the source texts kept there, by folder
+    r"monograph_lever_" + r"couplings|_paper_" + r"(ru|uk)\b|nonlinear_elastic_coupling_" + r"paper",
+    r"(?<![\w.])/(work|root|home)/",                  # absolute paths of a machine
+]))
+
+
+def tracked_files() -> list[str]:
+    try:
+        done = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout: the tracked files are unknown")
+    return [name for name in done.stdout.decode().split("\0") if name]
+
+
+def mentions(text: str) -> list[str]:
+    return [f"{number}: {line.strip()[:120]}" for number, line in enumerate(text.splitlines(), 1)
+            if FORBIDDEN.search(line)]
+
+
+def test_the_pattern_sees_each_kind_of_pointer():
+    for line in ["see ../" + SHARED + "/spec/x", "MODEL" + ".md section 2", "se" + "eds/x.txt",
+                 "monograph_lever_" + "couplings", "the freewheel_pa" + "per_ru.txt", "/wo" + "rk/main/x",
+                 "/ro" + "ot/.pyenv", "/ho" + "me/u/x"]:
+        assert mentions(line), line
+    for line in ["three load seeds", "shared library", "file:///tmp/x", "docs/physics.md#kinematics"]:
+        assert not mentions(line), line
+
+
+def test_no_tracked_file_points_outside_the_repository():
+    """Nothing refers to the developers' own folder or machine: a clone has neither."""
+    offenders = []
+    for name in tracked_files():
+        path = ROOT / name
+        if not path.is_file():
+            continue
+        text = path.read_bytes().decode("utf-8", errors="replace")
+        offenders += [f"{name}:{hit}" for hit in mentions(text)]
+    assert offenders == []
+
+
+def anchors(markdown: str) -> set[str]:
+    """GitHub's anchors of a page's headings: lower case, punctuation dropped, spaces as '-'."""
+    out = set()
+    for heading in re.findall(r"^#{1,6}\s+(.+?)\s*$", markdown, re.M):
+        out.add(re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-"))
+    return out
+
+
+def test_every_pointer_into_the_physics_page_names_a_section():
+    known = anchors(PHYSICS.read_text(encoding="utf-8"))
+    pointer = re.compile(r"physics\.md#([\w\-]+)")
+    broken = []
+    for name in tracked_files():
+        path = ROOT / name
+        if not path.is_file() or path.suffix not in {".py", ".md", ".toml", ".c", ".txt", ""}:
+            continue
+        for number, line in enumerate(path.read_bytes().decode("utf-8", errors="replace").splitlines(), 1):
+            broken += [f"{name}:{number}: #{a}" for a in pointer.findall(line) if a not in known]
+    assert broken == []
