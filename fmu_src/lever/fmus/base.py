@@ -211,6 +211,7 @@ class LeverSlave(Fmi2Slave):
         self.description = self.DESCRIPTION
         self._phase = "instantiated"   # -> initialization -> stepping (-> terminated)
         self._time = 0.0
+        self._start_time = 0.0         # fmi2SetupExperiment's: the scale of the host's time rounding
         self._dirty = _ALL             # what must be recomputed before outputs are read
         self._build_error = None
         self._declared = {}
@@ -339,7 +340,7 @@ class LeverSlave(Fmi2Slave):
         if not math.isfinite(start_time):
             self._error(f"fmi2SetupExperiment: start time {start_time} is not finite")
             return
-        self._time = float(start_time)
+        self._time = self._start_time = float(start_time)
 
     @guarded(default=False)
     def do_step(self, current_time, step_size):
@@ -350,10 +351,11 @@ class LeverSlave(Fmi2Slave):
         if not (math.isfinite(step_size) and step_size > 0.0):
             self._error(f"fmi2DoStep: communication step size {step_size} must be finite and > 0")
             return False
-        tolerance = 1e-9 * max(1.0, abs(self._time))
-        if not (math.isfinite(current_time) and abs(current_time - self._time) <= tolerance):
+        if not (math.isfinite(current_time) and abs(current_time - self._time) <= self._rounding()):
             self._error(f"fmi2DoStep: current communication point {current_time!r} does not match the FMU's "
-                        f"time {self._time!r} (steps must be contiguous; restore a saved state to go back)")
+                        f"time {self._time!r} (off by {current_time - self._time:.3g} s, more than the "
+                        f"{self._rounding():.3g} s that rounding of the host's time explains: steps must be "
+                        "contiguous; restore a saved state to go back)")
             return False
         failure = self._advance(current_time, step_size)
         if failure:
@@ -362,6 +364,15 @@ class LeverSlave(Fmi2Slave):
         self._time = current_time + step_size
         self._dirty = _ALL
         return True
+
+    #: ulps of the time's magnitude a host's communication point may differ from the FMU's:
+    #: a host that computes its points as t0 + k*h, from an integer-nanosecond clock, or by
+    #: t += h differs by a few roundings (at most 5 ulps of max(|t|, |t0|)), never by a step
+    ROUNDING_ULPS = 8
+
+    def _rounding(self) -> float:
+        """How far a communication point may lie from the FMU's time (rounding only)."""
+        return self.ROUNDING_ULPS * math.ulp(max(abs(self._time), abs(self._start_time)))
 
     @guarded()
     def terminate(self):
