@@ -693,11 +693,13 @@ class LeverSlave(Fmi2Slave):
             if getattr(spec, "derivative_of", ""):
                 typed.set("derivative", str(index_of[spec.derivative_of]))
             if isinstance(spec, Parameter):
+                # FMI's min and max are inclusive: an open bound is declared as the nearest
+                # double inside it, so that the declaration says exactly what is accepted
                 as_text = repr if typed.tag == "Real" else (lambda x: str(int(x)))
                 if math.isfinite(spec.low):
-                    typed.set("min", as_text(spec.low))
+                    typed.set("min", as_text(math.nextafter(spec.low, math.inf) if spec.low_open else spec.low))
                 if math.isfinite(spec.high):
-                    typed.set("max", as_text(spec.high))
+                    typed.set("max", as_text(math.nextafter(spec.high, -math.inf) if spec.high_open else spec.high))
 
         structure = root.find("ModelStructure")
         for child in list(structure):
