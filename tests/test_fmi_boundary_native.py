@@ -316,3 +316,63 @@ def test_fmpy_raises_on_the_native_refusals(native):
     with pytest.raises(FMICallException) as info:
         e.fmu.enterInitializationMode()
     assert info.value.status == ERROR
+
+
+# -- a state whose parts disagree -------------------------------------------------------------
+
+def _reframed(data: bytes, state: int | None = None, time: float | None = None) -> bytes:
+    """``data`` with the native entry's header saying another state or time."""
+    _, old_state, old_time = struct.unpack("<8sId", data[:8] + data[12:24])
+    return data[:12] + struct.pack("<Id", old_state if state is None else state,
+                                   old_time if time is None else time) + data[24:]
+
+
+def _refused_whole(e, data: bytes) -> str:
+    """Restore ``data`` into ``e``: it must be refused (at DeSerialize or SetFMUstate) and
+    leave ``e`` as it was and stepping on; returns the refusal's message."""
+    t, w = e.time(), e.get("w")
+    status, state = e.deserialize(data)
+    if status == OK:
+        assert e.call("fmi2SetFMUstate", state) == ERROR, "a state whose parts disagree was restored"
+        e.call("fmi2FreeFMUstate", byref(state))
+    else:
+        assert status == ERROR
+    said = e.messages()[-1]
+    assert e.time() == t and e.get("w") == w
+    assert e.step(t) == OK and e.time() == t + H
+    return said
+
+
+@pytest.mark.parametrize("case", ["header time 5.0 over model time", "header 'terminated' over model 'stepping'",
+                                  "header 'instantiated' over model 'stepping'",
+                                  "header 'step complete' over model 'terminated'"])
+def test_a_state_whose_header_and_model_part_disagree_is_refused_whole(native, case):
+    e = native().start()
+    for k in range(10):
+        assert e.step(k * H) == OK
+    source = native().start()
+    assert source.step(0.0) == OK
+    if case.endswith("'terminated'"):
+        assert source.call("fmi2Terminate") == OK
+    data = source.serialize(source.state())
+    edited = {"header time 5.0 over model time": lambda: _reframed(data, time=5.0),
+              "header 'terminated' over model 'stepping'": lambda: _reframed(data, state=16),
+              "header 'instantiated' over model 'stepping'": lambda: _reframed(data, state=1),
+              "header 'step complete' over model 'terminated'": lambda: _reframed(data, state=4)}[case]()
+    said = _refused_whole(e, edited)
+    assert "disagree" in said, said
+    # the unedited state is restored
+    status, state = e.deserialize(data)
+    assert status == OK and e.call("fmi2SetFMUstate", state) == OK
+
+
+def test_every_single_bit_flip_of_the_header_time_is_refused(native):
+    e = native().start()
+    for k in range(3):
+        assert e.step(k * H) == OK
+    data = e.serialize(e.state())
+    for bit in range(64):
+        flipped = bytearray(data)
+        flipped[16 + bit // 8] ^= 1 << (bit % 8)
+        _refused_whole(e, bytes(flipped))
+        e.call("fmi2SetFMUstate", e.deserialize(data)[1])    # back to where the flips start from

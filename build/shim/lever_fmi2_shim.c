@@ -895,6 +895,8 @@ typedef struct {
 #define SERIAL_MAGIC "LVRSHIM"  /* 8 bytes with its NUL */
 #define SERIAL_VERSION 1u
 #define SERIAL_HEADER 32       /* magic[8] version:u32 state:u32 time:f64 length:u64 */
+/* The line in front of the model's bytes on deserialization: state bit, time (C99 %a). */
+#define SERIAL_FRAME_LINE "lever-shim-frame"
 
 static void free_categories(Shim *s)
 {
@@ -1507,14 +1509,25 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
                              "%zu follow: the state is %s", (unsigned long long)length, size - SERIAL_HEADER,
                           length > size - SERIAL_HEADER ? "truncated" : "padded (bytes appended)");
     }
+    /* The header's state and time go to the model with its bytes, on a line of their own
+     * in front: fmi2SetFMUstate refuses the state unless the model's part agrees with them
+     * (a state whose parts disagree would leave the instance contradicting itself). */
+    char frame[96];
+    int framed = snprintf(frame, sizeof frame, "%s %u %a\n", SERIAL_FRAME_LINE, st, time);
     ShimFMUstate *w = calloc(1, sizeof *w);
-    if (!w) {
+    fmi2Byte *inner_bytes = malloc((size_t)framed + (size_t)length);
+    if (!w || !inner_bytes || framed <= 0 || (size_t)framed >= sizeof frame) {
+        free(w);
+        free(inner_bytes);
         return shim_error(s, "fmi2DeSerializeFMUstate: out of memory");
     }
+    memcpy(inner_bytes, frame, (size_t)framed);
+    memcpy(inner_bytes + framed, bytes + SERIAL_HEADER, (size_t)length);
     fmi2FMUstate inner = NULL;
     fmi2Status status = shim_end(s, "fmi2DeSerializeFMUstate",
-                                 g_api->fmi2DeSerializeFMUstate(s->inner, bytes + SERIAL_HEADER,
-                                                                (size_t)length, &inner));
+                                 g_api->fmi2DeSerializeFMUstate(s->inner, inner_bytes,
+                                                                (size_t)framed + (size_t)length, &inner));
+    free(inner_bytes);
     if (!succeeded(status)) {
         free(w);
         return status;

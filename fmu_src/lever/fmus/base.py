@@ -119,6 +119,12 @@ class _SerializedState:
 #: A serialized state: ``STATE_MAGIC``, a space, a JSON header (format, model, GUID,
 #: length of the payload), a newline, the payload (JSON of the state).
 STATE_MAGIC = b"lever-fmu-state"
+#: The native entry (build/shim) keeps the state machine's state and the time in its own
+#: header and passes them in front of the bytes as ``SHIM_FRAME <state bit> <time in C99
+#: hex>``: the state is refused unless they agree with its phase and time.
+SHIM_FRAME = b"lever-shim-frame"
+_SHIM_PHASES = {1: ("instantiated",), 2: ("initialization",), 4: ("stepping",), 8: ("stepping",),
+                16: ("terminated",)}
 STATE_FORMAT = 1
 _HEADER_LIMIT = 1024     # bytes the header line may take
 _NESTING_LIMIT = 4       # a state is {"variables": {...}, "internal": {"y": [...]}}
@@ -516,7 +522,26 @@ class LeverSlave(Fmi2Slave):
         return state
 
     def _parse_serialized(self, data: bytes) -> tuple[dict | None, str | None]:
-        """(state, None) from serialized bytes, or (None, why they are no state of this FMU)."""
+        """(state, None) from serialized bytes, or (None, why they are no state of this FMU);
+        behind the native entry, the state must agree with the entry's header."""
+        if not data.startswith(SHIM_FRAME + b" "):
+            return self._parse_model_state(data)
+        end = data.find(b"\n", 0, 128)
+        try:
+            bit, time = data[len(SHIM_FRAME) + 1:end].decode("ascii").split(" ")
+            bit, time = int(bit), float.fromhex(time)
+        except (UnicodeDecodeError, ValueError):
+            return None, "the native entry's frame does not decode"
+        state, problem = self._parse_model_state(data[end + 1:])
+        if problem is None:
+            problem = self._state_problem(state)
+        if problem is None and (state["phase"] not in _SHIM_PHASES.get(bit, ()) or state["time"] != time):
+            problem = (f"its parts disagree: the native entry's header says state {bit} ("
+                       f"{'/'.join(_SHIM_PHASES.get(bit, ('unknown',)))}) at t = {time!r} s, the model's part "
+                       f"phase {state['phase']!r} at t = {state['time']!r} s (damaged or edited bytes)")
+        return (None, problem) if problem else (state, None)
+
+    def _parse_model_state(self, data: bytes) -> tuple[dict | None, str | None]:
         if not data.startswith(STATE_MAGIC + b" "):
             return None, f"the bytes do not start with {STATE_MAGIC.decode()!r} (not a serialized state of a lever FMU)"
         end = data.find(b"\n", 0, _HEADER_LIMIT)
