@@ -95,8 +95,12 @@ class Native:
     def messages(self, min_status: int = ERROR) -> list[str]:
         return [m for n, s, m in LOG if n == self.name and s >= min_status]
 
+    freed = False
+
     def free(self):
-        self.fmu.freeInstance()
+        if not self.freed:
+            self.fmu.freeInstance()
+            self.freed = True
 
 
 @pytest.fixture
@@ -376,3 +380,45 @@ def test_every_single_bit_flip_of_the_header_time_is_refused(native):
         flipped[16 + bit // 8] ^= 1 << (bit % 8)
         _refused_whole(e, bytes(flipped))
         e.call("fmi2SetFMUstate", e.deserialize(data)[1])    # back to where the flips start from
+
+
+# -- instantiate/free cycles ------------------------------------------------------------------
+
+def _rss() -> int:
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmRSS"))
+
+
+def test_instantiate_free_cycles_do_not_accumulate_memory(unzipped):
+    """pythonfmu 0.7 leaks about 1.4 KB of Python objects at every instantiation (1,403 B a
+    cycle measured over 20,000 cycles of EngineShaft); the native entry keeps freed inner
+    instances (reset) for the next fmi2Instantiate instead, so the cycles stay flat."""
+    md, directory = unzipped["EngineShaft"]
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier="EngineShaft", instanceName="cycles")
+    for _ in range(100):
+        fmu.instantiate(loggingOn=False)
+        fmu.freeInstance()
+    cycles, before = 3000, _rss()
+    for _ in range(cycles):
+        fmu.instantiate(loggingOn=False)
+        fmu.freeInstance()
+    per_cycle = (_rss() - before) / cycles
+    assert per_cycle < 400, f"{per_cycle:.0f} bytes stay allocated per instantiate/free cycle"
+
+
+def test_an_instance_taken_from_the_kept_ones_is_a_fresh_one(native):
+    """A freed instance's inner instance is reset and reused: nothing of its past shows."""
+    fresh = native().start()
+    assert fresh.step(0.0) == OK
+    w_fresh = fresh.get("w")
+    used = native()
+    vr, value = (ctypes.c_uint * 1)(used.vr["inertia"]), (c_double * 1)(0.5)
+    assert used.call("fmi2SetReal", vr, 1, value) == OK
+    used.start()
+    for k in range(3):
+        assert used.step(k * H) == OK
+    used.free()
+    again = native()                         # takes the kept inner instance
+    assert again.get("inertia") == 0.128 and again.call("fmi2DoStep", 0.0, H, 1) == ERROR   # instantiated
+    again.start()
+    assert again.step(0.0) == OK and again.get("w") == w_fresh and again.time() == H
