@@ -13,6 +13,11 @@ import fmpy
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
+from harness.engine.component import add_log_listener, log_callbacks
+
+_said: list[str] = []
+add_log_listener(lambda name, status, category, text: _said.append(text) if status >= 2 else None)
+
 FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource", "FreewheelRectifier")
 STEPS = (1e-300, 1e-100, 1e-12, 1e-3, 1e4, 1e9, 1e30, 1e300)
 #: where the start matters too (the substeps' resolution of time)
@@ -46,7 +51,7 @@ def main(fmu_dir, first):
         vrs = {v.name: v.valueReference for v in md.modelVariables}
         for start in STARTS:
             slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped[fmu], modelIdentifier=fmu, instanceName="watchdog")
-            slave.instantiate(loggingOn=False)
+            slave.instantiate(callbacks=log_callbacks(), loggingOn=False)
             try:
                 if name is not None:
                     slave.setReal([vrs[name]], [value])
@@ -57,6 +62,7 @@ def main(fmu_dir, first):
                 print(f"{index} {fmu} {name}={value!r}: refused at initialisation", flush=True)
                 slave.freeInstance()
                 continue
+            _said.clear()
             state = slave.getFMUstate()
             for h in STEPS:
                 slave.setFMUstate(state)
@@ -67,7 +73,9 @@ def main(fmu_dir, first):
                     status = 0
                 except FMICallException as error:
                     status = error.status
-                print(f"done {index} {time.perf_counter() - began:.3f} s status {status}", flush=True)
+                said = " | ".join(_said).replace("\n", " ")
+                _said.clear()
+                print(f"done {index} {time.perf_counter() - began:.3f} s status {status} {said}", flush=True)
             slave.freeFMUstate(state)
             slave.terminate()
             slave.freeInstance()

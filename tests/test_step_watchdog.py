@@ -21,7 +21,7 @@ BOUND = 60.0
 
 
 def test_every_step_of_every_fmu_returns_within_the_bound(fmu_dir):
-    hangs, slow, first, calls = [], [], 0, 0
+    hangs, slow, unnamed, first, calls = [], [], [], 0, 0
     while True:
         child = subprocess.Popen([sys.executable, str(CHILD), str(fmu_dir), str(first)], stdout=subprocess.PIPE,
                                  text=True, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
@@ -46,6 +46,9 @@ def test_every_step_of_every_fmu_returns_within_the_bound(fmu_dir):
                 calls += 1
             elif line.startswith("done "):
                 seconds = float(line.split()[2])
+                status, said = int(line.split()[5]), line.split(None, 6)[6:] or [""]
+                if status not in (0, 1) and ("internal error" in said[0] or not said[0].strip()):
+                    unnamed.append(f"{current}: status {status}, {said[0].strip()!r}")
                 if seconds > BOUND / 4:
                     slow.append(f"{current}: {seconds} s")
             elif line.startswith("all done"):
@@ -54,4 +57,5 @@ def test_every_step_of_every_fmu_returns_within_the_bound(fmu_dir):
             break
     assert not hangs, f"fmi2DoStep did not return within {BOUND} s: {hangs}"
     assert calls > 1000, calls
+    assert not unnamed, "steps refused without naming the cause:\n" + "\n".join(unnamed)
     print(f"{calls} steps; slowest over {BOUND / 4} s: {slow}")

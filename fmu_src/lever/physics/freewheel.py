@@ -351,7 +351,7 @@ class FreewheelRectifier:
     MAX_SUBSTEPS = 200_000
     #: RK4 integrations one step may take in all, event location included (a chattering
     #: contact with a large 'max_events' would otherwise keep the importer waiting)
-    MAX_INTEGRATIONS = 1_000_000
+    MAX_INTEGRATIONS = 400_000
 
     def advance(self, t: float, h: float, y, disc: int, fly: int, ext: float = 0.0, ext_rate: float = 0.0,
                 log=None) -> tuple[list, int, int, int]:
