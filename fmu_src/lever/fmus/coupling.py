@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
 from ..physics.parameters import Parameter, ParameterError
-from .base import _ALL, _LIVE, LeverSlave, MechanicalPort, Output, guarded
+from .base import _ALL, LeverSlave, MechanicalPort, Output, guarded
 
 _BIG = 1e12
 
@@ -53,12 +53,13 @@ class LeverCoupling(LeverSlave):
     @guarded()
     def set_real(self, vrs, values):
         # The declared range of the misalignment input is the synchronous mode's; what the
-        # built coupling takes (kinematic: alpha + tilt < 45 deg) is judged here, at the set,
-        # so that a value the outputs cannot be computed for is refused and never applied.
+        # built coupling takes (kinematic: alpha + tilt < 45 deg) is judged here, at the set
+        # while stepping (before, at fmi2ExitInitializationMode, with the parameters), so that
+        # a value the outputs cannot be computed for is refused and never applied.
         before = {vr: getattr(self, self._real_names[vr]) for vr in vrs if vr in self._real_names}
         alpha = self.misalignment
         LeverSlave.set_real.__wrapped__(self, vrs, values)
-        if self.misalignment == alpha or self._family is None or self._model_stale or self._phase not in _LIVE:
+        if self.misalignment == alpha or self._family is None or self._model_stale or self._phase != "stepping":
             return
         try:
             self._family.at(self.misalignment)
