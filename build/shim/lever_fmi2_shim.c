@@ -905,7 +905,7 @@ typedef struct {
 #define SERIAL_MAGIC "LVRSHIM"  /* 8 bytes with its NUL */
 #define SERIAL_VERSION 1u
 #define SERIAL_HEADER 32       /* magic[8] version:u32 state:u32 time:f64 length:u64 */
-/* The line in front of the model's bytes on deserialization: state bit, time (C99 %a). */
+/* The line in front of the model's bytes on deserialization: state bit, time's bits (hex). */
 #define SERIAL_FRAME_LINE "lever-shim-frame"
 
 static void free_categories(Shim *s)
@@ -1612,7 +1612,10 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
      * in front: fmi2SetFMUstate refuses the state unless the model's part agrees with them
      * (a state whose parts disagree would leave the instance contradicting itself). */
     char frame[96];
-    int framed = snprintf(frame, sizeof frame, "%s %u %a\n", SERIAL_FRAME_LINE, st, time);
+    uint64_t time_bits; /* the time's bits in hex: exact, and no locale's decimal comma */
+    memcpy(&time_bits, &time, sizeof time_bits);
+    int framed = snprintf(frame, sizeof frame, "%s %u %016llx\n", SERIAL_FRAME_LINE, st,
+                          (unsigned long long)time_bits);
     ShimFMUstate *w = calloc(1, sizeof *w);
     fmi2Byte *inner_bytes = malloc((size_t)framed + (size_t)length);
     if (!w || !inner_bytes || framed <= 0 || (size_t)framed >= sizeof frame) {

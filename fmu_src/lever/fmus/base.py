@@ -16,6 +16,7 @@ import json
 import math
 import operator
 import re
+import struct
 import traceback
 from pathlib import Path
 from typing import NamedTuple, Sequence
@@ -120,8 +121,8 @@ class _SerializedState:
 #: length of the payload), a newline, the payload (JSON of the state).
 STATE_MAGIC = b"lever-fmu-state"
 #: The native entry (build/shim) keeps the state machine's state and the time in its own
-#: header and passes them in front of the bytes as ``SHIM_FRAME <state bit> <time in C99
-#: hex>``: the state is refused unless they agree with its phase and time.
+#: header and passes them in front of the bytes as ``SHIM_FRAME <state bit> <the time's 64
+#: bits in hex>``: the state is refused unless they agree with its phase and time.
 SHIM_FRAME = b"lever-shim-frame"
 _SHIM_PHASES = {1: ("instantiated",), 2: ("initialization",), 4: ("stepping",), 8: ("stepping",),
                 16: ("terminated",)}
@@ -527,10 +528,12 @@ class LeverSlave(Fmi2Slave):
         if not data.startswith(SHIM_FRAME + b" "):
             return self._parse_model_state(data)
         end = data.find(b"\n", 0, 128)
+        if end < 0:
+            return None, "the native entry's frame is not terminated (truncated or malformed)"
         try:
-            bit, time = data[len(SHIM_FRAME) + 1:end].decode("ascii").split(" ")
-            bit, time = int(bit), float.fromhex(time)
-        except (UnicodeDecodeError, ValueError):
+            bit, bits = data[len(SHIM_FRAME) + 1:end].decode("ascii").split(" ")
+            bit, time = int(bit), struct.unpack("<d", struct.pack("<Q", int(bits, 16)))[0]
+        except (UnicodeDecodeError, ValueError, struct.error):
             return None, "the native entry's frame does not decode"
         state, problem = self._parse_model_state(data[end + 1:])
         if problem is None:
