@@ -95,8 +95,12 @@ class Native:
     def messages(self, min_status: int = ERROR) -> list[str]:
         return [m for n, s, m in LOG if n == self.name and s >= min_status]
 
+    freed = False
+
     def free(self):
-        self.fmu.freeInstance()
+        if not self.freed:
+            self.fmu.freeInstance()
+            self.freed = True
 
 
 @pytest.fixture
@@ -316,3 +320,105 @@ def test_fmpy_raises_on_the_native_refusals(native):
     with pytest.raises(FMICallException) as info:
         e.fmu.enterInitializationMode()
     assert info.value.status == ERROR
+
+
+# -- a state whose parts disagree -------------------------------------------------------------
+
+def _reframed(data: bytes, state: int | None = None, time: float | None = None) -> bytes:
+    """``data`` with the native entry's header saying another state or time."""
+    _, old_state, old_time = struct.unpack("<8sId", data[:8] + data[12:24])
+    return data[:12] + struct.pack("<Id", old_state if state is None else state,
+                                   old_time if time is None else time) + data[24:]
+
+
+def _refused_whole(e, data: bytes) -> str:
+    """Restore ``data`` into ``e``: it must be refused (at DeSerialize or SetFMUstate) and
+    leave ``e`` as it was and stepping on; returns the refusal's message."""
+    t, w = e.time(), e.get("w")
+    status, state = e.deserialize(data)
+    if status == OK:
+        assert e.call("fmi2SetFMUstate", state) == ERROR, "a state whose parts disagree was restored"
+        e.call("fmi2FreeFMUstate", byref(state))
+    else:
+        assert status == ERROR
+    said = e.messages()[-1]
+    assert e.time() == t and e.get("w") == w
+    assert e.step(t) == OK and e.time() == t + H
+    return said
+
+
+@pytest.mark.parametrize("case", ["header time 5.0 over model time", "header 'terminated' over model 'stepping'",
+                                  "header 'instantiated' over model 'stepping'",
+                                  "header 'step complete' over model 'terminated'"])
+def test_a_state_whose_header_and_model_part_disagree_is_refused_whole(native, case):
+    e = native().start()
+    for k in range(10):
+        assert e.step(k * H) == OK
+    source = native().start()
+    assert source.step(0.0) == OK
+    if case.endswith("'terminated'"):
+        assert source.call("fmi2Terminate") == OK
+    data = source.serialize(source.state())
+    edited = {"header time 5.0 over model time": lambda: _reframed(data, time=5.0),
+              "header 'terminated' over model 'stepping'": lambda: _reframed(data, state=16),
+              "header 'instantiated' over model 'stepping'": lambda: _reframed(data, state=1),
+              "header 'step complete' over model 'terminated'": lambda: _reframed(data, state=4)}[case]()
+    said = _refused_whole(e, edited)
+    assert "disagree" in said, said
+    # the unedited state is restored
+    status, state = e.deserialize(data)
+    assert status == OK and e.call("fmi2SetFMUstate", state) == OK
+
+
+def test_every_single_bit_flip_of_the_header_time_is_refused(native):
+    e = native().start()
+    for k in range(3):
+        assert e.step(k * H) == OK
+    data = e.serialize(e.state())
+    for bit in range(64):
+        flipped = bytearray(data)
+        flipped[16 + bit // 8] ^= 1 << (bit % 8)
+        _refused_whole(e, bytes(flipped))
+        e.call("fmi2SetFMUstate", e.deserialize(data)[1])    # back to where the flips start from
+
+
+# -- instantiate/free cycles ------------------------------------------------------------------
+
+def _rss() -> int:
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmRSS"))
+
+
+def test_instantiate_free_cycles_do_not_accumulate_memory(unzipped):
+    """pythonfmu 0.7 leaks about 1.4 KB of Python objects at every instantiation (1,403 B a
+    cycle measured over 20,000 cycles of EngineShaft); the native entry keeps freed inner
+    instances (reset) for the next fmi2Instantiate instead, so the cycles stay flat."""
+    md, directory = unzipped["EngineShaft"]
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier="EngineShaft", instanceName="cycles")
+    for _ in range(100):
+        fmu.instantiate(loggingOn=False)
+        fmu.freeInstance()
+    cycles, before = 3000, _rss()
+    for _ in range(cycles):
+        fmu.instantiate(loggingOn=False)
+        fmu.freeInstance()
+    per_cycle = (_rss() - before) / cycles
+    assert per_cycle < 400, f"{per_cycle:.0f} bytes stay allocated per instantiate/free cycle"
+
+
+def test_an_instance_taken_from_the_kept_ones_is_a_fresh_one(native):
+    """A freed instance's inner instance is reset and reused: nothing of its past shows."""
+    fresh = native().start()
+    assert fresh.step(0.0) == OK
+    w_fresh = fresh.get("w")
+    used = native()
+    vr, value = (ctypes.c_uint * 1)(used.vr["inertia"]), (c_double * 1)(0.5)
+    assert used.call("fmi2SetReal", vr, 1, value) == OK
+    used.start()
+    for k in range(3):
+        assert used.step(k * H) == OK
+    used.free()
+    again = native()                         # takes the kept inner instance
+    assert again.get("inertia") == 0.128 and again.call("fmi2DoStep", 0.0, H, 1) == ERROR   # instantiated
+    again.start()
+    assert again.step(0.0) == OK and again.get("w") == w_fresh and again.time() == H

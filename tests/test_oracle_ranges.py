@@ -230,3 +230,80 @@ def test_the_table_covers_every_declared_real_and_integer_parameter(fmu_dir):
         declared = {(fmu, v.name) for v in md.modelVariables
                     if v.causality == "parameter" and v.type in ("Real", "Integer")}
         assert declared - typed == set(), f"parameters without a hand-written range: {sorted(declared - typed)}"
+
+
+def _declared_bounds(fmu_dir):
+    """(FMU, variable, label, value, accepted?): each Real parameter's and input's declared
+    min and max (accepted: FMI 2.0's bounds are inclusive) and the double just outside."""
+    out = []
+    for fmu in ("LeverCoupling", "EngineShaft", "LoadShaft", "FreewheelRectifier", "MisalignmentSource"):
+        md = fmpy.read_model_description(str(fmu_dir / f"{fmu}.fmu"))
+        for v in md.modelVariables:
+            if v.type != "Real" or v.causality not in ("parameter", "input"):
+                continue
+            for label, bound, outward in (("min", v.min, -INF), ("max", v.max, INF)):
+                if bound is not None:
+                    out.append((fmu, v.name, f"at declared {label}", float(bound), True))
+                    out.append((fmu, v.name, f"outside declared {label}", math.nextafter(float(bound), outward), False))
+    return out
+
+
+def test_every_declared_bound_is_exactly_what_the_fmu_accepts(fmu_dir):
+    """A value at a declared min or max is accepted by fmi2SetReal and the instance initialises
+    (with the good values SETUP gives where the value is judged with others), reads its outputs
+    and steps; the double just outside is refused."""
+    wrong = []
+    for fmu, name, label, value, ok in _declared_bounds(fmu_dir):
+        instance = f"declared-{fmu}-{name}-{label.replace(' ', '-')}"
+        slave = Slave(fmu_dir, fmu, instance)
+        try:
+            for other, good in SETUP.get((fmu, name), {}).items():
+                slave.set(other, good)
+            if slave.variables[name].causality == "input":
+                slave.initialise()
+            try:
+                slave.set(name, value)
+                if not slave.initialised:
+                    slave.initialise()
+                outputs = [v.valueReference for v in slave.md.modelVariables if v.causality == "output"]
+                slave.fmu.getReal(outputs)
+                accepted = True
+            except FMICallException:
+                accepted = False
+            if accepted != ok:
+                wrong.append(f"{fmu}.{name} = {value!r} ({label}): {'accepted' if accepted else 'refused'}; "
+                             f"{_log.get(instance, [])[-1:]}")
+        finally:
+            slave.close()
+    assert not wrong, "\n".join(wrong)
+
+
+@pytest.mark.parametrize("mode,alpha", [("synchronous", math.nextafter(75 * DEG, 0.0)), ("kinematic", 50 * DEG)])
+def test_a_misalignment_input_is_judged_when_it_is_set(fmu_dir, mode, alpha):
+    """An input the coupling cannot take is refused by fmi2SetReal (nothing applied); one it
+    accepts gives outputs: never accepted at the set and refused at every read after."""
+    instance = f"misalignment-input-{mode}"
+    slave = Slave(fmu_dir, "LeverCoupling", instance)
+    try:
+        slave.set("transfer_mode", mode)
+        slave.initialise()
+        vr = slave.variables["misalignment"].valueReference
+        outputs = [v.valueReference for v in slave.md.modelVariables if v.causality == "output"]
+        try:
+            slave.set("misalignment", alpha)
+        except FMICallException:
+            assert mode == "kinematic", f"{alpha!r} refused in {mode} mode: {_log[instance][-1:]}"
+            assert "'misalignment'" in _log[instance][-1] and "45 deg" in _log[instance][-1]
+            assert slave.fmu.getReal([vr])[0] == catalogue_default_misalignment()
+        else:
+            assert mode == "synchronous", f"{alpha!r} accepted in {mode} mode"
+        assert all(math.isfinite(x) for x in slave.fmu.getReal(outputs))
+        slave.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+        assert all(math.isfinite(x) for x in slave.fmu.getReal(outputs))
+    finally:
+        slave.close()
+
+
+def catalogue_default_misalignment() -> float:
+    from lever.physics.catalogue import MISALIGNMENT
+    return MISALIGNMENT.default

@@ -865,12 +865,22 @@ static const char *state_name(int state)
 #define MASK_fmi2GetBooleanStatus INITIALIZED
 #define MASK_fmi2GetStringStatus INITIALIZED
 
+/* An inner (pythonfmu) instance with the callbacks handed to it.  pythonfmu keeps a
+ * *pointer* to the callbacks, so they live here, at a stable address, as long as the inner
+ * instance does.  A freed instance's inner instance is reset and kept for the next
+ * fmi2Instantiate of the same resources (see the pool below). */
+typedef struct Slot {
+    fmi2Component inner;
+    fmi2CallbackFunctions own; /* componentEnvironment: the Shim using the slot, or NULL */
+    char *resources;
+    fmi2Boolean visible;
+    struct Slot *next;
+} Slot;
+
 typedef struct {
     fmi2Component inner;
     fmi2CallbackFunctions importer; /* the importer's callbacks (copied) */
-    /* Callbacks handed to the inner library.  pythonfmu keeps a *pointer* to
-     * this struct, so it lives here, at a stable address. */
-    fmi2CallbackFunctions own;
+    Slot *slot;
     char *instanceName;
     fmi2Boolean loggingOn;  /* the importer's wish; the inner one is always on */
     size_t nCategories;     /* 0 = all categories */
@@ -895,6 +905,8 @@ typedef struct {
 #define SERIAL_MAGIC "LVRSHIM"  /* 8 bytes with its NUL */
 #define SERIAL_VERSION 1u
 #define SERIAL_HEADER 32       /* magic[8] version:u32 state:u32 time:f64 length:u64 */
+/* The line in front of the model's bytes on deserialization: state bit, time's bits (hex). */
+#define SERIAL_FRAME_LINE "lever-shim-frame"
 
 static void free_categories(Shim *s)
 {
@@ -904,6 +916,62 @@ static void free_categories(Shim *s)
     free(s->categories);
     s->categories = NULL;
     s->nCategories = 0;
+}
+
+/* The pool of reset inner instances.  pythonfmu 0.7's instantiation leaks about 1.4 KB of
+ * Python objects every time (it inserts the resources path into sys.path again, and the
+ * search for the slave class keeps the MRO list, the reprs of its classes and their UTF-8
+ * bytes), while fmi2Reset of an inner instance only makes a fresh Python slave.  So a freed
+ * inner instance is reset and kept, and the next fmi2Instantiate of the same resources takes
+ * it: a host that instantiates and frees in a loop (an optimisation, a Monte Carlo study)
+ * stays flat.  At most POOL_MAX are kept; beyond that they are freed. */
+#define POOL_MAX 16
+static Slot *g_pool;
+static int g_pooled;
+static pthread_mutex_t g_pool_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static void *shim_calloc(size_t n, size_t size) { return calloc(n, size); }
+
+/* A kept inner instance for these resources, taken out of the pool, or NULL. */
+static Slot *pool_take(const char *resources, fmi2Boolean visible)
+{
+    pthread_mutex_lock(&g_pool_lock);
+    Slot **link = &g_pool, *slot = NULL;
+    for (; *link; link = &(*link)->next) {
+        if ((*link)->visible == visible && strcmp((*link)->resources, resources) == 0) {
+            slot = *link;
+            *link = slot->next;
+            slot->next = NULL;
+            g_pooled--;
+            break;
+        }
+    }
+    pthread_mutex_unlock(&g_pool_lock);
+    return slot;
+}
+
+/* Keeps a reset inner instance; 0 if the pool is full (the caller frees it). */
+static int pool_keep(Slot *slot)
+{
+    int kept = 0;
+    pthread_mutex_lock(&g_pool_lock);
+    if (g_pooled < POOL_MAX) {
+        slot->own.componentEnvironment = NULL; /* nothing of it may reach a freed Shim */
+        slot->next = g_pool;
+        g_pool = slot;
+        g_pooled++;
+        kept = 1;
+    }
+    pthread_mutex_unlock(&g_pool_lock);
+    return kept;
+}
+
+static void free_slot(Slot *slot)
+{
+    if (slot) {
+        free(slot->resources);
+        free(slot);
+    }
 }
 
 static void free_shim(Shim *s)
@@ -1095,11 +1163,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         free_shim(s);
         return NULL;
     }
-    s->own.logger = shim_logger;
-    s->own.allocateMemory = functions->allocateMemory;
-    s->own.freeMemory = functions->freeMemory;
-    s->own.stepFinished = NULL; /* asynchronous doStep is not supported */
-    s->own.componentEnvironment = s;
     s->state = ST_INSTANTIATED;
 
     /* Large, so static (host threads may have small stacks), under this lock. */
@@ -1132,15 +1195,43 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     thread_state_ready();
-    /* loggingOn is always true for the inner library: with it off, pythonfmu
-     * suppresses errors too.  The shim filters instead. */
-    s->inner = g_api->fmi2Instantiate(s->instanceName, fmuType, fmuGUID, resources, &s->own, visible,
-                                      fmi2True);
-    pthread_mutex_unlock(&lock);
-    if (!s->inner) {
-        free_shim(s);
-        return NULL;
+    Slot *slot = pool_take(resources, visible);
+    if (slot) {
+        slot->own.componentEnvironment = s;
+    } else {
+        slot = calloc(1, sizeof *slot);
+        if (slot) {
+            slot->resources = copy_string(resources);
+        }
+        if (!slot || !slot->resources) {
+            pthread_mutex_unlock(&lock);
+            free_slot(slot);
+            shim_error(s, "fmi2Instantiate: out of memory");
+            free_shim(s);
+            return NULL;
+        }
+        slot->visible = visible;
+        slot->own.logger = shim_logger;
+        /* pythonfmu 0.7 allocates with new/delete; these are never called, but a kept
+         * instance must not point at an importer's functions that may be gone. */
+        slot->own.allocateMemory = shim_calloc;
+        slot->own.freeMemory = free;
+        slot->own.stepFinished = NULL; /* asynchronous doStep is not supported */
+        slot->own.componentEnvironment = s; /* the inner instantiate may log already */
+        /* loggingOn is always true for the inner library: with it off, pythonfmu
+         * suppresses errors too.  The shim filters instead. */
+        slot->inner = g_api->fmi2Instantiate(s->instanceName, fmuType, fmuGUID, resources, &slot->own, visible,
+                                             fmi2True);
+        if (!slot->inner) {
+            pthread_mutex_unlock(&lock);
+            free_slot(slot);
+            free_shim(s);
+            return NULL;
+        }
     }
+    pthread_mutex_unlock(&lock);
+    s->slot = slot;
+    s->inner = slot->inner;
     __atomic_add_fetch(&g_live_instances, 1, __ATOMIC_ACQ_REL);
     return s;
 }
@@ -1156,7 +1247,17 @@ void fmi2FreeInstance(fmi2Component c)
     if (!s->dead) {
         s->worst = fmi2OK;
         thread_state_ready();
-        g_api->fmi2FreeInstance(s->inner);
+        /* Reset drops the model (a fresh Python slave takes its place) and the instance is
+         * kept for the next fmi2Instantiate; a fatal reset leaves it dead (and leaked). */
+        fmi2Status reset = g_api->fmi2Reset(s->inner);
+        if (reset == fmi2Fatal) {
+            s->slot->own.componentEnvironment = NULL;
+        } else if (reset != fmi2OK || !pool_keep(s->slot)) {
+            g_api->fmi2FreeInstance(s->inner);
+            free_slot(s->slot);
+        }
+    } else {
+        s->slot->own.componentEnvironment = NULL; /* leaked with the dead inner instance */
     }
     free_shim(s);
     if (__atomic_sub_fetch(&g_live_instances, 1, __ATOMIC_ACQ_REL) == 0 && t_kept_state) {
@@ -1507,14 +1608,28 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
                              "%zu follow: the state is %s", (unsigned long long)length, size - SERIAL_HEADER,
                           length > size - SERIAL_HEADER ? "truncated" : "padded (bytes appended)");
     }
+    /* The header's state and time go to the model with its bytes, on a line of their own
+     * in front: fmi2SetFMUstate refuses the state unless the model's part agrees with them
+     * (a state whose parts disagree would leave the instance contradicting itself). */
+    char frame[96];
+    uint64_t time_bits; /* the time's bits in hex: exact, and no locale's decimal comma */
+    memcpy(&time_bits, &time, sizeof time_bits);
+    int framed = snprintf(frame, sizeof frame, "%s %u %016llx\n", SERIAL_FRAME_LINE, st,
+                          (unsigned long long)time_bits);
     ShimFMUstate *w = calloc(1, sizeof *w);
-    if (!w) {
+    fmi2Byte *inner_bytes = malloc((size_t)framed + (size_t)length);
+    if (!w || !inner_bytes || framed <= 0 || (size_t)framed >= sizeof frame) {
+        free(w);
+        free(inner_bytes);
         return shim_error(s, "fmi2DeSerializeFMUstate: out of memory");
     }
+    memcpy(inner_bytes, frame, (size_t)framed);
+    memcpy(inner_bytes + framed, bytes + SERIAL_HEADER, (size_t)length);
     fmi2FMUstate inner = NULL;
     fmi2Status status = shim_end(s, "fmi2DeSerializeFMUstate",
-                                 g_api->fmi2DeSerializeFMUstate(s->inner, bytes + SERIAL_HEADER,
-                                                                (size_t)length, &inner));
+                                 g_api->fmi2DeSerializeFMUstate(s->inner, inner_bytes,
+                                                                (size_t)framed + (size_t)length, &inner));
+    free(inner_bytes);
     if (!succeeded(status)) {
         free(w);
         return status;

@@ -9,8 +9,10 @@ stays usable where FMI lets it, nothing is ever fatal, and the instance is freed
 
 Besides bad values: fmi2Set* on outputs, after fmi2Terminate, with the wrong type or an
 unknown value reference, a multi-value call with one bad value (nothing of it applied),
-and serialized states damaged every way ``_STATE_EDITS`` lists (header, length, format,
-model, GUID, nesting, content).  The importing process - the one running
+serialized states damaged every way ``_STATE_EDITS`` lists (header, length, format,
+model, GUID, nesting, content, a native header that disagrees with the model's part),
+communication points off by more than rounding, and steps too costly to take (a huge step,
+a tiny ``max_substep``).  The importing process - the one running
 the corpus - survives all of it.
 
 Cases for the declared parameters and inputs are generated from the catalogue (every
@@ -56,7 +58,7 @@ class Case:
     ``refused_by``: the call that must return error/discard: the action itself
     (``"action"``) or ``fmi2ExitInitializationMode`` (``"exit"``: values that are only
     judged together, when the model is built).  ``expect``: fragments the logged error
-    message must contain (the variable and its allowed range).
+    message must contain (the variable and its allowed range).  ``start``: the start time.
     """
 
     fmu: str
@@ -67,6 +69,8 @@ class Case:
     expect: tuple[str, ...]
     setup: tuple[tuple[str, object], ...] = ()
     refused_by: str = "action"
+    #: the start time given to fmi2SetupExperiment (the first step starts there)
+    start: float = 0.0
 
     @property
     def name(self) -> str:
@@ -210,7 +214,36 @@ def _by_hand() -> list[Case]:
              ("set", "load_kind", "table"), ("'table'", "at least 2"), refused_by="exit"),
         Case("LoadShaft", "malformed table", "load_kind 'fourier' without a series", "instantiated",
              ("set", "load_kind", "fourier"), ("'fourier'", "harmonic"), refused_by="exit"),
+        # An input the built coupling cannot take is refused when it is set (not at every read).
+        Case("LeverCoupling", "misalignment out of range", "kinematic misalignment input beyond 45 deg", "stepping",
+             ("set", "misalignment", 50 * DEG), ("'misalignment'", "45 deg", "nothing of this call"),
+             setup=(("transfer_mode", "kinematic"),)),
     ]
+    # Steps whose cost has no bound: refused at once, naming the step and the bound.
+    cases += [
+        Case("LoadShaft", "step too costly", "a step of 1e300 s", "stepping", ("call", "fmi2DoStep", (1e-3, 1e300)),
+             ("1e+300", "unbounded")),
+        Case("EngineShaft", "step too costly", "a step of 1e300 s", "stepping",
+             ("call", "fmi2DoStep", (1e-3, 1e300)), ("1e+300", "unbounded")),
+    ]
+    for label, h in (("1e4 s", 1e4), ("1e9 s", 1e9), ("1e300 s", 1e300)):
+        cases.append(Case("FreewheelRectifier", "step too costly", f"a step of {label}", "stepping",
+                          ("call", "fmi2DoStep", (1e-3, h)), ("'max_substep'", "200000", "RK4 substeps")))
+    for substep in (1e-12, 1e-300, 2.2e-308, 5e-324):
+        cases.append(Case("FreewheelRectifier", "step too costly", f"a 1 ms step with max_substep = {substep!r}",
+                          "initialization", ("call", "exit-then-step", (0.0, 1e-3)),
+                          ("'max_substep'", "200000", "RK4 substeps"), setup=(("max_substep", substep),)))
+    cases.append(Case("FreewheelRectifier", "step too costly", "a substep below the time's resolution at t = 1e6 s",
+                      "initialization", ("call", "exit-then-step", (1e6, 1e-6)), ("'max_substep'", "resolution"),
+                      setup=(("max_substep", 1e-11),), start=1e6))
+    # Communication points off by more than rounding at t = 1e6 s (the FMU is at 1e6 + 1 ms).
+    for fmu in DECLARED:
+        now = 1e6 + 1e-3
+        for label, point in (("one step ahead", now + 1e-3), ("one step behind", 1e6), ("1e-6 s ahead", now + 1e-6),
+                             ("1e-6 s behind", now - 1e-6)):
+            cases.append(Case(fmu, "bad step", f"communication point {label} at t = 1e6 s", "stepping",
+                              ("call", "fmi2DoStep", (point, 1e-3)), ("communication point", "rounding"),
+                              start=1e6))
     # Out-of-order and malformed FMI calls.
     for fmu in DECLARED:
         cases += [
@@ -272,6 +305,9 @@ _STATE_EDITS = {
     "time": ("with a non-finite time", ("time",)),
     "phase": ("with an unknown phase", ("phase",)),
     "internal": ("with a malformed internal state", ("internal state",)),
+    "frame-time": ("whose native header's time disagrees with the model's", ("disagree",)),
+    "frame-state": ("whose native header says terminated over a stepping model", ("disagree",)),
+    "frame-time-bit": ("with one bit of the native header's time flipped", ("disagree",)),
 }
 
 
@@ -291,9 +327,19 @@ def _edited_state(data: bytes, edit: str, fmu: str) -> bytes:
         return data[: len(data) // 2]
     if edit == "padded":
         return data + b"  "
+    import struct
+    if edit.startswith("frame-"):
+        # the native entry's header against the model's part: each valid, together not
+        state, time = struct.unpack("<Id", data[12:24])
+        if edit == "frame-time":
+            time = 5.0
+        elif edit == "frame-state":
+            state = 16
+        else:
+            time = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", time))[0] ^ 1))[0]
+        return data[:12] + struct.pack("<Id", state, time) + data[24:]
     if not data.startswith(SHIM_MAGIC):
         return _edited_model_state(data, edit, fmu)
-    import struct
     frame, inner = data[:SHIM_HEADER], _edited_model_state(data[SHIM_HEADER:], edit, fmu)
     return frame[:24] + struct.pack("<Q", len(inner)) + inner
 
@@ -456,16 +502,17 @@ class _Slave:
         value = getter([v.valueReference])[0]
         return value.decode() if isinstance(value, bytes) else value
 
-    def advance(self, phase: str) -> int:
-        """Bring the instance from instantiated to ``phase``; the worst status seen."""
+    def advance(self, phase: str, start: float = 0.0) -> int:
+        """Bring the instance from instantiated to ``phase`` (starting at ``start``); the
+        worst status seen."""
         worst = FMI2_OK
         if PHASES.index(phase) >= 1:
-            worst = max(worst, self.call("setupExperiment", None, 0.0, None))
+            worst = max(worst, self.call("setupExperiment", None, start, None))
             worst = max(worst, self.call("enterInitializationMode"))
         if PHASES.index(phase) >= 2:
             worst = max(worst, self.call("exitInitializationMode"))
-            worst = max(worst, self.call("doStep", 0.0, 1e-3))
-            self.time = 1e-3
+            worst = max(worst, self.call("doStep", start, 1e-3))
+            self.time = start + 1e-3
         return worst
 
     def step_ok(self) -> bool:
@@ -507,6 +554,10 @@ def _act(slave: _Slave, case: Case, fmu_dir: Path) -> int:
         return slave.call("enterInitializationMode")
     if function == "fmi2SetupExperiment":
         return slave.call("setupExperiment", None, *args)
+    if function == "exit-then-step":
+        if slave.call("exitInitializationMode") > FMI2_WARNING:
+            return FMI2_OK       # refused before the step: the case fails on its message
+        return slave.call("doStep", *args)
     if function == "terminate-then-step":
         slave.call("terminate")
         return slave.call("doStep", slave.time, 1e-3)
@@ -543,7 +594,7 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         for name, value in case.setup:
             if slave.set(name, value) > FMI2_WARNING:
                 outcome.problems.append(f"setting up {name} = {value!r} was refused")
-        if slave.advance(case.phase) > FMI2_WARNING:
+        if slave.advance(case.phase, case.start) > FMI2_WARNING:
             outcome.problems.append(f"reaching phase {case.phase} failed: {slave.log[-1:]}")
         before = slave.get(case.action[1]) if case.action[0] == "set" else None
         everything = slave.reals() if case.refused_by == "action" else None
@@ -601,11 +652,12 @@ def summary(outcomes: list[Outcome]) -> str:
         cell = table.setdefault((o.case.category, o.case.fmu), [0, 0])
         cell[0] += 1
         cell[1] += o.passed
-    fmus = list(DECLARED)
-    lines.append(f"  {'category':34s}" + "".join(f"{f:>15s}" for f in fmus))
+    fmus = list(dict.fromkeys([*DECLARED, *(o.case.fmu for o in outcomes)]))
+    width = max(15, *(len(f) + 2 for f in fmus))
+    lines.append(f"  {'category':34s}" + "".join(f"{f:>{width}s}" for f in fmus))
     for category in dict.fromkeys(c for c, _ in table):
         cells = [table.get((category, f)) for f in fmus]
-        lines.append(f"  {category:34s}" + "".join(f"{'-' if c is None else f'{c[1]}/{c[0]}':>15s}" for c in cells))
+        lines.append(f"  {category:34s}" + "".join(f"{'-' if c is None else f'{c[1]}/{c[0]}':>{width}s}" for c in cells))
     for o in outcomes:
         if not o.passed:
             lines.append(f"FAIL {o.case.name}: " + "; ".join(o.problems))

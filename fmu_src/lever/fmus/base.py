@@ -16,6 +16,7 @@ import json
 import math
 import operator
 import re
+import struct
 import traceback
 from pathlib import Path
 from typing import NamedTuple, Sequence
@@ -119,6 +120,12 @@ class _SerializedState:
 #: A serialized state: ``STATE_MAGIC``, a space, a JSON header (format, model, GUID,
 #: length of the payload), a newline, the payload (JSON of the state).
 STATE_MAGIC = b"lever-fmu-state"
+#: The native entry (build/shim) keeps the state machine's state and the time in its own
+#: header and passes them in front of the bytes as ``SHIM_FRAME <state bit> <the time's 64
+#: bits in hex>``: the state is refused unless they agree with its phase and time.
+SHIM_FRAME = b"lever-shim-frame"
+_SHIM_PHASES = {1: ("instantiated",), 2: ("initialization",), 4: ("stepping",), 8: ("stepping",),
+                16: ("terminated",)}
 STATE_FORMAT = 1
 _HEADER_LIMIT = 1024     # bytes the header line may take
 _NESTING_LIMIT = 4       # a state is {"variables": {...}, "internal": {"y": [...]}}
@@ -211,6 +218,7 @@ class LeverSlave(Fmi2Slave):
         self.description = self.DESCRIPTION
         self._phase = "instantiated"   # -> initialization -> stepping (-> terminated)
         self._time = 0.0
+        self._start_time = 0.0         # fmi2SetupExperiment's: the scale of the host's time rounding
         self._dirty = _ALL             # what must be recomputed before outputs are read
         self._build_error = None
         self._declared = {}
@@ -339,7 +347,7 @@ class LeverSlave(Fmi2Slave):
         if not math.isfinite(start_time):
             self._error(f"fmi2SetupExperiment: start time {start_time} is not finite")
             return
-        self._time = float(start_time)
+        self._time = self._start_time = float(start_time)
 
     @guarded(default=False)
     def do_step(self, current_time, step_size):
@@ -350,10 +358,11 @@ class LeverSlave(Fmi2Slave):
         if not (math.isfinite(step_size) and step_size > 0.0):
             self._error(f"fmi2DoStep: communication step size {step_size} must be finite and > 0")
             return False
-        tolerance = 1e-9 * max(1.0, abs(self._time))
-        if not (math.isfinite(current_time) and abs(current_time - self._time) <= tolerance):
+        if not (math.isfinite(current_time) and abs(current_time - self._time) <= self._rounding()):
             self._error(f"fmi2DoStep: current communication point {current_time!r} does not match the FMU's "
-                        f"time {self._time!r} (steps must be contiguous; restore a saved state to go back)")
+                        f"time {self._time!r} (off by {current_time - self._time:.3g} s, more than the "
+                        f"{self._rounding():.3g} s that rounding of the host's time explains: steps must be "
+                        "contiguous; restore a saved state to go back)")
             return False
         failure = self._advance(current_time, step_size)
         if failure:
@@ -362,6 +371,15 @@ class LeverSlave(Fmi2Slave):
         self._time = current_time + step_size
         self._dirty = _ALL
         return True
+
+    #: ulps of the time's magnitude a host's communication point may differ from the FMU's:
+    #: a host that computes its points as t0 + k*h, from an integer-nanosecond clock, or by
+    #: t += h differs by a few roundings (at most 5 ulps of max(|t|, |t0|)), never by a step
+    ROUNDING_ULPS = 8
+
+    def _rounding(self) -> float:
+        """How far a communication point may lie from the FMU's time (rounding only)."""
+        return self.ROUNDING_ULPS * math.ulp(max(abs(self._time), abs(self._start_time)))
 
     @guarded()
     def terminate(self):
@@ -505,7 +523,28 @@ class LeverSlave(Fmi2Slave):
         return state
 
     def _parse_serialized(self, data: bytes) -> tuple[dict | None, str | None]:
-        """(state, None) from serialized bytes, or (None, why they are no state of this FMU)."""
+        """(state, None) from serialized bytes, or (None, why they are no state of this FMU);
+        behind the native entry, the state must agree with the entry's header."""
+        if not data.startswith(SHIM_FRAME + b" "):
+            return self._parse_model_state(data)
+        end = data.find(b"\n", 0, 128)
+        if end < 0:
+            return None, "the native entry's frame is not terminated (truncated or malformed)"
+        try:
+            bit, bits = data[len(SHIM_FRAME) + 1:end].decode("ascii").split(" ")
+            bit, time = int(bit), struct.unpack("<d", struct.pack("<Q", int(bits, 16)))[0]
+        except (UnicodeDecodeError, ValueError, struct.error):
+            return None, "the native entry's frame does not decode"
+        state, problem = self._parse_model_state(data[end + 1:])
+        if problem is None:
+            problem = self._state_problem(state)
+        if problem is None and (state["phase"] not in _SHIM_PHASES.get(bit, ()) or state["time"] != time):
+            problem = (f"its parts disagree: the native entry's header says state {bit} ("
+                       f"{'/'.join(_SHIM_PHASES.get(bit, ('unknown',)))}) at t = {time!r} s, the model's part "
+                       f"phase {state['phase']!r} at t = {state['time']!r} s (damaged or edited bytes)")
+        return (None, problem) if problem else (state, None)
+
+    def _parse_model_state(self, data: bytes) -> tuple[dict | None, str | None]:
         if not data.startswith(STATE_MAGIC + b" "):
             return None, f"the bytes do not start with {STATE_MAGIC.decode()!r} (not a serialized state of a lever FMU)"
         end = data.find(b"\n", 0, _HEADER_LIMIT)
@@ -682,11 +721,13 @@ class LeverSlave(Fmi2Slave):
             if getattr(spec, "derivative_of", ""):
                 typed.set("derivative", str(index_of[spec.derivative_of]))
             if isinstance(spec, Parameter):
+                # FMI's min and max are inclusive: an open bound is declared as the nearest
+                # double inside it, so that the declaration says exactly what is accepted
                 as_text = repr if typed.tag == "Real" else (lambda x: str(int(x)))
                 if math.isfinite(spec.low):
-                    typed.set("min", as_text(spec.low))
+                    typed.set("min", as_text(math.nextafter(spec.low, math.inf) if spec.low_open else spec.low))
                 if math.isfinite(spec.high):
-                    typed.set("max", as_text(spec.high))
+                    typed.set("max", as_text(math.nextafter(spec.high, -math.inf) if spec.high_open else spec.high))
 
         structure = root.find("ModelStructure")
         for child in list(structure):

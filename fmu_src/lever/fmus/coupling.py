@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
-from ..physics.parameters import Parameter
-from .base import LeverSlave, MechanicalPort, Output
+from ..physics.parameters import Parameter, ParameterError
+from .base import _ALL, LeverSlave, MechanicalPort, Output, guarded
 
 _BIG = 1e12
 
@@ -49,6 +49,27 @@ class LeverCoupling(LeverSlave):
     def _build(self):
         # exact at the misalignment the model is built with; blended elsewhere (CouplingFamily)
         self._family = catalogue.coupling_family_from(self._values() | {"misalignment": self.misalignment})
+
+    @guarded()
+    def set_real(self, vrs, values):
+        # The declared range of the misalignment input is the synchronous mode's; what the
+        # built coupling takes (kinematic: alpha + tilt < 45 deg) is judged here, at the set
+        # while stepping (before, at fmi2ExitInitializationMode, with the parameters), so that
+        # a value the outputs cannot be computed for is refused and never applied.
+        before = {vr: getattr(self, self._real_names[vr]) for vr in vrs if vr in self._real_names}
+        alpha = self.misalignment
+        LeverSlave.set_real.__wrapped__(self, vrs, values)
+        if self.misalignment == alpha or self._family is None or self._model_stale or self._phase != "stepping":
+            return
+        try:
+            self._family.at(self.misalignment)
+        except ParameterError as error:
+            refused = self.misalignment
+            for vr, value in before.items():
+                setattr(self, self._real_names[vr], value)
+            self._dirty = _ALL
+            self._error(f"fmi2SetReal: input 'misalignment' = {refused!r} rad cannot be taken by this coupling: "
+                        f"{error}; nothing of this call was applied, 'misalignment' stays {alpha!r}")
 
     def _coupling_for(self, alpha):
         return self._family.at(alpha)

@@ -12,7 +12,7 @@ import math
 
 from ..physics import catalogue
 from ..physics.freewheel import EVENTS, FREE, STATE, STICK
-from ..physics.parameters import Parameter
+from ..physics.parameters import Parameter, ParameterError
 from .base import LeverSlave, Output
 
 _PORT = ("tau",)
@@ -92,8 +92,13 @@ class FreewheelRectifier(LeverSlave):
     def _advance(self, t, h):
         try:
             y, disc, fly, n = self._model.advance(t, h, self._y, self._disc, self._fly, self.tau, self.tau_rate)
-        except RuntimeError as error:
+        except (RuntimeError, ParameterError) as error:
             return f"{error}; the state was not updated"
+        except ArithmeticError as error:     # the state ran away within a substep
+            return (f"the state overflowed within the step ({type(error).__name__}: {error}) with input tau = "
+                    f"{self.tau:.6g} N.m: RK4 substeps of max_substep = {self.max_substep:.6g} s are unstable "
+                    "for these stiffnesses, dampings and inertias; take a smaller 'max_substep'; the state was not "
+                    "updated")
         if not all(math.isfinite(v) and abs(v) < 1e15 for v in y):
             bad = ", ".join(f"{name} = {v:.6g}" for name, v in zip(STATE, y) if not (math.isfinite(v) and abs(v) < 1e15))
             return f"the state became non-finite or unbounded ({bad}) with input tau = {self.tau:.6g} N.m"

@@ -115,7 +115,10 @@ class CouplingFamily:
         position = alpha / self.NODE
         k = math.floor(position)
         if abs(position - round(position)) < 1e-9:           # on a node
-            transfer = self._node(round(position))
+            try:
+                transfer = self._node(round(position))
+            except ParameterError:                           # a node just beyond the range (75 deg)
+                transfer = self._transfer_at(alpha)
         else:
             try:
                 transfer = BlendedTransferFunction(self._node(k), self._node(k + 1), alpha)

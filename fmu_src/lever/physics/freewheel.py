@@ -346,6 +346,13 @@ class FreewheelRectifier:
         sixth = h / 6.0
         return [a + sixth * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(y, k1, k2, k3, k4)]
 
+    #: RK4 substeps one step may take (about 30 us each in CPython): beyond it the step is
+    #: refused at once, not ground through for minutes while the importer waits
+    MAX_SUBSTEPS = 200_000
+    #: RK4 integrations one step may take in all, event location included (a chattering
+    #: contact with a large 'max_events' would otherwise keep the importer waiting)
+    MAX_INTEGRATIONS = 400_000
+
     def advance(self, t: float, h: float, y, disc: int, fly: int, ext: float = 0.0, ext_rate: float = 0.0,
                 log=None) -> tuple[list, int, int, int]:
         """Integrate from ``t`` over ``h`` with the port torque ``ext + ext_rate * s``:
@@ -355,11 +362,27 @@ class FreewheelRectifier:
         called at each event.  Raises ``RuntimeError`` when more than ``max_events``
         events pile up in one call (a chattering contact)."""
         t_end = t + h
-        n = max(1, math.ceil(h / self.max_substep - 1e-9))
+        needed = h / self.max_substep
+        if not needed <= self.MAX_SUBSTEPS:
+            raise ParameterError("max_substep", f"a step of h = {h:.6g} s needs {needed:.3g} RK4 substeps of "
+                                 f"max_substep = {self.max_substep:.6g} s, more than the {self.MAX_SUBSTEPS} "
+                                 "allowed per step: take smaller communication steps or a larger 'max_substep'")
+        n = max(1, math.ceil(needed - 1e-9))
         dt_nominal = h / n
+        if not dt_nominal >= math.ulp(max(abs(t), abs(t_end))):
+            # t + dt would round back to t: the substeps could never reach the step's end
+            raise ParameterError("max_substep", f"at t = {t:.9g} s a substep of {dt_nominal:.3g} s (max_substep = "
+                                 f"{self.max_substep:.6g} s) is below the time's resolution "
+                                 f"{math.ulp(abs(t_end)):.3g} s: take a larger 'max_substep' or start nearer t = 0")
         events = 0
+        budget = self.MAX_INTEGRATIONS       # substeps and event location alike
         y = list(y)
         while t < t_end - 1e-15 * max(1.0, abs(t_end)):
+            budget -= 1
+            if budget < 0:
+                raise RuntimeError(f"the step from t = {t_end - h:.9g} s of h = {h:.6g} s took more than "
+                                   f"{self.MAX_INTEGRATIONS} RK4 integrations ({events} events located): a contact "
+                                   "or the discs chatter; take smaller steps or a lower 'max_events'")
             dt = min(dt_nominal, t_end - t)
             ext_t = ext + ext_rate * (t - (t_end - h))
             g0 = self.event_values(t, y, disc, fly, ext_t)
@@ -381,6 +404,7 @@ class FreewheelRectifier:
                 s = hi - g_hi * (hi - lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
                 if not lo < s < hi:
                     s = 0.5 * (lo + hi)
+                budget -= 1
                 ys = self._rk4(t, y, s, disc, fly, ext, ext_rate, t_end - h)
                 gs = self.event_values(t + s, ys, disc, fly, ext + ext_rate * (t + s - (t_end - h)))
                 # an earlier event inside the bracket takes over
