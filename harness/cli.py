@@ -486,9 +486,11 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise click.ClickException(f"the sweep could not run: {error}") from None
     failed = [c for c in report["cases"] if c["result"].get("status") != "ok"]
     for t in report["trends"]:
-        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced"}[t["reproduced"]]
+        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced",
+                   sweeps.NOT_JUDGED: sweeps.NOT_JUDGED}[t["reproduced"]]
         click.echo(f"  {verdict:14s}  {t['trend']}" + (f" (holds for {', '.join(t['holds_for'])})"
-                                                       if t["reproduced"] == "partly" else ""))
+                                                       if t["reproduced"] == "partly" else "")
+                   + (f" ({t['numbers']})" if t["reproduced"] == sweeps.NOT_JUDGED else ""))
     click.echo(f"{len(report['cases']) - len(failed)} cases ok, {len(failed)} failed; written: {out / 'sweep.md'}")
     for c in failed:
         click.echo(f"  failed: {c['axis']} = {c['x']:g}: {c['result'].get('error')}", err=True)

@@ -179,7 +179,7 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     spec = scenes.load(scene).with_overrides(list(extra or []))
     cases = plan(axes, scene, stop, extra, fmu_dir)
     for case in cases:
-        spec.with_overrides(case["overrides"])
+        _check_experiment(spec.with_overrides(case["overrides"]).experiment, stop)
     fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
                    "extra": list(extra or []), "physics": physics_hash()}
     log = CaseLog(out, fingerprint, resume=resume)
@@ -202,6 +202,20 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
     write(out, axes, report)
     return report
+
+
+def _check_experiment(e: scenes.Experiment, stop: float | None) -> None:
+    """Refuse, before anything runs, a case whose experiment no run could take (a stop
+    within the scene's start-up transient fails every case the same way)."""
+    findings = scenes.experiment_findings(e)
+    if not findings:
+        return
+    if stop is not None and not 0.0 <= e.transient < e.stop - e.start:
+        raise scenes.SceneError(
+            f"--stop {stop:g} s: the scene leaves its first experiment.transient = {e.transient:g} s out of the "
+            f"amplitudes, so a case must run past it (allowed: --stop > {e.start + e.transient:g} s; or lower "
+            f"the transient with --set experiment.transient=...)")
+    raise scenes.SceneError("; ".join(findings))
 
 
 def _bar(total, done, dask):
@@ -300,19 +314,40 @@ def _verdict(holds: list[str], of: list[str]) -> str:
     return "yes" if len(holds) == len(of) else ("partly" if holds else "no")
 
 
+#: the fewest cases that ran a verdict rests on: fewer values show no trend (two points
+#: are always monotone, and a curve needs three)
+MIN_CASES = 3
+NOT_JUDGED = "not judged"
+
+
+def _ran(results: list[dict], axis: str | None = None) -> tuple[int, int]:
+    """(cases that ran, cases planned) of ``axis`` (of every axis when None)."""
+    rows = [r for r in results if axis is None or r["axis"] == axis]
+    return sum(r["result"].get("status") == "ok" for r in rows), len(rows)
+
+
 def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
     """Each qualitative finding of MODEL.md section 6 (and Fig. 3.16's inertia curve),
     judged on the sweep's numbers: "yes", "partly" (``holds_for`` says for which
-    quantities) or "no", with the numbers it rests on."""
+    quantities), "no", or "not judged" when fewer than ``MIN_CASES`` of its cases ran,
+    with the numbers it rests on.  A finding about the size of a difference ("shrinks")
+    is judged on its magnitude: dA = A2 - A1 that goes from +0.03 to -0.9 grew."""
     names = {a.name for a in axes}
     out = []
 
-    def add(trend, holds, of, numbers):
+    def add(trend, holds, of, numbers, ran):
+        done, planned = ran
+        if done < MIN_CASES:
+            out.append({"trend": trend, "reproduced": NOT_JUDGED, "holds_for": [],
+                        "numbers": f"not judged: {done} of {planned} cases ran (a verdict needs {MIN_CASES})"})
+            return
+        if done < planned:
+            numbers += f" ({done} of {planned} cases ran)"
         out.append({"trend": trend, "reproduced": _verdict(holds, of), "holds_for": holds, "numbers": numbers})
 
     ok = [r for r in results if r["result"].get("status") == "ok"]
+    lines, holds = [], []
     if ok:
-        lines, holds = [], []
         for q, label in (("w", "speed"), ("a", "acceleration"), ("tau", "torque")):
             less = sum(r["result"][f"A_{q}1"] < r["result"][f"A_{q}2"] for r in ok)
             if less == len(ok):
@@ -321,8 +356,8 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
         worst = min(ok, key=lambda r: r["result"]["A_tau2"] - r["result"]["A_tau1"])
         lines.append(f"smallest A_tau2 - A_tau1: {worst['result']['A_tau2'] - worst['result']['A_tau1']:.3g} N*m "
                      f"({worst['axis']} = {worst['x']:g})")
-        add("the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's",
-            holds, ["speed", "acceleration", "torque"], "; ".join(lines))
+    add("the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's",
+        holds, ["speed", "acceleration", "torque"], "; ".join(lines), _ran(results))
     amplitudes = ["A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2"]
     for axis_name, label in (("load", "load"), ("misalignment", "alpha")):
         if axis_name not in names:
@@ -334,30 +369,31 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
             if _monotone(y, +1) and curved > 0.05:
                 holds.append(q)
             parts.append(f"{q} {_fmt_series(x, y)} (off a straight line by {100 * curved:.0f} % of the rise)")
-        add(f"fluctuation amplitudes grow non-linearly with {label}", holds, amplitudes, "; ".join(parts))
+        add(f"fluctuation amplitudes grow non-linearly with {label}", holds, amplitudes, "; ".join(parts),
+            _ran(results, axis_name))
     if "load" in names:
         x, w = _series("load", results, "mean_w")
         add("mean speed falls with load", ["mean w"] if _monotone(w, -1) else [], ["mean w"],
-            "mean w [rad/s] at " + _fmt_series(x, w))
+            "mean w [rad/s] at " + _fmt_series(x, w), _ran(results, "load"))
         x, t = _series("load", results, "mean_tau")
         add("mean torque rises with load", ["mean torque"] if _monotone(t, +1) else [], ["mean torque"],
-            "mean torque [N*m] at " + _fmt_series(x, t))
+            "mean torque [N*m] at " + _fmt_series(x, t), _ran(results, "load"))
     for axis_name, label in (("stiffness", "stiffer"), ("damping", "more damped")):
         if axis_name not in names:
             continue
         parts, holds = [], []
-        for q in ("dA_w", "dA_a", "dA_tau"):
+        for q, unit in (("dA_w", "rad/s"), ("dA_a", "rad/s^2"), ("dA_tau", "N*m")):
             x, y = _series(axis_name, results, q)
-            if _monotone(y, -1):
+            if _monotone(np.abs(y), -1):
                 holds.append(q)
-            parts.append(f"{q} {_fmt_series(x, y)}")
-        add(f"a {label} elastic element shrinks the drive/driven amplitude difference (dA = A2 - A1)", holds,
-            ["dA_w", "dA_a", "dA_tau"], "; ".join(parts))
+            parts.append(f"|{q}| [{unit}] {_fmt_series(x, np.abs(y))}")
+        add(f"a {label} elastic element shrinks the drive/driven amplitude difference (|dA|, dA = A2 - A1)",
+            holds, ["dA_w", "dA_a", "dA_tau"], "; ".join(parts), _ran(results, axis_name))
     if "inertia" in names:
         x, w = _series("inertia", results, "mean_w")
         _, t = _series("inertia", results, "mean_tau")
         # A change the size of rounding is no trend: the monograph's mean speed falls by 9 % (Fig. 3.16);
-        # an angle-locked load part moves the model's by some 0.002 % (issue 17's spectrum load)
+        # an angle-locked load part moves the model's by some 0.002 %
         holds = (["mean w"] if _monotone(w, -1) and _moves(w) else []) + \
             (["mean torque"] if _monotone(t, +1) and _moves(t) else [])
         add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16; not in "
@@ -365,7 +401,7 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
             f"mean w [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
             "the steady means are set by the engine characteristic and the mean load alone; I2 enters only the "
             f"fluctuations (the means move by {100 * _span(w):.2g} % and {100 * _span(t):.2g} % over the axis; "
-            f"a trend needs {100 * MEANINGFUL:g} %)")
+            f"a trend needs {100 * MEANINGFUL:g} %)", _ran(results, "inertia"))
     return out
 
 
@@ -384,8 +420,9 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
              "conditions of the figure it mirrors.", "", "## Trends (MODEL.md section 6)", "",
              "| trend | reproduced | numbers |", "|---|---|---|"]
     for t in report["trends"]:
-        verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**"}[t["reproduced"]]
-        lines.append(f"| {t['trend']} | {verdict} | {t['numbers']} |")
+        verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**",
+                   NOT_JUDGED: NOT_JUDGED}[t["reproduced"]]
+        lines.append(f"| {t['trend']} | {verdict} | {_cell(t['numbers'])} |")
     for axis in axes:
         rows = [r for r in results if r["axis"] == axis.name]
         lines += ["", f"## {axis.name} (Fig. {axis.figure}): {axis.quantity}", "", axis.note, "",
@@ -399,7 +436,8 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
                                                              "mean_w", "mean_tau"))
                 lines.append(f"| {r['x']:g} | {cells} | ok |")
             else:
-                lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {res.get('error')} ({res.get('where')}) |")
+                lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {_cell(res.get('error'))} "
+                             f"({_cell(res.get('where'))}) |")
         reported = dict(axis.reported)
         if axis.name == "stiffness_measured":
             reported.update(measured_amplitudes())
@@ -408,10 +446,16 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
                 f"{k} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts) for k, pts in reported.items())]
         _plot(out / f"sweep_{axis.name}.png", axis, rows, reported)
     if failed:
-        lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {r['result'].get('error')} "
-                                                f"({r['result'].get('where')})" for r in failed]
+        lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {_cell(r['result'].get('error'))} "
+                                                f"({_cell(r['result'].get('where'))})" for r in failed]
     (out / "sweep.md").write_text("\n".join(lines) + "\n")
     return [out / "sweep.md", out / "sweep.json"]
+
+
+def _cell(text) -> str:
+    """``text`` on one line for a Markdown table cell: its lines joined (a multi-line
+    error would end the table), pipes escaped."""
+    return " ".join(line.strip() for line in str(text).splitlines() if line.strip()).replace("|", "\\|")
 
 
 def _range(v) -> str:
