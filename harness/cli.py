@@ -473,6 +473,10 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise UserError(str(error)) from None
     if stop is not None and not (math.isfinite(stop) and stop > 0):
         raise UserError(f"--stop {stop}: must be > 0 s")
+    try:
+        sweeps.check(chosen, scene, stop, list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
     show_progress = sys.stderr.isatty() if progress is None else progress
     _claim_out(out)

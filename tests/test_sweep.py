@@ -167,7 +167,7 @@ def test_lever_sweep_refuses_a_stop_within_the_transient(tmp_path):
     assert result.exit_code == 2, result.output
     assert "--stop 0.5 s" in result.output and "experiment.transient = 2 s" in result.output
     assert "allowed: --stop > 2 s" in result.output
-    assert not (tmp_path / "s" / "cases.jsonl").exists()
+    assert not (tmp_path / "s").exists()         # refused before the output folder is claimed
 
 
 def test_lever_sweep_refuses_an_unknown_axis():

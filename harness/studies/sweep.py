@@ -175,11 +175,7 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
 def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_dir) -> dict:
     axes = axes or default_axes()
     out = Path(out or RESULTS / "sweep")
-    # Refuse a bad scene or assignment before anything runs.
-    spec = scenes.load(scene).with_overrides(list(extra or []))
-    cases = plan(axes, scene, stop, extra, fmu_dir)
-    for case in cases:
-        _check_experiment(spec.with_overrides(case["overrides"]).experiment, stop)
+    cases = check(axes, scene, stop, extra, fmu_dir)
     fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
                    "extra": list(extra or []), "physics": physics_hash()}
     log = CaseLog(out, fingerprint, resume=resume)
@@ -202,6 +198,17 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
     write(out, axes, report)
     return report
+
+
+def check(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, extra: list[str] | None = None,
+          fmu_dir: Path = FMUS) -> list[dict]:
+    """The sweep's cases (``plan``), each checked as a run would check it: a bad scene,
+    assignment or experiment is a ``SceneError`` before anything runs."""
+    spec = scenes.load(scene).with_overrides(list(extra or []))
+    cases = plan(axes, scene, stop, extra, fmu_dir)
+    for case in cases:
+        _check_experiment(spec.with_overrides(case["overrides"]).experiment, stop)
+    return cases
 
 
 def _check_experiment(e: scenes.Experiment, stop: float | None) -> None:
@@ -533,4 +540,4 @@ def thin(axes: list[Axis], every: int) -> list[Axis]:
             for a in axes]
 
 
-__all__ = ["Axis", "default_axes", "plan", "run_case", "sweep", "trends", "select", "thin"]
+__all__ = ["Axis", "default_axes", "plan", "check", "run_case", "sweep", "trends", "select", "thin"]
