@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.formats import plotting
 from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
@@ -469,42 +470,62 @@ def _range(v) -> str:
     return f"{v[0]:g}-{v[1]:g}" if isinstance(v, (tuple, list)) else f"{v:g}"
 
 
-def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+#: each column of a sweep's plot: the quantity, its label, its unit
+PLOT_COLUMNS = (("w", "speed", "rad/s"), ("a", "acceleration", "rad/s^2"), ("tau", "torque", "N*m"))
 
+
+def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
+    """One column per quantity (and the means for the load and inertia axes): the model's
+    amplitudes, its dA = A2 - A1, and what the monograph reports in a row of its own - the
+    printed values are 2-10 times the model's, and on shared axes they flatten its curves."""
+    plt = plotting.pyplot()
     ok = sorted((r for r in rows if r["result"].get("status") == "ok"), key=lambda r: r["x"])
     x = np.array([r["x"] for r in ok])
-    panels = [("w", "speed amplitude [rad/s]"), ("a", "acceleration amplitude [rad/s^2]"),
-              ("tau", "torque amplitude [N*m]")]
-    fig, grid = plt.subplots(2, 3, figsize=(13, 7))
-    for col, (q, label) in enumerate(panels):
-        ax = grid[0, col]
+    value = lambda key: [r["result"][key] for r in ok]  # noqa: E731
+    columns = list(PLOT_COLUMNS) + ([("mean", "mean", "")] if axis.name in ("load", "inertia") else [])
+    shown_reported = any(reported.get(f"{kind}_{q}{i}") for kind, i in (("A", 1), ("A", 2), ("dA", ""))
+                         for q, _, _ in PLOT_COLUMNS)
+    nrows = 3 if shown_reported else 2
+    fig, grid = plt.subplots(nrows, len(columns), figsize=(4.6 * len(columns), 2.9 * nrows + 0.8), squeeze=False,
+                             sharex=True, layout="constrained")
+    for col, (q, label, unit) in enumerate(columns):
+        top, middle = grid[0, col], grid[1, col]
+        if q == "mean":
+            top.plot(x, value("mean_w"), "-o", color="tab:purple", label="model mean w")
+            top.set_ylabel("mean speed [rad/s]")
+            middle.plot(x, value("mean_tau"), "-o", color="tab:brown", label="model mean torque")
+            middle.set_ylabel("mean torque [N*m]")
+            # the printed means are on the model's scale: drawn on its panels
+            _overlay(top, reported.get("mean_w"), "reported mean w", "k")
+            _overlay(middle, reported.get("mean_tau"), "reported mean torque", "k")
+            if shown_reported:
+                grid[2, col].axis("off")
+            continue
         for i, style in ((1, "-o"), (2, "--s")):
-            key = f"A_{q}{i}"
-            ax.plot(x, [r["result"][key] for r in ok], style, label=f"model {('drive', 'driven')[i - 1]}")
-            _overlay(ax, reported.get(key), f"reported {('drive', 'driven')[i - 1]}", ("k", "tab:red")[i - 1])
-        ax.set_ylabel(label)
-        ax.legend(fontsize=7)
-        ax = grid[1, col]
-        key = f"dA_{q}"
-        ax.plot(x, [r["result"][key] for r in ok], "-o", color="tab:green", label="model A2 - A1")
-        _overlay(ax, reported.get(key), "reported", "k")
-        ax.axhline(0, color="0.6", lw=0.8)
-        ax.set_ylabel(f"dA {q}")
-        ax.legend(fontsize=7)
-    if axis.name in ("load", "inertia"):
-        ax = grid[1, 2].twinx()
-        ax.plot(x, [r["result"]["mean_w"] for r in ok], ":", color="tab:purple", label="model mean w")
-        _overlay(ax, reported.get("mean_w"), "reported mean w", "tab:purple")
-        ax.set_ylabel("mean speed [rad/s]", color="tab:purple")
-        ax.legend(fontsize=7, loc="lower right")
-    for ax in grid.flat:
+            top.plot(x, value(f"A_{q}{i}"), style, label=f"model {('drive', 'driven')[i - 1]}")
+        top.set_ylabel(f"{label} amplitude A [{unit}]")
+        middle.plot(x, value(f"dA_{q}"), "-o", color="tab:green", label="model dA = A2 - A1")
+        middle.axhline(0, color="0.6", lw=0.8)
+        middle.set_ylabel(f"dA {label} [{unit}]")
+        if shown_reported:
+            bottom = grid[2, col]
+            for key, legend, color in ((f"A_{q}1", "reported A drive", "k"),
+                                       (f"A_{q}2", "reported A driven", "tab:red"),
+                                       (f"dA_{q}", "reported dA", "tab:green")):
+                _overlay(bottom, reported.get(key), legend, color)
+            bottom.set_ylabel(f"monograph's {label} [{unit}]")
+    for row, axes_row in enumerate(grid):
+        for ax in axes_row:
+            ax.grid(alpha=0.3)
+            if ax.axison and not ax.has_data():
+                ax.text(0.5, 0.5, "nothing reported" if row == 2 else f"no case ran ({len(rows)} failed)",
+                        transform=ax.transAxes, ha="center", va="center", color="0.5")
+    for row in grid:
+        plotting.row_legend(row, fontsize=7)
+    for ax in grid[-1]:
         ax.set_xlabel(axis.quantity)
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}", fontsize=9)
-    fig.tight_layout()
+    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}" + ("" if not shown_reported else
+                 "\nthe monograph's values in the bottom row, on their own scale"), fontsize=9)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
