@@ -473,6 +473,10 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise UserError(str(error)) from None
     if stop is not None and not (math.isfinite(stop) and stop > 0):
         raise UserError(f"--stop {stop}: must be > 0 s")
+    try:
+        sweeps.check(chosen, scene, stop, list(assignments))
+    except scenes.SceneError as error:
+        raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
     show_progress = sys.stderr.isatty() if progress is None else progress
     _claim_out(out)
@@ -486,9 +490,11 @@ def sweep_command(axes, scene, assignments, stop, thin, workers, dask_address, n
         raise click.ClickException(f"the sweep could not run: {error}") from None
     failed = [c for c in report["cases"] if c["result"].get("status") != "ok"]
     for t in report["trends"]:
-        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced"}[t["reproduced"]]
+        verdict = {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced",
+                   sweeps.NOT_JUDGED: sweeps.NOT_JUDGED}[t["reproduced"]]
         click.echo(f"  {verdict:14s}  {t['trend']}" + (f" (holds for {', '.join(t['holds_for'])})"
-                                                       if t["reproduced"] == "partly" else ""))
+                                                       if t["reproduced"] == "partly" else "")
+                   + (f" ({t['numbers']})" if t["reproduced"] == sweeps.NOT_JUDGED else ""))
     click.echo(f"{len(report['cases']) - len(failed)} cases ok, {len(failed)} failed; written: {out / 'sweep.md'}")
     for c in failed:
         click.echo(f"  failed: {c['axis']} = {c['x']:g}: {c['result'].get('error')}", err=True)
@@ -564,9 +570,10 @@ def hosts(scene, host_names, assignments, step, repeats, fmu_dir, native_env, ou
     click.echo(f"written: {folder / 'hosts.md'}, {folder / 'hosts.json'}")
 
 
-def _export(scene, assignments, out, folder: str, suffix: str, export):
+def _export(scene, assignments, out, folder: str, suffix: str, export, how_to_run: dict | None = None):
     """Write SCENE (with the --set overrides) with ``export(spec, out, fmu_dir)`` to OUT,
-    by default results/<folder>/<scene>.<suffix>."""
+    by default results/<folder>/<scene>.<suffix>; then say what each engine in
+    ``how_to_run`` (engine -> how, ARCHIVE standing for the file) needs to run it."""
     from harness.engine.system import SceneInvalid
 
     spec = _scene(scene, assignments)
@@ -577,6 +584,10 @@ def _export(scene, assignments, out, folder: str, suffix: str, export):
     except SceneInvalid as error:
         raise UserError(str(error)) from None
     click.echo(f"written: {path}")
+    if how_to_run:
+        click.echo("runs with its parameter values in:")
+        for engine, how in how_to_run.items():
+            click.echo(f"  {engine + ':':10s} {how.replace('ARCHIVE', str(path))}")
 
 
 def _export_command(name: str, written: str, default: str):
@@ -595,11 +606,16 @@ def _export_command(name: str, written: str, default: str):
 @_export_command("export-ssp", "archive", "results/ssp/<scene>.ssp")
 def export_ssp(scene, assignments, out):
     """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
-    descriptions) and each component's parameter set (.ssv); it runs in fmpy.ssp, in
-    libcosim and in `lever run`."""
+    descriptions), each component's parameter set (.ssv, bound to it) and all of them in
+    one set with qualified names (resources/qualified/parameters.ssv).  With its values it
+    runs in `lever run ARCHIVE` and libcosim (they read the bindings), in ecos with
+    `--parameterSet scene` (ecos applies only the set it is told to), and in fmpy.ssp
+    only with `parameter_set=read_ssv(ARCHIVE, resource='resources/qualified/parameters.ssv')`:
+    fmpy 0.3's simulate_ssp applies no binding of the SSD and, without that argument, runs
+    every FMU on its defaults without a word."""
     from harness.formats import ssp
 
-    _export(scene, assignments, out, "ssp", "ssp", ssp.export)
+    _export(scene, assignments, out, "ssp", "ssp", ssp.export, ssp.HOW_TO_RUN)
 
 
 @_export_command("export-container", "FMU", "results/container/<scene>.fmu")

@@ -278,7 +278,7 @@ def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
                                            "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
     for name in ("report.md", "summary.json", "traces.csv", "reference.csv", "speeds.png", "torques.png",
-                 "accelerations.png", "transfer_function.png", "spectrum.png", "vs_reference.png", "revolution.png",
+                 "accelerations.png", "u12_over_angle.png", "spectrum.png", "vs_reference.png", "revolution.png",
                  "revolutions.png"):
         path = out / name
         assert path.exists() and path.stat().st_size > 0, name

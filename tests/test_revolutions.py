@@ -78,7 +78,7 @@ def test_the_plots_over_the_angle_show_the_last_revolutions():
     views = report.angle_views(spec, t, traces)
     assert views["revolutions"]["count"] == 1 and views["revolution"]["count"] == 1
     spec, t, traces = _synthetic_run(0.5)
-    assert report.angle_views(spec, t, traces) == {"revolution": None, "revolutions": None}
+    assert report.angle_views(spec, t, traces) == {"revolution": None, "revolutions": None, "u12": None}
 
 
 def test_the_plot_files_over_the_angle(tmp_path):

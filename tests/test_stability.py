@@ -262,7 +262,9 @@ def test_lever_stability_runs_and_resumes(tmp_path):
     first = runner.invoke(main, ARGS + ["--h-omega", "0.05", "--h-omega", "0.5", "--jobs", "1", "--out", str(tmp_path)])
     assert first.exit_code == 0, first.output
     assert "4 cases (0 already done)" in first.output
-    assert (tmp_path / "stability_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    png = (tmp_path / "stability_map.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert int.from_bytes(png[16:20], "big") == round(2 * 5.2 * 110)     # a panel a master, none blank beside
     assert len((tmp_path / "stability.csv").read_text().splitlines()) == 1 + 4      # header + the four cases
     log = [json.loads(line) for line in (tmp_path / "cases.jsonl").read_text().splitlines()[1:]]
     classes = {entry["key"].split("|")[0] + "@" + entry["key"].split("|")[3]: entry["result"]["class"] for entry in log}

@@ -62,24 +62,112 @@ def _row(axis, x, **values):
     return {"axis": axis, "x": x, "result": {"status": "ok", **values}}
 
 
-def test_trend_verdicts_follow_the_numbers():
-    amplitudes = lambda k: {q: v * k for q, v in (("A_w1", 1), ("A_w2", 2), ("A_a1", 1), ("A_a2", 2),  # noqa: E731
-                                                   ("A_tau1", 1), ("A_tau2", 2))}
-    results = [_row("load", x, **amplitudes(x ** 2), mean_w=40 - x, mean_tau=x) for x in (1.0, 2.0, 3.0)]
-    results += [_row("stiffness", x, **amplitudes(1.0), dA_w=1 / x, dA_a=x, dA_tau=1 / x) for x in (1.0, 2.0)]
-    axes = [a for a in sweeps.default_axes() if a.name in ("load", "stiffness")]
-    verdicts = {t["trend"]: t for t in sweeps.trends(axes, results)}
-    assert verdicts["the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's"][
-        "reproduced"] == "yes"
-    assert verdicts["fluctuation amplitudes grow non-linearly with load"]["reproduced"] == "yes"
-    assert verdicts["mean speed falls with load"]["reproduced"] == "yes"
-    stiff = verdicts["a stiffer elastic element shrinks the drive/driven amplitude difference (dA = A2 - A1)"]
+XS = (1.0, 2.0, 3.0, 4.0)
+AMPLITUDES = ("A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2")
+
+
+def _case(axis, x, **values):
+    """A case that ran, with every quantity a trend reads (drive below driven, flat means)."""
+    base = {"A_w1": 1.0, "A_w2": 2.0, "A_a1": 1.0, "A_a2": 2.0, "A_tau1": 1.0, "A_tau2": 2.0,
+            "mean_w": 30.0, "mean_tau": 100.0, "dA_w": 1.0, "dA_a": 1.0, "dA_tau": 1.0}
+    return _row(axis, x, **{**base, **values})
+
+
+def _grow(f):
+    """Amplitudes f(x), the driven shaft's twice the drive shaft's."""
+    return lambda x: {q: f(x) * (2.0 if q.endswith("2") else 1.0) for q in AMPLITUDES}
+
+
+def _dA(f):
+    return lambda x: {"dA_w": f(x), "dA_a": f(x), "dA_tau": f(x)}
+
+
+#: each verdict of the trend report: (its axis, its title's start, values of a case at x
+#: that make it true, values that make it false)
+VERDICTS = {
+    "drive below driven": ("load", "the drive shaft's speed",
+                           lambda x: {}, lambda x: {"A_w1": 3.0, "A_a1": 3.0, "A_tau1": 3.0} if x == 3.0 else {}),
+    "non-linear with load": ("load", "fluctuation amplitudes grow non-linearly with load",
+                             _grow(lambda x: x ** 2), _grow(lambda x: x)),
+    "non-linear with alpha": ("misalignment", "fluctuation amplitudes grow non-linearly with alpha",
+                              _grow(lambda x: x ** 2), _grow(lambda x: 5 - x)),
+    "mean speed falls": ("load", "mean speed falls with load",
+                         lambda x: {"mean_w": 40 - x}, lambda x: {"mean_w": 40 + x}),
+    "mean torque rises": ("load", "mean torque rises with load",
+                          lambda x: {"mean_tau": 100 * x}, lambda x: {"mean_tau": 100 / x}),
+    # the sweep's own numbers: dA_tau 0.0315 -> -0.865 over stiffness grows in size
+    "stiffer shrinks |dA|": ("stiffness", "a stiffer elastic element shrinks",
+                             _dA(lambda x: 1 / x), _dA(lambda x: 0.0315 - 0.2989 * (x - 1))),
+    # ... and -0.899 -> -0.552 over damping shrinks
+    "more damped shrinks |dA|": ("damping", "a more damped elastic element shrinks",
+                                 _dA(lambda x: -0.899 + 0.1157 * (x - 1)), _dA(lambda x: x)),
+    "heavier I2": ("inertia", "a heavier driven shaft (I2)",
+                   lambda x: {"mean_w": 40 - x, "mean_tau": 100 + x},
+                   lambda x: {"mean_w": 40 - 1e-6 * x, "mean_tau": 100 + 1e-6 * x}),
+}
+
+
+def _judge(axis, values):
+    results = [_case(axis, x, **values(x)) for x in XS]
+    return {t["trend"]: t for t in sweeps.trends(sweeps.select([axis]), results)}
+
+
+def _one(verdicts, title):
+    (found,) = [t for name, t in verdicts.items() if name.startswith(title)]
+    return found
+
+
+@pytest.mark.parametrize("verdict", list(VERDICTS))
+def test_each_trend_verdict_is_yes_on_a_true_case_and_no_on_a_false_one(verdict):
+    axis, title, true, false = VERDICTS[verdict]
+    assert _one(_judge(axis, true), title)["reproduced"] == "yes"
+    assert _one(_judge(axis, false), title)["reproduced"] == "no"
+
+
+def test_a_difference_that_shrinks_in_part_is_partly_reproduced():
+    values = lambda x: {"dA_w": 1 / x, "dA_a": x, "dA_tau": -1 / x}  # noqa: E731
+    stiff = _one(_judge("stiffness", values), "a stiffer elastic element shrinks")
     assert stiff["reproduced"] == "partly" and stiff["holds_for"] == ["dA_w", "dA_tau"]
-    # linear growth is not the monograph's non-linear growth
-    linear = [_row("load", x, **amplitudes(x), mean_w=1.0, mean_tau=x) for x in (1.0, 2.0, 3.0)]
-    verdicts = {t["trend"]: t for t in sweeps.trends(axes[:1], linear)}
-    assert verdicts["fluctuation amplitudes grow non-linearly with load"]["reproduced"] == "no"
-    assert verdicts["mean speed falls with load"]["reproduced"] == "no"
+
+
+@pytest.mark.parametrize("verdict", list(VERDICTS))
+def test_no_verdict_from_too_few_cases(verdict):
+    axis, title, true, _ = VERDICTS[verdict]
+    results = [_case(axis, x, **true(x)) for x in XS]
+    for r in results[1:3]:
+        r["result"] = {"status": "failed", "error": "SceneInvalid: not valid:\n  - a | b"}
+    found = _one({t["trend"]: t for t in sweeps.trends(sweeps.select([axis]), results)}, title)
+    assert found["reproduced"] == sweeps.NOT_JUDGED
+    assert found["numbers"].startswith(f"not judged: 2 of {len(XS)} cases ran")
+
+
+def test_a_verdict_on_the_cases_that_ran_says_how_many_did():
+    axis, title, true, _ = VERDICTS["mean speed falls"]
+    results = [_case(axis, x, **true(x)) for x in XS]
+    results[1]["result"] = {"status": "failed", "error": "boom"}
+    found = _one({t["trend"]: t for t in sweeps.trends(sweeps.select([axis]), results)}, title)
+    assert found["reproduced"] == "yes" and found["numbers"].endswith(f"(3 of {len(XS)} cases ran)")
+
+
+def test_a_failed_cases_multi_line_error_stays_in_its_table_cell(tmp_path):
+    axis = sweeps.select(["inertia"])
+    results = [{"axis": "inertia", "x": x, "result": {"status": "failed", "where": "system.py:1 in f",
+                                                      "error": "SceneInvalid: not valid:\n  - a | b\n  - c"}}
+               for x in XS]
+    sweeps.write(tmp_path, axis, {"scene": "kavz685", "cases": results, "trends": sweeps.trends(axis, results)})
+    text = (tmp_path / "sweep.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| 1 |")]
+    assert rows == ["| 1 | - | - | - | - | - | - | - | - | failed: SceneInvalid: not valid: - a \\| b - c "
+                    "(system.py:1 in f) |"]
+    assert "not judged: 0 of 4 cases ran" in text and "move by 0" not in text
+
+
+def test_lever_sweep_refuses_a_stop_within_the_transient(tmp_path):
+    result = CliRunner().invoke(main, ["sweep", "--axis", "inertia", "--stop", "0.5", "--out", str(tmp_path / "s")])
+    assert result.exit_code == 2, result.output
+    assert "--stop 0.5 s" in result.output and "experiment.transient = 2 s" in result.output
+    assert "allowed: --stop > 2 s" in result.output
+    assert not (tmp_path / "s").exists()         # refused before the output folder is claimed
 
 
 def test_lever_sweep_refuses_an_unknown_axis():

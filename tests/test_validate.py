@@ -247,3 +247,21 @@ def test_measured_option_checks_a_grade(tmp_path):
     # a table without its pair is bad input (exit 2), not a grade that misses its target (exit 1)
     result = CliRunner().invoke(main, ["validate", "--measured", grade[0], "--out", str(tmp_path / "lonely")])
     assert result.exit_code == 2 and "no driven-shaft table to pair with" in result.output
+
+
+def test_the_cross_check_verdict_says_what_its_band_cannot_see():
+    """A ripple faster than the cross-check's window, at the wrong phase, passes its band; the
+    verdict says so with the window and the margins, and the lever figures fail it."""
+    import numpy as np
+
+    from harness.judges import validation as judge
+
+    t = np.linspace(0.0, 10.0, 10001)
+    ref = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t)}
+    wrong = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t + 2.0)}
+    crosscheck, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["cross-check"])
+    assert crosscheck.passed
+    (note,) = [n for n in crosscheck.notes if n.startswith("what the cross-check band can see")]
+    assert "window of 0.2 s" in note and "tau2 +-1.2" in note
+    lever, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["lever"])
+    assert not lever.passed and not any(n.startswith("what the") for n in lever.notes)

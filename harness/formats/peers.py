@@ -18,8 +18,8 @@ from start to stop, and a failed run keeps the rows recorded before the failure.
 * ``fmpy-ssp`` - fmpy's own multi-FMU stepper, ``fmpy.ssp.simulate_ssp``, on the scene
   exported as an SSP archive (``harness.formats.ssp``), as an fmpy user runs an SSP.  Its
   limitations (above) are worked around where that is honest and refused where not: the
-  parameters are read from the archive's parameter sets and passed as its
-  ``parameter_set``; a String parameter that differs from the FMU's default is refused
+  parameters are the archive's qualified set (``harness.formats.ssp.QUALIFIED_SET``) passed
+  as its ``parameter_set``; a String parameter that differs from the FMU's default is refused
   (it cannot be set); the zero start of the connected inputs stays (the first step sees
   no torque); rows are labelled with the end of the step that produced them.  Each
   component's outputs are read right after its own ``doStep``, so the coupling's torques
@@ -351,21 +351,17 @@ def _set_fmpy_parameters(fmu, variables: dict, parameters: dict):
 
 def _simulate_fmpy_ssp(setup: _SceneSetup, step: float) -> RunResult:
     from fmpy.ssp.simulation import simulate_ssp
-    from fmpy.ssp.ssd import Parameter, ParameterSet
+    from fmpy.ssp.ssd import read_ssv
 
     from harness.formats import ssp
 
     scene, e = setup.scene, setup.scene.experiment
     refused = []
-    parameters = []
     for comp, values in setup.parameters.items():
         for name, value in values.items():
             var = setup.variables[comp][name]
-            if var.type == "String":
-                if str(value) != (var.start or ""):
-                    refused.append(f"{comp}.{name} = {value!r} (the FMU's default is {var.start!r})")
-                continue
-            parameters.append(Parameter(name=f"{comp}.{name}", type=var.type, value=value))
+            if var.type == "String" and str(value) != (var.start or ""):
+                refused.append(f"{comp}.{name} = {value!r} (the FMU's default is {var.start!r})")
     if refused:
         raise ValueError("fmpy-ssp: fmpy.ssp cannot set String parameters, and the scene sets "
                          + ", ".join(refused))
@@ -377,10 +373,13 @@ def _simulate_fmpy_ssp(setup: _SceneSetup, step: float) -> RunResult:
     failure = None
     with tempfile.TemporaryDirectory(prefix="lever-fmpy-ssp-") as scratch:
         archive = ssp.export(scene, Path(scratch) / f"{scene.name}.ssp", setup.fmu_dir)
+        # as an fmpy user runs our export: the values from its qualified set, the one form
+        # simulate_ssp applies
+        values = read_ssv(str(archive), resource=ssp.QUALIFIED_SET)
         started = clock.perf_counter()
         try:
             table = simulate_ssp(str(archive), start_time=e.start, stop_time=e.stop, step_size=step,
-                                 parameter_set=ParameterSet(name="scene", parameters=parameters))
+                                 parameter_set=values)
         except Exception as error:  # noqa: BLE001 - simulate_ssp keeps nothing of a failed run
             table = None
             failure = f"{type(error).__name__}: {error} (peer fmpy-ssp, step {step:g} s)"

@@ -7,6 +7,7 @@ import math
 
 from harness.description import kinds
 from harness.description import scene as scenes
+from harness.formats import plotting
 from harness.formats.run_files import files_line, reference_error_lines, write_run
 from harness.judges.rectifier import analyse, errors
 
@@ -173,10 +174,7 @@ def _comparison(fw: dict) -> list[str]:
 
 
 def plot(out, result, reference=None):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = plotting.pyplot()
 
     scene = result.scene
     name = kinds.rectifier(scene)
@@ -186,22 +184,21 @@ def plot(out, result, reference=None):
     elements = (("rocker", "1 rocker"), ("half_coupling", "2 half-couplings"), ("driven", "3 driven parts"),
                 ("torsion_end", "4 torsion output end"))
 
-    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True, layout="constrained")
     for ax, (quantity, unit) in zip(axes, (("angle", "rad"), ("speed", "rad/s"), ("acceleration", "rad/s^2"))):
         for prefix, label in elements:
             ax.plot(t, tr[f"{prefix}_{quantity}"], lw=0.8, label=label)
         ax.set_ylabel(f"{quantity} [{unit}]")
         ax.grid(alpha=0.3)
     axes[2].set_yscale("symlog", linthresh=200.0)
-    axes[0].legend(loc="upper right", fontsize=8, ncol=4)
+    plotting.legend_outside(axes[0])
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: kinematics of the elements (cf. the paper's Figs. 8-11)")
-    fig.tight_layout()
     fig.savefig(out / "kinematics.png", dpi=110)
     plt.close(fig)
 
     model = kinds.rectifier_model(scene)
-    fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
+    fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
     for ax, (var, gap, label) in zip(axes, (("msm_deflection", model.z1, "e = phi1 - phi2 (gap z1)"),
                                             ("torsion_twist", model.z2, "phi3 - phi4 (gap z2)"),
                                             ("mesh_deflection", model.z3, "phi4 - phi5 (gap z3)"))):
@@ -209,20 +206,19 @@ def plot(out, result, reference=None):
         ax.plot(t, tr[var], "k-", lw=0.8, label=label)
         ax.set_ylabel("[rad]")
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        plotting.legend_outside(ax)
     for k, (var, label) in enumerate((("msm_contact", "freewheel"), ("torsion_contact", "torsion splines"),
                                       ("mesh_contact", "gear mesh"), ("disc_slip", "disc slip"))):
         axes[3].plot(t, tr[var] + 3.0 * (3 - k), lw=0.8, label=f"{label} (+{3 * (3 - k)})")
     axes[3].set_ylabel("contact: +1 drive, 0 open, -1 back")
-    axes[3].legend(loc="upper right", fontsize=7, ncol=4)
+    plotting.legend_outside(axes[3])
     axes[3].grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: the gaps closing and opening")
-    fig.tight_layout()
     fig.savefig(out / "gaps.png", dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(1, 1, figsize=(11, 4))
+    fig, ax = plt.subplots(1, 1, figsize=(11, 4), layout="constrained")
     for var, label in (("rocker_torque", "T12 rocker -> half-couplings"), ("disc_torque", "through the discs"),
                        ("disc_capacity", "discs' capacity"), ("torsion_torque", "T34 torsion shaft"),
                        ("mesh_torque", "T45 gear mesh")):
@@ -230,44 +226,49 @@ def plot(out, result, reference=None):
     ax.set_ylabel("torque [N*m]")
     ax.set_xlabel("time [s]")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    plotting.legend_outside(ax)
     fig.suptitle(f"{title}: torques")
-    fig.tight_layout()
     fig.savefig(out / "torques.png", dpi=110)
     plt.close(fig)
 
     stored = tr["kinetic_energy"] + tr["elastic_energy"]
     stored = stored - stored[0]
     residual = tr["input_work"] - tr["output_work"] - stored - tr["dissipated_energy"]
-    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True, layout="constrained")
     axes[0].plot(t, tr["input_work"], lw=0.9, label="input work (rocker)")
     axes[0].plot(t, stored, lw=0.9, label="stored (kinetic + elastic)")
     axes[0].plot(t, tr["dissipated_energy"], lw=0.9, label="dissipated")
     axes[0].plot(t, tr["output_work"], lw=0.9, label="output work")
     axes[0].set_ylabel("energy [J]")
-    axes[0].legend(loc="upper left", fontsize=8)
+    plotting.legend_outside(axes[0])
     axes[0].grid(alpha=0.3)
     axes[1].plot(t, residual, "k-", lw=0.8)
     axes[1].set_ylabel("residual [J]")
     axes[1].set_xlabel("time [s]")
     axes[1].grid(alpha=0.3)
     fig.suptitle(f"{title}: energy balance, input = stored + dissipated + output + residual")
-    fig.tight_layout()
     fig.savefig(out / "energy.png", dpi=110)
     plt.close(fig)
 
     if reference is not None:
         n = min(len(t), len(reference.times))
-        fig, axes = plt.subplots(3, 1, figsize=(11, 8), sharex=True)
-        for ax, var in zip(axes, ("half_coupling_speed", "driven_speed", "torsion_torque")):
+        compared = (("half_coupling_speed", "rad/s"), ("driven_speed", "rad/s"), ("torsion_torque", "N*m"))
+        fig, axes = plt.subplots(5, 1, figsize=(11, 12), sharex=True, layout="constrained")
+        for ax, (var, unit) in zip(axes, compared):
             ax.plot(reference.times[:n], reference.traces[f"{name}.{var}"][:n], "k-", lw=1.2, label="reference")
             ax.plot(t[:n], tr[var][:n], "C1--", lw=0.8, label=f"FMU ({result.master})")
-            ax.set_ylabel(var)
+            ax.set_ylabel(f"{var} [{unit}]")
+        # the report states the error against the reference: drawn at its own scale
+        for ax, unit in zip(axes[3:], ("rad/s", "N*m")):
+            for k, (var, _) in enumerate(v for v in compared if v[1] == unit):
+                ax.plot(t[:n], tr[var][:n] - reference.traces[f"{name}.{var}"][:n], f"C{k}-", lw=0.7,
+                        label=f"error {var}")
+            ax.set_ylabel(f"error [{unit}]")
+        for ax in axes:
             ax.grid(alpha=0.3)
-            ax.legend(loc="upper right", fontsize=8)
+            plotting.legend_outside(ax)
         axes[-1].set_xlabel("time [s]")
         fig.suptitle(f"{title}: FMU against the monolithic reference")
-        fig.tight_layout()
         fig.savefig(out / "vs_reference.png", dpi=110)
         plt.close(fig)
 

@@ -540,10 +540,9 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
 def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
     """The reference, its band, the result and the samples outside the band: the whole span
     above, a close-up around the first sample outside below."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from harness.formats import plotting
 
+    plt = plotting.pyplot()
     t_ref, y_ref = reference.outputs.times, reference.outputs.signals[finding.name]
     column = next(c for c in (finding.name,) + tuple(k for k in result.traces if k.endswith("." + finding.name))
                   if c in result.traces)
@@ -551,7 +550,7 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
     first = finding.outside_times[0] if finding.outside_times else finding.max_error_time
     span = t_ref[-1] - t_ref[0]
     half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref))))
-    fig, axes = plt.subplots(2, 1, figsize=(10, 7))
+    fig, axes = plt.subplots(2, 1, figsize=(11, 7), layout="constrained")
     for ax, window in zip(axes, (None, (first - half, first + half))):
         ax.fill_between(band.t, band.low, band.high, color="tab:green", alpha=0.25, lw=0,
                         label=f"band ({tolerance.name}: +-{band.width:.3g})")
@@ -575,9 +574,8 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
         ax.set_xlabel("time [s]")
         ax.set_ylabel(finding.name)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="best")
+    plotting.legend_outside(axes[0])
     axes[0].set_title(f"{reference.name}: {finding.name} - {finding.problem}", fontsize=9)
-    fig.tight_layout()
     path = out / f"{finding.name}.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -11,7 +11,7 @@ from harness.description import kinds
 from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
-from harness.formats import rectifier_report
+from harness.formats import plotting, rectifier_report
 from harness.formats.run_files import files_line, fmt, reference_error_lines, write_run
 
 
@@ -114,14 +114,18 @@ def write_report(path: Path, summary: dict):
                 lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
     lines += ["", files_line(summary)]
     if "revolution.png" in (summary.get("files") or []):
-        lines.append(f"revolution.png and revolutions.png are over the driven shaft's angle, as the monograph draws "
-                     f"its figures: U12 and the torques over the last whole revolution, the speeds and accelerations "
-                     f"over the last {REVOLUTIONS_SHOWN}.")
+        lines.append(f"revolution.png, revolutions.png and {U12_PLOT} are over the driven shaft's angle, as the "
+                     f"monograph draws its figures: U12 and the torques over the last whole revolution, the speeds "
+                     f"and accelerations over the last {REVOLUTIONS_SHOWN}, U12 over the last {U12_REVOLUTIONS}.")
     path.write_text("\n".join(lines) + "\n")
 
 
 #: revolutions of the driven shaft in the speeds-and-accelerations view over the angle
 REVOLUTIONS_SHOWN = 3
+#: U12 over the driven shaft's angle (the coupling's transfer function, a function of the
+#: angle: over time it is a band of 60 revolutions), over its last two revolutions
+U12_PLOT = "u12_over_angle.png"
+U12_REVOLUTIONS = 2
 
 
 def driven_angle(scene, times, traces) -> np.ndarray:
@@ -147,7 +151,8 @@ def angle_views(scene, times, traces) -> dict:
     phi2 = driven_angle(scene, times, traces)
     views = {}
     for key, count, shown in (("revolution", 1, ("U12", "tau1", "tau2")),
-                              ("revolutions", REVOLUTIONS_SHOWN, ("w1", "w2", "a1", "a2"))):
+                              ("revolutions", REVOLUTIONS_SHOWN, ("w1", "w2", "a1", "a2")),
+                              ("u12", U12_REVOLUTIONS, ("U12",))):
         window = revolutions.last_revolutions(phi2, count)
         while window.stop - window.start < 2 and count > 1:
             count -= 1
@@ -166,59 +171,42 @@ def angle_views(scene, times, traces) -> dict:
 
 
 def plot(out: Path, result: RunResult, reference=None):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = plotting.pyplot()
     names = metrics.signals(result.scene)
     t = result.times
     tr = result.traces
-
-    def figure(filename, panels, title):
-        fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels)), sharex=True, squeeze=False)
-        for ax, (label, series) in zip(axes[:, 0], panels):
-            for name, legend, style, *sign in series:
-                if name in tr:
-                    ax.plot(t, (sign[0] if sign else 1.0) * tr[name], style, lw=0.8, label=legend)
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
-            ax.legend(loc="upper right", fontsize=8)
-        axes[-1, 0].set_xlabel("time [s]")
-        fig.suptitle(title)
-        fig.tight_layout()
-        fig.savefig(out / filename, dpi=110)
-        plt.close(fig)
-
+    transient = result.scene.experiment.transient
     title = f"{result.scene.name} - {result.master}, h = {result.step:g} s"
-    figure("speeds.png", [("speed [rad/s]", [(names["w1"], "w1 drive", "-"), (names["w2"], "w2 driven", "-")])], title)
-    # The drive side is plotted as the torque it transmits, -tau1, so both curves share a sign.
-    figure("torques.png", [("torque [N*m]", [(names["tau1"], "-tau1 (drive)", "-", -1.0),
-                                             (names["tau2"], "tau2 (driven)", "-")])], title)
-    figure("accelerations.png", [("acceleration [rad/s^2]", [(names["a1"], "a1 drive", "-"),
-                                                             (names["a2"], "a2 driven", "-")])], title)
-    figure("transfer_function.png", [("U12 [1]", [(names["U12"], "U12", "-")])], title)
+
+    # The drive side's torque is plotted as the torque it transmits, -tau1, so both curves share a sign.
+    for filename, quantity, unit, a, b, sign in (("speeds.png", "speed", "rad/s", "w1", "w2", 1.0),
+                                                 ("torques.png", "torque", "N*m", "tau1", "tau2", -1.0),
+                                                 ("accelerations.png", "acceleration", "rad/s^2", "a1", "a2", 1.0)):
+        if names[a] not in tr or names[b] not in tr:
+            continue
+        drive, driven = sign * np.asarray(tr[names[a]], dtype=float), np.asarray(tr[names[b]], dtype=float)
+        shown = f"-{a}" if sign < 0 else a
+        plotting.time_figure(out / filename, t, [(f"{shown} (drive)", drive), (f"{b} (driven)", driven)], quantity,
+                             unit, transient, title, (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive))
     plot_over_angle(out, result.scene, t, tr, title)
     _plot_spectrum(out, result, title, plt)
     if reference is not None:
-        fig, axes = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
+        fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
         n = min(len(t), len(reference.times))
         for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
             name = names[key]
             ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
             ax.plot(t[:n], tr[name][:n], "C1--", lw=0.8, label=f"co-simulation ({result.master})")
             ax.set_ylabel(f"{key} [{unit}]")
-            ax.grid(alpha=0.3)
-            ax.legend(loc="upper right", fontsize=8)
         for key, style in (("w1", "C0-"), ("w2", "C2-")):
             name = names[key]
             axes[3].plot(t[:n], tr[name][:n] - reference.traces[name][:n], style, lw=0.7, label=f"error {key}")
         axes[3].set_ylabel("error [rad/s]")
         axes[3].set_xlabel("time [s]")
-        axes[3].grid(alpha=0.3)
-        axes[3].legend(loc="upper right", fontsize=8)
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            plotting.legend_outside(ax)
         fig.suptitle(f"{title}: co-simulation vs reference")
-        fig.tight_layout()
         fig.savefig(out / "vs_reference.png", dpi=110)
         plt.close(fig)
 
@@ -228,31 +216,34 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
     revolution) and ``revolutions.png`` (speeds and accelerations over its last few), over
     the driven shaft's angle as the monograph's figures are; nothing when the run holds
     no whole revolution."""
-    import matplotlib.pyplot as plt
-
+    plt = plotting.pyplot()
     views = angle_views(scene, times, traces)
     panels = {"revolution.png": ("revolution", [("U12 [1]", [("U12", "U12")]),
                                                 ("torque [N*m]", [("-tau1", "-tau1 (drive)"), ("tau2", "tau2 (driven)")])]),
               "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", "w1 drive"), ("w2", "w2 driven")]),
-                                                  ("acceleration [rad/s^2]", [("a1", "a1 drive"), ("a2", "a2 driven")])])}
+                                                  ("acceleration [rad/s^2]",
+                                                   [("a1", "a1 drive"), ("a2", "a2 driven")])]),
+              U12_PLOT: ("u12", [("U12 [1]", [("U12", "U12 = dPhi/dphi2, the coupling's transfer function")])])}
     for filename, (key, rows) in panels.items():
         view = views[key]
         if view is None:
             continue
-        fig, axes = plt.subplots(len(rows), 1, figsize=(10, 2.8 * len(rows)), sharex=True, squeeze=False)
+        fig, axes = plt.subplots(len(rows), 1, figsize=(11, 1.2 + 2.8 * len(rows)), sharex=True, squeeze=False,
+                                 layout="constrained")
         for ax, (label, series) in zip(axes[:, 0], rows):
             for short, legend in series:
                 if short in view:
                     ax.plot(view["angle"], view[short], "-", lw=0.9, label=legend)
+            if key == "u12":
+                ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="1 (synchronous)")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
-            ax.legend(loc="upper right", fontsize=8)
+            plotting.legend_outside(ax)
         count = view["count"]
         axes[-1, 0].set_xlabel(f"driven shaft angle phi2 [deg] over its last {'whole revolution' if count == 1 else f'{count} whole revolutions'} "
                                f"(t = {view['t'][0]:.3f} ... {view['t'][-1]:.3f} s)")
         axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
-        fig.suptitle(title)
-        fig.tight_layout()
+        fig.suptitle(title if key != "u12" else f"{title}: U12 over the driven shaft's angle")
         fig.savefig(out / filename, dpi=110)
         plt.close(fig)
 
@@ -269,7 +260,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     if keep.sum() < 8:
         return
     rotation = float(abs(tr[names["w2"]][keep].mean()))
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True, layout="constrained")
     for ax, (name, label) in zip(axes, ((names["tau2"], "tau2, torque on the driven shaft"),
                                         (load_torque, "load torque Mc"))):
         if name not in tr:
@@ -281,11 +272,10 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
         ax.set_ylabel("amplitude [N*m]")
         ax.set_ylim(1e-4, None)
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        plotting.legend_outside(ax)
     axes[-1].set_xlim(0.0, 600.0)
     axes[-1].set_xlabel("angular frequency [rad/s]")
     fig.suptitle(f"{title}: spectrum after t = {t[0] + transient:g} s")
-    fig.tight_layout()
     fig.savefig(out / "spectrum.png", dpi=110)
     plt.close(fig)
 

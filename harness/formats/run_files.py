@@ -17,7 +17,7 @@ from harness.engine.traces import write as write_traces     # one writer: a stre
 #: that this run does not write again are removed, so a folder never mixes two runs
 RUN_FILES = ("traces.csv", "reference.csv", "summary.json", "report.md", "speeds.png", "torques.png",
              "accelerations.png", "transfer_function.png", "vs_reference.png", "kinematics.png", "gaps.png",
-             "energy.png", "revolution.png", "revolutions.png", "spectrum.png")
+             "energy.png", "revolution.png", "revolutions.png", "spectrum.png", "u12_over_angle.png")
 
 
 def earlier_run_files(out: Path) -> list[Path]:

@@ -14,6 +14,12 @@ An exported archive holds
   libcosim reads them), every one named ``PARAMETER_SET``: ecos gathers the sets of one
   name across components and applies the one named on its command line
   (``--parameterSet``), so sets named per component could never all be applied;
+* ``resources/qualified/parameters.ssv``: the same values in one set, each named
+  ``component.parameter`` and bound to nothing: what an engine that ignores the SSD's
+  bindings and takes one parameter set as an argument applies - fmpy.ssp 0.3.x, whose
+  ``simulate_ssp`` reads the bindings but applies only its ``parameter_set`` argument
+  (``QUALIFIED_SET``; a String equal to the FMU's default is left out of it, as there is
+  nothing to set and fmpy.ssp cannot set Strings);
 * an annotation ``org.lever-cosim.scene`` with what SSP has no place for (master,
   transient, recorded variables, features, notes), so an exported scene loads back
   as the same scene.  An SSP from elsewhere loads too: it records its connected outputs
@@ -43,6 +49,17 @@ LEVER = "https://lever-cosim.org/ssp/scene"
 LEVER_ANNOTATION = "org.lever-cosim.scene"
 #: the name of every component's parameter set in an exported archive (see above)
 PARAMETER_SET = "scene"
+#: the member holding every component's values with qualified names (see above)
+QUALIFIED_SET = "resources/qualified/parameters.ssv"
+#: what each engine we name needs to run an exported archive with its values (the export
+#: command and docs/hosts.md say it)
+HOW_TO_RUN = {
+    "lever": "lever run ARCHIVE (reads the bindings)",
+    "libcosim": "CosimExecution.from_ssp_file('ARCHIVE', step_ns) (reads the bindings)",
+    "ecos": f"ecos simulate ARCHIVE --parameterSet {PARAMETER_SET} (ecos applies only the set it is told to)",
+    "fmpy.ssp": f"simulate_ssp('ARCHIVE', ..., parameter_set=fmpy.ssp.ssd.read_ssv('ARCHIVE', "
+                f"resource='{QUALIFIED_SET}')) (simulate_ssp applies no binding of the SSD, only this argument)",
+}
 OSP_ANNOTATION = "com.opensimulationplatform"
 # libcosim reads the SSD with fixed prefixes (boost property trees know no namespaces).
 PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
@@ -98,7 +115,8 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     files = {"SystemStructure.ssd": _ssd(scene, descriptions, sources)}
     for name, spec in scene.components.items():
-        files[f"resources/{name}.ssv"] = _ssv(name, spec, descriptions[spec.fmu])
+        files[f"resources/{name}.ssv"] = _ssv(spec.parameters, descriptions[spec.fmu], name)
+    files[QUALIFIED_SET] = _qualified_ssv(scene, descriptions)
     tmp = out.with_name(out.name + ".tmp")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for member, text in files.items():
@@ -184,14 +202,38 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
     return _xml(root)
 
 
-def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
+def _qualified_ssv(scene: scenes.Scene, descriptions: dict) -> bytes:
+    """Every component's values in one set named ``component.parameter`` (``QUALIFIED_SET``)."""
+    root = _parameter_set("qualified")
+    for name, spec in scene.components.items():
+        md = descriptions[spec.fmu]
+        variables = {v.name: v for v in md.modelVariables}
+        values = {param: raw for param, raw in spec.parameters.items()
+                  if not (variables[param].type == "String" and str(raw) == (variables[param].start or ""))}
+        _parameters(root, values, md, name, qualify=True)
+    return _xml(root)
+
+
+def _parameter_set(name: str) -> ET.Element:
+    root = ET.Element(_q("ssv", "ParameterSet"), {"version": "1.0", "name": name})
+    ET.SubElement(root, _q("ssv", "Parameters"))
+    return root
+
+
+def _ssv(values: dict, md, component: str) -> bytes:
+    root = _parameter_set(PARAMETER_SET)
+    _parameters(root, values, md, component)
+    return _xml(root)
+
+
+def _parameters(root: ET.Element, values: dict, md, component: str, qualify: bool = False) -> None:
     variables = {v.name: v for v in md.modelVariables}
-    root = ET.Element(_q("ssv", "ParameterSet"), {"version": "1.0", "name": PARAMETER_SET})
-    parameters = ET.SubElement(root, _q("ssv", "Parameters"))
-    for param, raw in spec.parameters.items():
+    parameters = root.find(_q("ssv", "Parameters"))
+    for param, raw in values.items():
         var = variables[param]
-        value = converted(var, raw, f"{name}.{param}")
-        parameter = ET.SubElement(parameters, _q("ssv", "Parameter"), {"name": param})
+        value = converted(var, raw, f"{component}.{param}")
+        parameter = ET.SubElement(parameters, _q("ssv", "Parameter"),
+                                  {"name": f"{component}.{param}" if qualify else param})
         if var.type == "Real":
             attrs = {"value": _number(value)}
             if var.unit:
@@ -203,7 +245,6 @@ def _ssv(name: str, spec: scenes.ComponentSpec, md) -> bytes:
             ET.SubElement(parameter, _q("ssv", "Boolean"), {"value": "true" if value else "false"})
         else:
             ET.SubElement(parameter, _q("ssv", "String"), {"value": str(value)})
-    return _xml(root)
 
 
 # -- load ---------------------------------------------------------------------------------------

@@ -306,7 +306,25 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
         finding, b = compare_signal(signal, times, traces[column], reference_times, reference[signal], tolerance)
         findings.signals.append(finding)
         bands[signal] = b
+    if tolerance.cross_check and findings.signals:
+        findings.notes.append(cross_check_blind_spot(tolerance, reference_times, findings.signals))
     return findings, bands
+
+
+def cross_check_blind_spot(tolerance: Tolerance, reference_times: np.ndarray, signals: list[SignalFinding]) -> str:
+    """What the cross-check band can and cannot see on this reference: its running window
+    makes it the envelope of anything with a period shorter than the window, and its margin
+    hides any change smaller than the margin."""
+    span = float(reference_times[-1] - reference_times[0])
+    window = tolerance.dx * span / (tolerance.num - 1)
+    margins = ", ".join(f"{s.name} +-{s.band_width:.3g}" for s in signals)
+    return (f"what the {tolerance.name} band can see: it follows the reference through a running window of "
+            f"{window:.3g} s ({tolerance.dx} of {tolerance.num} points over the span), so anything with a shorter "
+            f"period (above {2 * math.pi / window:.3g} rad/s: a shaft's rotation, a load's tones) is judged only "
+            f"against its envelope - a ripple of another phase, frequency or shape passes; and its margin "
+            f"({100 * tolerance.dy:g} % of each signal's range: {margins}) passes any change smaller than that. "
+            "It sees a mean or a slow motion moved by more than the margin; the default 'lever' figures judge "
+            "the ripple")
 
 
 def fmpy_max_outside(times: np.ndarray, traces: dict, reference_times: np.ndarray, reference: dict) -> float:

@@ -697,30 +697,33 @@ def markdown(result: dict, rows: list[dict]) -> str:
 
 
 def plot(path: Path, result: dict) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from harness.formats import plotting
 
-    fig, ax = plt.subplots(figsize=(9, 6))
+    plt = plotting.pyplot()
+    fig, ax = plt.subplots(figsize=(11, 6), layout="constrained")
     groups: dict[str, list[Case]] = {}
     for case in result["cases"]:
         key = case.engine if case.kind != "monolithic" else "monolithic (scipy DOP853)"
         groups.setdefault(key, []).append(case)
     for name, group in groups.items():
-        points = sorted((c.wall, c.errors["tau_rms"]) for c in group if c.stable and "tau_rms" in c.errors)
+        points = sorted((c.wall, c.errors["tau_rms"], c.step) for c in group if c.stable and "tau_rms" in c.errors)
         if not points:
             continue
         kind = group[0].kind
         style = {"master": "-o", "peer": "--s", "monolithic": ":^"}[kind]
-        ax.loglog([p[0] for p in points], [100 * p[1] for p in points], style, label=name, markersize=4)
+        line, = ax.loglog([p[0] for p in points], [100 * p[1] for p in points], style, label=name, markersize=4)
+        if kind != "monolithic":       # each point's step, as the report's tables list them
+            for wall, error, step in points:
+                if step:
+                    ax.annotate(f"{1e3 * step:g}", (wall, 100 * error), textcoords="offset points", xytext=(3, 3),
+                                fontsize=6, color=line.get_color())
     target = result["claims"]["target_error"]
-    ax.axhline(100 * target, color="grey", lw=0.8, ls="--")
+    ax.axhline(100 * target, color="grey", lw=0.8, ls="--", label=f"target error {100 * target:g} %")
     ax.set_xlabel("run time of the stepping loop [s] (median)")
     ax.set_ylabel("RMS torque error [% of mean torque]")
-    ax.set_title(f"Work-precision, scene {result['scene']}")
+    ax.set_title(f"Work-precision, scene {result['scene']} (numbers: the communication step in ms)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    plotting.legend_outside(ax)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

@@ -570,14 +570,13 @@ def _settled_of(g: dict) -> float:
 
 def _plot(path: Path, drive: Table, driven: Table, prediction: Prediction, per_cycle, numbers: dict,
           alternative: Prediction | None = None):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from harness.formats import plotting
 
+    plt = plotting.pyplot()
     path.parent.mkdir(parents=True, exist_ok=True)
     angles = np.append(drive.angles_deg, 360.0)
     close = lambda y: np.append(y, y[0])  # noqa: E731
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = plt.subplots(figsize=(11, 4.8), layout="constrained")
     for k, cycle in enumerate(drive.cycles):
         ax.plot(angles, close(cycle), color="0.7", lw=0.8, marker=".", label="measured drive, cycles" if k == 0 else None)
     ax.plot(angles, close(drive.mean_curve), color="k", lw=2, marker="o", label="measured drive, mean")
@@ -597,8 +596,7 @@ def _plot(path: Path, drive: Table, driven: Table, prediction: Prediction, per_c
     ax.set_title(f"{drive.grade}, c = {numbers['conditions']['stiffness']:g} N*m/rad: RMS error model "
                  f"{100 * numbers['rms_model']:.1f} %, naive {100 * numbers['rms_naive']:.1f} %")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    plotting.legend_outside(ax)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -588,23 +588,31 @@ def edge_curves(result: StabilityMap, master: str, points: int = 9, fmu_dir: Pat
     return curves
 
 
+def legend_classes(statuses) -> list[str]:
+    """The classes a map's legend names: those its cases hold, in ``COLOURS``' order (no
+    "failed" entry when nothing failed)."""
+    return [k for k in COLOURS if k in set(statuses)]
+
+
 def _plot(path: Path, result: StabilityMap) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
+    from harness.formats import plotting
+
+    plt = plotting.pyplot()
     masters = result.plan.masters
-    ncols = 3
+    ncols = min(3, len(masters))            # one panel a master, three to a row: no blank panels beside one
     nrows = math.ceil(len(masters) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.2 * nrows), squeeze=False,
-                             sharex=True, sharey=True)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), 4.2 * nrows + 0.6), squeeze=False,
+                             sharex=True, sharey=True, layout="constrained")
+    statuses = set()
     zetas = [result.model.with_coupling(c.stiffness, c.damping).zeta for c in result.results]
     for ax, master in zip(axes.flat, masters):
         for case, r in result.results.items():
             if case.master != master:
                 continue
             status = "failed" if r.get("status") == FAILED else r["class"]
+            statuses.add(status)
             zeta = result.model.with_coupling(case.stiffness, case.damping).zeta
             ax.scatter(case.h_omega, zeta, s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
         for (m, c, b), edge in result.edges.items():
@@ -625,12 +633,12 @@ def _plot(path: Path, result: StabilityMap) -> Path:
         ax.axis("off")
     if zetas:
         axes[0, 0].set_ylim(min(zetas) / 1.5, max(zetas) * 1.5)
-    handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in COLOURS]
+    handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in legend_classes(statuses)]
     handles.append(Line2D([], [], color="k", lw=0.9, marker="|", ms=10,
                           label="predicted edge (|: swept coupling; line: per stiffness, damping varied)"))
-    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if ncols > 1 else 2, fontsize=8,
+               frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
-    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

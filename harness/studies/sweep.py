@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.formats import plotting
 from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
@@ -175,11 +176,7 @@ def sweep(axes: list[Axis] | None = None, out: Path | None = None, scene: str = 
 def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_dir) -> dict:
     axes = axes or default_axes()
     out = Path(out or RESULTS / "sweep")
-    # Refuse a bad scene or assignment before anything runs.
-    spec = scenes.load(scene).with_overrides(list(extra or []))
-    cases = plan(axes, scene, stop, extra, fmu_dir)
-    for case in cases:
-        spec.with_overrides(case["overrides"])
+    cases = check(axes, scene, stop, extra, fmu_dir)
     fingerprint = {"scene": scene, "scene_text": scenes.resolve(scene).read_text(), "stop": stop,
                    "extra": list(extra or []), "physics": physics_hash()}
     log = CaseLog(out, fingerprint, resume=resume)
@@ -202,6 +199,31 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
     write(out, axes, report)
     return report
+
+
+def check(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, extra: list[str] | None = None,
+          fmu_dir: Path = FMUS) -> list[dict]:
+    """The sweep's cases (``plan``), each checked as a run would check it: a bad scene,
+    assignment or experiment is a ``SceneError`` before anything runs."""
+    spec = scenes.load(scene).with_overrides(list(extra or []))
+    cases = plan(axes, scene, stop, extra, fmu_dir)
+    for case in cases:
+        _check_experiment(spec.with_overrides(case["overrides"]).experiment, stop)
+    return cases
+
+
+def _check_experiment(e: scenes.Experiment, stop: float | None) -> None:
+    """Refuse, before anything runs, a case whose experiment no run could take (a stop
+    within the scene's start-up transient fails every case the same way)."""
+    findings = scenes.experiment_findings(e)
+    if not findings:
+        return
+    if stop is not None and not 0.0 <= e.transient < e.stop - e.start:
+        raise scenes.SceneError(
+            f"--stop {stop:g} s: the scene leaves its first experiment.transient = {e.transient:g} s out of the "
+            f"amplitudes, so a case must run past it (allowed: --stop > {e.start + e.transient:g} s; or lower "
+            f"the transient with --set experiment.transient=...)")
+    raise scenes.SceneError("; ".join(findings))
 
 
 def _bar(total, done, dask):
@@ -300,19 +322,40 @@ def _verdict(holds: list[str], of: list[str]) -> str:
     return "yes" if len(holds) == len(of) else ("partly" if holds else "no")
 
 
+#: the fewest cases that ran a verdict rests on: fewer values show no trend (two points
+#: are always monotone, and a curve needs three)
+MIN_CASES = 3
+NOT_JUDGED = "not judged"
+
+
+def _ran(results: list[dict], axis: str | None = None) -> tuple[int, int]:
+    """(cases that ran, cases planned) of ``axis`` (of every axis when None)."""
+    rows = [r for r in results if axis is None or r["axis"] == axis]
+    return sum(r["result"].get("status") == "ok" for r in rows), len(rows)
+
+
 def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
     """Each qualitative finding of the monograph (docs/physics.md#what-the-monograph-reports),
     judged on the sweep's numbers: "yes", "partly" (``holds_for`` says for which
-    quantities) or "no", with the numbers it rests on."""
+    quantities), "no", or "not judged" when fewer than ``MIN_CASES`` of its cases ran,
+    with the numbers it rests on.  A finding about the size of a difference ("shrinks")
+    is judged on its magnitude: dA = A2 - A1 that goes from +0.03 to -0.9 grew."""
     names = {a.name for a in axes}
     out = []
 
-    def add(trend, holds, of, numbers):
+    def add(trend, holds, of, numbers, ran):
+        done, planned = ran
+        if done < MIN_CASES:
+            out.append({"trend": trend, "reproduced": NOT_JUDGED, "holds_for": [],
+                        "numbers": f"not judged: {done} of {planned} cases ran (a verdict needs {MIN_CASES})"})
+            return
+        if done < planned:
+            numbers += f" ({done} of {planned} cases ran)"
         out.append({"trend": trend, "reproduced": _verdict(holds, of), "holds_for": holds, "numbers": numbers})
 
     ok = [r for r in results if r["result"].get("status") == "ok"]
+    lines, holds = [], []
     if ok:
-        lines, holds = [], []
         for q, label in (("w", "speed"), ("a", "acceleration"), ("tau", "torque")):
             less = sum(r["result"][f"A_{q}1"] < r["result"][f"A_{q}2"] for r in ok)
             if less == len(ok):
@@ -321,8 +364,8 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
         worst = min(ok, key=lambda r: r["result"]["A_tau2"] - r["result"]["A_tau1"])
         lines.append(f"smallest A_tau2 - A_tau1: {worst['result']['A_tau2'] - worst['result']['A_tau1']:.3g} N*m "
                      f"({worst['axis']} = {worst['x']:g})")
-        add("the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's",
-            holds, ["speed", "acceleration", "torque"], "; ".join(lines))
+    add("the drive shaft's speed, acceleration and torque fluctuate less than the driven shaft's",
+        holds, ["speed", "acceleration", "torque"], "; ".join(lines), _ran(results))
     amplitudes = ["A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2"]
     for axis_name, label in (("load", "load"), ("misalignment", "alpha")):
         if axis_name not in names:
@@ -334,30 +377,31 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
             if _monotone(y, +1) and curved > 0.05:
                 holds.append(q)
             parts.append(f"{q} {_fmt_series(x, y)} (off a straight line by {100 * curved:.0f} % of the rise)")
-        add(f"fluctuation amplitudes grow non-linearly with {label}", holds, amplitudes, "; ".join(parts))
+        add(f"fluctuation amplitudes grow non-linearly with {label}", holds, amplitudes, "; ".join(parts),
+            _ran(results, axis_name))
     if "load" in names:
         x, w = _series("load", results, "mean_w")
         add("mean speed falls with load", ["mean w"] if _monotone(w, -1) else [], ["mean w"],
-            "mean w [rad/s] at " + _fmt_series(x, w))
+            "mean w [rad/s] at " + _fmt_series(x, w), _ran(results, "load"))
         x, t = _series("load", results, "mean_tau")
         add("mean torque rises with load", ["mean torque"] if _monotone(t, +1) else [], ["mean torque"],
-            "mean torque [N*m] at " + _fmt_series(x, t))
+            "mean torque [N*m] at " + _fmt_series(x, t), _ran(results, "load"))
     for axis_name, label in (("stiffness", "stiffer"), ("damping", "more damped")):
         if axis_name not in names:
             continue
         parts, holds = [], []
-        for q in ("dA_w", "dA_a", "dA_tau"):
+        for q, unit in (("dA_w", "rad/s"), ("dA_a", "rad/s^2"), ("dA_tau", "N*m")):
             x, y = _series(axis_name, results, q)
-            if _monotone(y, -1):
+            if _monotone(np.abs(y), -1):
                 holds.append(q)
-            parts.append(f"{q} {_fmt_series(x, y)}")
-        add(f"a {label} elastic element shrinks the drive/driven amplitude difference (dA = A2 - A1)", holds,
-            ["dA_w", "dA_a", "dA_tau"], "; ".join(parts))
+            parts.append(f"|{q}| [{unit}] {_fmt_series(x, np.abs(y))}")
+        add(f"a {label} elastic element shrinks the drive/driven amplitude difference (|dA|, dA = A2 - A1)",
+            holds, ["dA_w", "dA_a", "dA_tau"], "; ".join(parts), _ran(results, axis_name))
     if "inertia" in names:
         x, w = _series("inertia", results, "mean_w")
         _, t = _series("inertia", results, "mean_tau")
         # A change the size of rounding is no trend: the monograph's mean speed falls by 9 % (Fig. 3.16);
-        # an angle-locked load part moves the model's by some 0.002 % (issue 17's spectrum load)
+        # an angle-locked load part moves the model's by some 0.002 %
         holds = (["mean w"] if _monotone(w, -1) and _moves(w) else []) + \
             (["mean torque"] if _monotone(t, +1) and _moves(t) else [])
         add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16)",
@@ -365,7 +409,7 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
             f"mean w [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
             "the steady means are set by the engine characteristic and the mean load alone; I2 enters only the "
             f"fluctuations (the means move by {100 * _span(w):.2g} % and {100 * _span(t):.2g} % over the axis; "
-            f"a trend needs {100 * MEANINGFUL:g} %)")
+            f"a trend needs {100 * MEANINGFUL:g} %)", _ran(results, "inertia"))
     return out
 
 
@@ -384,8 +428,9 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
              "conditions of the figure it mirrors.", "", "## Trends (docs/physics.md#what-the-monograph-reports)", "",
              "| trend | reproduced | numbers |", "|---|---|---|"]
     for t in report["trends"]:
-        verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**"}[t["reproduced"]]
-        lines.append(f"| {t['trend']} | {verdict} | {t['numbers']} |")
+        verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**",
+                   NOT_JUDGED: NOT_JUDGED}[t["reproduced"]]
+        lines.append(f"| {t['trend']} | {verdict} | {_cell(t['numbers'])} |")
     for axis in axes:
         rows = [r for r in results if r["axis"] == axis.name]
         lines += ["", f"## {axis.name} (Fig. {axis.figure}): {axis.quantity}", "", axis.note, "",
@@ -399,7 +444,8 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
                                                              "mean_w", "mean_tau"))
                 lines.append(f"| {r['x']:g} | {cells} | ok |")
             else:
-                lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {res.get('error')} ({res.get('where')}) |")
+                lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {_cell(res.get('error'))} "
+                             f"({_cell(res.get('where'))}) |")
         reported = dict(axis.reported)
         if axis.name == "stiffness_measured":
             reported.update(measured_amplitudes())
@@ -408,52 +454,78 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
                 f"{k} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts) for k, pts in reported.items())]
         _plot(out / f"sweep_{axis.name}.png", axis, rows, reported)
     if failed:
-        lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {r['result'].get('error')} "
-                                                f"({r['result'].get('where')})" for r in failed]
+        lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {_cell(r['result'].get('error'))} "
+                                                f"({_cell(r['result'].get('where'))})" for r in failed]
     (out / "sweep.md").write_text("\n".join(lines) + "\n")
     return [out / "sweep.md", out / "sweep.json"]
+
+
+def _cell(text) -> str:
+    """``text`` on one line for a Markdown table cell: its lines joined (a multi-line
+    error would end the table), pipes escaped."""
+    return " ".join(line.strip() for line in str(text).splitlines() if line.strip()).replace("|", "\\|")
 
 
 def _range(v) -> str:
     return f"{v[0]:g}-{v[1]:g}" if isinstance(v, (tuple, list)) else f"{v:g}"
 
 
-def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+#: each column of a sweep's plot: the quantity, its label, its unit
+PLOT_COLUMNS = (("w", "speed", "rad/s"), ("a", "acceleration", "rad/s^2"), ("tau", "torque", "N*m"))
 
+
+def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
+    """One column per quantity (and the means for the load and inertia axes): the model's
+    amplitudes, its dA = A2 - A1, and what the monograph reports in a row of its own - the
+    printed values are 2-10 times the model's, and on shared axes they flatten its curves."""
+    plt = plotting.pyplot()
     ok = sorted((r for r in rows if r["result"].get("status") == "ok"), key=lambda r: r["x"])
     x = np.array([r["x"] for r in ok])
-    panels = [("w", "speed amplitude [rad/s]"), ("a", "acceleration amplitude [rad/s^2]"),
-              ("tau", "torque amplitude [N*m]")]
-    fig, grid = plt.subplots(2, 3, figsize=(13, 7))
-    for col, (q, label) in enumerate(panels):
-        ax = grid[0, col]
+    value = lambda key: [r["result"][key] for r in ok]  # noqa: E731
+    columns = list(PLOT_COLUMNS) + ([("mean", "mean", "")] if axis.name in ("load", "inertia") else [])
+    shown_reported = any(reported.get(f"{kind}_{q}{i}") for kind, i in (("A", 1), ("A", 2), ("dA", ""))
+                         for q, _, _ in PLOT_COLUMNS)
+    nrows = 3 if shown_reported else 2
+    fig, grid = plt.subplots(nrows, len(columns), figsize=(4.6 * len(columns), 2.9 * nrows + 0.8), squeeze=False,
+                             sharex=True, layout="constrained")
+    for col, (q, label, unit) in enumerate(columns):
+        top, middle = grid[0, col], grid[1, col]
+        if q == "mean":
+            top.plot(x, value("mean_w"), "-o", color="tab:purple", label="model mean w")
+            top.set_ylabel("mean speed [rad/s]")
+            middle.plot(x, value("mean_tau"), "-o", color="tab:brown", label="model mean torque")
+            middle.set_ylabel("mean torque [N*m]")
+            # the printed means are on the model's scale: drawn on its panels
+            _overlay(top, reported.get("mean_w"), "reported mean w", "k")
+            _overlay(middle, reported.get("mean_tau"), "reported mean torque", "k")
+            if shown_reported:
+                grid[2, col].axis("off")
+            continue
         for i, style in ((1, "-o"), (2, "--s")):
-            key = f"A_{q}{i}"
-            ax.plot(x, [r["result"][key] for r in ok], style, label=f"model {('drive', 'driven')[i - 1]}")
-            _overlay(ax, reported.get(key), f"reported {('drive', 'driven')[i - 1]}", ("k", "tab:red")[i - 1])
-        ax.set_ylabel(label)
-        ax.legend(fontsize=7)
-        ax = grid[1, col]
-        key = f"dA_{q}"
-        ax.plot(x, [r["result"][key] for r in ok], "-o", color="tab:green", label="model A2 - A1")
-        _overlay(ax, reported.get(key), "reported", "k")
-        ax.axhline(0, color="0.6", lw=0.8)
-        ax.set_ylabel(f"dA {q}")
-        ax.legend(fontsize=7)
-    if axis.name in ("load", "inertia"):
-        ax = grid[1, 2].twinx()
-        ax.plot(x, [r["result"]["mean_w"] for r in ok], ":", color="tab:purple", label="model mean w")
-        _overlay(ax, reported.get("mean_w"), "reported mean w", "tab:purple")
-        ax.set_ylabel("mean speed [rad/s]", color="tab:purple")
-        ax.legend(fontsize=7, loc="lower right")
-    for ax in grid.flat:
+            top.plot(x, value(f"A_{q}{i}"), style, label=f"model {('drive', 'driven')[i - 1]}")
+        top.set_ylabel(f"{label} amplitude A [{unit}]")
+        middle.plot(x, value(f"dA_{q}"), "-o", color="tab:green", label="model dA = A2 - A1")
+        middle.axhline(0, color="0.6", lw=0.8)
+        middle.set_ylabel(f"dA {label} [{unit}]")
+        if shown_reported:
+            bottom = grid[2, col]
+            for key, legend, color in ((f"A_{q}1", "reported A drive", "k"),
+                                       (f"A_{q}2", "reported A driven", "tab:red"),
+                                       (f"dA_{q}", "reported dA", "tab:green")):
+                _overlay(bottom, reported.get(key), legend, color)
+            bottom.set_ylabel(f"monograph's {label} [{unit}]")
+    for row, axes_row in enumerate(grid):
+        for ax in axes_row:
+            ax.grid(alpha=0.3)
+            if ax.axison and not ax.has_data():
+                ax.text(0.5, 0.5, "nothing reported" if row == 2 else f"no case ran ({len(rows)} failed)",
+                        transform=ax.transAxes, ha="center", va="center", color="0.5")
+    for row in grid:
+        plotting.row_legend(row, fontsize=7)
+    for ax in grid[-1]:
         ax.set_xlabel(axis.quantity)
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}", fontsize=9)
-    fig.tight_layout()
+    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}" + ("" if not shown_reported else
+                 "\nthe monograph's values in the bottom row, on their own scale"), fontsize=9)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -489,4 +561,4 @@ def thin(axes: list[Axis], every: int) -> list[Axis]:
             for a in axes]
 
 
-__all__ = ["Axis", "default_axes", "plan", "run_case", "sweep", "trends", "select", "thin"]
+__all__ = ["Axis", "default_axes", "plan", "check", "run_case", "sweep", "trends", "select", "thin"]
