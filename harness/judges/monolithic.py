@@ -5,7 +5,8 @@ For the driveline (engine shaft - lever coupling - load shaft) the state is
 ``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
 energy dissipated in the coupling (and, for an engine with a torque lag, its torque), so the reference's own energy balance is exact up to
 the integrator's tolerance.  Results are cached (harness.judges.solution).  ``solve``
-picks the solver of the scene's kind (``SOLVERS``).
+picks the solver of the scene's kind (``SOLVERS``); ``method`` a scipy method or CVODE's
+(``harness.judges.cvode``, on the same right-hand side with its analytic Jacobian).
 """
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from lever.physics.shaft import LaggedShaft
 
 from harness.description import kinds
 from harness.description import scene as scenes
-from harness.judges import rectifier
+from harness.judges import cvode, rectifier
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
 RTOL = 1e-10
@@ -105,7 +106,14 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
     y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
-    if load.resisting:
+    if method in cvode.METHODS:
+        if load.resisting:
+            raise ReferenceUnavailable(f"scene '{scene.name}': CVODE has no stick/slip switching here (the load "
+                                       "can stick); DOP853's reference switches its modes")
+        t, y, counts = cvode.integrate(driveline, times, y0, cvode.METHODS[method], rtol, atol,
+                                       min(1e-4, 0.1 / omega))
+        nfev = counts["rhs"]
+    elif load.resisting:
         couple = fixed if fixed else (lambda p1, v1, p2, v2, t: evaluate(p1, v1, p2, v2, t))
         t, y, nfev = _solve_stick_slip(couple, driveline, load, times, y0, method, rtol, atol,
                                        min(1e-4, 0.1 / omega), fixed is not None)
