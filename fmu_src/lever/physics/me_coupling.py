@@ -24,7 +24,7 @@ class CouplingME(ModelExchange):
         self._law, self._damping = fixed.law, fixed.damping
         self._fixed = None if self.family else coupling
         #: whether U12 varies with the driven angle (no: synchronous, or no deformation)
-        self._periodic = bool(self.family) or bool(getattr(fixed.transfer, "_c", ()))
+        self._periodic = bool(self.family) or bool(fixed.transfer.coefficients)
 
     def start(self):
         return []
