@@ -5,7 +5,8 @@ For the driveline (engine shaft - lever coupling - load shaft) the state is
 ``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
 energy dissipated in the coupling (and, for an engine with a torque lag, its torque), so the reference's own energy balance is exact up to
 the integrator's tolerance.  Results are cached (harness.judges.solution).  ``solve``
-picks the solver of the scene's kind (``SOLVERS``).
+picks the solver of the scene's kind (``SOLVERS``); ``method`` a scipy method or CVODE's
+(``harness.judges.cvode``, on the same right-hand side with its analytic Jacobian).
 """
 from __future__ import annotations
 
@@ -15,11 +16,12 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from lever.physics import catalogue
+from lever.physics.driveline import HELD, Driveline
 from lever.physics.shaft import LaggedShaft
 
 from harness.description import kinds
 from harness.description import scene as scenes
-from harness.judges import rectifier
+from harness.judges import cvode, rectifier
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
 RTOL = 1e-10
@@ -81,41 +83,39 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
     misalignment = _misalignment_source(scene, coupling_name)
     phi1, w1 = catalogue.start_state(kinds.parameters(scene, engine_name), catalogue.ENGINE)
     phi2, w2 = catalogue.start_state(kinds.parameters(scene, load_name), catalogue.LOAD)
-    drive_rates, driven_rates = engine.rates, load.rates
 
     if misalignment is not None:
         # the coupling at alpha(t), exactly as the coupling FMU evaluates it (CouplingFamily)
         family = catalogue.coupling_family_from(coupling_params)
         alpha_at = misalignment.value
 
+        def coupling_at(t):
+            return family.at(alpha_at(t))
+
         def evaluate(p1, v1, p2, v2, t):
             return family.at(alpha_at(t)).evaluate(p1, v1, p2, v2)
+    else:
+        def coupling_at(t):
+            return coupling
     fixed = coupling.evaluate if misalignment is None else None
     lagged = isinstance(engine, LaggedShaft)
-
-    if lagged:
-        def drive(t, y, tau1):
-            # the engine torque M lags its characteristic: an eighth state, after the works
-            a1, m1 = engine.rates(t, y[0], y[1], tau1, y[7])
-            return a1, m1, [engine.torque_rate(t, y[0], y[1], y[7])]
-    else:
-        def drive(t, y, tau1):
-            a1, m1 = drive_rates(t, y[0], y[1], tau1)
-            return a1, m1, []
-
-    def rhs(t, y):
-        p1, v1, p2, v2 = y[0], y[1], y[2], y[3]
-        r = fixed(p1, v1, p2, v2) if fixed else evaluate(p1, v1, p2, v2, t)
-        a1, m1, lag_rate = drive(t, y, r.tau1)
-        a2, m2 = driven_rates(t, p2, v2, r.tau2)
-        return [v1, a1, v2, a2, m1 * v1, -m2 * v2, r.dissipation] + lag_rate
+    # the right-hand side: the physics' own (lever.physics.driveline), as the ME editions
+    driveline = Driveline(engine, coupling_at, load)
+    rhs = driveline.derivatives
 
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
     y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
-    if load.resisting:
+    if method in cvode.METHODS:
+        if load.resisting:
+            raise ReferenceUnavailable(f"scene '{scene.name}': CVODE has no stick/slip switching here (the load "
+                                       "can stick); DOP853's reference switches its modes")
+        t, y, counts = cvode.integrate(driveline, times, y0, cvode.METHODS[method], rtol, atol,
+                                       min(1e-4, 0.1 / omega))
+        nfev = counts["rhs"]
+    elif load.resisting:
         couple = fixed if fixed else (lambda p1, v1, p2, v2, t: evaluate(p1, v1, p2, v2, t))
-        t, y, nfev = _solve_stick_slip(couple, drive, load, times, y0, method, rtol, atol,
+        t, y, nfev = _solve_stick_slip(couple, driveline, load, times, y0, method, rtol, atol,
                                        min(1e-4, 0.1 / omega), fixed is not None)
     else:
         solution = solve_ivp(rhs, (float(times[0]), float(times[-1])), y0,
@@ -163,27 +163,23 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
 MAX_SWITCHES = 100_000
 
 
-def _solve_stick_slip(couple, drive, load, times, y0, method, rtol, atol, first_step, time_free):
+def _solve_stick_slip(couple, driveline, load, times, y0, method, rtol, atol, first_step, time_free):
     """The driveline with a resisting load (``lever.physics.friction``): integrated in
     segments of one mode each - the driven shaft slipping in a fixed direction, or held
     at rest - switched at scipy's located events: the speed through zero (stop; the
     stick condition decides) and the breakaway margin through zero (slip off in the
     direction of the net torque).  The same functions of the physics as the FMU's
-    integrator.  ``drive(t, y, tau1) -> (a1, M1, [dM1/dt] or [])`` is the drive shaft's
-    (a lagged engine's torque is state ``y[7]``).  Returns ``(t, y, nfev)`` at ``times``."""
+    integrator; ``driveline`` (``lever.physics.driveline.Driveline``) gives the
+    right-hand side of each mode.  Returns ``(t, y, nfev)`` at ``times``."""
     shaft = load
     friction = shaft.external
-    inertia = shaft.inertia
 
     def coupling_at(t, y):
         return couple(y[0], y[1], y[2], y[3]) if time_free else couple(y[0], y[1], y[2], y[3], t)
 
     def slipping(direction):
         def rhs(t, y):
-            r = coupling_at(t, y)
-            a1, m1, lag_rate = drive(t, y, r.tau1)
-            m2 = friction.slip_torque(t, y[2], y[3], direction)
-            return [y[1], a1, y[3], (m2 + r.tau2) / inertia, m1 * y[1], -m2 * y[3], r.dissipation] + lag_rate
+            return driveline.derivatives(t, y, direction)
 
         def stop(t, y):
             return y[3]
@@ -192,9 +188,7 @@ def _solve_stick_slip(couple, drive, load, times, y0, method, rtol, atol, first_
         return rhs, stop
 
     def held(t, y):
-        r = coupling_at(t, y)
-        a1, m1, lag_rate = drive(t, y, r.tau1)
-        return [y[1], a1, 0.0, 0.0, m1 * y[1], 0.0, r.dissipation] + lag_rate
+        return driveline.derivatives(t, y, HELD)
 
     def breakaway(t, y):
         return friction.breakaway_margin(t, y[2], coupling_at(t, y).tau2)[0]

@@ -56,6 +56,22 @@ class LeverCoupling:
         torque = self.law.torque(phi1 - position) + self.damping * (w1 - ratio * w2)
         return -torque, ratio * torque
 
+    def partials(self, phi1, w1, phi2, w2) -> tuple[tuple, tuple]:
+        """``(dtau1/dx, dtau2/dx)`` for ``x = (phi1, w1, phi2, w2)``, analytic: with the
+        law's stiffness ``k = dT_el/dtheta`` and ``U' = dU12/dphi2`` (``dPhi/dphi2 = U12``),
+
+            dT/dphi1 = k,  dT/dw1 = b,  dT/dphi2 = -k U12 - b U' w2,  dT/dw2 = -b U12
+            dtau1 = -dT,   dtau2 = U12 dT (+ T U' for phi2)"""
+        position, ratio = self.transfer.evaluate(phi2)
+        theta = phi1 - position
+        torque = self.law.torque(theta) + self.damping * (w1 - ratio * w2)
+        k, b = self.law.stiffness_at(theta), self.damping
+        slope = self.transfer.ratio_slope(phi2)
+        d_phi2 = -k * ratio - b * slope * w2
+        d_w2 = -b * ratio
+        return ((-k, -b, -d_phi2, -d_w2),
+                (ratio * k, ratio * b, ratio * d_phi2 + torque * slope, ratio * d_w2))
+
     def eigen_estimate(self, inertia_drive: float, inertia_driven: float) -> tuple[float, float]:
         """Undamped eigenfrequency [rad/s] and damping ratio of the two-inertia chain
         about U12 = 1, from the nominal stiffness: for step-size and stability advice."""
@@ -128,6 +144,35 @@ class CouplingFamily:
             self._couplings = {self.start_alpha: self.start}
         coupling = self._couplings[alpha] = LeverCoupling(transfer, self._law, self._damping)
         return coupling
+
+
+    def alpha_slopes(self, alpha, phi2) -> tuple[float, float]:
+        """``(dPhi/dalpha, dU12/dalpha)`` at driven angle ``phi2`` of the coupling
+        ``at(alpha)``: the blend is linear in alpha between nodes, so this is its slope; on
+        a node, the right-hand one (the blend up to the next node).  Next to the kinematic
+        limit, where ``at`` uses the exact transfer function (no node beyond), the
+        left-hand blend's; with no node on either side there is none (``ParameterError``)."""
+        position = alpha / self.NODE
+        k = round(position) if abs(position - round(position)) < 1e-9 else math.floor(position)
+        try:
+            blend = BlendedTransferFunction(self._node(k), self._node(k + 1), alpha)
+        except ParameterError:
+            try:
+                blend = BlendedTransferFunction(self._node(k - 1), self._node(k), alpha)
+            except ParameterError:
+                raise ParameterError("misalignment", f"parameter 'misalignment' (alpha) = {math.degrees(alpha):.6g} "
+                                     "deg: no node of the transfer function's blend on either side, so no "
+                                     "derivative with respect to alpha there") from None
+        return blend.alpha_slopes(phi2)
+
+    def alpha_partials(self, alpha, phi1, w1, phi2, w2) -> tuple[float, float]:
+        """``(dtau1/dalpha, dtau2/dalpha)`` of the coupling ``at(alpha)`` (``alpha_slopes``):
+        ``dT/dalpha = -k dPhi/dalpha - b w2 dU12/dalpha``, ``dtau1 = -dT``,
+        ``dtau2 = U12 dT + T dU12/dalpha``."""
+        d_position, d_ratio = self.alpha_slopes(alpha, phi2)
+        result = self.at(alpha).evaluate(phi1, w1, phi2, w2)
+        d_torque = -self._law.stiffness_at(result.deflection) * d_position - self._damping * w2 * d_ratio
+        return -d_torque, result.ratio * d_torque + result.torque * d_ratio
 
 
 def build_coupling(transfer_mode: str, alpha: float, support_deformation: float, hinge_deformation: float,

@@ -29,6 +29,10 @@ class LinearCharacteristic:
     def torque(self, t, phi, w):
         return self.stall_torque - self.slope * w
 
+    def torque_slope(self, t, phi, w):
+        """``dMg/dw = -K1``."""
+        return -self.slope
+
     def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         """Exact solution over a step with coupling torque ``tau + r s`` (``r`` =
         ``tau_rate``): ``I w' = A + r s - K1 w`` with ``A = M1 + tau``, a first-order lag
@@ -90,6 +94,7 @@ class TabulatedCharacteristic:
             raise ParameterError(name, f"parameter '{name}': the characteristic's slopes overflow: speeds too "
                                  "close together for their torques")
         self._falls = slopes[-1] < 0.0
+        self._slopes = slopes
         #: largest |dMg/dw| [N.m.s/rad]: sets the RK4 substep that stays stable
         self.speed_stiffness = max(abs(k) for k in slopes)
 
@@ -119,6 +124,15 @@ class TabulatedCharacteristic:
             return ms[-1]
         k = min(bisect.bisect_right(ws, w) - 1, len(ws) - 2)
         return ms[k] + (ms[k + 1] - ms[k]) * (w - ws[k]) / (ws[k + 1] - ws[k])
+
+    def torque_slope(self, t, phi, w):
+        """``dMg/dw``: the slope of the segment ``torque`` interpolates on, 0 where it holds
+        an end value.  At a point of the table (a kink) the right-hand slope: the segment
+        ``torque`` takes there (the one above the point)."""
+        ws = self._w
+        if w < ws[0] or (w >= ws[-1] and not self._falls):
+            return 0.0
+        return self._slopes[min(bisect.bisect_right(ws, w) - 1, len(ws) - 2)]
 
     def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         return None  # no closed form: the shaft integrates numerically

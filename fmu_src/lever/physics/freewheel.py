@@ -207,6 +207,77 @@ class FreewheelRectifier:
         w5 = y[7]
         return [y[1], a2, y[3], a3, y[5], a4, w5, a5, t12 * w1, (brake - ext) * w5, loss]
 
+    def jacobian(self, t: float, y, disc: int, fly: int, ext: float) -> list[list[float]]:
+        """``d derivatives / d(y, ext)``, analytic, in the modes ``disc``, ``fly``: 11 rows
+        (``STATE``), 12 columns (``STATE`` then ``ext``).  Each torque's gradient follows
+        the branch ``forces`` takes (a gap edge, ``e = 0`` or the ball friction's
+        saturation ``|de| = v_k`` on the side ``forces`` evaluates): the kinks are events or,
+        for the saturation, continuous in value."""
+        n = len(STATE) + 1                       # the last column: ext
+        def grad(**entries):
+            g = [0.0] * n
+            for k, v in entries.items():
+                g[int(k[1:])] = v
+            return g
+
+        def comb(*terms):
+            g = [0.0] * n
+            for c, v in terms:
+                if c:
+                    for k in range(n):
+                        g[k] += c * v[k]
+            return g
+
+        p2, w2, p3, w3, p4, w4, p5, w5 = y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7]
+        _, _, _, _, _, f, _, _, _, brake, _, w1 = self.forces(t, y, disc, fly, ext)
+        e, de = self.rocker(t)[0] - p2, w1 - w2
+        zero = [0.0] * n
+        # T12, its loss and the disc capacity (``_ramp``), through e = phi1 - phi2, de = w1 - w2
+        if e > 0.0:
+            elastic = self.c_fi * e
+            s = de / self.vk
+            inside = -1.0 < s < 1.0
+            s = 1.0 if s > 1.0 else (-1.0 if s < -1.0 else s)
+            q = (1.0 - s * self.fk * self.tan_a) * self.tan_a
+            kappa = (self.tan_a + s * self.fk) / q
+            dkappa = (self.fk * self.tan_a * (1.0 + self.tan_a * self.tan_a) / (q * q) / self.vk) if inside else 0.0
+            d_e, d_de = kappa * self.c_fi, dkappa * elastic                     # of T12
+            g12 = grad(x0=-d_e, x1=-d_de)
+            g_ramp = grad(x0=-(kappa - 1.0) * self.c_fi * de, x1=-(dkappa * elastic * de + (kappa - 1.0) * elastic))
+            g_cap = grad(x0=-self.gain * self.c_fi)
+        elif e < -self.z1:
+            g12, g_ramp, g_cap = grad(x0=-self.c_b), zero, zero
+        else:
+            g12, g_ramp, g_cap = zero, zero, zero
+        d = p3 - p4
+        c34 = self.c_t if (d > 0.0 or d < -self.z2) else 0.0
+        v34 = w3 - w4
+        g34 = grad(x2=c34, x4=-c34, x3=self.k_t, x5=-self.k_t)
+        d = p4 - p5
+        c45 = self.c_z if (d > 0.0 or d < -self.z3) else 0.0
+        v45 = w4 - w5
+        g45 = grad(x4=c45, x6=-c45, x5=self.k_z, x7=-self.k_z)
+        g_loss = comb((1.0, g_ramp), (2.0 * self.k_t * v34, grad(x3=1.0, x5=-1.0)),
+                      (2.0 * self.k_z * v45, grad(x5=1.0, x7=-1.0)))
+        if disc == STICK:
+            g2 = g3 = comb((1.0 / self.J23, g12), (-1.0 / self.J23, g34))
+        else:
+            slip = w2 - w3
+            g_f = comb((disc, g_cap), (self.k_v, grad(x1=1.0, x3=-1.0)))
+            g2 = comb((1.0 / self.J2, g12), (-1.0 / self.J2, g_f))
+            g3 = comb((1.0 / self.J3, g_f), (-1.0 / self.J3, g34))
+            g_loss = comb((1.0, g_loss), (slip, g_f), (f, grad(x1=1.0, x3=-1.0)))
+        g4 = comb((1.0 / self.J4, g34), (-1.0 / self.J4, g45))
+        if fly == STICK:
+            g_brake = comb((1.0, g45), (1.0, grad(x11=1.0)))
+            g5 = zero
+        else:
+            g_brake = zero
+            g5 = comb((1.0 / self.J5, g45), (1.0 / self.J5, grad(x11=1.0)))
+        g_out = comb((w5, g_brake), (-w5, grad(x11=1.0)), (brake - ext, grad(x7=1.0)))
+        return [grad(x1=1.0), g2, grad(x3=1.0), g3, grad(x5=1.0), g4, grad(x7=1.0), g5,
+                comb((w1, g12)), g_out, g_loss]
+
     # -- events and modes ------------------------------------------------------------------------
     def event_values(self, t: float, y, disc: int, fly: int, ext: float) -> list:
         """The functions whose zeros are events (``EVENTS``).  Gap edges change sign both

@@ -67,6 +67,15 @@ class ResistingLoad:
         active, slip, _ = self.parts(t, phi)
         return active - direction * slip - self.viscous * w
 
+    def slip_partials(self, t, phi, w, direction: float) -> tuple[float, float]:
+        """``(d/dphi, d/dw)`` of ``slip_torque``: the wrapped load's angle slope (a brake's
+        only where ``Mc > 0``, as ``parts`` clips it; at ``Mc = 0`` the side where it is 0)
+        and the viscous ``-b_v``."""
+        slope = self.base.resistance_slope(t, phi, 0.0)
+        if self.resistive:
+            slope = direction * slope if self.base.resistance(t, phi, 0.0) > 0.0 else 0.0
+        return -slope, -self.viscous
+
     def breakaway_margin(self, t, phi, tau) -> tuple[float, float]:
         """``(|net| - hold, net)`` at rest with coupling torque ``tau``: the shaft breaks
         away where the margin is positive, in the direction of ``net``."""

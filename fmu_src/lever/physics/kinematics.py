@@ -212,6 +212,18 @@ class TransferFunction:
         """``U12(phi2) = w1/w2`` of a rigid coupling."""
         return self.evaluate(phi)[1]
 
+    def ratio_slope(self, phi):
+        """``dU12/dphi2 = Re sum_k i k C_k e^{i k phi}``: the series differentiated term by
+        term (exact for the truncated series ``evaluate`` sums).  ``dPhi/dphi2`` is ``U12``
+        itself."""
+        if not self._c:
+            return 0.0
+        z = cmath.exp(1j * phi)
+        slope = 0j
+        for k, c in zip(range(len(self._c), 0, -1), self._c):
+            slope = slope * z + 1j * k * c
+        return (slope * z).real
+
     def position(self, phi):
         """``Phi(phi2)``: the drive angle a rigid coupling holds for driven angle ``phi2``."""
         return self.evaluate(phi)[0]
@@ -249,6 +261,18 @@ class BlendedTransferFunction:
 
     def ratio(self, phi):
         return self.evaluate(phi)[1]
+
+    def ratio_slope(self, phi):
+        """``dU12/dphi2`` of the blend."""
+        s0, s1 = self.lower.ratio_slope(phi), self.upper.ratio_slope(phi)
+        return s0 + self.weight * (s1 - s0)
+
+    def alpha_slopes(self, phi):
+        """``(dPhi/dalpha, dU12/dalpha)``: the blend is linear in alpha between its nodes."""
+        p0, u0 = self.lower.evaluate(phi)
+        p1, u1 = self.upper.evaluate(phi)
+        span = self.upper.alpha - self.lower.alpha
+        return (p1 - p0) / span, (u1 - u0) / span
 
     def position(self, phi):
         return self.evaluate(phi)[0]

@@ -58,6 +58,10 @@ class _TimeLoad:
     def torque(self, t, phi, w):
         return -self.resistance(t, phi, w)
 
+    def resistance_slope(self, t, phi, w):
+        """``dMc/dphi``: none, the load depends on time only (nor on ``w``)."""
+        return 0.0
+
     def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         """Exact step with coupling torque ``tau + tau_rate * s``."""
         impulse, second = self.integrals(t, h)
@@ -215,6 +219,10 @@ class SpectrumLoad(RandomLoad):
     def resistance(self, t, phi, w):
         return self.time_part(t) + self.order_amplitude * math.sin(self.order * phi + self.order_phase)
 
+    def resistance_slope(self, t, phi, w):
+        """``dMc/dphi`` of the shaft-order term ``A_k sin(k phi + psi)``."""
+        return self.order_amplitude * self.order * math.cos(self.order * phi + self.order_phase)
+
     def advance(self, inertia, t, phi, w, tau, h, tau_rate=0.0):
         if self.order_amplitude:
             return None     # depends on the angle: the shaft steps by advance_split
@@ -364,6 +372,14 @@ class FourierLoad:
         for c in self._c:
             acc = acc * z + c
         return self.mean + (acc * z).real
+
+    def resistance_slope(self, t, phi, w):
+        """``dMc/dphi2 = Re sum_n i n (a_n - i b_n) e^{i n phi}``, term by term."""
+        z = cmath.exp(1j * phi)
+        acc = 0j
+        for n, c in zip(range(len(self._c), 0, -1), self._c):
+            acc = acc * z + 1j * n * c
+        return (acc * z).real
 
     def torque(self, t, phi, w):
         return -self.resistance(t, phi, w)

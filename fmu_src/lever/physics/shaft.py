@@ -67,6 +67,29 @@ class Shaft:
     def acceleration(self, t, phi, w, tau):
         return self.rates(t, phi, w, tau)[0]
 
+    def external_partials(self, t, phi, w, tau):
+        """``(dM/dphi, dM/dw, dM/dtau)`` of the external torque ``rates`` applies: an
+        engine's characteristic slope, a load's angle slope and viscous friction; a shaft
+        held by static friction feels ``-tau``.  At a stop or a kink the side ``rates``
+        takes there."""
+        external = self.external
+        if isinstance(external, ResistingLoad):
+            direction = 0.0 if w == 0.0 else math.copysign(1.0, w)
+            if self.resisting and w == 0.0:
+                margin, net = external.breakaway_margin(t, phi, tau)
+                if margin <= 0.0:
+                    return 0.0, 0.0, -1.0
+                direction = math.copysign(1.0, net)
+            return external.slip_partials(t, phi, w, direction) + (0.0,)
+        if hasattr(external, "torque_slope"):          # an engine characteristic: Mg(w)
+            return 0.0, external.torque_slope(t, phi, w), 0.0
+        return -external.resistance_slope(t, phi, w), 0.0, 0.0
+
+    def partials(self, t, phi, w, tau):
+        """``(da/dphi, da/dw, da/dtau)`` of the acceleration ``rates`` gives."""
+        d_phi, d_w, d_tau = self.external_partials(t, phi, w, tau)
+        return d_phi / self.inertia, d_w / self.inertia, (d_tau + 1.0) / self.inertia
+
     def advance(self, t, phi, w, tau, h, tau_rate=0.0, tau_accel=0.0):
         """State after ``h`` seconds with coupling torque ``tau + tau_rate * s`` (with
         ``tau_accel``: its ``equivalent_ramp``): ``(phi, w, external_work)``, where
@@ -189,6 +212,13 @@ class LaggedShaft:
     def torque_rate(self, t, phi, w, torque):
         """``dM/dt = (Ms(w) - M) / Te``."""
         return (self.external.torque(t, phi, w) - torque) / self.lag
+
+    def partials(self, t, phi, w, tau, torque):
+        """``((da/dw, da/dM, da/dtau), (dM'/dw, dM'/dM))``, with ``M' = dM/dt``: the
+        acceleration ``(M + tau)/I`` and the lag ``(Ms(w) - M)/Te`` (nothing depends on
+        the angle)."""
+        return ((0.0, 1.0 / self.inertia, 1.0 / self.inertia),
+                (self.external.torque_slope(t, phi, w) / self.lag, -1.0 / self.lag))
 
     def advance(self, t, phi, w, torque, tau, h, tau_rate=0.0, tau_accel=0.0):
         """State after ``h`` seconds: ``(phi, w, M, engine_work)`` (the work from the

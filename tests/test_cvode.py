@@ -1,0 +1,57 @@
+"""The unsplit driveline under SUNDIALS CVODE (harness.judges.cvode): the same right-hand
+side as the DOP853 reference, the physics' analytic Jacobian (docs/decisions.md)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.judges import cvode, metrics, monolithic
+from harness.judges.solution import ReferenceUnavailable
+from lever.physics import catalogue
+from lever.physics.driveline import Driveline
+
+
+def torque_error(scene, times, solution, reference):
+    e = metrics.driveline_errors(scene, times, solution.traces, reference.times, reference.traces)
+    return max(e["tau1"]["rms_relative"], e["tau2"]["rms_relative"])
+
+
+@pytest.mark.parametrize("method", ["CVODE-BDF", "CVODE-Adams"])
+def test_cvode_agrees_with_the_dop853_reference(method):
+    scene = scenes.load("kavz685")
+    times = np.linspace(0.0, 1.0, 1001)
+    reference = monolithic.solve(scene, times)                  # DOP853, rtol 1e-10
+    solution = monolithic.solve(scene, times, use_cache=False, rtol=1e-9, atol=1e-11, method=method)
+    assert solution.method.startswith(method)
+    assert torque_error(scene, times, solution, reference) < 1e-6
+    for name in ("engine.w", "load.w", "engine.engine_work", "coupling.dissipated_energy"):
+        assert np.allclose(solution.traces[name], reference.traces[name], rtol=1e-6, atol=1e-6), name
+
+
+def stiff_driveline(name):
+    scene = scenes.load(name)
+    built, roles = kinds.physics(scene), kinds.driveline(scene)
+    y0 = (list(catalogue.start_state(kinds.parameters(scene, roles.engine), catalogue.ENGINE))
+          + list(catalogue.start_state(kinds.parameters(scene, roles.load), catalogue.LOAD)) + [0.0] * 3)
+    return scene, Driveline(built.engine, lambda t: built.coupling, built.load), y0
+
+
+def test_the_analytic_jacobian_saves_right_hand_side_evaluations_on_the_stiff_scene():
+    """CVODE's difference-quotient Jacobian costs one right-hand side per state each time
+    it is formed; the analytic one none, for the same solution."""
+    scene, system, y0 = stiff_driveline("kavz685_step_tiny_inertia")
+    times = np.linspace(scene.experiment.start, scene.experiment.stop, 101)
+    _, y_analytic, analytic = cvode.integrate(system, times, y0, "BDF", 1e-8, 1e-10, 1e-6, analytic_jacobian=True)
+    _, y_differences, differences = cvode.integrate(system, times, y0, "BDF", 1e-8, 1e-10, 1e-6,
+                                                    analytic_jacobian=False)
+    assert analytic["jacobian"] > 0 and differences["jacobian"] > 0
+    assert analytic["rhs"] <= 0.95 * differences["rhs"]
+    assert np.allclose(y_analytic[1], y_differences[1], rtol=1e-6)
+
+
+def test_cvode_refuses_a_load_that_sticks():
+    scene = scenes.load("kavz685_stall_resistive")
+    with pytest.raises(ReferenceUnavailable, match="stick"):
+        monolithic.solve(scene, np.linspace(0.0, 0.1, 11), use_cache=False, method="CVODE-BDF")
