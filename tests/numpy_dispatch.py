@@ -69,7 +69,12 @@ def main(argv: list[str]) -> int:
     failed = []
     for level, disabled in passes:
         env = limited_env(disabled)
-        still = set(in_use(env)) & set(disabled)
+        try:
+            still = set(in_use(env)) & set(disabled)
+        except subprocess.CalledProcessError as error:
+            print(f"numpy dispatch: numpy refuses NPY_DISABLE_CPU_FEATURES={env['NPY_DISABLE_CPU_FEATURES']!r}:\n"
+                  f"{error.stderr.strip()}")
+            return 1
         if still:
             print(f"numpy dispatch: disabling {' '.join(disabled)} left {' '.join(sorted(still))} in use")
             return 1
