@@ -11,6 +11,49 @@ REPO = Path(__file__).resolve().parents[1]
 FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 
 
+#: Tests whose outcome could move with numpy's SIMD dispatch: they compare what went through
+#: numpy's vectorised functions, reductions or FFTs with the physics' standard-library results,
+#: with scipy or fmpy, or with committed numbers, exactly or close to rounding.  They get the
+#: marker ``numerics``; `make test` runs them again with numpy's dispatch limited to each
+#: lower level this CPU has (tests/numpy_dispatch.py, docs/testing.md).
+NUMERICS = (
+    "test_loads_and_shafts.py::test_random_load_draws_are_numpys_default_rng_bit_for_bit",
+    "test_loads_and_shafts.py::test_random_load_scalar_resistance_is_the_multisine",
+    "test_loads_and_shafts.py::test_random_load_stays_within_its_bound",
+    "test_kinematics.py::test_pairwise_sum_is_numpys_sum_bit_for_bit",
+    "test_kinematics.py::test_the_standard_library_fft_agrees_with_numpy_to_rounding",
+    "test_kinematics.py::test_standard_library_real_ffts_agree_with_numpy",
+    "test_kinematics.py::test_position_derivative_is_the_transfer_function",
+    "test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
+    "test_kinematics.py::test_the_reported_amplitude_fit_agrees_with_scipy",
+    "test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
+    "test_oracle_physics.py::test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables",
+    "test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
+    "test_validate.py::test_band_is_fmpys_with_the_cross_check_figures",
+    "test_validate.py::test_cross_check_fraction_is_fmpys_validate_result",
+    "test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+)
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
+                                       "(tests/conftest.py NUMERICS)")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if f"{item.path.name}::{item.originalname}" in NUMERICS:
+            item.add_marker(pytest.mark.numerics)
+
+
+def pytest_report_header(config):
+    # Which SIMD code numpy runs here, so that a log says at which dispatch level it passed.
+    from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
+    used = [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+    return (f"numpy SIMD: baseline {' '.join(__cpu_baseline__) or '-'}, dispatched in use: {' '.join(used) or 'none'}"
+            f" (NPY_DISABLE_CPU_FEATURES={os.environ.get('NPY_DISABLE_CPU_FEATURES', '')!r})")
+
+
 @pytest.fixture(scope="session")
 def fmu_dir() -> Path:
     """The built FMUs, (re)built first when they are missing or older than their sources."""

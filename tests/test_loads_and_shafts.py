@@ -14,6 +14,7 @@ from lever.physics import catalogue
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
 from lever.physics.load import (ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad, load_model,
                                 read_harmonics)
+from lever.physics.numerics import SeededUniform
 from lever.physics.parameters import ParameterError
 from lever.physics.shaft import Shaft
 
@@ -66,18 +67,35 @@ def test_random_load_is_reproducible_by_seed():
     assert np.array_equal(over(a.resistance)(t, 0.0, 0.0), over(d.resistance)(t, 0.0, 0.0))
 
 
+def within_ulps(values, expected, ulps: int) -> bool:
+    """Each value within ``ulps`` units in the last place of the expected one."""
+    return len(values) == len(expected) and all(
+        abs(v - e) <= ulps * math.ulp(e) for v, e in zip(values, expected))
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 7, 99, 123456, 2 ** 31 - 1])
 @pytest.mark.parametrize("tones", [1, 6, 7, 8, 9, 40, 129, 256])
 def test_random_load_draws_are_numpys_default_rng_bit_for_bit(seed, tones):
     # The physics draws with its own PCG64/SeedSequence (lever.physics.numerics) since the
-    # FMUs left numpy: every seeded load is exactly the one numpy drew before.
+    # FMUs left numpy: every seeded load is the one numpy drew before.  Exact where the
+    # operations are exact on every CPU: the stream of uniform doubles (integer arithmetic,
+    # one multiply and one add), the standard library's exp of them, numpy's pairwise sum
+    # (a fixed order of additions at every SIMD level).  np.exp is not exact: numpy sends
+    # it to SIMD code on CPUs with AVX-512, which differs from libm's exp in the last bits,
+    # so the exponentials are compared with numpy's to a few ulps.
     band_low, band_high, amplitude = 2.0, 450.0, 8.8
     rng = np.random.default_rng(seed)
-    frequencies = np.exp(rng.uniform(math.log(band_low), math.log(band_high), tones)).tolist()
-    phases = rng.uniform(0.0, 2.0 * math.pi, tones).tolist()
+    logs = rng.uniform(math.log(band_low), math.log(band_high), tones)
+    phases = rng.uniform(0.0, 2.0 * math.pi, tones)
     weights = rng.uniform(0.5, 1.0, tones)
+    mine = SeededUniform(seed)
+    assert mine.uniform(math.log(band_low), math.log(band_high), tones) == logs.tolist()
+    assert mine.uniform(0.0, 2.0 * math.pi, tones) == phases.tolist()
+    assert mine.uniform(0.5, 1.0, tones) == weights.tolist()
     load = RandomLoad(107.5, amplitude, seed, tones, band_low, band_high)
-    assert load.frequencies == frequencies and load.phases == phases
+    assert load.frequencies == [math.exp(x) for x in logs.tolist()]
+    assert within_ulps(load.frequencies, np.exp(logs).tolist(), 4)
+    assert load.phases == phases.tolist()
     assert load.weights == (amplitude * weights / weights.sum()).tolist()
 
 
