@@ -475,25 +475,32 @@ class Result:
 
 def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None, fmu_dir: Path = FMUS) -> Result:
     """The FMU stand-alone under fmpy's ``simulate_fmu``, driven by the reference's inputs,
-    at the ``_ref.opt`` step, recording at every communication point."""
+    at the ``_ref.opt`` step, recording at every communication point.  The instance is the
+    harness's own (``Component``: its messages come through the process's one logger, see
+    ``harness.engine.component``), lent to ``simulate_fmu`` and freed as its state allows."""
     from fmpy import simulate_fmu
+    from harness.engine.component import Component
 
     opt = reference.opt
     inputs = reference.inputs
     signal = np.rec.fromarrays([inputs.times] + list(inputs.signals.values()), names=["time"] + list(inputs.signals))
     outputs = list(reference.outputs.signals)
-    messages = []
     how = f"fmpy.simulate_fmu, step {opt.step:g} s, {opt.start:g}...{opt.stop:g} s"
+    component = Component(name, fmu_dir / f"{name}.fmu")
     try:
-        result = simulate_fmu(str(fmu_dir / f"{name}.fmu"), start_time=opt.start, stop_time=opt.stop,
-                              step_size=opt.step, output_interval=opt.step, input=signal, output=outputs,
-                              start_values=dict(start_values or {}), relative_tolerance=opt.rel_tol,
-                              logger=lambda *args: messages.append(args[-1].decode("utf-8", "replace")
-                                                                   if isinstance(args[-1], bytes) else str(args[-1])),
-                              debug_logging=False)
+        with component.lent() as fmu:
+            # the extracted folder, not the file: simulate_fmu would extract it again
+            result = simulate_fmu(component.unzipped_dir, start_time=opt.start, stop_time=opt.stop,
+                                  step_size=opt.step, output_interval=opt.step, input=signal, output=outputs,
+                                  start_values=dict(start_values or {}), relative_tolerance=opt.rel_tol,
+                                  model_description=component.description, fmu_instance=fmu, terminate=False,
+                                  debug_logging=False)
     except Exception as error:   # fmpy raises plain Exceptions for refused calls
-        said = f" (FMU said: {' | '.join(messages)})" if messages else ""
+        said = [m for m in component.messages if not m.startswith("[ok]")]
+        said = f" (FMU said: {' | '.join(said)})" if said else ""
         return Result(np.empty(0), {n: np.empty(0) for n in outputs}, how, f"{name}: {error}{said}")
+    finally:
+        component.free()
     return Result(np.asarray(result["time"], dtype=float), {n: np.asarray(result[n], dtype=float) for n in outputs},
                   how)
 
