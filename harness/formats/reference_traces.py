@@ -544,6 +544,13 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
     return written
 
 
+def _finite_limits(*arrays) -> tuple[float, float] | None:
+    """The smallest and largest finite value of ``arrays``; None when there is none."""
+    values = np.concatenate([np.asarray(a, dtype=float).ravel() for a in arrays])
+    values = values[np.isfinite(values)]
+    return (float(values.min()), float(values.max())) if values.size else None
+
+
 def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
     """The reference, its band, the result and the samples outside the band: the whole span
     above, a close-up around the first sample outside below."""
@@ -557,9 +564,13 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
     t, y = result.times, result.traces[column]
     first = finding.outside_times[0] if finding.outside_times else finding.max_error_time
     span = t_ref[-1] - t_ref[0]
-    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref))))
-    fig, axes = plt.subplots(2, 1, figsize=(10, 7))
-    for ax, window in zip(axes, (None, (first - half, first + half))):
+    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref)))) if len(t_ref) > 1 else 1.0
+    # no sample compared (the result's times miss the reference's): no close-up, and the
+    # whole plot over both spans, from their finite values only
+    windows = (None, (first - half, first + half) if math.isfinite(first) else None)
+    fig, axes = plt.subplots(2 if windows[1] else 1, 1, figsize=(10, 7 if windows[1] else 4), squeeze=False)
+    axes = axes[:, 0]
+    for ax, window in zip(axes, windows):
         ax.fill_between(band.t, band.low, band.high, color="tab:green", alpha=0.25, lw=0,
                         label=f"band ({tolerance.name}: +-{band.width:.3g})")
         ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
@@ -579,6 +590,14 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
                 pad = 0.05 * (shown.max() - shown.min() or 1.0)
                 ax.set_ylim(shown.min() - pad, shown.max() + pad)
             ax.set_title(f"close-up at t = {first:.4g} s", fontsize=9)
+        else:
+            x = _finite_limits(t_ref, t)
+            y_limits = _finite_limits(band.low, band.high, y_ref, y)
+            if x and x[1] > x[0]:
+                ax.set_xlim(*x)
+            if y_limits and y_limits[1] > y_limits[0]:
+                pad = 0.05 * (y_limits[1] - y_limits[0])
+                ax.set_ylim(y_limits[0] - pad, y_limits[1] + pad)
         ax.set_xlabel("time [s]")
         ax.set_ylabel(finding.name)
         ax.grid(alpha=0.3)
