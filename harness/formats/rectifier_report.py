@@ -7,7 +7,7 @@ import math
 
 from harness.description import kinds
 from harness.description import scene as scenes
-from harness.formats.run_files import files_line, reference_error_lines, write_run
+from harness.formats.run_files import files_line, reference_error_lines, save_figure, write_run
 from harness.judges.rectifier import analyse, errors
 
 
@@ -197,8 +197,7 @@ def plot(out, result, reference=None):
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: kinematics of the elements (cf. the paper's Figs. 8-11)")
     fig.tight_layout()
-    fig.savefig(out / "kinematics.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "kinematics.png")
 
     model = kinds.rectifier_model(scene)
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True)
@@ -219,8 +218,7 @@ def plot(out, result, reference=None):
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: the gaps closing and opening")
     fig.tight_layout()
-    fig.savefig(out / "gaps.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "gaps.png")
 
     fig, ax = plt.subplots(1, 1, figsize=(11, 4))
     for var, label in (("rocker_torque", "T12 rocker -> half-couplings"), ("disc_torque", "through the discs"),
@@ -233,8 +231,7 @@ def plot(out, result, reference=None):
     ax.legend(loc="upper right", fontsize=8)
     fig.suptitle(f"{title}: torques")
     fig.tight_layout()
-    fig.savefig(out / "torques.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "torques.png")
 
     stored = tr["kinetic_energy"] + tr["elastic_energy"]
     stored = stored - stored[0]
@@ -253,8 +250,7 @@ def plot(out, result, reference=None):
     axes[1].grid(alpha=0.3)
     fig.suptitle(f"{title}: energy balance, input = stored + dissipated + output + residual")
     fig.tight_layout()
-    fig.savefig(out / "energy.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "energy.png")
 
     if reference is not None:
         n = min(len(t), len(reference.times))
@@ -268,8 +264,7 @@ def plot(out, result, reference=None):
         axes[-1].set_xlabel("time [s]")
         fig.suptitle(f"{title}: FMU against the monolithic reference")
         fig.tight_layout()
-        fig.savefig(out / "vs_reference.png", dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / "vs_reference.png")
 
 
 def write(out, result, reference=None) -> dict:

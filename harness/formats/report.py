@@ -12,7 +12,7 @@ from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import rectifier_report
-from harness.formats.run_files import files_line, fmt, reference_error_lines, write_run
+from harness.formats.run_files import files_line, fmt, reference_error_lines, save_figure, write_run
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -187,8 +187,7 @@ def plot(out: Path, result: RunResult, reference=None):
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(title)
         fig.tight_layout()
-        fig.savefig(out / filename, dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / filename)
 
     title = f"{result.scene.name} - {result.master}, h = {result.step:g} s"
     figure("speeds.png", [("speed [rad/s]", [(names["w1"], "w1 drive", "-"), (names["w2"], "w2 driven", "-")])], title)
@@ -219,8 +218,7 @@ def plot(out: Path, result: RunResult, reference=None):
         axes[3].legend(loc="upper right", fontsize=8)
         fig.suptitle(f"{title}: co-simulation vs reference")
         fig.tight_layout()
-        fig.savefig(out / "vs_reference.png", dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / "vs_reference.png")
 
 
 def plot_over_angle(out: Path, scene, times, traces, title: str):
@@ -253,8 +251,7 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
         axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
         fig.suptitle(title)
         fig.tight_layout()
-        fig.savefig(out / filename, dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / filename)
 
 
 def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
@@ -286,8 +283,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     axes[-1].set_xlabel("angular frequency [rad/s]")
     fig.suptitle(f"{title}: spectrum after t = {t[0] + transient:g} s")
     fig.tight_layout()
-    fig.savefig(out / "spectrum.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "spectrum.png")
 
 
 def write_driveline(out: Path, result: RunResult, reference=None) -> dict:
