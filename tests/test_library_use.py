@@ -136,3 +136,17 @@ def test_after_an_error_only_free_after_fatal_nothing(fmu_dir, status, calls):
     assert made == calls
     if status == 4:      # the test's own instance: not fatal really, so freed here
         real.freeInstance()
+
+
+def test_the_fmpy_peer_ends_a_refused_initialisation_without_fmi2terminate(fmu_dir):
+    from harness.formats.peers import simulate_peer
+
+    logged: list[str] = []
+    listener = lambda instance, status, category, text: logged.append(text)
+    components.add_log_listener(listener)
+    try:
+        result = simulate_peer("fmpy-jacobi", scenes.load("kavz685").with_overrides(REFUSED), 1e-3, fmu_dir)
+    finally:
+        components._listeners.remove(listener)
+    assert result.failure and REFUSAL_TEXT in result.failure, result.failure
+    assert not [m for m in logged if "not allowed in state" in m], logged
