@@ -882,19 +882,8 @@ _alias("check", compliance_command)
 
 
 def entry():
-    """Console entry point.  pythonfmu 0.7's native library can corrupt the heap while
-    the process tears down, after all results are written; so flush and leave without
-    interpreter and library teardown, keeping the command's exit status."""
-    try:
-        main.main(standalone_mode=True)
-        status = 0
-    except SystemExit as done:
-        status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
-    from harness.engine.component import remove_extractions
-    remove_extractions()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(status)
+    """Console entry point."""
+    main.main(standalone_mode=True)
 
 
 if __name__ == "__main__":

@@ -178,3 +178,136 @@ def test_case_log_redoes_interrupted_cases(tmp_path):
         {"status": INTERRUPTED, "time": 0.25}
     result, reused = again.run("b", lambda: {"status": "ok"})
     assert not reused and "b" in again
+
+
+# -- Ctrl-C at each named phase of `lever run`, sent by the process itself ----------------------
+# ``interrupt.phase`` is called at each phase of a run; here it is replaced by one that
+# sends SIGINT to the process when the named phase begins (``times`` SIGINTs: a second one
+# is a user who insists), so each phase is hit exactly, whatever the machine's speed.
+
+_HOOKED = """
+import os, signal, sys
+from harness.engine import interrupt
+
+target, times = sys.argv[1], int(sys.argv[2])
+real = interrupt.phase
+
+def phase(name):
+    real(name)
+    if name == target:
+        for _ in range(times):
+            os.kill(os.getpid(), signal.SIGINT)
+
+interrupt.phase = phase
+sys.argv = ["lever", *sys.argv[3:]]
+from harness.cli import entry
+entry()
+"""
+
+_SHORT = ["--set", "experiment.stop=0.5", "--set", "experiment.transient=0"]
+
+
+def _run_hooked(phase: str, out: Path, times: int = 1, scene: str = "kavz685", extra=_SHORT):
+    done = subprocess.run([sys.executable, "-c", _HOOKED, phase, str(times), "run", scene, *extra, "--no-progress",
+                           "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert "Traceback" not in done.stderr, done.stderr
+    return done
+
+
+def _whole_files(out: Path) -> set[str]:
+    """The files in ``out``, each checked whole and parseable (no temporary left)."""
+    names = set()
+    for path in out.iterdir():
+        if path.name == ".lever.lock":
+            continue
+        assert not path.name.startswith("."), f"a temporary file was left: {path.name}"
+        data = path.read_bytes()
+        if path.suffix == ".csv":
+            lines = data.decode().split("\n")
+            assert lines[-1] == "", f"{path.name} does not end with a whole line"
+            widths = {len(line.split(",")) for line in lines[:-1]}
+            assert len(widths) == 1 and len(lines) > 2, f"{path.name}: rows of {widths} cells"
+            [float(cell) for line in lines[1:-1] for cell in line.split(",")]
+        elif path.suffix == ".json":
+            json.loads(data)
+        elif path.suffix == ".png":
+            assert data.startswith(b"\x89PNG\r\n\x1a\n") and data.endswith(b"IEND\xaeB`\x82"), path.name
+        elif path.suffix == ".md":
+            assert data.endswith(b"\n") and data.startswith(b"# "), path.name
+        names.add(path.name)
+    return names
+
+
+_PLOTS = {"speeds.png", "torques.png", "accelerations.png", "u12_over_angle.png", "spectrum.png",
+          "revolution.png", "revolutions.png"}
+
+
+def test_ctrl_c_while_stepping_writes_the_part_computed(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("stepping", out)
+    assert done.returncode == 130 and "interrupted at t = 0.001 s" in done.stderr, done.stderr
+    files = _whole_files(out)
+    assert {"traces.csv", "summary.json", "report.md"} <= files and "reference.csv" not in files
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["diagnosis"]["kind"] == "interrupted" and "interrupted_while_writing" not in summary
+    assert len(trace_files.read(out / "traces.csv")[0]) == 2      # the start and the one step taken
+
+
+def test_ctrl_c_while_solving_the_reference_writes_the_run_without_it(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("reference", out)
+    assert done.returncode == 130 and "interrupted while solving the reference" in done.stderr, done.stderr
+    files = _whole_files(out)
+    assert {"traces.csv", "summary.json", "report.md"} | _PLOTS <= files and "reference.csv" not in files
+    assert len(trace_files.read(out / "traces.csv")[0]) == 501
+    assert json.loads((out / "summary.json").read_text())["failure"].startswith("interrupted after the run")
+
+
+def test_ctrl_c_while_writing_the_traces_finishes_them_and_names_the_plots_not_drawn(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("writing traces.csv", out)
+    assert done.returncode == 130, done.stderr
+    files = _whole_files(out)
+    assert files == {"traces.csv", "reference.csv", "summary.json", "report.md"}
+    assert len(trace_files.read(out / "traces.csv")[0]) == 501
+    not_drawn = json.loads((out / "summary.json").read_text())["interrupted_while_writing"]["not_drawn"]
+    assert _PLOTS <= set(not_drawn)
+    assert "Not drawn (Ctrl-C while the files were written): speeds.png" in (out / "report.md").read_text()
+    assert f"interrupted while writing the run's files to {out}/: not written: speeds.png" in done.stderr
+
+
+def test_ctrl_c_while_plotting_keeps_the_plots_drawn(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("plotting torques.png", out)
+    assert done.returncode == 130, done.stderr
+    files = _whole_files(out)
+    assert {"traces.csv", "reference.csv", "summary.json", "report.md", "speeds.png"} <= files
+    assert not files & (_PLOTS - {"speeds.png"})
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["interrupted_while_writing"]["not_drawn"]) >= _PLOTS - {"speeds.png"}
+    assert "speeds.png" in summary["files"] and "torques.png" not in summary["files"]
+
+
+def test_ctrl_c_while_writing_the_summary_finishes_every_file(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("writing summary.json", out)
+    assert done.returncode == 130 and "every file was written whole" in done.stderr, done.stderr
+    assert _whole_files(out) >= {"traces.csv", "reference.csv", "summary.json", "report.md"} | _PLOTS
+
+
+def test_a_second_ctrl_c_while_writing_stops_and_names_what_is_missing(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("writing traces.csv", out, times=2)
+    assert done.returncode == 130, done.stderr
+    assert _whole_files(out) == set()          # nothing half-written, no temporary file
+    assert ("not written: traces.csv, reference.csv, the plots not drawn yet, summary.json, report.md"
+            in done.stderr), done.stderr
+
+
+def test_ctrl_c_while_writing_a_freewheel_run(tmp_path, fmu_dir):
+    out = tmp_path / "run"
+    done = _run_hooked("writing traces.csv", out, scene="freewheel_rectifier", extra=["--set", "experiment.stop=0.2"])
+    assert done.returncode == 130, done.stderr
+    files = _whole_files(out)
+    assert {"traces.csv", "summary.json", "report.md"} <= files and not [f for f in files if f.endswith(".png")]
+    assert len(trace_files.read(out / "traces.csv")[0]) == 1001

@@ -227,6 +227,31 @@ def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
     assert "ends at t = 0.499" in result.output and "'engine_work' is missing" in result.output
 
 
+@pytest.mark.parametrize("shift", [20.0, -20.0, 100.0, 0.4, -0.4])
+def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift):
+    """A result whose times miss the reference's span (a shifted time column) fails,
+    saying that the spans do not overlap, or how much of the span it covers; the plots
+    of the failing signals are drawn, validation.json is standard JSON."""
+    import json
+
+    ref = crosscheck.read("EngineShaft")      # 0 ... 1 s
+    path = tmp_path / "shifted.csv"
+    crosscheck.write_csv(path, crosscheck.Traces(ref.outputs.times + shift, ref.outputs.signals))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["validate", "--result", str(path), "EngineShaft", "--out", str(out)])
+    assert result.exit_code == 1, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
+    assert "EngineShaft: FAIL" in result.output and "Traceback" not in result.output
+    if abs(shift) > 1:
+        assert f"do not overlap the span 0 ... 1 s" in result.output
+    else:
+        assert "it covers 60.0% of 0 ... 1 s" in result.output
+    summary = json.loads((out / "validation.json").read_text(),
+                         parse_constant=lambda c: pytest.fail(f"validation.json holds {c}"))
+    assert summary["passed"] is False
+    assert sorted(p.stem for p in out.glob("*.png")) == sorted(ref.outputs.signals)
+
+
 def test_validate_refuses_bad_input(tmp_path):
     assert _invoke("validate", "nope").exit_code == 2
     assert _invoke("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers

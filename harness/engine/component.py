@@ -15,6 +15,7 @@ import shutil
 import sys
 import tempfile
 from collections import deque
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -31,6 +32,11 @@ _STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
 # FMU log messages are printf-style with variadic arguments, which ctypes cannot read:
 # fmpy's native proxy formats them and calls one Python function for the whole process.
 # So every component shares one callback struct, and messages are routed by instance name.
+# The proxy keeps a single pointer to the last Python logger anyone gave it (fmpy's
+# ``simulate_fmu(logger=...)`` gives it a temporary one, freed when it returns: the next
+# message calls freed memory).  So the harness never hands fmpy a logger of its own
+# making; it points the proxy back at this module's callback, which lives as long as the
+# process, before each instance it makes (``_pin_logger``).
 _routes: dict[str, deque] = {}
 _listeners: list = []
 _instances = itertools.count(1)
@@ -69,16 +75,27 @@ def add_log_listener(listener):
 def log_callbacks() -> fmi2CallbackFunctions:
     """The one callback struct of this process (see above); pass it to
     ``FMU2Slave.instantiate(callbacks=...)``."""
+    _pin_logger()
     return _callbacks
 
 
+def _pin_logger():
+    """Point fmpy's native logger proxy at ``_dispatch`` again (code outside the harness
+    may have pointed it at a logger of its own since).  ``addLoggerProxy`` re-points it
+    only for a struct whose logger is not the proxy yet, hence the struct of its own."""
+    _pin.logger = _logger
+    addLoggerProxy(ctypes.byref(_pin))
+
+
 _libc = ctypes.CDLL(None)
+# Module globals: alive until the process ends, as the FMUs' pointers to them must be.
 _logger = fmi2CallbackLoggerTYPE(_dispatch)
 _callbacks = fmi2CallbackFunctions()
 _callbacks.logger = _logger
 _callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(("calloc", _libc))
 _callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(("free", _libc))
 addLoggerProxy(ctypes.byref(_callbacks))
+_pin = fmi2CallbackFunctions()
 
 
 # One extraction per FMU file and process.  Every instance of an FMU then loads the same
@@ -158,6 +175,13 @@ class FmuCallError(RuntimeError):
                          f"at t = {time:.6g} s{said}")
 
 
+# Where an instance stands in FMI 2.0's co-simulation state machine, as far as ``free``
+# needs it: fmi2Terminate is allowed only once initialised (step complete or step failed),
+# fmi2FreeInstance in every state but after fmi2Fatal, after which no call at all is.
+INSTANTIATED, INITIALIZATION, STEPPING, ERROR, FATAL, TERMINATED, UNKNOWN = (
+    "instantiated", "initialization mode", "stepping", "error", "fatal", "terminated", "unknown")
+
+
 class Component:
     """An instantiated FMU: named variables, parameters applied, fast value access."""
 
@@ -174,10 +198,12 @@ class Component:
         # A process-unique instance name routes this instance's log messages here.
         self.instance_name = f"{name}#{next(_instances)}"
         _routes[self.instance_name] = self.messages
+        _pin_logger()
         self.fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
                              modelIdentifier=self.description.coSimulation.modelIdentifier,
                              instanceName=self.instance_name)
         self.fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
+        self.state = INSTANTIATED
         functions = self.fmu._functions
         self.raw = RawCalls(ctypes.c_void_p(self.fmu.component), _unconverted(functions["fmi2GetReal"]),
                             _unconverted(functions["fmi2SetReal"]), functions["fmi2DoStep"], ctypes.c_size_t)
@@ -185,6 +211,11 @@ class Component:
         self._set_state = self.fmu._functions["fmi2SetFMUstate"]
         self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
         self._freed = False
+
+    @property
+    def unzipped_dir(self) -> str:
+        """The folder this process extracted the FMU to (shared by its instances)."""
+        return self._unzipped
 
     @property
     def calls(self) -> int:
@@ -206,7 +237,34 @@ class Component:
         """Raise ``FmuCallError`` for ``call`` that returned ``status``, with the last messages logged."""
         messages = [m for m in self.messages if not m.startswith("[ok]")][-5:]
         self.messages.clear()
+        self.note_status(status)
         raise FmuCallError(self.name, call, status, self.time, messages)
+
+    def note_status(self, status: int):
+        """The instance returned ``status`` (above warning) to a call: fmi2Error and
+        fmi2Fatal change its state (fmi2Discard leaves it where it was, a discarded step
+        in "step failed", from which fmi2Terminate is allowed)."""
+        if status >= 4:
+            self.state = FATAL
+        elif status == 3 and self.state != FATAL:
+            self.state = ERROR
+
+    @contextmanager
+    def lent(self):
+        """``self.fmu`` lent to code that drives it itself (fmpy's ``simulate_fmu`` with
+        ``fmu_instance``, from set-up to its last step, not terminating it); how that ends
+        tells ``free`` the instance's state: stepping when it returns, the status of the
+        call that failed when one did, unknown (only fmi2FreeInstance) otherwise."""
+        try:
+            yield self.fmu
+        except FMICallException as error:
+            self.state = UNKNOWN
+            self.note_status(error.status)
+            raise
+        except BaseException:
+            self.state = UNKNOWN
+            raise
+        self.state = STEPPING
 
     def _checked(self, call: str, function, *args):
         try:
@@ -237,9 +295,11 @@ class Component:
         self.time = start
         self._checked("fmi2SetupExperiment", self.fmu.setupExperiment, None, start, stop)
         self._checked("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
+        self.state = INITIALIZATION
 
     def exit_initialization(self):
         self._checked("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+        self.state = STEPPING
 
     # -- hot path ----------------------------------------------------------------------------
     def real_buffer(self, names: Iterable[str]):
@@ -288,6 +348,8 @@ class Component:
         status = self._set_state(self.raw.handle, state)
         if status > 1:
             self.fail("fmi2SetFMUstate", status)
+        if self.state == ERROR:      # a state saved while stepping, restored after an error
+            self.state = STEPPING
         self.time = time
 
     def free_state(self, state):
@@ -298,14 +360,21 @@ class Component:
 
     # -- tear-down ---------------------------------------------------------------------------
     def free(self):
+        """End the instance with the calls FMI 2.0 allows in its state: fmi2Terminate only
+        once initialised and not failed, then fmi2FreeInstance; after fmi2Fatal none (the
+        standard allows no further call; the instance and its library stay in memory)."""
         if self._freed:
             return
         self._freed = True
         try:
-            self.fmu.terminate()
-        except Exception:  # noqa: BLE001 - freeing must go on after a failed run
-            pass
-        try:
+            if self.state == FATAL:
+                return
+            if self.state == STEPPING:
+                try:
+                    self.fmu.terminate()
+                    self.state = TERMINATED
+                except Exception:  # noqa: BLE001 - freeing must go on after a refused terminate
+                    pass
             self.fmu.freeInstance()
         finally:
             _routes.pop(self.instance_name, None)

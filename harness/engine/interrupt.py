@@ -39,6 +39,13 @@ def _on_sigint(signum, frame):
     _requested = True
 
 
+def phase(name: str):
+    """The process enters the phase ``name`` of its work ("stepping", "reference",
+    "writing traces.csv", "plotting speeds.png", ...).  Nothing happens here: the named
+    points are where a test sends SIGINT to check what each phase leaves on disk
+    (``tests/test_interrupts.py`` replaces this function)."""
+
+
 def requested() -> bool:
     """True once Ctrl-C was pressed inside ``deferred()``."""
     return _requested

@@ -184,6 +184,7 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
         interrupt.check(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
         calls_before = system.calls_by_kind()
+        interrupt.phase("stepping")
         stepping = clock.perf_counter()
         if driver.adaptive:
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import resource
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -42,14 +43,30 @@ def _lines(times: np.ndarray, block: np.ndarray) -> str:
     return "".join(",".join(map(repr, [t] + row)) + "\n" for t, row in zip(times.tolist(), block.tolist()))
 
 
+@contextmanager
+def replaced(path: Path):
+    """Write ``path`` whole or not at all: yields a temporary name beside it (hidden, with
+    the same suffix, so writers that go by the suffix still do), renamed to ``path`` when
+    the block ends normally (``os.replace``: atomic), removed when it does not (an
+    exception, Ctrl-C); ``path`` is then as it was before."""
+    path = Path(path)
+    temporary = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
+    try:
+        yield temporary
+        os.replace(temporary, path)
+    finally:
+        temporary.unlink(missing_ok=True)
+
+
 def write(path: Path, times: np.ndarray, traces: dict[str, np.ndarray]):
-    """Write a whole run's traces at once, in the format a stream writes (and ``read`` reads)."""
+    """Write a whole run's traces at once, in the format a stream writes (and ``read``
+    reads); whole or not at all (``replaced``)."""
     names = list(traces)
     times = np.asarray(times, dtype=float)
     block = np.empty((len(times), len(names)))
     for j, name in enumerate(names):
         block[:, j] = traces[name]
-    with open(path, "w", newline="") as f:
+    with replaced(path) as temporary, open(temporary, "w", newline="") as f:
         f.write(_header(names))
         for start in range(0, len(times), CHUNK):
             f.write(_lines(times[start:start + CHUNK], block[start:start + CHUNK]))

@@ -267,6 +267,7 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
     rows: list[list[float]] = []
     n_steps = 0
     failure = stage = None
+    finished = False       # every step taken: fmi2Terminate allowed (FMI 2.0: not after an error or before stepping)
 
     def propagate():
         for name in setup.order:
@@ -314,6 +315,7 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
                 propagate()
                 n_steps += 1
                 record_row(grid[n])
+            finished = True
         except Exception as error:  # noqa: BLE001 - whatever fails ends the run, keeping its rows
             said = [m for m in messages if not m.startswith("[ok]")]
             failure = (f"{type(error).__name__}: {error}" + ("; FMU said: " + " | ".join(said) if said else "")
@@ -321,10 +323,11 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
         wall = clock.perf_counter() - started
     finally:
         for name, fmu in slaves.items():
-            try:
-                fmu.terminate()
-            except Exception:  # noqa: BLE001 - freeing must go on after a failed run
-                pass
+            if finished:
+                try:
+                    fmu.terminate()
+                except Exception:  # noqa: BLE001 - freeing must go on after a refused terminate
+                    pass
             fmu.freeInstance()
         for name in setup.order:
             harness_component.unroute(f"{name}@fmpy-jacobi")

@@ -1,5 +1,5 @@
 """What every plot of the project shares: legends beside the data (never on it), a view
-zoomed to the values it shows, the start-up transient marked, and time figures that show
+zoomed to the values it shows, the start-up transient marked, and time views that show
 the judged window at a readable scale.
 
 A report states means and amplitudes after the start-up transient; a plot over the whole
@@ -63,15 +63,6 @@ def mark_transient(ax, start: float, end: float) -> None:
         ax.axvspan(start, end, color=TRANSIENT_SHADE, zorder=0, label="start-up transient (not judged)")
 
 
-def time_figure(path, t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, transient: float,
-                title: str, difference: tuple[str, np.ndarray] | None = None, dpi: int = 110) -> None:
-    """``time_view`` written to ``path``."""
-    plt = pyplot()
-    fig = time_view(t, series, ylabel, unit, transient, title, difference)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-
-
 def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, transient: float, title: str,
               difference: tuple[str, np.ndarray] | None = None):
     """A figure of quantities over time as a report judges them: the whole run (the
@@ -124,4 +115,4 @@ def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, t
     return fig
 
 
-__all__ = ["pyplot", "legend_outside", "row_legend", "zoom", "mark_transient", "time_figure", "time_view"]
+__all__ = ["pyplot", "legend_outside", "row_legend", "zoom", "mark_transient", "time_view"]

@@ -8,7 +8,7 @@ import math
 from harness.description import kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
-from harness.formats.run_files import files_line, reference_error_lines, write_run
+from harness.formats.run_files import files_line, reference_error_lines, save_figure, write_run
 from harness.judges.rectifier import analyse, errors
 
 
@@ -194,8 +194,7 @@ def plot(out, result, reference=None):
     plotting.legend_outside(axes[0])
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: kinematics of the elements (cf. the paper's Figs. 8-11)")
-    fig.savefig(out / "kinematics.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "kinematics.png")
 
     model = kinds.rectifier_model(scene)
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
@@ -215,8 +214,7 @@ def plot(out, result, reference=None):
     axes[3].grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}: the gaps closing and opening")
-    fig.savefig(out / "gaps.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "gaps.png")
 
     fig, ax = plt.subplots(1, 1, figsize=(11, 4), layout="constrained")
     for var, label in (("rocker_torque", "T12 rocker -> half-couplings"), ("disc_torque", "through the discs"),
@@ -228,8 +226,7 @@ def plot(out, result, reference=None):
     ax.grid(alpha=0.3)
     plotting.legend_outside(ax)
     fig.suptitle(f"{title}: torques")
-    fig.savefig(out / "torques.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "torques.png")
 
     stored = tr["kinetic_energy"] + tr["elastic_energy"]
     stored = stored - stored[0]
@@ -247,8 +244,7 @@ def plot(out, result, reference=None):
     axes[1].set_xlabel("time [s]")
     axes[1].grid(alpha=0.3)
     fig.suptitle(f"{title}: energy balance, input = stored + dissipated + output + residual")
-    fig.savefig(out / "energy.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "energy.png")
 
     if reference is not None:
         n = min(len(t), len(reference.times))
@@ -269,8 +265,7 @@ def plot(out, result, reference=None):
             plotting.legend_outside(ax)
         axes[-1].set_xlabel("time [s]")
         fig.suptitle(f"{title}: FMU against the monolithic reference")
-        fig.savefig(out / "vs_reference.png", dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / "vs_reference.png")
 
 
 def write(out, result, reference=None) -> dict:

@@ -475,25 +475,32 @@ class Result:
 
 def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None, fmu_dir: Path = FMUS) -> Result:
     """The FMU stand-alone under fmpy's ``simulate_fmu``, driven by the reference's inputs,
-    at the ``_ref.opt`` step, recording at every communication point."""
+    at the ``_ref.opt`` step, recording at every communication point.  The instance is the
+    harness's own (``Component``: its messages come through the process's one logger, see
+    ``harness.engine.component``), lent to ``simulate_fmu`` and freed as its state allows."""
     from fmpy import simulate_fmu
+    from harness.engine.component import Component
 
     opt = reference.opt
     inputs = reference.inputs
     signal = np.rec.fromarrays([inputs.times] + list(inputs.signals.values()), names=["time"] + list(inputs.signals))
     outputs = list(reference.outputs.signals)
-    messages = []
     how = f"fmpy.simulate_fmu, step {opt.step:g} s, {opt.start:g}...{opt.stop:g} s"
+    component = Component(name, fmu_dir / f"{name}.fmu")
     try:
-        result = simulate_fmu(str(fmu_dir / f"{name}.fmu"), start_time=opt.start, stop_time=opt.stop,
-                              step_size=opt.step, output_interval=opt.step, input=signal, output=outputs,
-                              start_values=dict(start_values or {}), relative_tolerance=opt.rel_tol,
-                              logger=lambda *args: messages.append(args[-1].decode("utf-8", "replace")
-                                                                   if isinstance(args[-1], bytes) else str(args[-1])),
-                              debug_logging=False)
+        with component.lent() as fmu:
+            # the extracted folder, not the file: simulate_fmu would extract it again
+            result = simulate_fmu(component.unzipped_dir, start_time=opt.start, stop_time=opt.stop,
+                                  step_size=opt.step, output_interval=opt.step, input=signal, output=outputs,
+                                  start_values=dict(start_values or {}), relative_tolerance=opt.rel_tol,
+                                  model_description=component.description, fmu_instance=fmu, terminate=False,
+                                  debug_logging=False)
     except Exception as error:   # fmpy raises plain Exceptions for refused calls
-        said = f" (FMU said: {' | '.join(messages)})" if messages else ""
+        said = [m for m in component.messages if not m.startswith("[ok]")]
+        said = f" (FMU said: {' | '.join(said)})" if said else ""
         return Result(np.empty(0), {n: np.empty(0) for n in outputs}, how, f"{name}: {error}{said}")
+    finally:
+        component.free()
     return Result(np.asarray(result["time"], dtype=float), {n: np.asarray(result[n], dtype=float) for n in outputs},
                   how)
 
@@ -537,6 +544,13 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
     return written
 
 
+def _finite_limits(*arrays) -> tuple[float, float] | None:
+    """The smallest and largest finite value of ``arrays``; None when there is none."""
+    values = np.concatenate([np.asarray(a, dtype=float).ravel() for a in arrays])
+    values = values[np.isfinite(values)]
+    return (float(values.min()), float(values.max())) if values.size else None
+
+
 def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
     """The reference, its band, the result and the samples outside the band: the whole span
     above, a close-up around the first sample outside below."""
@@ -549,9 +563,14 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
     t, y = result.times, result.traces[column]
     first = finding.outside_times[0] if finding.outside_times else finding.max_error_time
     span = t_ref[-1] - t_ref[0]
-    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref))))
-    fig, axes = plt.subplots(2, 1, figsize=(11, 7), layout="constrained")
-    for ax, window in zip(axes, (None, (first - half, first + half))):
+    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref)))) if len(t_ref) > 1 else 1.0
+    # no sample compared (the result's times miss the reference's): no close-up, and the
+    # whole plot over both spans, from their finite values only
+    windows = (None, (first - half, first + half) if math.isfinite(first) else None)
+    fig, axes = plt.subplots(2 if windows[1] else 1, 1, figsize=(11, 7 if windows[1] else 4), squeeze=False,
+                             layout="constrained")
+    axes = axes[:, 0]
+    for ax, window in zip(axes, windows):
         ax.fill_between(band.t, band.low, band.high, color="tab:green", alpha=0.25, lw=0,
                         label=f"band ({tolerance.name}: +-{band.width:.3g})")
         ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
@@ -571,6 +590,14 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
                 pad = 0.05 * (shown.max() - shown.min() or 1.0)
                 ax.set_ylim(shown.min() - pad, shown.max() + pad)
             ax.set_title(f"close-up at t = {first:.4g} s", fontsize=9)
+        else:
+            x = _finite_limits(t_ref, t)
+            y_limits = _finite_limits(band.low, band.high, y_ref, y)
+            if x and x[1] > x[0]:
+                ax.set_xlim(*x)
+            if y_limits and y_limits[1] > y_limits[0]:
+                pad = 0.05 * (y_limits[1] - y_limits[0])
+                ax.set_ylim(y_limits[0] - pad, y_limits[1] + pad)
         ax.set_xlabel("time [s]")
         ax.set_ylabel(finding.name)
         ax.grid(alpha=0.3)

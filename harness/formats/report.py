@@ -12,7 +12,7 @@ from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
-from harness.formats.run_files import files_line, fmt, reference_error_lines, write_run
+from harness.formats.run_files import files_line, fmt, reference_error_lines, save_figure, write_run
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -186,8 +186,10 @@ def plot(out: Path, result: RunResult, reference=None):
             continue
         drive, driven = sign * np.asarray(tr[names[a]], dtype=float), np.asarray(tr[names[b]], dtype=float)
         shown = f"-{a}" if sign < 0 else a
-        plotting.time_figure(out / filename, t, [(f"{shown} (drive)", drive), (f"{b} (driven)", driven)], quantity,
-                             unit, transient, title, (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive))
+        save_figure(plotting.time_view(t, [(f"{shown} (drive)", drive), (f"{b} (driven)", driven)], quantity, unit,
+                                       transient, title,
+                                       (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
+                    out / filename)
     plot_over_angle(out, result.scene, t, tr, title)
     _plot_spectrum(out, result, title, plt)
     if reference is not None:
@@ -207,8 +209,7 @@ def plot(out: Path, result: RunResult, reference=None):
             ax.grid(alpha=0.3)
             plotting.legend_outside(ax)
         fig.suptitle(f"{title}: co-simulation vs reference")
-        fig.savefig(out / "vs_reference.png", dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / "vs_reference.png")
 
 
 def plot_over_angle(out: Path, scene, times, traces, title: str):
@@ -244,8 +245,7 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
                                f"(t = {view['t'][0]:.3f} ... {view['t'][-1]:.3f} s)")
         axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
         fig.suptitle(title if key != "u12" else f"{title}: U12 over the driven shaft's angle")
-        fig.savefig(out / filename, dpi=110)
-        plt.close(fig)
+        save_figure(fig, out / filename)
 
 
 def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
@@ -276,8 +276,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     axes[-1].set_xlim(0.0, 600.0)
     axes[-1].set_xlabel("angular frequency [rad/s]")
     fig.suptitle(f"{title}: spectrum after t = {t[0] + transient:g} s")
-    fig.savefig(out / "spectrum.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "spectrum.png")
 
 
 def write_driveline(out: Path, result: RunResult, reference=None) -> dict:

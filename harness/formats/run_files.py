@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from harness.engine.run import RunResult
+from harness.engine import interrupt
+from harness.engine.traces import replaced as write_whole
 from harness.engine.traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
 
@@ -31,29 +33,94 @@ def earlier_run_files(out: Path) -> list[Path]:
     return [out / n for n in sorted(names) if (out / n).is_file()]
 
 
+class WritingInterrupted(KeyboardInterrupt):
+    """Ctrl-C while a run's files were written: ``missing`` names the files it left out
+    (empty: every file was written whole).  A KeyboardInterrupt, as Ctrl-C is."""
+
+    def __init__(self, out: Path, missing: list[str]):
+        self.out, self.missing = Path(out), list(missing)
+        said = (f"not written: {', '.join(self.missing)}; every file there is whole" if self.missing
+                else "every file was written whole")
+        super().__init__(f"interrupted while writing the run's files to {self.out}/: {said}")
+
+
+#: plots ``save_figure`` left undrawn because Ctrl-C was pressed (``write_run`` resets it)
+_not_drawn: list[str] = []
+
+
+def save_figure(fig, path: Path, dpi: int = 110):
+    """Save a run's plot whole or not at all; after Ctrl-C (taken by ``write_run``) the
+    plot is not drawn but named as missing, so the run's files are written at once."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    interrupt.phase(f"plotting {path.name}")
+    try:
+        if interrupt.requested():
+            _not_drawn.append(path.name)
+            return
+        with write_whole(path) as temporary:
+            fig.savefig(temporary, dpi=dpi)
+    finally:
+        plt.close(fig)
+
+
 def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots) -> dict:
     """A run's files in ``out``, with the summary, report and plots of its kind of scene
     (``summary_of(result, reference)``, ``write_markdown(path, summary)``,
     ``make_plots(out, result, reference)``): traces.csv (unless the run streamed it while
     running), reference.csv, the plots (scene feature ``plots``), summary.json and
     report.md, which list the files written (``summary["files"]``).  An earlier run's
-    files are removed first.  Returns the summary."""
+    files are removed first.  Returns the summary.
+
+    Each file is written whole or not at all (``write_whole``).  Ctrl-C while writing
+    (``interrupt.deferred``) lets the files under way finish, leaves the plots not drawn
+    yet undrawn, marks summary.json and report.md with what is missing and then raises
+    ``WritingInterrupted``; a second Ctrl-C stops at once, naming the files not written."""
     out.mkdir(parents=True, exist_ok=True)
     streamed = out / "traces.csv" if result.stream is not None else None
     for path in earlier_run_files(out):
         if path != streamed:               # a streamed run wrote its traces while it ran
             path.unlink()
-    if result.stream is None:
-        write_traces(out / "traces.csv", result.times, result.traces)
-    if reference is not None:
-        write_traces(out / "reference.csv", reference.times, reference.traces)
-    if "plots" in result.scene.features and len(result.times) > 1:
-        make_plots(out, result, reference)
-    summary = summary_of(result, reference)
-    summary["files"] = [p.name for p in earlier_run_files(out) if p.name not in ("summary.json", "report.md")] \
-        + ["summary.json", "report.md"]
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    write_markdown(out / "report.md", summary)
+    planned = (["traces.csv"] if result.stream is None else []) + (["reference.csv"] if reference is not None
+                                                                     else [])
+    plots = "plots" in result.scene.features and len(result.times) > 1
+    _not_drawn.clear()
+    done: list[str] = []
+    try:
+        with interrupt.deferred():
+            for name in planned:
+                interrupt.phase(f"writing {name}")
+                source = result if name == "traces.csv" else reference
+                write_traces(out / name, source.times, source.traces)
+                done.append(name)
+            if plots:
+                make_plots(out, result, reference)
+                done.append("plots")
+            summary = summary_of(result, reference)
+            summary["files"] = [p.name for p in earlier_run_files(out) if p.name not in ("summary.json", "report.md")] \
+                + ["summary.json", "report.md"]
+            if interrupt.requested() and _not_drawn:
+                summary["interrupted_while_writing"] = {"not_drawn": list(_not_drawn),
+                                                        "note": "Ctrl-C while the files were written: the plots "
+                                                                "named were not drawn; every file written is whole"}
+            interrupt.phase("writing summary.json")
+            with write_whole(out / "summary.json") as temporary:
+                temporary.write_text(json.dumps(summary, indent=2, default=_json_default))
+            done.append("summary.json")
+            interrupt.phase("writing report.md")
+            with write_whole(out / "report.md") as temporary:
+                write_markdown(temporary, summary)
+            done.append("report.md")
+            interrupted = interrupt.requested()
+    except KeyboardInterrupt as error:       # the second Ctrl-C: stopped where it was
+        if isinstance(error, WritingInterrupted):
+            raise
+        steps = planned + (["plots"] if plots else []) + ["summary.json", "report.md"]
+        left = [("the plots not drawn yet" if n == "plots" else n) for n in steps if n not in done]
+        raise WritingInterrupted(out, left) from None
+    if interrupted:
+        raise WritingInterrupted(out, list(_not_drawn))
     return summary
 
 
@@ -64,6 +131,9 @@ def files_line(summary: dict) -> str:
     traces = [f for f in files if f.endswith(".csv")]
     parts = ([f"Plots: {', '.join(plots)}."] if plots else []) + ([f"Traces: {' and '.join(traces)}."] if traces
                                                                     else [])
+    missing = (summary.get("interrupted_while_writing") or {}).get("not_drawn")
+    if missing:
+        parts.append(f"Not drawn (Ctrl-C while the files were written): {', '.join(missing)}.")
     return "  ".join(parts) or "No traces were written."
 
 

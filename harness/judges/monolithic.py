@@ -21,6 +21,7 @@ from lever.physics.shaft import LaggedShaft
 
 from harness.description import kinds
 from harness.description import scene as scenes
+from harness.engine import interrupt
 from harness.judges import cvode, rectifier
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
@@ -65,6 +66,7 @@ def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: 
     """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
     Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
     benchmark compares the masters with."""
+    interrupt.phase("reference")
     solver = SOLVERS.get(kinds.kind_of(scene), solve_driveline)
     return solver(scene, times, use_cache, rtol, atol, method)
 

@@ -14,6 +14,7 @@ import numpy as np
 from lever.physics import catalogue
 
 from harness.description import scene as scenes
+from harness.engine.traces import replaced
 from harness.paths import RESULTS
 
 CACHE = RESULTS / ".cache"
@@ -71,4 +72,6 @@ def store(path: Path, reference: MonolithicSolution):
     CACHE.mkdir(parents=True, exist_ok=True)
     meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
                        "info": reference.info})
-    np.savez_compressed(path, times=reference.times, meta=np.array(meta), **reference.traces)
+    # whole or not at all: a cache cut short by Ctrl-C would break every later run's reference
+    with replaced(path) as temporary:
+        np.savez_compressed(temporary, times=reference.times, meta=np.array(meta), **reference.traces)

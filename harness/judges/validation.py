@@ -125,8 +125,14 @@ class Findings:
     def to_dict(self) -> dict:
         return {"name": self.name, "passed": self.passed, "tolerance": self.tolerance.describe(),
                 "problems": list(self.problems), "notes": list(self.notes),
-                "signals": {s.name: {k: v for k, v in vars(s).items() if k not in ("name", "outside_times")}
+                "signals": {s.name: {k: _json_number(v) for k, v in vars(s).items() if k not in ("name", "outside_times")}
                             for s in self.signals}}
+
+
+def _json_number(value):
+    """A value as JSON holds it: a NaN or infinite error (nothing compared, a non-finite
+    result) as null, which JSON readers take, not Python's NaN/Infinity, which they refuse."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 def _width(values: np.ndarray, dy: float) -> float:
@@ -267,6 +273,26 @@ def value_problems(signal: str, times: np.ndarray, values: np.ndarray, reference
     return problems
 
 
+def span_problems(times: np.ndarray, start: float, stop: float) -> list[str]:
+    """What the result's time span (sorted ``times``) leaves out of ``start ... stop``: a
+    result that starts late or ends early, saying how much of the span it covers, or one
+    whose times miss the span altogether."""
+    slack = 1e-9 * max(1.0, abs(start), abs(stop))
+    first, last = float(times[0]), float(times[-1])
+    if first > stop + slack or last < start - slack:
+        return [f"the result's times {first:.6g} ... {last:.6g} s do not overlap the span {start:g} ... {stop:g} s "
+                "it is to be judged over: nothing to compare (a time column shifted, or another run's?)"]
+    problems = []
+    span = stop - start
+    covered = (min(last, stop) - max(first, start)) / span if span > 0 else 1.0
+    share = f"it covers {max(0.0, min(1.0, covered)):.1%} of {start:g} ... {stop:g} s"
+    if first > start + slack:
+        problems.append(f"the result starts at t = {first:.6g} s, after the start time ({start:g} s): {share}")
+    if last < stop - slack:
+        problems.append(f"the result ends at t = {last:.6g} s, before the stop time ({stop:g} s): {share}")
+    return problems
+
+
 def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], reference_times: np.ndarray,
             reference: dict[str, np.ndarray], tolerance: Tolerance = TOLERANCES["lever"],
             start: float | None = None, stop: float | None = None) -> tuple[Findings, dict[str, Band]]:
@@ -289,11 +315,7 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
     if np.any(np.diff(times) < 0):
         findings.problems.append("the result's time column is not monotonic")
         return findings, bands
-    slack = 1e-9 * max(1.0, abs(stop))
-    if times[0] > start + slack:
-        findings.problems.append(f"the result starts at t = {times[0]:.6g} s, after the start time ({start:g} s)")
-    if times[-1] < stop - slack:
-        findings.problems.append(f"the result ends at t = {times[-1]:.6g} s, before the stop time ({stop:g} s)")
+    findings.problems += span_problems(times, start, stop)
     mapping, missing = match_columns(list(reference), list(traces))
     for signal in missing:
         findings.problems.append(f"signal '{signal}' is missing from the result")
