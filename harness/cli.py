@@ -287,31 +287,8 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
                                  progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
-    claims = result["claims"]
-    target = claims["target_error"]
-    for name, t in claims["time_at_target_s"].items():
-        click.echo(f"  at {100 * target:g} % RMS torque error: {name:26s} "
-                   + ("not reached" if t is None else f"{t:.3f} s"))
-    if claims.get("best_master"):
-        speedup = claims.get("speedup_over_baseline")
-        click.echo(f"  best master: {claims['best_master']}"
-                   + (f", {speedup:.1f}x faster than {claims['baseline']}" if speedup else "")
-                   + (f"; {claims['best_master_over_monolithic']:.2f}x the monolithic solution's time"
-                      if claims.get("best_master_over_monolithic") else ""))
-    if claims.get("baseline_step"):
-        b = claims["baseline_step"]
-        click.echo(f"  one {claims['baseline']} step: {b['per_step_s'] * 1e6:.1f} us, {b['over_hollow_floor']:.2f}x "
-                   f"the do-nothing FMUs' floor ({b['hollow_floor_per_step_s'] * 1e6:.1f} us, same calls)")
-        if "bound_without_master" in b:
-            click.echo(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that cost "
-                       f"nothing would take {b['bound_without_master']:.2f}x the floor")
-    for case in result["cases"]:
-        if case.split:
-            click.echo(f"  {case.label:34s} " + ", ".join(
-                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master")))
-    if claims.get("overhead_above_floor"):
-        click.echo("  above the FMU-call floor: " + ", ".join(
-            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    for line in benchmark.summary_lines(result):
+        click.echo(line)
     click.echo("written: " + ", ".join(str(p) for p in paths))
 
 
