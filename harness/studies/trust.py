@@ -82,7 +82,7 @@ def noise(load: dict | None, figures: dict | None = None, unit: str = "s") -> st
     parts = []
     if load and load.get("load_max") is not None:
         parts.append(f"load average {load['load_min']:.2f}-{load['load_max']:.2f} on {load['cpus']} CPUs")
-    if figures and figures.get("n"):
+    if figures and figures.get("n", 0) > 1:
         parts.append(f"repeats spread {_num(figures['min'], unit)}-{_num(figures['max'], unit)} "
                      f"over {figures['n']} runs")
     return "machine too noisy" + (f" ({'; '.join(parts)})" if parts else "")
