@@ -17,8 +17,11 @@ The same scene (KAVZ-685, 10 s at 1 ms by default) in
   coupled scene's 12), and its time is the sum of the three stepping loops.
 Each host's time is its stepping loop as the host reports it (ours and libcosim's: from
 applying the parameters to the last communication point; ecos: the time of its last
-progress line, "90% complete, simulated 9.000s in T s", scaled to the whole span), the median of ``repeats`` runs, and the ratio
-to our harness's median in the same run.
+progress line, "90% complete, simulated 9.000s in T s", scaled to the whole span), the median
+[min-max] of ``repeats`` runs.  Every host runs once a round, round after round, and its ratio
+to our harness is the median [min-max] of the ratios within each round
+(``harness.studies.trust.paired_ratio``); the report states the machine's load average.  A
+host whose output shows another experiment (another stop time or number of steps) is refused.
 
 ``run_ecos`` and ``ecos_traces`` (``harness.formats.ecos``, also the benchmark's peer ``ecos``)
 are what the tests use to run ecos.
@@ -118,8 +121,8 @@ def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: P
 
 def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,
                hosts=HOSTS, native_env: dict | None = None, log=print) -> dict:
-    """Median stepping-loop time of each host over ``repeats`` runs, and its ratio to the
-    first host's (our harness's jacobi by default).  The hosts that are no Python process
+    """Median [min-max] stepping-loop time of each host over ``repeats`` rounds, and its
+    ratio to the first host's (our harness's jacobi by default), round by round.  The hosts that are no Python process
     (ecos, the C importer) run in ``native_env`` (default bare)."""
     times: dict[str, list[float]] = {h: [] for h in hosts}
     load = trust.LoadLog()
