@@ -949,7 +949,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
             else:
                 parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
                                    for part in ("crossing", "slave", "master"))
-            lines.append(f"| {r['engine']} | {setting} | {wall:.3f} s | {calls} | {parts} |")
+            shown = "unreliable" if r.get("unreliable") else f"{wall:.3f} s"
+            lines.append(f"| {r['engine']} | {setting} | {shown} | {calls} | {parts} |")
     if c.get("baseline_step"):
         b = c["baseline_step"]
         if b.get("unreliable"):
