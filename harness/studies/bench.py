@@ -811,7 +811,7 @@ def table_row(case: Case) -> dict:
     overhead = overhead_above_floor(case) if case.floor_time and case.stable and not floor_bad else None
     spread = trust.spread(case.wall_times)
     loads = [x for x in case.load if x is not None]
-    split = None if case.split_unreliable else case.split
+    split = None if case.split_unreliable or problems else case.split      # a split of no result is none
     return {"engine": case.engine, "kind": case.kind, "step": case.step, "tolerance": case.tolerance,
             "wall_median_s": case.wall, "wall_min_s": spread["min"], "wall_max_s": spread["max"],
             "repeats": len(case.wall_times), "asked": case.asked or None,
@@ -927,7 +927,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
             lines += ["", "Each ratio is the median of the ratios of runs made side by side (the cases it divides "
                       "run in turn, round after round), with their range; the run times above are the cases' own "
                       "repeats, made one case after another."]
-    split_rows = [r for r in rows if r.get("crossing_s") is not None or r.get("split_unreliable")]
+    split_rows = [r for r in rows if r.get("crossing_s") is not None or r.get("split_unreliable")
+                  or (r["kind"] == "master" and r.get("unreliable") and r.get("calls_per_step"))]
     if split_rows:
         lines += ["", "## Where the time goes", "",
                   "Each master's run time split by the calls it made, priced call by call (component and kind: "
@@ -946,6 +947,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
             calls = "" if r["calls_per_step"] is None else f"{r['calls_per_step']:.1f}"
             if r.get("split_unreliable"):
                 parts = f"unreliable: {r['split_unreliable']} | | "
+            elif r.get("unreliable"):
+                parts = "unreliable: its run time is (above) | | "
             else:
                 parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
                                    for part in ("crossing", "slave", "master"))
@@ -1019,7 +1022,9 @@ def summary_lines(result: dict) -> list[str]:
                 lines.append(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that "
                              f"cost nothing would take {b['bound_without_master']:.2f}x the floor")
     for case in result["cases"]:
-        if case.split_unreliable:
+        if case.split and case_problems(case):
+            lines.append(f"  {case.label:34s} split unreliable: its run time is ({'; '.join(case_problems(case))})")
+        elif case.split_unreliable:
             lines.append(f"  {case.label:34s} split unreliable: {case.split_unreliable}")
         elif case.split:
             lines.append(f"  {case.label:34s} " + ", ".join(
