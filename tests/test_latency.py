@@ -33,7 +33,8 @@ def test_the_observer_sees_every_step_of_a_run_and_the_table_says_it(fmu_dir):
     assert all(reason.split(":")[0] in known for s in report["slowest"] for reason in s["why"].split("; "))
     text = latency.table(report, "kavz685")
     assert "| all steps |" in text and "| after the first 10 |" in text and "Start-up steps:" in text
-    assert text.count("\n| ") >= 2 + 1 + latency.SLOWEST
+    assert "| CPU time of each step" in text and text.count("| start-up: step ") >= latency.STARTUP
+    assert text.count("\n| ") >= 3 + 1 + latency.STARTUP + 1 + latency.SLOWEST
 
 
 def test_the_slowest_steps_are_explained_from_what_was_seen_in_them():

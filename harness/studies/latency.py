@@ -53,6 +53,12 @@ def analyse(timer: StepTimer, step: float, run_wall: float | None = None) -> dic
         "over_step": int((wall > step).sum()),
         "over_step_after_startup": int((steady > step).sum()),
         "startup_s": [float(x) for x in wall[:STARTUP]],
+        "startup": [{"wall_s": float(wall[k]), "cpu_s": float(cpu[k]), "switches": int(switches[k]),
+                     "why": _why(k, wall[k], cpu[k], switches[k], gc_by_step.get(k, []))}
+                    for k in range(min(STARTUP, n))],
+        # the steps' CPU time: what each would take with a core of its own
+        "cpu": {"median_s": float(np.median(cpu)), "p99_s": float(np.percentile(cpu, 99)),
+                "p999_s": float(np.percentile(cpu, 99.9)), "max_s": float(cpu.max()), "over_step": int((cpu > step).sum())},
         "cpu_share": float(cpu.sum() / wall.sum()) if wall.sum() > 0 else None,
         "collections": len(timer.collections),
         "collection_s": float(sum(s for _, s, _ in timer.collections)),
@@ -112,8 +118,13 @@ def table(report: dict, title: str = "") -> str:
              f"| all steps | {_us(r['median_s'])} | {_us(r['p99_s'])} | {_us(r['p999_s'])} | {_us(r['max_s'])} | "
              f"{r['over_step']} of {r['steps']} |",
              f"| after the first {len(r['startup_s'])} | {_us(a['median_s'])} | {_us(a['p99_s'])} | "
-             f"{_us(a['p999_s'])} | {_us(a['max_s'])} | {r['over_step_after_startup']} |", "",
+             f"{_us(a['p999_s'])} | {_us(a['max_s'])} | {r['over_step_after_startup']} |",
+             f"| CPU time of each step (a core of its own) | {_us(r['cpu']['median_s'])} | {_us(r['cpu']['p99_s'])} | "
+             f"{_us(r['cpu']['p999_s'])} | {_us(r['cpu']['max_s'])} | {r['cpu']['over_step']} |", "",
              "Start-up steps: " + ", ".join(_us(x) for x in r["startup_s"]) + ".", "",
+             "| start-up step | wall | CPU | why |", "|---|---|---|---|",
+             *(f"| {k + 1} | {_us(s['wall_s'])} | {_us(s['cpu_s'])} | {s['why']} |" for k, s in enumerate(r["startup"])),
+             "",
              f"The {len(r['slowest'])} slowest steps:", "", "| step | t [s] | wall | CPU | why |", "|---|---|---|---|---|"]
     for s in r["slowest"]:
         lines.append(f"| {s['index'] + 1} | {s['t']:.4f} | {_us(s['wall_s'])} | {_us(s['cpu_s'])} | {s['why']} |")
