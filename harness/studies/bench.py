@@ -683,7 +683,8 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
     base_time = at_target.get(baseline)
     ranked = sorted(((t, n) for n, t in at_target.items() if t is not None and n in master_family.MASTERS))
     out = {"target_error": target, "time_at_target_s": at_target, "baseline": baseline, "ratios": {},
-           "machine": machine}
+           "machine": machine,
+           "time_at_target_side_by_side": {n: trust.spread(t) for n, t in per_round.items() if t}}
     if ranked:
         best_time, best = ranked[0]
         out["best_master"] = best
@@ -911,9 +912,11 @@ def markdown(result: dict, rows: list[dict]) -> str:
                      f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
                      f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
     lines += ["", f"## At an RMS torque error of {_pct(c['target_error'])}", "",
-              "| engine | run time (interpolated) |", "|---|---|"]
+              "| engine | run time (interpolated) | in the rounds side by side: median [min-max] |", "|---|---|---|"]
+    side = c.get("time_at_target_side_by_side", {})
     for name, t in sorted(c["time_at_target_s"].items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
-        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} |")
+        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} | "
+                     f"{trust.spread_text(side[name]) if name in side else ''} |")
     ratios = c.get("ratios", {})
     if c.get("best_master"):
         speedup = ratios.get("speedup_over_baseline")
