@@ -2,8 +2,15 @@
 step a scene, next to other co-simulation engines on the same FMUs, the monolithic
 solution and the FMU-call floor (``lever bench [SCENE]``).
 
-Each case runs ``repeats`` times; the run time quoted is the median of the stepping
-loops (instantiation left out, for every engine alike).  Errors are measured once
+Each case runs ``repeats`` times; the run time quoted is the median [min-max] of the
+stepping loops (instantiation left out, for every engine alike).  What is divided by what
+(a master and its baseline, a master and DOP853, a step and the do-nothing floor) is measured
+side by side: the cases a headline ratio divides run again in turn, round after round
+(``measure_rounds``), and the ratio is the median of the rounds' ratios with their range.  A
+master's FMU-call floor is timed just before each of its runs and its call prices just before
+and after them.  A figure that cannot be (a share below zero, a floor above the step it bounds,
+a figure from fewer runs than asked) is flagged with the machine's load and the spread, not
+shown (``harness.studies.trust``).  Errors are measured once
 (runs are deterministic) against the tight monolithic reference on the run's own
 communication grid: time-averaged RMS and max of ``tau1, tau2, w1, w2`` relative to the
 mean torque and speed, over the whole run and after the scene's start-up transient, and
