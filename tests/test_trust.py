@@ -116,9 +116,9 @@ def test_a_master_slower_than_the_baseline_is_said_to_be_slower():
 
 
 def test_a_bound_above_the_ratio_it_bounds_is_flagged():
-    assert "above the measured ratio" in trust.bound_problem(2.27, {"max": 1.54})
-    assert trust.bound_problem(1.5, {"max": 1.54}) is None
-    verdict = trust.judged(1.54, [trust.bound_problem(2.27, {"max": 1.54})], "machine too noisy (x)")
+    assert "above the measured ratio" in trust.bound_problem(2.27, {"median": 1.54, "max": 2.9})
+    assert trust.bound_problem(1.5, {"median": 1.54, "max": 1.6}) is None
+    verdict = trust.judged(1.54, [trust.bound_problem(2.27, {"median": 1.54})], "machine too noisy (x)")
     assert verdict["value"] is None and verdict["measured"] == 1.54 and not verdict["reliable"]
     assert verdict["reason"].endswith(": machine too noisy (x)")
 
@@ -165,3 +165,25 @@ def test_lever_hosts_reports_the_ratio_round_by_round_with_the_load(monkeypatch)
     text = hosts.table(report)
     assert "1.50x [1.40-1.60x, 3 pairs]" in text and ("load average" in text or "load not known" in text)
     assert math.isfinite(report["hosts"]["harness-jacobi"]["ratio"])
+
+
+def test_a_step_said_to_cost_less_than_a_master_that_cost_nothing_is_flagged():
+    spec = scene.load("kavz685")                     # scene step 1 ms
+    case = Case("jacobi", "master", 1e-3, wall_times=[1.0, 1.0, 1.0], asked=3, steps=1000, load=[2.0, 2.1],
+                errors={"tau_rms": 1e-3}, split={"crossing": 0.2, "slave": 0.4, "master": 0.4})
+    # the step against the do-nothing floor, round by round: 2.0x, 2.2x, 5.0x
+    rounds = {"walls": {bench.case_key("master", "jacobi", 1e-3, None): [1.0, 1.0, 1.0]},
+              "hollow_floor": [0.5e-3, 0.45e-3, 0.2e-3]}
+    claims = bench.claims(spec, [case], {"target_error": 1e-3, "baseline": "jacobi"}, rounds=rounds,
+                          machine={"cpus": 2, "load_min": 2.0, "load_max": 2.1, "load_median": 2.05, "samples": 2})
+    step = claims["baseline_step"]
+    assert step["ratio"]["median"] == pytest.approx(1e-3 / 0.45e-3)
+    # the calls priced at our FMUs are 3x those priced at the twins: above the step's 2.2x
+    assert step["bound_without_master"] == pytest.approx(3.0)
+    assert "the bound without a master (3.00x) is above the measured ratio (2.22x)" in step["unreliable"]
+    assert "machine too noisy (load average 2.00-2.10 on 2 CPUs" in step["unreliable"]
+    text = bench.markdown({"claims": claims, "scene": "kavz685", "repeats": 3, "floor_per_step_s": 5e-5}, [])
+    assert "against the do-nothing FMUs' floor: unreliable (" in text and "would take 3.00x" not in text
+    case.split = {"crossing": 0.5, "slave": 0.4, "master": 0.1}          # 1.8x: below every round's ratio
+    assert "unreliable" not in bench.claims(spec, [case], {"target_error": 1e-3, "baseline": "jacobi"},
+                                            rounds=rounds)["baseline_step"]

@@ -725,14 +725,18 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
             if r.get("min") is not None and r["min"] < 1.0:
                 problems.append(f"in {sum(x < 1.0 for x in r['ratios'])} of {r['n']} rounds the do-nothing "
                                 "floor was above the step it bounds")
-            if case.split and not case.split_unreliable:
+            if case.split and not case.split_unreliable and not case_problems(case):
                 # What our slaves do behind the calls bounds the ratio from below: a master
                 # that cost nothing would still pay the crossings and the slaves' own work.
+                # Both from the call prices, ours and the twins' timed back to back around
+                # the case's runs (not the rounds' floor, timed at other moments).
                 slave = case.split["slave"] / case.steps
-                b.update({"slave_per_step_s": slave, "bound_without_master": (floor + slave) / floor})
+                b.update({"slave_per_step_s": slave,
+                          "bound_without_master": (case.split["crossing"] + case.split["slave"])
+                          / case.split["crossing"]})
                 problems.append(trust.bound_problem(b["bound_without_master"], r))
-            elif case.split_unreliable:
-                b["bound_unreliable"] = case.split_unreliable
+            elif case.split_unreliable or case.split:
+                b["bound_unreliable"] = case.split_unreliable or "; ".join(case_problems(case))
             verdict = trust.judged(r["median"], problems, trust.noise(machine, trust.spread(steps_walls or [])))
             if not verdict["reliable"]:
                 b["unreliable"] = verdict["reason"]

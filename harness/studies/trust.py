@@ -130,12 +130,12 @@ def runs_problem(done: int, asked: int) -> str | None:
 
 
 def bound_problem(bound: float | None, measured: dict | None) -> str | None:
-    """A lower bound above the figure it bounds (a ratio that a master that cost nothing
-    would reach, above the whole master's ratio in every pair)."""
-    if bound is None or not measured or measured.get("max") is None:
+    """A lower bound above the figure it bounds: the ratio a master that cost nothing would
+    reach, above the median of the whole master's measured ratios."""
+    if bound is None or not measured or measured.get("median") is None:
         return None
-    if bound > measured["max"]:
-        return f"the bound without a master ({bound:.2f}x) is above the measured ratio ({measured['max']:.2f}x)"
+    if bound > measured["median"]:
+        return f"the bound without a master ({bound:.2f}x) is above the measured ratio ({measured['median']:.2f}x)"
     return None
 
 
