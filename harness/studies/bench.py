@@ -422,8 +422,9 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     log = CaseLog(out, fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
     if log is not None and len(log):
         say(f"resuming: {len(log)} case(s) already in {log.path}")
+    # the load seen by the measurements themselves (kept in the case log: a resumed
+    # benchmark reports the load its cases ran under, not the load when it resumed)
     machine = trust.LoadLog()
-    machine.sample()
     cases: list[Case] = []
 
     def take(case: Case, measure):
@@ -432,9 +433,14 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         machine.samples += [x for x in case.load if x is not None]
         say(_line(case) + ("  (from the case log)" if reused else ""))
 
-    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: Case(
-        "floor", "floor", scene.experiment.step, asked=repeats,
-        wall_times=[call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats)]))
+    def floors(fmus: Path, name: str) -> Case:
+        case = Case(name, "floor", scene.experiment.step, asked=repeats, load=[trust.load_average()])
+        case.wall_times = [call_floor(scene, fmu_dir=fmus) for _ in range(repeats)]
+        case.load.append(trust.load_average())
+        return case
+
+    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: floors(fmu_dir, "floor"))
+    machine.samples += [x for x in floor_case.load if x is not None]
     floor_per_step = floor_case.wall
     say(f"FMU-call floor: {trust.spread_text(trust.spread(floor_case.wall_times))} per communication step")
     # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step): what
@@ -446,9 +452,9 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         say(f"do-nothing FMUs not built ({type(error).__name__}: {error}): no split of the run times")
     hollow_case = None
     if twins is not None:
-        hollow_case, _ = _logged(log, Case("floor-hollow", "floor", scene.experiment.step), lambda: Case(
-            "floor-hollow", "floor", scene.experiment.step, asked=repeats,
-            wall_times=[call_floor(scene, fmu_dir=twins) for _ in range(repeats)]))
+        hollow_case, _ = _logged(log, Case("floor-hollow", "floor", scene.experiment.step),
+                                 lambda: floors(twins, "floor-hollow"))
+        machine.samples += [x for x in hollow_case.load if x is not None]
         if hollow_case.wall_times:
             say(f"do-nothing FMU floor: {trust.spread_text(trust.spread(hollow_case.wall_times))} per "
                 "communication step (same calls)")
@@ -489,7 +495,6 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         key = case_key("rounds", repeats, *(case_key(c.kind, c.engine, c.step, c.tolerance) for c in chosen))
         rounds = _rounds_logged(log, key, lambda: measure_rounds(scene, chosen, repeats, fmu_dir, twins))
         machine.samples += [x for x in rounds.get("load", []) if x is not None]
-    machine.sample()
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
             "floor_spread": trust.spread(floor_case.wall_times),
             "hollow_floor_per_step_s": hollow_case.wall if hollow_case else None,
