@@ -69,10 +69,11 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     jacobi = [r for r in rows if r["engine"] == "jacobi"]
     assert float(jacobi[1]["tau_rms"]) < float(jacobi[0]["tau_rms"])   # smaller step, smaller error
     # the overhead is the run's time over the floor of the same calls (not a timing bound:
-    # under load either can be anything; a floor above the step is flagged, no overhead shown)
+    # under load either can be anything; a floor above the step is flagged, no overhead shown
+    # beside a run time that is no result)
     for r in jacobi:
         assert float(r["floor_s"]) > 0.0
-        if "call floor" in r["unreliable"]:
+        if r["unreliable"]:
             assert r["overhead_above_floor"] == "", r
             continue
         assert float(r["overhead_above_floor"]) == pytest.approx(

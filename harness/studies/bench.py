@@ -824,8 +824,7 @@ def table_row(case: Case) -> dict:
     is no result (``case_problems``) says why in ``unreliable``; a split that cannot be
     (``split_case``) is left out, the reason in ``split_unreliable``."""
     problems = case_problems(case)
-    floor_bad = any("call floor" in x for x in problems)
-    overhead = overhead_above_floor(case) if case.floor_time and case.stable and not floor_bad else None
+    overhead = overhead_above_floor(case) if case.floor_time and case.stable and not problems else None
     spread = trust.spread(case.wall_times)
     loads = [x for x in case.load if x is not None]
     split = None if case.split_unreliable or problems else case.split      # a split of no result is none
