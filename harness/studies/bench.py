@@ -995,9 +995,10 @@ def markdown(result: dict, rows: list[dict]) -> str:
     if c.get("largest_stable_baseline_step"):
         s = c["largest_stable_baseline_step"]
         side = s.get("wall_spread_side_by_side")
+        short = s.get("asked") and s["runs"] < s["asked"]
         lines += ["", f"Largest stable {c['baseline']} step: {s['step']:g} s (h*omega_n = {s['h_omega']:.3g}), "
-                  f"run time {s['wall_s']:.3f} s"
-                  + (f" ({s['runs']} of {s['asked']} runs)" if s.get("asked") and s["runs"] < s["asked"] else "")
+                  + (f"run time unreliable (from {s['runs']} of {s['asked']} runs)" if short
+                     else f"run time {s['wall_s']:.3f} s")
                   + (f"; side by side with the masters below: {trust.spread_text(side)}" if side else "") + "."]
         faster = s.get("faster", {})
         for name, fraction in sorted(s.get("time_fraction_at_target", {}).items(), key=lambda kv: kv[1]):
