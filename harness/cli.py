@@ -121,7 +121,9 @@ def list_scenes():
 @click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
               "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
               "the reference (the energy balance, integrated over every row, judges the run).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, strict, progress, stream):
+@click.option("--latency", is_flag=True, help="Time every step for real-time use: median, p99, p99.9 and maximum "
+              "step time, the start-up steps and why the slowest were slow (latency.md, latency.json).")
+def run(scene, assignments, master, step, tolerance, out, no_reference, strict, progress, stream, latency):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
     from harness.engine import masters as family
@@ -156,9 +158,11 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, strict, 
     if not stream:
         _refuse_unstreamed(spec, step)
     out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
+    from harness.studies import latency as step_latency
+    timer = step_latency.StepTimer() if latency else None
     try:
         result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
-                          stream=out / "traces.csv" if stream else None, keep_partial=True)
+                          stream=out / "traces.csv" if stream else None, keep_partial=True, observer=timer)
     except SceneInvalid as error:
         from harness.formats import outputs
         outputs.abandon(out)             # refused before the run: no empty folder left
@@ -179,6 +183,9 @@ def run(scene, assignments, master, step, tolerance, out, no_reference, strict, 
         result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
     summary = report.write(out, result, reference)
     _print_summary(summary, out)
+    if timer is not None:
+        for line in step_latency.report(out, timer, result):
+            click.echo(line)
     if result.interrupted:
         click.echo(f"{result.failure}; what was computed is in {out}/ (marked interrupted)", err=True)
         sys.exit(INTERRUPTED_EXIT)
@@ -287,31 +294,8 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
                                  progress=click.echo, out=out, resume=not fresh)
     paths = benchmark.write(out, result)
     click.echo("")
-    claims = result["claims"]
-    target = claims["target_error"]
-    for name, t in claims["time_at_target_s"].items():
-        click.echo(f"  at {100 * target:g} % RMS torque error: {name:26s} "
-                   + ("not reached" if t is None else f"{t:.3f} s"))
-    if claims.get("best_master"):
-        speedup = claims.get("speedup_over_baseline")
-        click.echo(f"  best master: {claims['best_master']}"
-                   + (f", {speedup:.1f}x faster than {claims['baseline']}" if speedup else "")
-                   + (f"; {claims['best_master_over_monolithic']:.2f}x the monolithic solution's time"
-                      if claims.get("best_master_over_monolithic") else ""))
-    if claims.get("baseline_step"):
-        b = claims["baseline_step"]
-        click.echo(f"  one {claims['baseline']} step: {b['per_step_s'] * 1e6:.1f} us, {b['over_hollow_floor']:.2f}x "
-                   f"the do-nothing FMUs' floor ({b['hollow_floor_per_step_s'] * 1e6:.1f} us, same calls)")
-        if "bound_without_master" in b:
-            click.echo(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that cost "
-                       f"nothing would take {b['bound_without_master']:.2f}x the floor")
-    for case in result["cases"]:
-        if case.split:
-            click.echo(f"  {case.label:34s} " + ", ".join(
-                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master")))
-    if claims.get("overhead_above_floor"):
-        click.echo("  above the FMU-call floor: " + ", ".join(
-            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    for line in benchmark.summary_lines(result):
+        click.echo(line)
     click.echo("written: " + ", ".join(str(p) for p in paths))
 
 

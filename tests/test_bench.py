@@ -54,7 +54,7 @@ def test_claims_compare_the_target_time_with_the_largest_stable_baseline_step():
     runs = claims["at_h_omega_5_or_more"]["adaptive-trapezoidal"]
     assert [(r["tolerance"], round(r["h_omega"], 1), r["stable"]) for r in runs] == [(2e-2, 7.1, True)]
     text = bench.markdown({"claims": claims, "scene": spec.name, "repeats": 1, "floor_per_step_s": 5e-5}, [])
-    assert f"({8.0 / at_target:.1f}x faster)" in text and "longest step 0.006 s" in text
+    assert f"({8.0 / at_target:.1f}x (medians measured apart, not side by side) faster)" in text and "longest step 0.006 s" in text
 
 
 def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
@@ -69,9 +69,13 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     jacobi = [r for r in rows if r["engine"] == "jacobi"]
     assert float(jacobi[1]["tau_rms"]) < float(jacobi[0]["tau_rms"])   # smaller step, smaller error
     # the overhead is the run's time over the floor of the same calls (not a timing bound:
-    # under load either can be anything)
+    # under load either can be anything; a floor above the step is flagged, no overhead shown
+    # beside a run time that is no result)
     for r in jacobi:
         assert float(r["floor_s"]) > 0.0
+        if r["unreliable"]:
+            assert r["overhead_above_floor"] == "", r
+            continue
         assert float(r["overhead_above_floor"]) == pytest.approx(
             float(r["wall_median_s"]) / float(r["floor_s"]) - 1.0, rel=1e-9), r
     claims = json.loads((tmp_path / "bench.json").read_text())["claims"]
@@ -89,18 +93,28 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     # a jacobi step makes 11 FMI calls (3 steps, 3 reads, 3 sets - one per target - and
     # the shafts' accelerations read again), the floor's calls
     assert result["hollow_floor_per_step_s"] > 0
+    # (a split that cannot be - a share below zero on a busy machine - is left out, with why)
     for r in rows[:-1]:
+        if r["split_unreliable"]:
+            assert r["crossing_s"] == "" and "machine too noisy" in r["split_unreliable"], r
+            continue
         parts = [float(r[f"{part}_s"]) for part in ("crossing", "slave", "master")]
-        assert parts[0] > 0 and sum(parts) == pytest.approx(float(r["wall_median_s"])), r
+        assert parts[0] > 0 and min(parts) >= 0 and sum(parts) == pytest.approx(float(r["wall_median_s"])), r
     assert [float(r["calls_per_step"]) for r in jacobi] == [11.0, 11.0]
-    assert claims["baseline_step"]["over_hollow_floor"] == pytest.approx(
-        float(jacobi[1]["wall_median_s"]) / float(jacobi[1]["steps"]) / result["hollow_floor_per_step_s"])
+    # the step against the do-nothing floor: timed side by side, round by round
+    rounds = result["rounds"]
+    key = bench.case_key("master", "jacobi", 1e-3, None)
+    per_step = rounds["walls"][key][0] / float(jacobi[1]["steps"])
+    step = claims["baseline_step"]
+    assert step["ratio"]["ratios"] == pytest.approx([per_step / rounds["hollow_floor"][0]])
+    assert step["ratio"]["single_run"] and "a single run" in (tmp_path / "bench.md").read_text()
     # the bound a master that cost nothing would meet: the floor plus our slaves' own work
-    slave_per_step = float(jacobi[1]["slave_s"]) / float(jacobi[1]["steps"])
-    assert claims["baseline_step"]["slave_per_step_s"] == pytest.approx(slave_per_step)
-    assert claims["baseline_step"]["bound_without_master"] == pytest.approx(
-        1.0 + slave_per_step / result["hollow_floor_per_step_s"])
-    assert "even a master that cost nothing" in (tmp_path / "bench.md").read_text()
+    if "slave_per_step_s" in step:
+        slave_per_step = float(jacobi[1]["slave_s"]) / float(jacobi[1]["steps"])
+        assert step["slave_per_step_s"] == pytest.approx(slave_per_step)
+        assert step["bound_without_master"] == pytest.approx(1.0 + float(jacobi[1]["slave_s"]) / float(jacobi[1]["crossing_s"]))
+        assert "even a master that cost nothing" in (tmp_path / "bench.md").read_text() or step.get("unreliable")
+    assert json.loads((tmp_path / "bench.json").read_text())["machine"]["cpus"] >= 1
     assert "## Where the time goes" in (tmp_path / "bench.md").read_text()
 
 
@@ -137,7 +151,8 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
 
     monkeypatch.setattr(bench, "run_monolithic", broken)
     floor = bench.call_floor
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir: floor(scene, n_steps=500, fmu_dir=fmu_dir))
+    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+                        floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     first = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path)
     by_engine = {c.engine: c for c in first["cases"]}
     # the divergence guard stops it at the physical speed bound, naming variable and time
@@ -155,14 +170,16 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
-    # three cases, the two floors (our FMUs', the do-nothing twins') and the call prices
-    assert lines[0].startswith("resuming: 6 case(s) already in")
+    # three cases and the two floors (our FMUs', the do-nothing twins'); no case reaches the
+    # target, so no headline is measured side by side
+    assert lines[0].startswith("resuming: 5 case(s) already in")
     assert [bench.table_row(c) for c in again["cases"]] == [bench.table_row(c) for c in first["cases"]]
     assert again["floor_per_step_s"] == first["floor_per_step_s"]
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.
     monkeypatch.undo()
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir: floor(scene, n_steps=500, fmu_dir=fmu_dir))
+    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+                        floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
     spec.bench["monolithic_rtol"] = []
     grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False)

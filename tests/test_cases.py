@@ -94,3 +94,19 @@ def test_a_broken_pool_ends_the_collection_only_for_a_caller_that_resubmits(tmp_
     # ... passed on to one that does (the stability map)
     with pytest.raises(BrokenProcessPool):
         _pool_run(tmp_path / "b", [1, 4], passes=(BrokenProcessPool,))
+
+
+def test_a_fingerprint_with_a_set_is_the_same_in_every_process(tmp_path):
+    """A scene's features are a set, whose order follows the interpreter's string hashing,
+    which changes from process to process: a log written by one `lever bench` must be
+    resumed by the next, not set aside."""
+    import subprocess
+    import sys
+
+    program = ("import sys; from pathlib import Path; from harness.studies.cases import CaseLog; "
+               "log = CaseLog(Path(sys.argv[1]), {'features': {'plots', 'reference', 'energy_balance', 'stream'}}); "
+               "print(log.set_aside)")
+    seen = [subprocess.run([sys.executable, "-c", program, str(tmp_path)], capture_output=True, text=True, check=True,
+                           env={"PYTHONHASHSEED": str(seed), "PATH": "/usr/bin:/bin"}).stdout.strip()
+            for seed in range(1, 7)]
+    assert seen == ["None"] * 6, seen

@@ -94,9 +94,9 @@ def test_bench_interrupted_logs_the_case_and_resumes(tmp_path, fmu_dir):
     scene, out = _bench_scene(tmp_path), tmp_path / "bench"
     process = _start("bench", scene, "--repeats", "1", "--no-peers", "--out", out)
     log = out / "cases.jsonl"
-    # interrupt while the first master case runs (after the floor cases are logged: ours, the
-    # do-nothing twins' and the call prices)
-    _wait_for(lambda: log.exists() and any(e["key"].startswith("floor|call-prices") for e in _case_lines(log)),
+    # interrupt while the first master case runs (after the floor cases are logged: ours and
+    # the do-nothing twins')
+    _wait_for(lambda: log.exists() and any(e["key"].startswith("floor|floor-hollow") for e in _case_lines(log)),
               process)
     _, err, _ = _interrupt(process)
     assert process.returncode == 130, err

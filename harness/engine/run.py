@@ -144,7 +144,7 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
 
 def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
-             stream: Path | None = None, keep_partial: bool = False) -> RunResult:
+             stream: Path | None = None, keep_partial: bool = False, observer=None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
     (for an adaptive master: its first step); ``options`` go to the master.  The stability
     advice is not computed here: whoever shows it (``lever run``) asks
@@ -153,15 +153,19 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
 
     Ctrl-C stops the run at the next step boundary (harness.engine.interrupt): with
     ``keep_partial`` the result holds the rows computed until then, marked interrupted;
-    without, ``Interrupted`` is raised once the FMUs are freed."""
+    without, ``Interrupted`` is raised once the FMUs are freed.
+
+    ``observer`` (e.g. ``harness.engine.observers.StepTimer``) is told when the stepping
+    starts (``started(t)``), after every whole step (``stepped(n, t)``, the step recorded
+    and checked) and when it ends (``ended()``); without one the loop pays one test a step."""
     with interrupt.deferred():
-        result = _simulate(scene, master, step, fmu_dir, progress, options, stream)
+        result = _simulate(scene, master, step, fmu_dir, progress, options, stream, observer)
     if result.interrupted and not keep_partial:
         raise Interrupted(result.diagnosis["time"])
     return result
 
 
-def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunResult:
+def _simulate(scene, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
@@ -185,12 +189,16 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
         calls_before = system.calls_by_kind()
         interrupt.phase("stepping")
+        if observer is not None:
+            observer.started(driver.t)
         stepping = clock.perf_counter()
         if driver.adaptive:
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
                 driver.step(min(driver.h, e.stop - driver.t))
                 recorder.record(driver.t)
                 guard.check(driver.t, driver.n_steps)
+                if observer is not None:
+                    observer.stepped(driver.n_steps, driver.t)
                 if interrupt.requested():
                     raise Interrupted(driver.t)
                 if bar is not None:
@@ -202,6 +210,8 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
                 driver.step(t_next=min(e.start + n * step, e.stop))
                 recorder.record(driver.t)
                 guard.check(driver.t, n)
+                if observer is not None:
+                    observer.stepped(n, driver.t)
                 if interrupt.requested():
                     raise Interrupted(driver.t)
                 if n % stride == 0:
@@ -228,6 +238,8 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream) -> RunRes
             bar.close()
     finally:
         ended = clock.perf_counter()
+        if observer is not None:
+            observer.ended()
         counters = driver.counters() if driver else {"fmu_calls": system.fmu_calls}
         counters["setup_time"] = stepping - started
         if calls_before is not None:    # the stepping loop's FMI calls by component and kind

@@ -102,11 +102,15 @@ def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | No
     environment = dict(BARE_ENVIRONMENT if env is None else env)
     environment["LD_LIBRARY_PATH"] = str(tbb_dir)   # ecos's own need, not the FMUs'
     options = [] if parallel else ["--noParallel"]
+    # ecos adds the step to its time (t += h) and, as its logs show, steps while t + h <= stop: the sum's
+    # rounding drops the last step whenever it lands a hair above stop (10 s at 0.5 ms:
+    # 19,999 steps).  Half a step beyond stop makes it take every step and no more.
+    stop_given = stop + 0.5 * step
     if target.suffix == ".ssp":       # ecos applies only the parameter set it is told to
         options += ["--parameterSet", ssp.PARAMETER_SET]
     if record is not None:
         options += ["--csvConfig", str(_csv_config(record, target.with_name(target.stem + "_CsvConfig.xml")))]
-    done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop),
+    done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop_given),
                            "--stepSize", repr(step), "--logLevel", "info", *options],
                           env=environment, cwd=target.parent,
                           capture_output=True, text=True, timeout=timeout)
@@ -115,7 +119,7 @@ def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | No
     if done.returncode != 0 or not result.exists() or "[error]" in log:
         raise RuntimeError(f"ecos failed on {target.name} (exit {done.returncode}):\n{log[-4000:]}")
     # ecos's own progress lines ("90% complete, simulated 9.000s in 4.321s"): the last one,
-    # scaled to the whole span (it logs no line at 100 %).
+    # scaled to the whole span (it may log no line at 100 %).
     progress = re.findall(r"simulated ([0-9.]+)s in ([0-9.]+)s", log)
     simulated, took = (float(x) for x in progress[-1]) if progress else (float("nan"), float("nan"))
     wall = took * stop / simulated if simulated > 0 else float("nan")

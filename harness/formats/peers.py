@@ -166,13 +166,51 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
     names = list(recorded_names(scene) if record is None else record)
     setup = _SceneSetup(scene, Path(fmu_dir), names)
     if name == "fmpy-jacobi":
-        return _simulate_fmpy_jacobi(setup, float(step))
-    if name == "fmpy-ssp":
-        return _simulate_fmpy_ssp(setup, float(step))
-    if name == "ecos":
-        return _simulate_ecos(scene, float(step), Path(fmu_dir), names)
-    return _simulate_libcosim_in_child(setup, float(step), name,
-                                       tolerance=ECCO_TOLERANCE if tolerance is None else float(tolerance))
+        result = _simulate_fmpy_jacobi(setup, float(step))
+    elif name == "fmpy-ssp":
+        result = _simulate_fmpy_ssp(setup, float(step))
+    elif name == "ecos":
+        result = _simulate_ecos(scene, float(step), Path(fmu_dir), names)
+    else:
+        result = _simulate_libcosim_in_child(setup, float(step), name,
+                                             tolerance=ECCO_TOLERANCE if tolerance is None else float(tolerance))
+    return refuse_other_experiment(result, name, scene, float(step))
+
+
+#: peers whose step varies (their number of steps is theirs to choose)
+ADAPTIVE_PEERS = ("libcosim-ecco",)
+
+
+def experiment_problem(times, scene: scenes.Scene, step: float, fixed_step: bool = True) -> str | None:
+    """What a run's communication points ``times`` show of an experiment other than the
+    scene's: another start, another stop, another number of steps of ``step`` (a fixed-step
+    run).  None when it ran the scene's experiment."""
+    e = scene.experiment
+    if len(times) == 0:
+        return None
+    # the peers write times to six decimals or more; a thousandth of a step tells a missing step
+    slack = max(1e-9 * max(1.0, abs(e.stop)), 1e-3 * step)
+    wanted = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
+    made = len(times) - 1
+    problems = []
+    if abs(times[0] - e.start) > slack:
+        problems.append(f"started at t = {times[0]:.9g} s, not {e.start:g} s")
+    if fixed_step and made != wanted:
+        problems.append(f"made {made} steps of {step:g} s, not the {wanted} from {e.start:g} to {e.stop:g} s")
+    if (abs(times[-1] - e.stop) > slack) if fixed_step else (times[-1] < e.stop - slack):
+        problems.append(f"stopped at t = {times[-1]:.9g} s, not {e.stop:g} s")
+    return "; ".join(problems) or None
+
+
+def refuse_other_experiment(result: RunResult, name: str, scene: scenes.Scene, step: float) -> RunResult:
+    """A peer's run that did not run the scene's experiment (``experiment_problem``) is
+    refused: its errors and run time would compare another experiment with ours."""
+    if result.ok:
+        problem = experiment_problem(result.times, scene, step, fixed_step=name not in ADAPTIVE_PEERS)
+        if problem:
+            result.failure = f"refused: peer {name} {problem}"
+            result.failure_stage = "stepping"
+    return result
 
 
 class _SceneSetup:

@@ -2,8 +2,15 @@
 step a scene, next to other co-simulation engines on the same FMUs, the monolithic
 solution and the FMU-call floor (``lever bench [SCENE]``).
 
-Each case runs ``repeats`` times; the run time quoted is the median of the stepping
-loops (instantiation left out, for every engine alike).  Errors are measured once
+Each case runs ``repeats`` times; the run time quoted is the median [min-max] of the
+stepping loops (instantiation left out, for every engine alike).  What is divided by what
+(a master and its baseline, a master and DOP853, a step and the do-nothing floor) is measured
+side by side: the cases a headline ratio divides run again in turn, round after round
+(``measure_rounds``), and the ratio is the median of the rounds' ratios with their range.  A
+master's FMU-call floor is timed just before each of its runs and its call prices just before
+and after them.  A figure that cannot be (a share below zero, a floor above the step it bounds,
+a figure from fewer runs than asked) is flagged with the machine's load and the spread, not
+shown (``harness.studies.trust``).  Errors are measured once
 (runs are deterministic) against the tight monolithic reference on the run's own
 communication grid: time-averaged RMS and max of ``tau1, tau2, w1, w2`` relative to the
 mean torque and speed, over the whole run and after the scene's start-up transient, and
@@ -30,7 +37,7 @@ from harness.engine import interrupt
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.judges import monolithic as reference
-from harness.studies import hollow
+from harness.studies import hollow, trust
 from harness.studies.cases import FAILED, CaseLog, case_key
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
@@ -57,8 +64,17 @@ class Case:
     calls_by_kind: dict = field(default_factory=dict)
     #: where the run time went (``time_split``): crossing, slave, master [s]
     split: dict | None = None
-    #: the "call-prices" case's: {"ours"|"hollow": {repr(step): component -> kind -> seconds a call}}
+    #: the call prices measured just before and just after the case's runs:
+    #: {"ours"|"hollow": [before, after]}, each component -> kind -> seconds a call
     prices: dict | None = None
+    #: runs asked for (``repeats``); fewer were made when a run failed or took long
+    asked: int = 0
+    #: the FMU-call floor [s a step] timed just before each run (masters): one per run
+    floor_times: list = field(default_factory=list)
+    #: the machine's one-minute load average before and after the case's runs
+    load: list = field(default_factory=list)
+    #: why the split is not shown (``trust.split_problems``), with the machine's noise
+    split_unreliable: str | None = None
 
     @property
     def wall(self) -> float:
@@ -124,10 +140,16 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
 
-def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
+def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None) -> Case:
     """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
-    judge the first run (runs are deterministic), stop at a failure or a long run."""
+    judge the first run (runs are deterministic), stop at a failure or a long run.
+    ``floor()`` (seconds a step of the FMU calls alone) is timed just before each run, so
+    that a run and the floor it is divided by saw the same machine."""
+    case.asked = repeats
+    case.load.append(trust.load_average())
     for attempt in range(repeats):
+        if floor is not None:
+            case.floor_times.append(floor())
         result: RunResult = run_once()
         interrupt.check()          # Ctrl-C during a peer's run: the case is not measured
         case.wall_times.append(result.wall_time)
@@ -146,13 +168,39 @@ def _measure(case: Case, scene, run_once, repeats, limit_s) -> Case:
             _judge(case, scene, result.times, result.traces)
         if result.wall_time > limit_s:     # long runs: one or two repeats say enough
             break
+    case.load.append(trust.load_average())
+    if case.floor_times and case.steps:
+        case.floor_time = stats.median(case.floor_times) * case.steps
     return case
 
 
-def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s) -> Case:
+#: steps of the floor timed before each run of a case (about 0.1 s of calls)
+FLOOR_STEPS = 2000
+#: steps of each pricing of the calls, before and after a case's runs
+PRICE_STEPS = 1000
+
+
+def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
+    """A master's case: its runs, each after the FMU-call floor at its step (the scene's
+    for an adaptive master), and with ``twins`` (the do-nothing FMUs) the prices of a call
+    into ours and into the twins just before and just after the runs, for its time split."""
     options = {"tolerance": tolerance} if tolerance is not None else {}
-    return _measure(Case(name, "master", step, tolerance), scene,
-                    lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s)
+    at = step if tolerance is None else scene.experiment.step
+    prices = {"ours": [], "hollow": []}
+
+    def price():
+        if twins is not None:
+            prices["ours"].append(call_prices(scene, fmu_dir, n_steps=PRICE_STEPS, step=at))
+            prices["hollow"].append(call_prices(scene, twins, n_steps=PRICE_STEPS, step=at))
+
+    price()
+    case = _measure(Case(name, "master", step, tolerance), scene,
+                    lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s,
+                    floor=lambda: call_floor(scene, n_steps=FLOOR_STEPS, fmu_dir=fmu_dir, step=at))
+    price()
+    if twins is not None:
+        case.prices = prices
+    return case
 
 
 def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
@@ -173,21 +221,25 @@ def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
     e = scene.experiment
     times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / grid_step)) + 1)
     solution = None
+    case.asked = repeats
+    case.load.append(trust.load_average())
     for _ in range(repeats):
         solution = reference.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
         interrupt.check()
         case.wall_times.append(solution.wall_time)
+    case.load.append(trust.load_average())
     case.steps = solution.n_rhs
     _judge(case, scene, solution.times, solution.traces)
     return case
 
 
-def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) -> float:
+def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS, step: float | None = None) -> float:
     """Seconds per communication step of the FMI calls alone: every component steps once,
     its outputs are read once and every target's inputs set once (the system's compiled
     propagation), straight through ctypes, in a bare loop (no master, no recording), and
     recorded outputs that depend on inputs (a shaft's acceleration) are read again after
-    the writes.  What any master must pay at the least."""
+    the writes.  What any master must pay at the least.  Steps of ``step`` (default the
+    scene's): a shaft's fmi2DoStep costs more the longer the step."""
     system = System(scene, fmu_dir, record=recorded_names(scene))
     try:
         system.initialize()
@@ -201,7 +253,7 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS) 
                  for _, get_real, handle, vrs, n, values, copies, sends in system.propagation_plan]
         rereads = [(get_real, handle, vrs, n, values)
                    for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
-        h = scene.experiment.step
+        h = step or scene.experiment.step
         t = scene.experiment.start
         started = clock.perf_counter()
         for _ in range(n_steps):
@@ -370,66 +422,55 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     log = CaseLog(out, fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
     if log is not None and len(log):
         say(f"resuming: {len(log)} case(s) already in {log.path}")
+    # the load seen by the measurements themselves (kept in the case log: a resumed
+    # benchmark reports the load its cases ran under, not the load when it resumed)
+    machine = trust.LoadLog()
     cases: list[Case] = []
 
-    def take(case: Case, measure, floor: float | None = None):
+    def take(case: Case, measure):
         case, reused = _logged(log, case, measure)
-        if floor is not None and case.floor_time is None:
-            case.floor_time = floor * case.steps
         cases.append(case)
+        machine.samples += [x for x in case.load if x is not None]
         say(_line(case) + ("  (from the case log)" if reused else ""))
 
-    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: Case(
-        "floor", "floor", scene.experiment.step, wall_times=[call_floor(scene, fmu_dir=fmu_dir) for _ in range(repeats)]))
+    def floors(fmus: Path, name: str) -> Case:
+        case = Case(name, "floor", scene.experiment.step, asked=repeats, load=[trust.load_average()])
+        case.wall_times = [call_floor(scene, fmu_dir=fmus) for _ in range(repeats)]
+        case.load.append(trust.load_average())
+        return case
+
+    floor_case, _ = _logged(log, Case("floor", "floor", scene.experiment.step), lambda: floors(fmu_dir, "floor"))
+    machine.samples += [x for x in floor_case.load if x is not None]
     floor_per_step = floor_case.wall
-    say(f"FMU-call floor: {floor_per_step * 1e6:.1f} us per communication step")
-    # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step), and
-    # each kind of call priced in both, interleaved: where a master's time goes.
+    say(f"FMU-call floor: {trust.spread_text(trust.spread(floor_case.wall_times))} per communication step")
+    # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step): what
+    # any pythonfmu FMU costs, and the other half of each master's time split.
     try:
         twins = hollow.twins(scene, fmu_dir)
     except Exception as error:  # noqa: BLE001 - the benchmark goes on without the split
         twins = None
         say(f"do-nothing FMUs not built ({type(error).__name__}: {error}): no split of the run times")
-    hollow_per_step, prices = None, None
+    hollow_case = None
     if twins is not None:
-        hollow_case, _ = _logged(log, Case("floor-hollow", "floor", scene.experiment.step), lambda: Case(
-            "floor-hollow", "floor", scene.experiment.step,
-            wall_times=[call_floor(scene, fmu_dir=twins) for _ in range(repeats)]))
-        hollow_per_step = hollow_case.wall if hollow_case.wall_times else None
-        if hollow_per_step:
-            say(f"do-nothing FMU floor: {hollow_per_step * 1e6:.1f} us per communication step (same calls)")
+        hollow_case, _ = _logged(log, Case("floor-hollow", "floor", scene.experiment.step),
+                                 lambda: floors(twins, "floor-hollow"))
+        machine.samples += [x for x in hollow_case.load if x is not None]
+        if hollow_case.wall_times:
+            say(f"do-nothing FMU floor: {trust.spread_text(trust.spread(hollow_case.wall_times))} per "
+                "communication step (same calls)")
         else:
             say(f"do-nothing FMU floor not measured ({hollow_case.failure}): no split of the run times")
-            twins = None
-
-    # prices at each fixed step of the plan (a shaft's step costs more the longer it is)
-    # and at the scene's step (for the adaptive masters)
-    priced_steps = sorted({scene.experiment.step, *(h for hs in p["steps"].values() for h in hs)})
-
-    def measure_prices() -> Case:
-        measured = {"ours": {}, "hollow": {}}
-        for h in priced_steps:
-            runs = {"ours": [], "hollow": []}
-            for _ in range(repeats):
-                runs["ours"].append(call_prices(scene, fmu_dir, step=h))
-                runs["hollow"].append(call_prices(scene, twins, step=h))
-            for which in measured:
-                measured[which][repr(h)] = _median_prices(runs[which])
-        return Case("call-prices", "floor", scene.experiment.step, prices=measured)
-
-    if twins is not None:
-        prices = _logged(log, Case("call-prices", "floor", scene.experiment.step), measure_prices)[0].prices
+            twins = hollow_case = None
     limit = p["repeats_limit_s"]
     for name, steps in p["steps"].items():
         for h in steps:
-            take(Case(name, "master", h), lambda name=name, h=h: run_master(scene, name, h, None, repeats, fmu_dir,
-                                                                            limit), floor_per_step)
+            take(Case(name, "master", h),
+                 lambda name=name, h=h: run_master(scene, name, h, None, repeats, fmu_dir, limit, twins))
     for name, tolerances in p["tolerances"].items():
         for tol in tolerances:
-            h = scene.experiment.step
-            take(Case(name, "master", h, tol),
+            take(Case(name, "master", scene.experiment.step, tol),
                  lambda name=name, tol=tol: run_master(scene, name, scene.experiment.step, tol, repeats, fmu_dir,
-                                                       limit), floor_per_step)
+                                                       limit, twins))
     if peers:
         for name, steps in p["peers"].items():
             for h in steps:
@@ -444,14 +485,108 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
             take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
                  lambda rtol=rtol: run_monolithic(scene, rtol, scene.experiment.step, repeats))
     for case in cases:
-        if prices and case.kind == "master" and case.calls_by_kind and case.wall_times:
-            h = repr(case.step if case.tolerance is None else scene.experiment.step)
-            if h in prices["ours"]:
-                case.split = time_split(case.wall, case.calls_by_kind, prices["ours"][h], prices["hollow"][h])
+        split_case(case)
+    # The headline comparisons, measured side by side: the cases they divide run in turn,
+    # round after round, with the do-nothing floor in each round.
+    chosen = headline_cases(scene, cases, p)
+    rounds = None
+    if chosen:
+        say(f"side by side: {len(chosen)} case(s) the headline ratios divide, {repeats} round(s)")
+        key = case_key("rounds", repeats, *(case_key(c.kind, c.engine, c.step, c.tolerance) for c in chosen))
+        rounds = _rounds_logged(log, key, lambda: measure_rounds(scene, chosen, repeats, fmu_dir, twins))
+        machine.samples += [x for x in rounds.get("load", []) if x is not None]
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
-            "hollow_floor_per_step_s": hollow_per_step, "prices": prices,
+            "floor_spread": trust.spread(floor_case.wall_times),
+            "hollow_floor_per_step_s": hollow_case.wall if hollow_case else None,
+            "hollow_floor_spread": trust.spread(hollow_case.wall_times) if hollow_case else None,
+            "machine": machine.summary(), "rounds": rounds,
             "eigenfrequency_rad_s": eigenfrequency(scene), "cases": cases,
-            "claims": claims(scene, cases, p, hollow_per_step)}
+            "claims": claims(scene, cases, p, hollow_case.wall if hollow_case else None, rounds=rounds,
+                             machine=machine.summary())}
+
+
+def _rounds_logged(log: CaseLog | None, key: str, measure) -> dict:
+    if log is None:
+        return measure()
+    entry, _ = log.run(key, measure)
+    if entry.get("status") == FAILED:
+        return {"failure": f"{entry['error']} (at {entry['where']})"}
+    return entry
+
+
+def case_noise(case: Case) -> str:
+    """The machine's noise around a case, in words (its load and the spread of its runs)."""
+    loads = [x for x in case.load if x is not None]
+    load = {"cpus": trust.cpus(), "load_min": min(loads), "load_max": max(loads)} if loads else None
+    return trust.noise(load, trust.spread(case.wall_times))
+
+
+def split_case(case: Case):
+    """A master's time split from the prices measured around its runs; an impossible split
+    (a share below zero, priced calls above the run time) is kept aside with the reason."""
+    if not (case.prices and case.kind == "master" and case.calls_by_kind and case.wall_times):
+        return
+    ours, hollow_prices = _median_prices(case.prices["ours"]), _median_prices(case.prices["hollow"])
+    case.split = time_split(case.wall, case.calls_by_kind, ours, hollow_prices)
+    problems = trust.split_problems(case.split, case.wall)
+    case.split_unreliable = ("; ".join(problems) + f": {case_noise(case)}") if problems else None
+
+
+def _key(case: Case) -> str:
+    return case_key(case.kind, case.engine, case.step, case.tolerance)
+
+
+def headline_cases(scene: scenes.Scene, cases: list[Case], p: dict) -> list[Case]:
+    """The cases the headline ratios divide: each master's and the monolithic solution's
+    two runs either side of the target error (the interpolation's), the largest stable
+    baseline step and the baseline at the scene's step (against the do-nothing floor)."""
+    target, baseline = p["target_error"], p["baseline"]
+    chosen: dict[str, Case] = {}
+    for name, group in _by_engine(cases).items():
+        if name in master_family.MASTERS or name == "monolithic":
+            for c in bracket(group, target):
+                chosen[_key(c)] = c
+    stable_base = [c for c in cases if c.engine == baseline and c.kind == "master" and c.stable
+                   and c.tolerance is None]
+    if stable_base and eigenfrequency(scene):
+        largest = max(stable_base, key=lambda c: c.step)
+        chosen[_key(largest)] = largest
+    at_step = [c for c in stable_base if c.step == scene.experiment.step and c.steps]
+    if at_step:
+        chosen[_key(at_step[0])] = at_step[0]
+    return list(chosen.values())
+
+
+def measure_rounds(scene: scenes.Scene, chosen: list[Case], repeats: int, fmu_dir: Path,
+                   twins: Path | None) -> dict:
+    """``repeats`` rounds, each running every chosen case once in turn (A B C A B C ...)
+    and the do-nothing floor: the k-th run of each case saw the machine the k-th of the
+    others saw, so ratios are taken round by round."""
+    walls = {_key(c): [] for c in chosen}
+    floors, loads = [], []
+    for _ in range(repeats):
+        loads.append(trust.load_average())
+        if twins is not None:
+            floors.append(call_floor(scene, n_steps=FLOOR_STEPS * 2, fmu_dir=twins))
+        for c in chosen:
+            walls[_key(c)].append(_rerun(scene, c, fmu_dir))
+    loads.append(trust.load_average())
+    return {"walls": walls, "hollow_floor": floors, "load": loads}
+
+
+def _rerun(scene: scenes.Scene, case: Case, fmu_dir: Path) -> float:
+    """The stepping-loop time of one more run of a case (a master's or the monolithic one)."""
+    if case.kind == "monolithic":
+        e = scene.experiment
+        times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / case.step)) + 1)
+        return reference.solve(scene, times, use_cache=False, rtol=case.tolerance,
+                               atol=case.tolerance * 1e-2).wall_time
+    options = {"tolerance": case.tolerance} if case.tolerance is not None else {}
+    result = simulate(scene, case.engine, case.step, fmu_dir, options=options)
+    interrupt.check()
+    if not result.ok:
+        raise RuntimeError(f"{case.label} failed when run again: {result.failure}")
+    return result.wall_time
 
 
 def _median_prices(runs: list[dict]) -> dict:
@@ -477,77 +612,170 @@ def _line(case: Case) -> str:
             f"  ({case.steps} steps)")
 
 
-def time_at_error(cases: list[Case], target: float, key: str = "tau_rms") -> float | None:
-    """Run time at which a master's curve reaches ``target``: log-log interpolation
-    between the cheapest run at or below it and the dearest run above it (None when no
-    run reaches it)."""
-    points = sorted((c.wall, c.errors[key]) for c in cases if c.stable and key in c.errors)
-    good = [(w, e) for w, e in points if e <= target]
+def bracket(cases: list[Case], target: float, key: str = "tau_rms") -> list[Case]:
+    """The runs a curve's time at ``target`` is read from: the cheapest run at or below
+    the target and the dearest cheaper run above it (if any); [] when no run reaches it."""
+    points = sorted((c.wall, c.errors[key], k) for k, c in enumerate(cases) if c.stable and key in c.errors)
+    good = [p for p in points if p[1] <= target]
     if not good:
-        return None
-    w1, e1 = min(good)
-    worse = [(w, e) for w, e in points if e > target and w < w1]
+        return []
+    w1, e1, k1 = min(good)
+    worse = [p for p in points if p[1] > target and p[0] < w1]
     if not worse:
+        return [cases[k1]]
+    w0, e0, k0 = max(worse)
+    return [cases[k1]] if e0 <= e1 else [cases[k1], cases[k0]]
+
+
+def interpolate(target: float, good: tuple[float, float], worse: tuple[float, float] | None = None) -> float:
+    """Run time at ``target`` between (time, error) points either side: log-log."""
+    w1, e1 = good
+    if worse is None or worse[1] <= e1:
         return w1
-    w0, e0 = max(worse)
-    if e0 <= e1:
-        return w1
+    w0, e0 = worse
     x = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
     return math.exp(math.log(w0) + x * (math.log(w1) - math.log(w0)))
 
 
-def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: float | None = None) -> dict:
-    """What the benchmark shows, computed from the cases (not asserted)."""
-    target = p["target_error"]
+def time_at_error(cases: list[Case], target: float, key: str = "tau_rms") -> float | None:
+    """Run time at which a master's curve reaches ``target``: log-log interpolation
+    between the cheapest run at or below it and the dearest run above it (None when no
+    run reaches it)."""
+    pair = bracket(cases, target, key)
+    if not pair:
+        return None
+    return interpolate(target, *((c.wall, c.errors[key]) for c in pair))
+
+
+def _by_engine(cases: list[Case]) -> dict[str, list[Case]]:
     by_engine: dict[str, list[Case]] = {}
     for case in cases:
         by_engine.setdefault(case.engine if case.kind != "monolithic" else "monolithic", []).append(case)
+    return by_engine
+
+
+def _round_times(group: list[Case], target: float, walls: dict[str, list[float]]) -> list[float] | None:
+    """A curve's time at the target in each round (its bracket's runs of that round)."""
+    pair = bracket(group, target)
+    if not pair or any(_key(c) not in walls for c in pair):
+        return None
+    series = [walls[_key(c)] for c in pair]
+    return [interpolate(target, *((w[k], c.errors["tau_rms"]) for w, c in zip(series, pair)))
+            for k in range(min(len(w) for w in series))]
+
+
+def _unpaired(a: float | None, b: float | None) -> dict | None:
+    """A ratio of two medians measured apart (no rounds): said so, never as a spread."""
+    if not a or not b:
+        return None
+    return {"median": a / b, "min": None, "max": None, "n": 0, "ratios": [], "single_run": False,
+            "interleaved": False}
+
+
+def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: float | None = None,
+           rounds: dict | None = None, machine: dict | None = None) -> dict:
+    """What the benchmark shows, computed from the cases (not asserted).  Each headline
+    ratio is the median of the ratios of ``rounds`` (the cases it divides, run side by side
+    round after round: ``measure_rounds``) with their range; without rounds, the ratio of
+    the two medians, marked as not measured side by side."""
+    target = p["target_error"]
+    by_engine = _by_engine(cases)
     at_target = {name: time_at_error(group, target) for name, group in by_engine.items()}
+    walls = (rounds or {}).get("walls") or {}
+    per_round = {name: _round_times(group, target, walls) for name, group in by_engine.items()}
+
+    def ratio(a: str | Case, b: str | Case, a_value=None, b_value=None) -> dict | None:
+        sa = per_round.get(a) if isinstance(a, str) else walls.get(_key(a))
+        sb = per_round.get(b) if isinstance(b, str) else walls.get(_key(b))
+        if sa and sb and len(sa) == len(sb):
+            return {**trust.paired_ratio(sa, sb), "interleaved": True}
+        return _unpaired(a_value, b_value)
+
     baseline = p["baseline"]
     base_time = at_target.get(baseline)
     ranked = sorted(((t, n) for n, t in at_target.items() if t is not None and n in master_family.MASTERS))
-    out = {"target_error": target, "time_at_target_s": at_target, "baseline": baseline}
+    out = {"target_error": target, "time_at_target_s": at_target, "baseline": baseline, "ratios": {},
+           "machine": machine,
+           "time_at_target_side_by_side": {n: trust.spread(t) for n, t in per_round.items() if t}}
     if ranked:
         best_time, best = ranked[0]
         out["best_master"] = best
-        out["speedup_over_baseline"] = (base_time / best_time) if base_time else None
+        r = ratio(baseline, best, base_time, best_time) if base_time else None
+        out["speedup_over_baseline"] = r["median"] if r else None
+        out["ratios"]["speedup_over_baseline"] = r
         out["peers_at_target_s"] = {n: t for n, t in at_target.items() if n not in master_family.MASTERS}
         if at_target.get("monolithic"):
-            out["best_master_over_monolithic"] = best_time / at_target["monolithic"]
-    # One baseline step at the scene's step against the same calls into do-nothing FMUs.
-    if hollow_per_step:
+            r = ratio(best, "monolithic", best_time, at_target["monolithic"])
+            out["best_master_over_monolithic"] = r["median"]
+            out["ratios"]["best_master_over_monolithic"] = r
+    # One baseline step at the scene's step against the same calls into do-nothing FMUs,
+    # taken round by round (the floor is timed in each round beside the step).
+    hollow_rounds = (rounds or {}).get("hollow_floor") or []
+    if hollow_per_step or hollow_rounds:
         at_step = [c for c in cases if c.engine == baseline and c.kind == "master" and c.tolerance is None
                    and c.stable and c.steps and c.step == scene.experiment.step]
         if at_step:
             case = at_step[0]
-            per_step = case.wall / case.steps
-            out["baseline_step"] = {"step": scene.experiment.step, "per_step_s": per_step,
-                                    "hollow_floor_per_step_s": hollow_per_step,
-                                    "over_hollow_floor": per_step / hollow_per_step}
-            if case.split:
+            steps_walls = walls.get(_key(case))
+            if steps_walls and hollow_rounds and len(steps_walls) == len(hollow_rounds):
+                per_step_runs = [w / case.steps for w in steps_walls]
+                r = {**trust.paired_ratio(per_step_runs, hollow_rounds), "interleaved": True}
+                per_step, floor = stats.median(per_step_runs), stats.median(hollow_rounds)
+            else:
+                per_step, floor = case.wall / case.steps, hollow_per_step
+                r = _unpaired(per_step, floor)
+            b = {"step": scene.experiment.step, "per_step_s": per_step, "hollow_floor_per_step_s": floor,
+                 "over_hollow_floor": r["median"], "ratio": r}
+            problems = [trust.floor_problem(floor, per_step)]
+            if r.get("min") is not None and r["min"] < 1.0:
+                problems.append(f"in {sum(x < 1.0 for x in r['ratios'])} of {r['n']} rounds the do-nothing "
+                                "floor was above the step it bounds")
+            if case.split and not case.split_unreliable and not case_problems(case):
                 # What our slaves do behind the calls bounds the ratio from below: a master
                 # that cost nothing would still pay the crossings and the slaves' own work.
+                # Both from the call prices, ours and the twins' timed back to back around
+                # the case's runs (not the rounds' floor, timed at other moments).
                 slave = case.split["slave"] / case.steps
-                out["baseline_step"].update({"slave_per_step_s": slave,
-                                             "bound_without_master": (hollow_per_step + slave) / hollow_per_step})
-    # Harness overhead above the FMU-call floor, fixed-step zero-order-hold masters.
+                b.update({"slave_per_step_s": slave,
+                          "bound_without_master": (case.split["crossing"] + case.split["slave"])
+                          / case.split["crossing"]})
+                problems.append(trust.bound_problem(b["bound_without_master"], r))
+            elif case.split_unreliable or case.split:
+                b["bound_unreliable"] = case.split_unreliable or "; ".join(case_problems(case))
+            verdict = trust.judged(r["median"], problems, trust.noise(machine, trust.spread(steps_walls or [])))
+            if not verdict["reliable"]:
+                b["unreliable"] = verdict["reason"]
+            out["baseline_step"] = b
+            out["ratios"]["baseline_step_over_hollow_floor"] = r
+    # Harness overhead above the FMU-call floor, fixed-step zero-order-hold masters: each
+    # run over the floor timed just before it.
     overhead = {}
     for case in cases:
         if case.kind == "master" and case.stable and case.floor_time and case.tolerance is None:
-            overhead.setdefault(case.engine, []).append(case.wall / case.floor_time - 1.0)
+            o = overhead_above_floor(case)
+            if o is not None:
+                overhead.setdefault(case.engine, []).append(o)
     out["overhead_above_floor"] = {n: stats.median(v) for n, v in overhead.items()}
     # Stability: the largest stable step of the baseline, and which masters stay stable
     # at h * omega_n >= 5 with a bounded energy residual.
     omega = eigenfrequency(scene)
     if omega:
-        stable_base = [c for c in by_engine.get(baseline, []) if c.stable]
+        stable_base = [c for c in by_engine.get(baseline, []) if c.stable and c.tolerance is None]
         if stable_base:
             largest = max(stable_base, key=lambda c: c.step)
             # the issue's bar for the stiff case: the target reached in a tenth of this
-            fractions = {n: t / largest.wall for n, t in at_target.items()
-                         if t is not None and n in master_family.MASTERS and n != baseline}
+            fractions, faster = {}, {}
+            for n, t in at_target.items():
+                if t is not None and n in master_family.MASTERS and n != baseline:
+                    r = ratio(n, largest, t, largest.wall)
+                    fractions[n] = r["median"]
+                    faster[n] = ratio(largest, n, largest.wall, t)
             out["largest_stable_baseline_step"] = {"step": largest.step, "h_omega": largest.step * omega,
-                                                   "wall_s": largest.wall, "time_fraction_at_target": fractions}
+                                                   "wall_s": largest.wall, "runs": len(largest.wall_times),
+                                                   "asked": largest.asked, "time_fraction_at_target": fractions,
+                                                   "faster": faster}
+            if walls.get(_key(largest)):
+                out["largest_stable_baseline_step"]["wall_spread_side_by_side"] = trust.spread(walls[_key(largest)])
         large = {}
         for c in cases:
             if c.kind != "master":
@@ -562,28 +790,58 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
     return out
 
 
+def overhead_above_floor(case: Case) -> float | None:
+    """A master's run time above the FMU-call floor: the median over its runs of each run
+    over the floor timed just before it (over the median floor for a case without)."""
+    if not (case.steps and case.wall_times):
+        return None
+    if case.floor_times and len(case.floor_times) == len(case.wall_times):
+        return trust.paired_ratio(case.wall_times, [f * case.steps for f in case.floor_times])["median"] - 1.0
+    return case.wall / case.floor_time - 1.0 if case.floor_time else None
+
+
+def case_problems(case: Case) -> list[str]:
+    """What makes a case's run time no result: fewer runs than asked (a failed case made
+    its one run), a call floor above the step it bounds."""
+    problems = []
+    if not case.failure and case.asked:
+        problems.append(trust.runs_problem(len(case.wall_times), case.asked))
+    if case.kind == "master" and case.floor_times and case.steps and case.wall_times:
+        problems.append(trust.floor_problem(stats.median(case.floor_times), case.wall / case.steps))
+    return [p for p in problems if p]
+
+
 # -- writing ------------------------------------------------------------------------------------------------
 
-COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "repeats", "steps", "fmu_calls", "rollbacks",
-           "floor_s", "overhead_above_floor", "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
-           "w_rms_after_transient", "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s",
-           "failure"]
+COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
+           "load_min", "load_max", "unreliable", "steps", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
+           "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
+           "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "split_unreliable", "failure"]
 
 
 def table_row(case: Case) -> dict:
-    """A case as a row of the benchmark's tables (CSV and report)."""
-    overhead = (case.wall / case.floor_time - 1.0) if case.floor_time and case.stable else None
+    """A case as a row of the benchmark's tables (CSV and report).  A case whose run time
+    is no result (``case_problems``) says why in ``unreliable``; a split that cannot be
+    (``split_case``) is left out, the reason in ``split_unreliable``."""
+    problems = case_problems(case)
+    overhead = overhead_above_floor(case) if case.floor_time and case.stable and not problems else None
+    spread = trust.spread(case.wall_times)
+    loads = [x for x in case.load if x is not None]
+    split = None if case.split_unreliable or problems else case.split      # a split of no result is none
     return {"engine": case.engine, "kind": case.kind, "step": case.step, "tolerance": case.tolerance,
-            "wall_median_s": case.wall, "repeats": len(case.wall_times), "steps": case.steps,
-            "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
+            "wall_median_s": case.wall, "wall_min_s": spread["min"], "wall_max_s": spread["max"],
+            "repeats": len(case.wall_times), "asked": case.asked or None,
+            "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
+            "unreliable": ("; ".join(problems) + f": {case_noise(case)}") if problems else None,
+            "steps": case.steps, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
             "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
                                                  ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
                                                   "w_rms_after_transient")},
             "energy_residual": case.energy_residual,
             "calls_per_step": (sum(sum(k.values()) for k in case.calls_by_kind.values()) / case.steps
                                if case.calls_by_kind and case.steps else None),
-            **{f"{part}_s": (case.split or {}).get(part) for part in ("crossing", "slave", "master")},
-            "failure": case.failure}
+            **{f"{part}_s": (split or {}).get(part) for part in ("crossing", "slave", "master")},
+            "split_unreliable": case.split_unreliable, "failure": case.failure}
 
 
 def write(out: Path, result: dict) -> list[Path]:
@@ -614,76 +872,138 @@ def _pct(x):
     return "" if x is None or not math.isfinite(x) else f"{100 * x:.4g} %"
 
 
+def machine_text(machine: dict | None) -> str:
+    """The machine's load during a study, in words."""
+    if not machine or machine.get("load_max") is None:
+        return "Machine load not known (no load average on this system)."
+    return (f"Machine: {machine['cpus']} CPUs, one-minute load average {machine['load_min']:.2f}-"
+            f"{machine['load_max']:.2f} during the run (median {machine['load_median']:.2f}, "
+            f"{machine['samples']} samples).")
+
+
+def faster_text(r: dict | None) -> str:
+    """``2.1x faster [1.9-2.3x, 3 pairs]`` or ``0.6x`` said as ``1.7x slower``."""
+    if not r or r.get("median") is None:
+        return "not measured"
+    if r["median"] >= 1.0:
+        return f"{trust.ratio_text(r, 1)} faster"
+    inverse = {**r, "median": 1 / r["median"],
+               "min": 1 / r["max"] if r.get("max") else None, "max": 1 / r["min"] if r.get("min") else None}
+    return f"{trust.ratio_text(inverse, 1)} slower"
+
+
+def _ratio(r: dict | None, digits: int = 2) -> str:
+    return trust.ratio_text(r, digits)
+
+
 def markdown(result: dict, rows: list[dict]) -> str:
     c = result["claims"]
+    floor = result.get("floor_spread") or trust.spread([result["floor_per_step_s"]])
+    hollow_floor = result.get("hollow_floor_spread")
     lines = [f"# Work-precision benchmark: {result['scene']}", "",
-             f"Median of up to {result['repeats']} repeats of the stepping loop; errors against the monolithic "
-             f"reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
-             f"FMU-call floor: {result['floor_per_step_s'] * 1e6:.1f} us per communication step"
-             + (f"; the same calls into do-nothing FMUs: {result['hollow_floor_per_step_s'] * 1e6:.1f} us"
-                if result.get("hollow_floor_per_step_s") else "") + ".", ""]
+             f"Median [min-max] of up to {result['repeats']} repeats of the stepping loop; errors against the "
+             f"monolithic reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
+             f"FMU-call floor: {trust.spread_text(floor)} per communication step"
+             + (f"; the same calls into do-nothing FMUs: {trust.spread_text(hollow_floor)}"
+                if hollow_floor and hollow_floor.get("n") else "") + ".", "",
+             machine_text(result.get("machine") or c.get("machine")), ""]
     if result.get("eigenfrequency_rad_s"):
         lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
-    lines += ["| engine | step / tol | run time | steps | above floor | tau RMS | tau max | w RMS | "
+    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above floor | tau RMS | tau max | w RMS | "
               "tau RMS after transient | energy residual | note |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
-        note = (r["failure"] or "")[:90]
-        lines.append(f"| {r['engine']} | {setting} | {r['wall_median_s']:.3f} s | {r['steps']} | "
+        if r.get("unreliable"):
+            wall = "unreliable"
+        elif r.get("wall_min_s") is not None and r["repeats"] > 1:
+            wall = f"{r['wall_median_s']:.3f} s [{r['wall_min_s']:.3f}-{r['wall_max_s']:.3f}]"
+        else:
+            wall = f"{r['wall_median_s']:.3f} s"
+        note = "; ".join(x for x in ((r["failure"] or "")[:90], r.get("unreliable") or "") if x)
+        runs = f"{r['repeats']}" + (f" of {r['asked']}" if r.get("asked") and r["asked"] != r["repeats"] else "")
+        lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {r['steps']} | "
                      f"{_pct(r['overhead_above_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
                      f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
                      f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
     lines += ["", f"## At an RMS torque error of {_pct(c['target_error'])}", "",
-              "| engine | run time (interpolated) |", "|---|---|"]
+              "| engine | run time (interpolated) | in the rounds side by side: median [min-max] |", "|---|---|---|"]
+    side = c.get("time_at_target_side_by_side", {})
     for name, t in sorted(c["time_at_target_s"].items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
-        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} |")
+        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} | "
+                     f"{trust.spread_text(side[name]) if name in side else ''} |")
+    ratios = c.get("ratios", {})
     if c.get("best_master"):
-        speedup = c.get("speedup_over_baseline")
+        speedup = ratios.get("speedup_over_baseline")
         lines += ["", f"Best master: **{c['best_master']}**, "
-                  + (f"{speedup:.1f}x faster than {c['baseline']}." if speedup else
+                  + (f"{faster_text(speedup)} than {c['baseline']}." if speedup else
                      f"({c['baseline']} does not reach the target).")]
-        if c.get("best_master_over_monolithic"):
-            lines[-1] += (f"  It takes {c['best_master_over_monolithic']:.2f}x the time of the monolithic "
+        if ratios.get("best_master_over_monolithic"):
+            lines[-1] += (f"  It takes {_ratio(ratios['best_master_over_monolithic'])} the time of the monolithic "
                           "solution (scipy DOP853 on the unsplit equations) at this error.")
-    split_rows = [r for r in rows if r.get("crossing_s") is not None]
+        if c.get("ratios") is not None:
+            lines += ["", "Each ratio is the median of the ratios of runs made side by side (the cases it divides "
+                      "run in turn, round after round), with their range; the run times above are the cases' own "
+                      "repeats, made one case after another."]
+    split_rows = [r for r in rows if r.get("crossing_s") is not None or r.get("split_unreliable")
+                  or (r["kind"] == "master" and r.get("unreliable") and r.get("calls_per_step"))]
     if split_rows:
         lines += ["", "## Where the time goes", "",
                   "Each master's run time split by the calls it made, priced call by call (component and kind: "
                   "get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
-                  "the scene's for adaptive masters - the median of the repeats): *crossing* the calls "
-                  "priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
+                  "the scene's for adaptive masters - just before and just after the case's runs, their mean): "
+                  "*crossing* the calls priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
                   "*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
                   "FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
-                  "Python, recording).", "",
+                  "Python, recording).  A split that cannot be (a share below zero, priced calls above the run "
+                  "time: the prices and the runs saw different machines) is not shown.", "",
                   "| engine | step / tol | run time | FMI calls per step | crossing | slave | master |",
                   "|---|---|---|---|---|---|---|"]
         for r in split_rows:
             setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
             wall = r["wall_median_s"]
-            lines.append(f"| {r['engine']} | {setting} | {wall:.3f} s | {r['calls_per_step']:.1f} | "
-                         + " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
-                                      for part in ("crossing", "slave", "master")) + " |")
+            calls = "" if r["calls_per_step"] is None else f"{r['calls_per_step']:.1f}"
+            if r.get("split_unreliable"):
+                parts = f"unreliable: {r['split_unreliable']} | | "
+            elif r.get("unreliable"):
+                parts = "unreliable: its run time is (above) | | "
+            else:
+                parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
+                                   for part in ("crossing", "slave", "master"))
+            shown = "unreliable" if r.get("unreliable") else f"{wall:.3f} s"
+            lines.append(f"| {r['engine']} | {setting} | {shown} | {calls} | {parts} |")
     if c.get("baseline_step"):
         b = c["baseline_step"]
-        lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s: {b['per_step_s'] * 1e6:.1f} us, "
-                  f"{b['over_hollow_floor']:.2f}x the do-nothing FMUs' floor for the same calls "
-                  f"({b['hollow_floor_per_step_s'] * 1e6:.1f} us)."]
-        if "bound_without_master" in b:
-            lines[-1] += (f" Our slaves' own work behind those calls (the FMI glue and the physics) takes "
-                          f"{b['slave_per_step_s'] * 1e6:.1f} us a step, so even a master that cost nothing "
-                          f"would take {b['bound_without_master']:.2f}x the floor.")
+        if b.get("unreliable"):
+            lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s against the do-nothing FMUs' floor: "
+                      f"unreliable ({b['unreliable']})."]
+        else:
+            lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s: {b['per_step_s'] * 1e6:.1f} us, "
+                      f"{_ratio(b['ratio'])} the do-nothing FMUs' floor for the same calls "
+                      f"({b['hollow_floor_per_step_s'] * 1e6:.1f} us, timed in each round beside the step)."]
+            if "bound_without_master" in b:
+                lines[-1] += (f" Our slaves' own work behind those calls (the FMI glue and the physics) takes "
+                              f"{b['slave_per_step_s'] * 1e6:.1f} us a step, so even a master that cost nothing "
+                              f"would take {b['bound_without_master']:.2f}x the floor.")
+            elif b.get("bound_unreliable"):
+                lines[-1] += f" The bound without a master is not shown: its split is unreliable."
     if c.get("overhead_above_floor"):
-        lines += ["", "Harness overhead above the FMU-call floor (median over steps; masters that make more "
-                  "FMI calls per step than the floor's one step and one propagation show those calls here too): "
+        lines += ["", "Harness overhead above the FMU-call floor (each run over the floor timed just before it, "
+                  "at the case's step; median over steps; masters that make more FMI calls per step than the "
+                  "floor's one step and one propagation show those calls here too): "
                   + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_floor"].items()) + "."]
     if c.get("largest_stable_baseline_step"):
         s = c["largest_stable_baseline_step"]
+        side = s.get("wall_spread_side_by_side")
+        short = s.get("asked") and s["runs"] < s["asked"]
         lines += ["", f"Largest stable {c['baseline']} step: {s['step']:g} s (h*omega_n = {s['h_omega']:.3g}), "
-                  f"run time {s['wall_s']:.3f} s."]
+                  + (f"run time unreliable (from {s['runs']} of {s['asked']} runs)" if short
+                     else f"run time {s['wall_s']:.3f} s")
+                  + (f"; side by side with the masters below: {trust.spread_text(side)}" if side else "") + "."]
+        faster = s.get("faster", {})
         for name, fraction in sorted(s.get("time_fraction_at_target", {}).items(), key=lambda kv: kv[1]):
             lines.append(f"- {name} reaches {_pct(c['target_error'])} RMS torque error in {fraction:.3f} of that "
-                         f"run time ({1 / fraction:.1f}x faster).")
+                         f"run time ({faster_text(faster.get(name)) if faster.get(name) else ''}).")
     if c.get("at_h_omega_5_or_more"):
         lines += ["", "At h*omega_n >= 5 (adaptive runs: their longest step):"]
         for name, runs in c["at_h_omega_5_or_more"].items():
@@ -694,6 +1014,45 @@ def markdown(result: dict, rows: list[dict]) -> str:
                              + (f"stable, energy residual {r['energy_residual']:.2e}, tau RMS {_pct(r['tau_rms'])}"
                                 if r["stable"] else "failed"))
     return "\n".join(lines) + "\n"
+
+
+def summary_lines(result: dict) -> list[str]:
+    """The benchmark's outcome in a few lines (what ``lever bench`` prints at the end)."""
+    claims = result["claims"]
+    lines, target = [], claims["target_error"]
+    for name, t in claims["time_at_target_s"].items():
+        lines.append(f"  at {100 * target:g} % RMS torque error: {name:26s} "
+                     + ("not reached" if t is None else f"{t:.3f} s"))
+    ratios = claims.get("ratios", {})
+    if claims.get("best_master"):
+        speedup = ratios.get("speedup_over_baseline")
+        over = ratios.get("best_master_over_monolithic")
+        lines.append(f"  best master: {claims['best_master']}"
+                     + (f", {faster_text(speedup)} than {claims['baseline']}" if speedup else "")
+                     + (f"; {_ratio(over)} the monolithic solution's time" if over else ""))
+    if claims.get("baseline_step"):
+        b = claims["baseline_step"]
+        if b.get("unreliable"):
+            lines.append(f"  one {claims['baseline']} step against the do-nothing floor: unreliable ({b['unreliable']})")
+        else:
+            lines.append(f"  one {claims['baseline']} step: {b['per_step_s'] * 1e6:.1f} us, {_ratio(b['ratio'])} "
+                         f"the do-nothing FMUs' floor ({b['hollow_floor_per_step_s'] * 1e6:.1f} us, same calls)")
+            if "bound_without_master" in b:
+                lines.append(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that "
+                             f"cost nothing would take {b['bound_without_master']:.2f}x the floor")
+    for case in result["cases"]:
+        if case.split and case_problems(case):
+            lines.append(f"  {case.label:34s} split unreliable: its run time is ({'; '.join(case_problems(case))})")
+        elif case.split_unreliable:
+            lines.append(f"  {case.label:34s} split unreliable: {case.split_unreliable}")
+        elif case.split:
+            lines.append(f"  {case.label:34s} " + ", ".join(
+                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master")))
+    if claims.get("overhead_above_floor"):
+        lines.append("  above the FMU-call floor: " + ", ".join(
+            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    lines.append("  " + machine_text(result.get("machine")))
+    return lines
 
 
 def plot(path: Path, result: dict) -> Path:

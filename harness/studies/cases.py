@@ -37,7 +37,7 @@ class CaseLog:
     def __init__(self, folder: Path, fingerprint: dict, resume: bool = True, name: str = "cases.jsonl"):
         self.path = Path(folder) / name
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.fingerprint = json.loads(json.dumps(fingerprint, sort_keys=True, default=str))
+        self.fingerprint = json.loads(json.dumps(fingerprint, sort_keys=True, default=_canonical))
         self._done: dict[str, dict] = {}
         self.set_aside: Path | None = None
         if self.path.exists():
@@ -184,6 +184,14 @@ def stop_pool(pool, futures: dict, log: CaseLog, key_of: Callable, logged: int =
     for process in workers:
         if process.is_alive():
             process.terminate()
+
+
+def _canonical(value):
+    """A fingerprint's value as the same JSON in every process: a set as its sorted items
+    (its own order changes with the interpreter's string hashing from run to run)."""
+    if isinstance(value, (set, frozenset)):
+        return sorted(value, key=repr)
+    return str(value)
 
 
 def _jsonable(value):

@@ -17,8 +17,11 @@ The same scene (KAVZ-685, 10 s at 1 ms by default) in
   coupled scene's 12), and its time is the sum of the three stepping loops.
 Each host's time is its stepping loop as the host reports it (ours and libcosim's: from
 applying the parameters to the last communication point; ecos: the time of its last
-progress line, "90% complete, simulated 9.000s in T s", scaled to the whole span), the median of ``repeats`` runs, and the ratio
-to our harness's median in the same run.
+progress line, "90% complete, simulated 9.000s in T s", scaled to the whole span), the median
+[min-max] of ``repeats`` runs.  Every host runs once a round, round after round, and its ratio
+to our harness is the median [min-max] of the ratios within each round
+(``harness.studies.trust.paired_ratio``); the report states the machine's load average.  A
+host whose output shows another experiment (another stop time or number of steps) is refused.
 
 ``run_ecos`` and ``ecos_traces`` (``harness.formats.ecos``, also the benchmark's peer ``ecos``)
 are what the tests use to run ecos.
@@ -36,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..formats import peers, ssp
+from . import trust
 # ecos's runner lives with the peers (layer 4), which run it in `lever bench` too
 from ..formats.ecos import BARE_ENVIRONMENT, EcosRun, EcosUnavailable, ecos_program, ecos_traces, run_ecos  # noqa: F401
 from ..description import scene as scenes
@@ -117,15 +121,17 @@ def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: P
 
 def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,
                hosts=HOSTS, native_env: dict | None = None, log=print) -> dict:
-    """Median stepping-loop time of each host over ``repeats`` runs, and its ratio to the
-    first host's (our harness's jacobi by default).  The hosts that are no Python process
+    """Median [min-max] stepping-loop time of each host over ``repeats`` rounds, and its
+    ratio to the first host's (our harness's jacobi by default), round by round.  The hosts that are no Python process
     (ecos, the C importer) run in ``native_env`` (default bare)."""
     times: dict[str, list[float]] = {h: [] for h in hosts}
+    load = trust.LoadLog()
     with tempfile.TemporaryDirectory(prefix="lever-hosts-") as scratch:
         scratch = Path(scratch)
         archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) \
             if {"ecos", "ecos-serial", "ecos-log-all"} & set(hosts) else None
         for k in range(repeats):
+            load.sample()
             for host in hosts:
                 if host == "harness-jacobi":
                     result = simulate(scene, "jacobi", step, fmu_dir)
@@ -134,10 +140,14 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
                     result = peers.simulate_peer("libcosim-fixed", scene, step, fmu_dir)
                     ok, wall = result.ok, result.wall_time
                 elif host in ("ecos", "ecos-serial", "ecos-log-all"):
-                    wall = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", native_env,
-                                    parallel=host != "ecos-serial",
-                                    record=None if host == "ecos-log-all" else list(scene.record)).wall_time
-                    ok = True
+                    run = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", native_env,
+                                   parallel=host != "ecos-serial",
+                                   record=None if host == "ecos-log-all" else list(scene.record))
+                    wall, ok = run.wall_time, True
+                    # a host that ran another experiment is not timed against ours
+                    problem = peers.experiment_problem(ecos_traces(run.csv)[0], scene, step)
+                    if problem:
+                        raise RuntimeError(f"{host} refused: it {problem}")
                 elif host == "c-importer":
                     wall, ok = _c_importer_time(scene, step, fmu_dir, scratch, native_env), True
                 else:
@@ -146,19 +156,39 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
                     raise RuntimeError(f"{host} failed: {result.failure}")
                 times[host].append(wall)
                 log(f"  run {k + 1}/{repeats} {host}: {wall:.3f} s")
-    base = statistics.median(times[hosts[0]])
+    load.sample()
+    # each round ran every host in turn: the ratio to our harness is taken round by round
     return {"scene": scene.name, "stop": scene.experiment.stop, "step": step, "repeats": repeats,
-            "hosts": {h: {"median_s": statistics.median(t), "runs_s": t,
-                          "ratio": statistics.median(t) / base} for h, t in times.items()}}
+            "machine": load.summary(),
+            "hosts": {h: {"median_s": statistics.median(t), "runs_s": t, **_spread(t),
+                          "ratio": trust.paired_ratio(t, times[hosts[0]])["median"],
+                          "ratio_spread": trust.paired_ratio(t, times[hosts[0]])} for h, t in times.items()}}
+
+
+def _spread(runs: list[float]) -> dict:
+    s = trust.spread(runs)
+    return {"min_s": s["min"], "max_s": s["max"]}
 
 
 def table(report: dict) -> str:
     lines = [f"{report['scene']}: {report['stop']:g} s at {report['step'] * 1e3:g} ms, "
-             f"medians of {report['repeats']} runs",
-             "", "| host | wall time (median) | vs harness-jacobi |", "|---|---|---|"]
+             f"medians [min-max] of {report['repeats']} runs; each ratio the median [min-max] of the ratios of "
+             "runs made in the same round (every host in turn, round after round)",
+             "", _machine(report.get("machine")), "",
+             f"| host | wall time (median [min-max]) | vs {next(iter(report['hosts']))} |", "|---|---|---|"]
     for host, row in report["hosts"].items():
-        lines.append(f"| {host} | {row['median_s']:.3f} s | {row['ratio']:.2f}x |")
+        wall = trust.spread_text({"median": row["median_s"], "min": row.get("min_s", row["median_s"]),
+                                  "max": row.get("max_s", row["median_s"]), "n": len(row.get("runs_s", [1]))})
+        ratio = trust.ratio_text(row["ratio_spread"]) if "ratio_spread" in row else f"{row['ratio']:.2f}x"
+        lines.append(f"| {host} | {wall} | {ratio} |")
     return "\n".join(lines) + "\n"
+
+
+def _machine(machine: dict | None) -> str:
+    if not machine or machine.get("load_max") is None:
+        return "Machine load not known."
+    return (f"Machine: {machine['cpus']} CPUs, one-minute load average {machine['load_min']:.2f}-"
+            f"{machine['load_max']:.2f} during the runs.")
 
 
 def default_out(scene: scenes.Scene) -> Path:
