@@ -11,6 +11,11 @@ REPO = Path(__file__).resolve().parents[1]
 FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 
 
+def pytest_addoption(parser):
+    parser.addoption("--accuracy-report", action="store_true", default=False,
+                     help="print each master's measured errors (tests/test_oracle_accuracy.py), to re-measure")
+
+
 @pytest.fixture(scope="session")
 def fmu_dir() -> Path:
     """The built FMUs, (re)built first when they are missing or older than their sources."""
