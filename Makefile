@@ -23,6 +23,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/lever build
+	$(BIN)/python -m pytest -q -x -m oracle
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
