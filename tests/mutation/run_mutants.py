@@ -76,9 +76,10 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     shutil.copytree(REPO / "build" / "shim", target / "build" / "shim", ignore=ignore)
     shutil.copytree(REPO / "build" / "fmus", target / "build" / "fmus")
     shutil.copytree(REPO / "resources", target / "resources")
+    shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
     selected = [t for t in tests if (target / t).exists()]
-    also_copy = ["fmu_src", "build", "resources", "constraints.txt", "tests", "lever", "harness"]
+    also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
     (target / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
         f"source_paths = {json.dumps(['lever', 'harness'])}\n"
