@@ -79,6 +79,8 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
     selected = [t for t in tests if (target / t).exists()]
+    if not selected:    # an empty selection would make mutmut run the whole suite per mutant
+        raise SystemExit(f"none of the group's tests {tests} exists in {tests_from / 'tests'}")
     also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
     (target / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
