@@ -18,7 +18,9 @@ improvement is no accident either.  The FMUs' traces are pure-Python arithmetic 
 standard library's math, bit-identical across CPUs); the reference's own error (about
 1e-10) is four orders below the smallest figure here, so the last bits a CPU may change
 in scipy's vectorised arithmetic do not move these figures by a measurable fraction,
-far from the 1.25x margin.  An adaptive master's accept/reject decisions may fall the other
+far from the 1.25x margin: with numpy's AVX2 paths switched off
+(``NPY_DISABLE_CPU_FEATURES=X86_V3``) every figure below came out the same to its printed
+digits.  An adaptive master's accept/reject decisions may fall the other
 way on a last-bit difference: a few steps differ, not the error's size.
 """
 from __future__ import annotations
