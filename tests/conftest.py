@@ -54,6 +54,11 @@ def pytest_report_header(config):
             f" (NPY_DISABLE_CPU_FEATURES={os.environ.get('NPY_DISABLE_CPU_FEATURES', '')!r})")
 
 
+def pytest_addoption(parser):
+    parser.addoption("--accuracy-report", action="store_true", default=False,
+                     help="print each master's measured errors (tests/test_oracle_accuracy.py), to re-measure")
+
+
 @pytest.fixture(scope="session")
 def fmu_dir() -> Path:
     """The built FMUs, (re)built first when they are missing or older than their sources."""

@@ -168,6 +168,7 @@ KAVZ_ENERGY_RESIDUAL = 1.98e-8
 KAVZ_REFERENCE_RESIDUAL = 1.01e-12
 
 
+@pytest.mark.oracle
 def test_kavz685_default_scene_meets_its_accuracy_targets():
     spec = scene.load("kavz685")
     result = run.simulate(spec)

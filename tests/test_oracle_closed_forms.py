@@ -18,6 +18,8 @@ from harness.description import scene
 from harness.engine import run
 from harness.judges import stability
 
+pytestmark = pytest.mark.oracle
+
 I1, I2 = 0.128, 0.161            # the KAVZ-685 inertias (docs/physics.md#kavz-685)
 I_RED = I1 * I2 / (I1 + I2)
 

@@ -25,6 +25,8 @@ from harness.engine import component
 from lever.physics import kinematics
 from lever.physics.kinematics import TransferFunction, half_coupling_ratio
 
+pytestmark = pytest.mark.oracle
+
 DEG = math.pi / 180.0
 
 # Fig. 3.7, as printed (monograph lines 912-914): (alpha [deg], D2s/l2, D2h/lc2, dU12).

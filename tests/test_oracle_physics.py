@@ -15,6 +15,8 @@ from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic, 
 from lever.physics.kinematics import TransferFunction
 from lever.physics.parameters import ParameterError
 
+pytestmark = pytest.mark.oracle
+
 # -- the masters' extrapolation weights ------------------------------------------------------------------------
 
 

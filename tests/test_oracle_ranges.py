@@ -26,6 +26,8 @@ from fmpy.fmi2 import FMU2Slave
 
 from harness.engine import component
 
+pytestmark = pytest.mark.oracle
+
 INF = math.inf
 DEG = math.pi / 180.0
 

@@ -194,7 +194,11 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream, observer=
         stepping = clock.perf_counter()
         if driver.adaptive:
             while driver.t < e.stop - 1e-12 * max(1.0, abs(e.stop)):
-                driver.step(min(driver.h, e.stop - driver.t))
+                # the step that reaches the stop aims at it exactly (t + (stop - t) may not)
+                if driver.h >= e.stop - driver.t:
+                    driver.step(t_next=e.stop)
+                else:
+                    driver.step(driver.h)
                 recorder.record(driver.t)
                 guard.check(driver.t, driver.n_steps)
                 if observer is not None:
@@ -204,10 +208,12 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream, observer=
                 if bar is not None:
                     bar.update(driver.t - bar.n)
         else:
-            # Targets from the step count, not by summing steps: no drift in t.
+            # Targets from the step count, not by summing steps: no drift in t.  The last
+            # is the stop time itself: start + n*step can miss it by an ulp (0.03 + 5*0.001
+            # is 0.034999999999999996).
             stride = 500 if bar is not None else n_steps + 1
             for n in range(1, n_steps + 1):
-                driver.step(t_next=min(e.start + n * step, e.stop))
+                driver.step(t_next=e.stop if n == n_steps else min(e.start + n * step, e.stop))
                 recorder.record(driver.t)
                 guard.check(driver.t, n)
                 if observer is not None:

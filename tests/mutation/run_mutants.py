@@ -41,10 +41,20 @@ GROUPS = {
     "physics": (["lever/physics/coupling.py", "lever/physics/elastic.py", "lever/physics/kinematics.py",
                  "lever/physics/engine.py", "lever/physics/shaft.py"], [],
                 ["tests/test_coupling_physics.py", "tests/test_kinematics.py", "tests/test_loads_and_shafts.py",
-                 "tests/test_oracle_monograph.py", "tests/test_oracle_physics.py"]),
+                 "tests/test_oracle_monograph.py", "tests/test_oracle_physics.py",
+                 "tests/test_oracle_stability_models.py", "tests/test_oracle_states.py"]),
     "masters": (["harness/engine/masters/explicit.py"], ["harness.engine.masters.explicit.x_extrapolation_weights*",
                                                          "harness.engine.masters.explicit.x_lagrange_weights*"],
                 ["tests/test_masters.py", "tests/test_oracle_physics.py"]),
+    # The linear model the stability analysis and the advisor build from a scene (the
+    # one-step maps are checked against the real masters by test_stability.py).
+    "stability": (["harness/judges/stability.py"], ["harness.judges.stability.x_model_of*",
+                                                    "harness.judges.stability.xǁTwoInertiaǁ*"],
+                  ["tests/test_stability.py", "tests/test_oracle_closed_forms.py",
+                   "tests/test_oracle_stability_models.py"]),
+    # The shaft FMUs' adapter (saved states among it): reached only by tests that run the
+    # slave classes in the test process (the built FMUs carry their own copy of the code).
+    "fmus": (["lever/fmus/shafts.py"], [], ["tests/test_oracle_states.py"]),
 }
 
 
@@ -66,9 +76,12 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     shutil.copytree(REPO / "build" / "shim", target / "build" / "shim", ignore=ignore)
     shutil.copytree(REPO / "build" / "fmus", target / "build" / "fmus")
     shutil.copytree(REPO / "resources", target / "resources")
+    shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
     selected = [t for t in tests if (target / t).exists()]
-    also_copy = ["fmu_src", "build", "resources", "constraints.txt", "tests", "lever", "harness"]
+    if not selected:    # an empty selection would make mutmut run the whole suite per mutant
+        raise SystemExit(f"none of the group's tests {tests} exists in {tests_from / 'tests'}")
+    also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
     (target / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
         f"source_paths = {json.dumps(['lever', 'harness'])}\n"
@@ -122,6 +135,9 @@ def main() -> int:
     parser.add_argument("--group", choices=list(GROUPS), nargs="+", default=list(GROUPS))
     parser.add_argument("--max-children", type=int, default=2)
     parser.add_argument("--keep", action="store_true", help="reuse a staged tree and mutmut's cached results")
+    parser.add_argument("--mutants", nargs="+", default=None, metavar="GLOB",
+                        help="only the mutants whose names match these globs (a bounded subset of a group, "
+                             "e.g. 'lever.physics.engine.*'; the same subset before and after)")
     args = parser.parse_args()
     subprocess.run([sys.executable, "-c", "from harness.cli import ensure_fmus; ensure_fmus(quiet=True)"],
                    cwd=REPO, check=True)
@@ -130,6 +146,7 @@ def main() -> int:
     status = 0
     for group in args.group:
         mutate, names, tests = GROUPS[group]
+        names = args.mutants or names
         target = REPO / "results" / "mutation" / args.label / group
         if not (args.keep and target.exists()):
             stage(target, args.tests_from.resolve(), mutate, tests)
