@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -38,6 +39,11 @@ NUMERICS = (
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
                                        "(tests/conftest.py NUMERICS)")
+    # A suite started as a background job of a shell without job control inherits SIGINT
+    # ignored, and so would every `lever` the Ctrl-C tests start: they would wait for an
+    # interrupt that never comes.  A handled signal is reset to its default across exec.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(config, items):
