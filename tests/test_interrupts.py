@@ -178,3 +178,26 @@ def test_case_log_redoes_interrupted_cases(tmp_path):
         {"status": INTERRUPTED, "time": 0.25}
     result, reused = again.run("b", lambda: {"status": "ok"})
     assert not reused and "b" in again
+
+
+def test_dask_sweep_interrupted_logs_the_case_under_way(tmp_path, fmu_dir, monkeypatch):
+    """Ctrl-C (the flag, as ``interrupt.deferred`` sets it) once the first case is logged:
+    the case a worker is running is logged as interrupted, the queued ones are not logged."""
+    distributed = pytest.importorskip("distributed")
+    from harness.studies import sweep as sweeps
+
+    axis = sweeps.Axis("stiffness", "3.17", "c", [450.0, 600.0, 900.0], sweeps.FIG_317, "coupling.stiffness")
+    record = CaseLog.record
+
+    def record_then_interrupt(self, key, result):
+        record(self, key, result)
+        time.sleep(0.5)                                  # the worker is well into the next case
+        monkeypatch.setattr(interrupt, "_requested", True)
+
+    monkeypatch.setattr(CaseLog, "record", record_then_interrupt)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with pytest.raises(interrupt.Interrupted):
+            sweeps.sweep([axis], tmp_path, stop=2.0, extra=["experiment.transient=0.2"],
+                         dask=cluster.scheduler_address, progress=False)
+    entries = _case_lines(tmp_path / "cases.jsonl")
+    assert [e["result"].get("status") for e in entries] == ["ok", INTERRUPTED]
