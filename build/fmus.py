@@ -88,7 +88,7 @@ def runtime_requirements() -> list[str]:
 
 
 REQUIREMENTS_HEADER = """\
-# Python packages this FMU's model imports in the Python it runs on (CPython >= 3.11 with a
+# Python packages this FMU's model imports in the Python it runs on (CPython >= 3.9 with a
 # shared libpython; pythonfmu's Python part is in resources/pythonfmu).  In a host that is
 # no Python process the FMU finds that Python itself: LEVER_FMU_LIBPYTHON, else the Python
 # it was built with (resources/lever_shim.cfg), else python3 on PATH.  No package is listed:
