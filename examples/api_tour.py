@@ -1,10 +1,11 @@
-"""The harness from Python (harness.api): run KAVZ-685 shortened and stiffer, plot its
-driven torque beside the scene's own, validate the short run over the span it covers, and
-judge the stand-alone EngineShaft FMU.
+"""The harness from Python (harness.api): run KAVZ-685 shortened, as written and with a
+stiffer coupling, plot their driven torques, and validate both against the scene's
+committed reference over the span they cover.
 
     python examples/api_tour.py [OUTPUT_FOLDER]     # default: ./results/api_tour
 
-Writes tau2.png there and prints what it found; exit status 0 when both validations pass.
+Writes tau2.png there and prints what it found; exit status 0 when the run as written
+passes and the stiffer one fails (the validation sees the change).
 """
 from __future__ import annotations
 
@@ -47,13 +48,16 @@ def main(out: Path) -> int:
     fig.savefig(out / "tau2.png", dpi=100)
     plt.close(fig)
 
-    # Judge the short run against the committed 10 s reference over the span it covers.
-    short = api.validate("kavz685", result=(plain.times, plain.traces), window=(0.0, 1.0))
-    print(f"kavz685, {short.findings.describe_span()}: {'PASS' if short.passed else 'FAIL'}")
-    engine = api.validate("EngineShaft")
-    print(f"EngineShaft stand-alone: {'PASS' if engine.passed else 'FAIL'}")
+    # Judge both short runs against the committed 10 s reference over the span they cover:
+    # the scene as written passes; the stiffer coupling fails where the physics says it must.
+    verdicts = {}
+    for name, run in (("as written", plain), ("stiffness 1500", stiff)):
+        verdicts[name] = api.validate("kavz685", result=(run.times, run.traces), window=(0.0, 1.0))
+        failed = verdicts[name].findings.failed_signals
+        print(f"{name:15s} against kavz685, {verdicts[name].findings.describe_span()}: "
+              + ("PASS" if verdicts[name].passed else f"FAIL ({', '.join(failed)})"))
     print(f"written: {out / 'tau2.png'}")
-    return 0 if short.passed and engine.passed else 1
+    return 0 if verdicts["as written"].passed and not verdicts["stiffness 1500"].passed else 1
 
 
 if __name__ == "__main__":
