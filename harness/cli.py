@@ -193,6 +193,8 @@ def _print_summary(summary: dict, out: Path):
     click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
                f"wall time {summary['wall_time_s']:.2f} s")
     stats = summary.get("statistics") or {}
+    if stats and not any(stats.values()):
+        click.echo(f"  no statistics: the run ended before the start-up transient did (t < {summary['transient_s']:g} s)")
     for short in ("w1", "w2", "tau1", "tau2"):
         s = stats.get(short)
         if s:

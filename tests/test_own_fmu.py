@@ -223,3 +223,14 @@ def test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged(fmu_
     strict = CliRunner().invoke(cli, ["run", "kavz685", "--stop", "0.5", "--set", "experiment.transient=2",
                                       "--out", str(tmp_path / "strict")])
     assert strict.exit_code == 2 and "experiment.transient = 2.0 s must be in [0, stop - start)" in strict.output
+
+
+def test_a_run_that_ends_before_its_transient_says_there_is_no_steady_window(fmu_dir, tmp_path):
+    from harness import api
+    from harness.formats import report
+
+    done = api.run("kavz685", stop=0.3, reference=False, notify=lambda *_: None)
+    summary = dict(done.summary, statistics={k: None for k in done.summary["statistics"]})   # nothing after it
+    report.write_report(tmp_path / "report.md", summary)
+    assert "No steady window: the run ended before the start-up transient did (t < 0.06 s)" in \
+        (tmp_path / "report.md").read_text()

@@ -84,6 +84,9 @@ def write_report(path: Path, summary: dict):
         lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", ""]
         if summary.get("transient_note"):
             lines += [f"The run is shorter than its scene: {summary['transient_note']}.", ""]
+        if not any(stats.values()):
+            lines += [f"No steady window: the run ended before the start-up transient did (t < "
+                      f"{summary['transient_s']:g} s), so there are no statistics.", ""]
         lines += ["| signal | mean | amplitude A = (max-min)/2 | unevenness (w_max-w_min)/w_mean |",
                   "|---|---|---|---|"]
         for short, s in stats.items():
