@@ -136,11 +136,11 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
 
     with _user_errors():
         spec = api.load(scene, list(assignments), stop=stop, strict=strict)
-    out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
+    out = out or RESULTS / spec.name        # claimed by api.run after its checks, before the run
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
         done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference, out=out,
-                       claimed=True, progress=show_progress, stream=stream,
+                       progress=show_progress, stream=stream,
                        notify=lambda kind, message: click.echo(f"{kind}: {message}", err=True))
     except api.InputError as error:
         outputs.abandon(out)             # refused before the run: no empty folder left

@@ -173,7 +173,7 @@ def test_do_step_before_initialisation_is_an_error(components):
 
 @pytest.mark.parametrize("h", [-1e-3, 0.0, math.nan, math.inf])
 def test_bad_step_size_is_an_error(components, h):
-    c = start(components("LoadShaft"))
+    c = start(components("LoadShaft"), {"mean_torque": 107.5})          # a load: the good step moves w
     c.do_step(0.0, 1e-3)
     state = c.get(["phi", "w"])
     with pytest.raises(FmuCallError) as info:

