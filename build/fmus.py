@@ -28,11 +28,16 @@ import importlib.util
 import json
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-SOURCE = ROOT / "fmu_src" / "lever"
+#: In a checkout the model package is fmu_src/lever and the FMUs go to build/fmus, staged in
+#: build/tmp.  An installed package (``pip install .``, harness/paths.py) carries this file
+#: without fmu_src: the model is the installed ``lever`` package, staged in a temporary folder.
+CHECKOUT = (ROOT / "fmu_src" / "lever").is_dir()
+SOURCE = ROOT / "fmu_src" / "lever" if CHECKOUT else Path(importlib.util.find_spec("lever").origin).parent
 OUTPUT = HERE / "fmus"
 STAGING = HERE / "tmp"
 
@@ -83,7 +88,7 @@ def runtime_requirements() -> list[str]:
 
 
 REQUIREMENTS_HEADER = """\
-# Python packages this FMU's model imports in the Python it runs on (CPython >= 3.11 with a
+# Python packages this FMU's model imports in the Python it runs on (CPython >= 3.9 with a
 # shared libpython; pythonfmu's Python part is in resources/pythonfmu).  In a host that is
 # no Python process the FMU finds that Python itself: LEVER_FMU_LIBPYTHON, else the Python
 # it was built with (resources/lever_shim.cfg), else python3 on PATH.  No package is listed:
@@ -101,13 +106,22 @@ def source_hash() -> str:
     import pythonfmu
 
     digest = hashlib.sha256(pythonfmu.__version__.encode())
-    files = sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)
-    files += sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", Path(__file__).resolve()]
-    files += [ROOT / "constraints.txt", ROOT / "harness" / "compliance.py"]
-    for path in files:
-        digest.update(str(path.relative_to(ROOT)).encode())
+    # Each file is hashed under its name in a checkout, so that an installed package and a
+    # checkout of the same sources agree.
+    named = [(f"fmu_src/lever/{p.relative_to(SOURCE).as_posix()}", p)
+             for p in sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)]
+    named += [(f"build/{p.relative_to(HERE).as_posix()}", p) for p in
+              sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", Path(__file__).resolve()]]
+    named += [("constraints.txt", ROOT / "constraints.txt"), ("harness/compliance.py", _compliance_file())]
+    for name, path in named:
+        digest.update(name.encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()
+
+
+def _compliance_file() -> Path:
+    checkout = ROOT / "harness" / "compliance.py"
+    return checkout if CHECKOUT else Path(importlib.util.find_spec("harness.compliance").origin)
 
 
 def is_current(out_dir: Path = OUTPUT) -> bool:
@@ -121,26 +135,35 @@ def is_current(out_dir: Path = OUTPUT) -> bool:
 
 def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, Path]:
     """Build every FMU into ``out_dir``; return {model identifier: path}."""
-    from pythonfmu.builder import FmuBuilder
-
-    from harness.compliance import check_fmu
-
     out_dir = Path(out_dir)
     paths = {m: out_dir / f"{m}.fmu" for m in MODELS}
     if not force and is_current(out_dir):
         log(f"FMUs in {out_dir} are up to date")
         return paths
     digest = source_hash()
-    tag = digest[:10]
     out_dir.mkdir(parents=True, exist_ok=True)
+    if CHECKOUT:
+        _build_in(STAGING, out_dir, paths, digest, log)
+    else:       # the installed package's folders may not be writable
+        with tempfile.TemporaryDirectory(prefix="lever-fmu-build-") as staging:
+            _build_in(Path(staging), out_dir, paths, digest, log)
+    return paths
+
+
+def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str, log):
+    from pythonfmu.builder import FmuBuilder
+
+    from harness.compliance import check_fmu
+
+    tag = digest[:10]
     shim = _load(HERE / "shim" / "compile.py", "_lever_build_shim")
-    shim_so = STAGING / "lever_fmi2_shim.so"
-    STAGING.mkdir(parents=True, exist_ok=True)
+    shim_so = staging / "lever_fmi2_shim.so"
+    staging.mkdir(parents=True, exist_ok=True)
     shim.compile_shim(shim_so)
     requirements = runtime_requirements()
 
     for model, module in MODELS.items():
-        stage = STAGING / model
+        stage = staging / model
         shutil.rmtree(stage, ignore_errors=True)
         stage.mkdir(parents=True)
         package = f"_lever_{model}_{tag}"
@@ -174,7 +197,6 @@ def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, P
             raise RuntimeError(f"{model}.fmu does not pass `lever check`:\n  " + "\n  ".join(problems))
         log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), lever check: 0 findings")
     (out_dir / "build-stamp.json").write_text(json.dumps({"hash": digest, "models": list(MODELS)}, indent=1))
-    return paths
 
 
 def main(argv=None):

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import importlib.util
 import json
 import math
 import os
@@ -12,9 +11,10 @@ from pathlib import Path
 
 import click
 
+from harness import api
 from harness.description import kinds
 from harness.description import scene as scenes
-from harness.paths import BUILD, FMUS, RESULTS, SCENES
+from harness.paths import FMUS, RESULTS
 
 
 class UserError(click.ClickException):
@@ -23,45 +23,50 @@ class UserError(click.ClickException):
     exit_code = 2
 
 
-def _build_module():
-    spec = importlib.util.spec_from_file_location("_lever_build_fmus", BUILD / "fmus.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+#: what to do without a C compiler (the FMUs' native entry is compiled when they are built)
+NO_COMPILER = ("the FMUs' native entry is C, compiled when they are built: install a C compiler "
+               "(Debian/Ubuntu: sudo apt install gcc; Fedora: sudo dnf install gcc; macOS: xcode-select --install) "
+               "or name one with CC (e.g. CC=clang lever build)")
 
 
 def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):
     """Build the FMUs when they are missing or older than their sources."""
-    build = _build_module()
-    if force or not build.is_current(fmu_dir):
-        build.build(fmu_dir, force=force, log=(lambda *_: None) if quiet else click.echo)
+    try:
+        api.build(force, fmu_dir, log=None if quiet else click.echo)
+    except RuntimeError as error:
+        raise RuntimeError(_with_compiler_hint(error)) from None
+
+
+def _with_compiler_hint(error: Exception) -> str:
+    """The build's message, with what to do when no C compiler could be run."""
+    return f"{error}; {NO_COMPILER}" if "cannot run" in str(error) and NO_COMPILER not in str(error) else str(error)
 
 
 def open_scene(name: str | Path) -> scenes.Scene:
     """The scene NAME: a name in resources/scenes, a .toml file or an SSP archive (.ssp)."""
-    if str(name).endswith(".ssp"):
-        from harness.formats import ssp
-        return ssp.read_scene(name)
-    return scenes.load(name)
+    return api.load(name)
+
+
+@contextlib.contextmanager
+def _user_errors():
+    """``api.InputError`` ends the command with exit code 2 and its message."""
+    try:
+        yield
+    except api.InputError as error:
+        raise UserError(str(error)) from None
 
 
 def _scene(name: str, assignments=()) -> scenes.Scene:
     """The scene NAME (a name, a .toml or an .ssp) with the --set overrides; bad input ends
     the command with exit code 2 and the scene's message."""
-    try:
-        return open_scene(name).with_overrides(list(assignments))
-    except scenes.SceneError as error:
-        raise UserError(str(error)) from None
+    with _user_errors():
+        return api.load(name, list(assignments))
 
 
 def _check_masters(*names: str):
     """End the command with exit code 2 when one of ``names`` is not a master."""
-    from harness.engine import masters as family
-
-    try:
-        family.check(*names)
-    except family.UnknownMaster as error:
-        raise UserError(str(error)) from None
+    with _user_errors():
+        api.check_masters(*names)
 
 
 class _Lever(click.Group):
@@ -83,9 +88,12 @@ def main():
 
 @main.command()
 @click.option("--force", is_flag=True, help="Rebuild even when the sources did not change.")
-@click.option("--out", type=click.Path(path_type=Path), default=FMUS, show_default=True)
+@click.option("--out", type=click.Path(path_type=Path), default=FMUS, show_default=True,
+              help="Where the FMUs go: build/fmus in a checkout; for a package installed with pip, the user's "
+                   "cache folder; LEVER_FMU_DIR chooses another.")
 def build(force, out):
-    """Build the FMUs (LeverCoupling, EngineShaft, LoadShaft) into build/fmus."""
+    """Build the FMUs (LeverCoupling, EngineShaft, LoadShaft, FreewheelRectifier,
+    MisalignmentSource)."""
     try:
         ensure_fmus(out, force)
     except RuntimeError as error:
@@ -94,12 +102,9 @@ def build(force, out):
 
 @main.command("scenes")
 def list_scenes():
-    """List the scenes in resources/scenes."""
-    for path in sorted(SCENES.glob("*.toml")):
-        try:
-            click.echo(f"{path.stem:24s} {scenes.load(path).description}")
-        except scenes.SceneError as error:
-            click.echo(f"{path.stem:24s} (invalid: {error})")
+    """List the committed scenes (resources/scenes)."""
+    for name, description in api.scenes_list().items():
+        click.echo(f"{name:24s} {description}")
 
 
 @main.command()
@@ -109,6 +114,9 @@ def list_scenes():
                    "coupling.misalignment='20 deg') or experiment.stop=5.")
 @click.option("--master", type=str, default=None, help="Co-simulation master (default: the scene's).")
 @click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--stop", type=float, default=None,
+              help="Stop time [s] (as --set experiment.stop=S); a scene's start-up transient that does not fit the "
+                   "shorter run takes the same share of it (said before the run).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/<scene>).")
 @click.option("--tolerance", type=float, default=None,
@@ -123,66 +131,30 @@ def list_scenes():
               "the reference (the energy balance, integrated over every row, judges the run).")
 @click.option("--latency", is_flag=True, help="Time every step for real-time use: median, p99, p99.9 and maximum "
               "step time, the start-up steps and why the slowest were slow (latency.md, latency.json).")
-def run(scene, assignments, master, step, tolerance, out, no_reference, strict, progress, stream, latency):
+def run(scene, assignments, master, step, stop, tolerance, out, no_reference, strict, progress, stream, latency):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
-    from harness.engine import masters as family
-    from harness.judges import monolithic as references
-    from harness.formats import report
-    from harness.engine.run import simulate
-    from harness.judges.stability import run_advice
-    from harness.engine.system import SceneInvalid
+    from harness.formats import outputs
 
-    spec = _scene(scene, tuple(assignments) + (("experiment.strict=true",) if strict else ()))
-    chosen = master or spec.experiment.master
-    _check_masters(chosen)
-    if step is not None and (problem := scenes.step_problem(step, "--step")):
-        raise UserError(problem)
-    options = {}
-    if tolerance is not None:
-        if "tolerance" not in family.MASTERS[chosen].options:
-            raise UserError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
-                            + ", ".join(n for n, m in family.MASTERS.items() if "tolerance" in m.options) + ")")
-        if not (math.isfinite(tolerance) and 0 < tolerance < 1):
-            raise UserError(f"--tolerance {tolerance}: must lie in (0, 1)")
-        options["tolerance"] = tolerance
-    try:
-        ensure_fmus(quiet=True)
-    except RuntimeError as error:
-        raise click.ClickException(f"building the FMUs failed: {error}") from None
+    with _user_errors():
+        spec = api.load(scene, list(assignments), stop=stop, strict=strict)
+    out = out or RESULTS / spec.name        # claimed by api.run after its checks, before the run
     show_progress = sys.stderr.isatty() if progress is None else progress
-    fmu_dir = spec.fmu_dir or FMUS
-    warnings = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
-    for warning in warnings:
-        click.echo(f"warning: {warning}", err=True)     # before the run, so a long run is not waited for
-    if not stream:
-        _refuse_unstreamed(spec, step)
-    out = _claim_out(out or RESULTS / spec.name)      # before the run: a bad or busy --out is said at once
     from harness.studies import latency as step_latency
+
     timer = step_latency.StepTimer() if latency else None
     try:
-        result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=show_progress, options=options,
-                          stream=out / "traces.csv" if stream else None, keep_partial=True, observer=timer)
-    except SceneInvalid as error:
-        from harness.formats import outputs
+        done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference, out=out,
+                       progress=show_progress, stream=stream, observer=timer,
+                       notify=lambda kind, message: click.echo(f"{kind}: {message}", err=True))
+    except api.InputError as error:
         outputs.abandon(out)             # refused before the run: no empty folder left
         raise UserError(str(error)) from None
-    result.warnings = warnings
-    if result.unconnected_inputs:
-        click.echo(f"warning: {scenes.unconnected_message(result.unconnected_inputs)}", err=True)
-    reference = None
-    try:
-        if "reference" in spec.features and not no_reference and not stream and result.ok:
-            try:
-                reference = references.solve(spec, result.times)
-            except references.ReferenceUnavailable as error:
-                click.echo(f"note: no reference for this scene: {error}", err=True)
-    except KeyboardInterrupt:
-        click.echo("interrupted while solving the reference: the run's results are written without it", err=True)
-        result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
-        result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
-    summary = report.write(out, result, reference)
-    _print_summary(summary, out)
+    except api.BuildError as error:
+        outputs.abandon(out)
+        raise click.ClickException(f"building the FMUs failed: {_with_compiler_hint(error)}") from None
+    result, out = done.result, done.out
+    _print_summary(done.summary, out)
     if timer is not None:
         for line in step_latency.report(out, timer, result):
             click.echo(line)
@@ -225,25 +197,12 @@ def _resumable(out: Path):
         sys.exit(INTERRUPTED_EXIT)
 
 
-def _refuse_unstreamed(spec: scenes.Scene, step: float | None):
-    """Exit 2 before a run whose traces would not fit in memory: say to use --stream."""
-    from harness.engine.run import available_memory, trace_memory
-
-    if scenes.experiment_findings(spec.experiment):
-        return      # no estimate from unsound times: the run refuses them, naming each (exit 2)
-    needed, rows = trace_memory(spec, step)
-    free = available_memory()
-    if free is not None and needed > 0.8 * free:
-        raise UserError(f"a step of {step or spec.experiment.step:g} s over {spec.experiment.stop - spec.experiment.start:g} s "
-                        f"makes {rows:,} rows of traces, about {needed / 2**30:.1f} GiB in memory, more than this "
-                        f"machine has free ({free / 2**30:.1f} GiB): use --stream (writes traces.csv while running, "
-                        "keeps 1 row in k in memory), a larger --step or a shorter experiment.stop")
-
-
 def _print_summary(summary: dict, out: Path):
     click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
                f"wall time {summary['wall_time_s']:.2f} s")
     stats = summary.get("statistics") or {}
+    if stats and not any(stats.values()):
+        click.echo(f"  no statistics: the run ended before the start-up transient did (t < {summary['transient_s']:g} s)")
     for short in ("w1", "w2", "tau1", "tau2"):
         s = stats.get(short)
         if s:
@@ -285,14 +244,14 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
     try:
         spec = open_scene(scene)
         benchmark.plan(spec, list(only))      # refuses unknown masters before anything runs
-    except (scenes.SceneError, ValueError) as error:
+    except (api.InputError, ValueError) as error:
         raise UserError(str(error)) from None
     ensure_fmus(quiet=True)
     out = _claim_out(out or benchmark.default_out(spec))
-    with _resumable(out):
-        result = benchmark.bench(spec, repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                                 progress=click.echo, out=out, resume=not fresh)
-    paths = benchmark.write(out, result)
+    with _resumable(out), _user_errors():
+        result = api.bench(spec, repeats=repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
+                           progress=click.echo, out=out, claimed=True, resume=not fresh)
+    paths = result["written"]
     click.echo("")
     for line in benchmark.summary_lines(result):
         click.echo(line)
@@ -318,7 +277,10 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
 @click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the case log.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/stability/<scene>).")
-def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps, no_refine, jobs, fresh, out):
+@click.option("--progress/--no-progress", default=True, show_default=True,
+              help="Progress lines: the cases planned and already done, every 50 cases run.")
+def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps, no_refine, jobs, fresh, out,
+              progress):
     """The stability map of SCENE: every case classified (stable / energy-drifting /
     divergent) against the edges the linear analysis predicts; writes stability.md,
     stability.csv, stability_map.png and the resumable case log cases.jsonl."""
@@ -347,7 +309,8 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     ensure_fmus(quiet=True)
     out = _claim_out(out or stabilitymap.default_out(spec))
     with _resumable(out):
-        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh, progress=click.echo)
+        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=not fresh,
+                                    progress=click.echo if progress else None)
     paths = stabilitymap.write(out, result)
     agreed = stabilitymap.agreement(result)
     if agreed["explicit_rows"]:
@@ -688,28 +651,10 @@ def _reference_names(names) -> list[str]:
 
 
 def fmu_start_values(model: str, assignments) -> dict:
-    """``--set name=value`` for an FMU run stand-alone: its parameters (and inputs not in
-    the ``_in.csv``), checked against the model description."""
-    from fmpy import read_model_description
-
-    variables = {v.name: v for v in read_model_description(str(FMUS / f"{model}.fmu")).modelVariables}
-    values = {}
-    for assignment in assignments:
-        if "=" not in assignment:
-            raise UserError(f"--set {assignment!r}: expected name=value")
-        key, raw = (x.strip() for x in assignment.split("=", 1))
-        name = key.split(".", 1)[1] if key.startswith(model + ".") else key
-        var = variables.get(name)
-        if var is None or var.causality not in ("parameter", "input"):
-            known = ", ".join(v.name for v in variables.values() if v.causality == "parameter")
-            raise UserError(f"--set {key}: {model} has no parameter '{name}' (parameters: {known})")
-        from harness.engine.system import converted
-        value = scenes.coerce(raw)
-        problems = scenes.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
-        if problems:
-            raise UserError("; ".join(problems))
-        values[name] = converted(var, value, key)
-    return values
+    """``--set name=value`` for an FMU run stand-alone (``api.fmu_start_values``); exit 2
+    with its message on bad input."""
+    with _user_errors():
+        return api.fmu_start_values(model, assignments)
 
 
 @main.command("validate")
@@ -730,9 +675,12 @@ def fmu_start_values(model: str, assignments) -> dict:
               help="Model vs measurement instead (lever validate --measured GRADE_FILES...): NAMES are "
                    "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
                    "the model-vs-measurement check (as lever measured; default: the monograph's grades).")
+@click.option("--window", default=None, metavar="START:STOP",
+              help="Judge only this span of the reference [s] (e.g. 0:1 for a 1 s result, 2:10 for the steady "
+                   "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")
-def validate_command(names, assignments, master, step, result_csv, tolerance, measured, out):
+def validate_command(names, assignments, master, step, result_csv, tolerance, window, measured, out):
     """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
     or a scene, with its master) and compare every recorded output with its committed
     reference trace: RMS and max error, fraction of samples outside the tolerance band,
@@ -740,9 +688,6 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
 
     Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
     2 on bad input."""
-    from harness.formats import reference_traces as crosscheck
-    from harness.judges import validation as judge
-
     if measured:
         _measured_report([Path(n) for n in names], out or RESULTS / "validate" / "measured")
         return
@@ -751,9 +696,10 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
     if result_csv is not None and len(chosen) != 1:
         raise UserError("--result: name exactly one reference the CSV is to be compared with "
                         "(e.g. lever validate --result run.csv kavz685)")
+    with _user_errors():
+        span = api.parse_window(window)
     if step is not None and (problem := scenes.step_problem(step, "--step")):
         raise UserError(problem)
-    tol = judge.TOLERANCES[tolerance]
     if result_csv is None:
         try:
             ensure_fmus(quiet=True)
@@ -761,45 +707,19 @@ def validate_command(names, assignments, master, step, result_csv, tolerance, me
             raise click.ClickException(f"building the FMUs failed: {error}") from None
     all_passed = True
     for name in chosen:
-        try:
-            ref = crosscheck.read(name)
-        except crosscheck.TraceFileError as error:
-            raise UserError(str(error)) from None
-        if result_csv is not None:
-            try:
-                other = crosscheck.read_csv(result_csv)
-            except crosscheck.TraceFileError as error:
-                raise UserError(str(error)) from None
-            result = crosscheck.Result(other.times, other.signals, f"from {result_csv}")
-        elif ref.kind == "fmu":
-            if master or step:
-                raise UserError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
-        else:
-            from harness.engine.system import SceneInvalid
-            try:
-                spec = scenes.load(name).with_overrides(list(assignments))
-            except scenes.SceneError as error:
-                raise UserError(str(error)) from None
-            if master:
-                _check_masters(master)
-            try:
-                result = crosscheck.run_scene(spec, master, step)
-            except SceneInvalid as error:
-                raise UserError(str(error)) from None
-        findings, bands = judge.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
-                                        tol, ref.opt.start, ref.opt.stop)
-        if result.failure:
-            findings.problems.append(f"the run failed: {result.failure}")
         target = out if (out and len(chosen) == 1) else (out or RESULTS / "validate") / name
-        crosscheck.write_validation(target, findings, bands, result, ref, write_result=result_csv is None)
-        _print_validation(name, findings, result, target)
-        all_passed &= findings.passed
+        with _user_errors():
+            verdict = api.validate(name, overrides=list(assignments), master=master, step=step, result=result_csv,
+                                   tolerance=tolerance, window=span, out=target)
+        _print_validation(name, verdict.findings, verdict.result, target)
+        all_passed &= verdict.passed
     sys.exit(0 if all_passed else 1)
 
 
 def _print_validation(name, findings, result, out: Path):
     click.echo(f"{name}: {result.how}; tolerance {findings.tolerance.describe()}")
+    if findings.span:
+        click.echo(f"  judged: {findings.describe_span()}")
     click.echo(f"  {'signal':24s} {'RMS error':>11s} {'max error':>11s} {'at t [s]':>9s} {'band +-':>10s} "
                f"{'outside':>8s}  verdict")
     for s in findings.signals:
@@ -811,7 +731,8 @@ def _print_validation(name, findings, result, out: Path):
         click.echo(f"  note: {note}")
     verdict = "PASS" if findings.passed else "FAIL" + (
         f" ({', '.join(findings.failed_signals)})" if findings.failed_signals else "")
-    click.echo(f"  {name}: {verdict}; written to {out}/")
+    span = f" over {findings.describe_span()}" if findings.span else ""
+    click.echo(f"  {name}: {verdict}{span}; written to {out}/")
 
 
 @main.command("fingerprint")

@@ -5,6 +5,7 @@ process - matching the reference."""
 from __future__ import annotations
 
 import ast
+import re
 import math
 import os
 import subprocess
@@ -539,3 +540,16 @@ def test_kavz_run_in_libcosim_passes_lever_validate(fmu_dir, tmp_path):
     np.savetxt(csv_path, shifted, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
     outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "w")])
     assert outcome.exit_code == 1 and "coupling.tau1" in outcome.output
+
+
+def test_the_documents_name_the_python_the_fmus_native_entry_accepts(fmu_dir):
+    """The oldest CPython the shim accepts is what each FMU's requirements.txt, the README
+    and docs/hosts.md say."""
+    shim_source = (REPO / "build" / "shim" / "lever_fmi2_shim.c").read_text()
+    oldest = int(re.search(r"minor < (\d+)", shim_source).group(1))
+    with zipfile.ZipFile(fmu_dir / "LoadShaft.fmu") as archive:
+        requirements = archive.read("resources/requirements.txt").decode()
+    assert f"CPython >= 3.{oldest} " in requirements
+    for page in ("README.md", "docs/hosts.md", "docs/models-and-fmus.md"):
+        stated = set(re.findall(r"CPython\s+(3\.\d+)\+", (REPO / page).read_text()))
+        assert stated == {f"3.{oldest}"}, (page, stated)

@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import fmpy
+import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
@@ -172,7 +173,7 @@ def test_do_step_before_initialisation_is_an_error(components):
 
 @pytest.mark.parametrize("h", [-1e-3, 0.0, math.nan, math.inf])
 def test_bad_step_size_is_an_error(components, h):
-    c = start(components("LoadShaft"))
+    c = start(components("LoadShaft"), {"mean_torque": 107.5})          # a load: the good step moves w
     c.do_step(0.0, 1e-3)
     state = c.get(["phi", "w"])
     with pytest.raises(FmuCallError) as info:
@@ -265,7 +266,8 @@ def test_two_instances_of_a_shaft_do_not_interfere(components):
 def test_two_random_loads_with_different_seeds_differ_and_repeat(components):
     runs = {}
     for name, seed in (("s1", 1), ("s2", 2), ("s1again", 1)):
-        runs[name] = run_shaft(start(components("LoadShaft", name), {"seed": seed}), 107.5, 40)
+        runs[name] = run_shaft(start(components("LoadShaft", name), {"seed": seed, "mean_torque": 107.5,
+                                                                     "random_amplitude": 8.8}), 107.5, 40)
     assert runs["s1"] == runs["s1again"]
     assert runs["s1"] != runs["s2"]
 
@@ -596,3 +598,13 @@ def test_a_state_saved_while_friction_holds_the_load_continues_exactly(fmu_dir):
     finally:
         saved.free()
         target.free()
+
+
+def test_the_load_shaft_alone_idles_with_its_defaults(fmu_dir):
+    """Run stand-alone with no input and its defaults, the driven shaft keeps its start speed
+    (no load until one is set) instead of being driven backwards by an unopposed resistance."""
+    from fmpy import simulate_fmu
+
+    result = simulate_fmu(str(fmu_dir / "LoadShaft.fmu"), stop_time=1.0, output_interval=1e-3, output=["w", "phi"])
+    assert result["w"][0] == 39.0 and np.all(np.abs(result["w"] - 39.0) <= 1e-9), result["w"][-1]
+    assert result["phi"][-1] == pytest.approx(39.0, rel=1e-6)

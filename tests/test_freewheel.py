@@ -355,3 +355,17 @@ def test_coupling_iterating_masters_are_refused_on_the_one_fmu_scene(fmu_dir, ma
     assert not result.ok and result.failure_stage == "initialisation"
     assert "connects none" in result.failure and "jacobi" in result.failure
     assert len(simulate(spec, "jacobi-quadratic", fmu_dir=fmu_dir).times) == 51   # extrapolation just steps it
+
+
+def test_the_committed_scene_leaves_no_input_unconnected_and_keeps_its_reference(fmu_dir):
+    """The output shaft's input is held at 0 in the scene (no downstream element): no
+    warning on every run, and the reference (which covers tau = 0) still solves it; a
+    held torque other than 0 is no case the reference covers."""
+    from harness.engine.system import descriptions_for
+
+    spec = scenes.load("freewheel_rectifier")
+    assert scenes.unconnected_inputs(spec, descriptions_for(spec, fmu_dir)) == []
+    short = spec.with_overrides(["experiment.stop=0.01"])
+    assert reference.solve(short, np.linspace(0.0, 0.01, 11), use_cache=False).traces
+    with pytest.raises(reference.ReferenceUnavailable, match="tau = 0"):
+        reference.solve(short.with_overrides(["rectifier.tau=5"]), np.linspace(0.0, 0.01, 11), use_cache=False)

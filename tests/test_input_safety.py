@@ -451,3 +451,17 @@ def test_an_fmu_run_stand_alone_checks_units_and_types_too(fmu_dir, tmp_path):
                       "LeverCoupling.stiffness", "N.m/rad")
     assert_user_error(invoke("validate", "LeverCoupling", "--set", "misalignment=true", "--out", tmp_path / "v"),
                       "boolean true")
+
+
+def test_a_mistyped_name_is_refused_before_the_stability_advisor_with_the_closest_name(fmu_dir, tmp_path):
+    result = invoke("run", "kavz685", "--set", "coupling.stifness=900", "--out", tmp_path / "o")
+    assert_user_error(result, "LeverCoupling has no variable 'stifness' (did you mean 'stiffness'?)")
+    assert "warning" not in result.output and "stability" not in result.output
+    assert not (tmp_path / "o").exists()
+    assert_user_error(invoke("run", "kavz685", "--set", "coupling.stiffness=900", "--set", "experiment.stpo=1"),
+                      "no field 'stpo' (did you mean 'stop'?)")
+    assert_user_error(invoke("run", "kavz685", "--set", "couplin.stiffness=900"), "did you mean 'coupling'?")
+    assert_user_error(invoke("run", "kavz68"), "no scene 'kavz68' (did you mean 'kavz685'?)")
+    assert_user_error(invoke("validate", "LeverCoupling", "--set", "stifness=3"), "did you mean 'stiffness'?")
+    # nothing close: no guess
+    assert "did you mean" not in invoke("run", "kavz685", "--set", "coupling.zzzz=1").output

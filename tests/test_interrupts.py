@@ -311,3 +311,26 @@ def test_ctrl_c_while_writing_a_freewheel_run(tmp_path, fmu_dir):
     files = _whole_files(out)
     assert {"traces.csv", "summary.json", "report.md"} <= files and not [f for f in files if f.endswith(".png")]
     assert len(trace_files.read(out / "traces.csv")[0]) == 1001
+
+
+def test_dask_sweep_interrupted_logs_the_case_under_way(tmp_path, fmu_dir, monkeypatch):
+    """Ctrl-C (the flag, as ``interrupt.deferred`` sets it) once the first case is logged:
+    the case a worker is running is logged as interrupted, the queued ones are not logged."""
+    distributed = pytest.importorskip("distributed")
+    from harness.studies import sweep as sweeps
+
+    axis = sweeps.Axis("stiffness", "3.17", "c", [450.0, 600.0, 900.0], sweeps.FIG_317, "coupling.stiffness")
+    record = CaseLog.record
+
+    def record_then_interrupt(self, key, result):
+        record(self, key, result)
+        time.sleep(0.5)                                  # the worker is well into the next case
+        monkeypatch.setattr(interrupt, "_requested", True)
+
+    monkeypatch.setattr(CaseLog, "record", record_then_interrupt)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with pytest.raises(interrupt.Interrupted):
+            sweeps.sweep([axis], tmp_path, stop=2.0, extra=["experiment.transient=0.2"],
+                         dask=cluster.scheduler_address, progress=False)
+    entries = _case_lines(tmp_path / "cases.jsonl")
+    assert [e["result"].get("status") for e in entries] == ["ok", INTERRUPTED]

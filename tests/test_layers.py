@@ -126,6 +126,8 @@ def test_the_layer_check_sees_an_upward_use():
     table = layer_table()
     assert layer_of("harness.description.scene", table) < layer_of("harness.formats.ssp", table)
     assert layer_of("harness.engine.masters.base", table) == layer_of("harness.engine.run", table)
+    # the Python API sits on the studies and under the command line, which calls it
+    assert layer_of("harness.studies.bench", table) < layer_of("harness.api", table) < layer_of("harness.cli", table)
     with pytest.raises(AssertionError, match="in no layer"):
         layer_of("harness.new_module", table)
 

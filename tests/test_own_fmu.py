@@ -185,11 +185,56 @@ def test_the_archive_runs_in_libcosim(archive, tmp_path):
 
 
 def test_the_archive_runs_in_fmpy_ssp(archive):
+    """fmpy.ssp applies no binding of the SSD, only its ``parameter_set`` argument: the
+    archive's qualified set, as `lever export-ssp` says."""
+    from fmpy.ssp.ssd import read_ssv
     from fmpy.ssp.simulation import simulate_ssp
 
-    table = simulate_ssp(str(archive), stop_time=1.5, step_size=1e-3)
+    table = simulate_ssp(str(archive), stop_time=1.5, step_size=1e-3,
+                         parameter_set=read_ssv(str(archive), resource=ssp.QUALIFIED_SET))
     assert "monitor.status" not in table.dtype.names and "monitor.level" not in table.dtype.names
     tau1 = np.asarray(table["coupling.tau1"])
     assert table["monitor.peak"][-1] == pytest.approx(np.max(np.abs(tau1[:-1])), rel=1e-12)
     # a zero-order hold like libcosim's: 121.91 against our 119.36 N*m measured; bound 5 %
     assert table["monitor.peak"][-1] == pytest.approx(_ours(archive), rel=5e-2)
+
+
+def test_a_shortened_run_fits_the_scenes_transient_and_says_so():
+    """The scene states 2 s of 10: a 1 s run keeps the same share (0.2 s) and a note says it;
+    a run the transient still fits keeps it; a transient the user sets stays strict."""
+    kavz = scenes.load("kavz685")
+    short = kavz.with_overrides(["experiment.stop=1"])
+    assert short.experiment.transient == pytest.approx(0.2)
+    assert "2 s does not fit a run of 1 s" in short.experiment.transient_note
+    assert scenes.experiment_findings(short.experiment) == []
+    assert short.with_overrides(["coupling.stiffness=900"]).experiment.transient_note == short.experiment.transient_note
+    fits = kavz.with_overrides(["experiment.stop=3"])
+    assert fits.experiment.transient == 2.0 and fits.experiment.transient_note is None
+    chosen = kavz.with_overrides(["experiment.stop=1", "experiment.transient=2"])
+    assert chosen.experiment.transient == 2.0 and chosen.experiment.transient_note is None
+    assert scenes.experiment_findings(chosen.experiment) == ["experiment.transient = 2.0 s must be in [0, stop - start)"]
+
+
+def test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged(fmu_dir, tmp_path):
+    out = tmp_path / "short"
+    result = CliRunner().invoke(cli, ["run", "kavz685", "--stop", "0.5", "--no-reference", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    import json
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_s"] == 0.5 and summary["transient_s"] == pytest.approx(0.1)
+    assert "statistics after 0.1 s instead" in result.output
+    assert "The run is shorter than its scene" in (out / "report.md").read_text()
+    strict = CliRunner().invoke(cli, ["run", "kavz685", "--stop", "0.5", "--set", "experiment.transient=2",
+                                      "--out", str(tmp_path / "strict")])
+    assert strict.exit_code == 2 and "experiment.transient = 2.0 s must be in [0, stop - start)" in strict.output
+
+
+def test_a_run_that_ends_before_its_transient_says_there_is_no_steady_window(fmu_dir, tmp_path):
+    from harness import api
+    from harness.formats import report
+
+    done = api.run("kavz685", stop=0.3, reference=False, notify=lambda *_: None)
+    summary = dict(done.summary, statistics={k: None for k in done.summary["statistics"]})   # nothing after it
+    report.write_report(tmp_path / "report.md", summary)
+    assert "No steady window: the run ended before the start-up transient did (t < 0.06 s)" in \
+        (tmp_path / "report.md").read_text()

@@ -87,7 +87,8 @@ def test_a_brake_never_drives_and_friction_parameters_are_judged_together():
     assert info.value.name == "breakaway_torque" and "Fs >= Fc" in str(info.value)
     assert not catalogue.load_from({}).resisting           # the defaults: the old active load
     assert catalogue.load_from({"friction_torque": 0.1, "breakaway_torque": 0.1}).resisting
-    smooth = catalogue.load_from({"load_kind": "constant", "viscous_damping": 0.1})   # viscous only: no sticking
+    smooth = catalogue.load_from({"load_kind": "constant", "mean_torque": 107.5,
+                                  "viscous_damping": 0.1})                          # viscous only: no sticking
     assert not smooth.resisting and smooth.rates(0.0, 0.0, 2.0, 0.0)[1] == -107.5 - 0.2
 
 

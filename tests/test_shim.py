@@ -479,3 +479,14 @@ def test_python_exception_quarantines_the_instance(tmp_path, shim_so):
     assert any(s == FMI2_FATAL and "RuntimeError('boom')" in text for s, text in log), log
     unusable = [text for s, text in log if s == FMI2_ERROR]
     assert unusable == ["instance is unusable after a fatal error in fmi2DoStep"] * 3
+
+
+def test_without_a_compiler_lever_build_says_how_to_get_one(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from harness.cli import main
+
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    result = CliRunner().invoke(main, ["build", "--force", "--out", str(tmp_path / "fmus")])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert "cannot run" in result.output and "apt install gcc" in result.output and "CC=" in result.output

@@ -276,6 +276,10 @@ def test_lever_stability_runs_and_resumes(tmp_path):
     assert second.exit_code == 0, second.output
     assert "6 cases (4 already done)" in second.output
     assert len((tmp_path / "cases.jsonl").read_text().splitlines()) == 1 + 6
+    quiet = runner.invoke(main, ARGS + ["--h-omega", "0.05", "--h-omega", "0.5", "--h-omega", "0.2", "--no-progress",
+                                        "--out", str(tmp_path)])
+    assert quiet.exit_code == 0, quiet.output
+    assert "already done" not in quiet.output and "written:" in quiet.output
     text = (tmp_path / "stability.md").read_text()
     assert "| jacobi | 1e+05 | 0 | 0.0258 | S | E | X |" in text or "| jacobi | 1e+05 | 0 | 0.0258 | S | X | X |" in text
     assert "trapezoidal-newton: predicted stable at every swept step; observed stable" in text

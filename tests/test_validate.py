@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import shutil
 
 import numpy as np
@@ -290,3 +291,34 @@ def test_the_cross_check_verdict_says_what_its_band_cannot_see():
     assert "window of 0.2 s" in note and "tau2 +-1.2" in note
     lever, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["lever"])
     assert not lever.passed and not any(n.startswith("what the") for n in lever.notes)
+
+
+def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir, tmp_path):
+    """A 1 s run of kavz685 fails against the 10 s reference (it ends early) and passes over
+    the window 0 ... 1 s, by the same band; the verdict says which span it judged."""
+    run = tmp_path / "run"
+    assert _invoke("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
+    whole = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
+    assert whole.exit_code == 1 and "before the stop time" in whole.output
+    assert "FAIL over the reference's whole span, t = 0 ... 10 s" in whole.output
+    part = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:1",
+                   "--out", str(tmp_path / "part"))
+    assert part.exit_code == 0, part.output
+    assert "PASS over t = 0 ... 1 s of the reference's 0 ... 10 s" in part.output
+    verdict = json.loads((tmp_path / "part" / "validation.json").read_text())
+    assert verdict["span_s"] == [0.0, 1.0] and verdict["reference_span_s"] == [0.0, 10.0]
+    widths = lambda out: {line.split()[0]: line.split()[4] for line in out.splitlines() if " pass" in line}
+    assert widths(part.output) == widths(whole.output)          # the same band over the window
+    # a window the result does not cover fails, naming the end; a window outside the reference is bad input
+    late = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:2",
+                   "--out", str(tmp_path / "late"))
+    assert late.exit_code == 1 and "before the stop time (2 s" in late.output
+    for bad in ("0:11", "1:1", "x:1", "5"):
+        result = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", bad)
+        assert result.exit_code == 2, (bad, result.output)
+
+
+def test_a_window_with_too_few_reference_samples_fails_with_a_sentence():
+    t = np.linspace(0, 1, 11)
+    findings, _ = validate.compare_span("x", t, {"y": t}, t, {"y": t}, LEVER, 0.01, 0.02)
+    assert not findings.passed and "holds 0 of the reference's samples" in findings.problems[0]

@@ -124,10 +124,21 @@ def energy_variables(scene: scenes.Scene) -> list[str]:
             f"{coupling}.elastic_energy", f"{coupling}.dissipated_power"]
 
 
+#: the freewheel rectifier FMU's inputs, which a scene may hold at a value among its
+#: parameters; the rectifier's physics object has no such parameter
+RECTIFIER_INPUTS = ("tau", "tau_rate")
+
+
+def rectifier_inputs(scene: scenes.Scene) -> dict:
+    """The values the scene holds the rectifier's inputs at (those it states)."""
+    return {k: v for k, v in parameters(scene, rectifier(scene)).items() if k in RECTIFIER_INPUTS}
+
+
 def rectifier_model(scene: scenes.Scene):
     """The freewheel rectifier's physics object from the scene's values (the scene must
-    have one: ``rectifier``)."""
-    return catalogue.freewheel_from(parameters(scene, rectifier(scene)))
+    have one: ``rectifier``); the inputs it holds are not the model's parameters."""
+    values = parameters(scene, rectifier(scene))
+    return catalogue.freewheel_from({k: v for k, v in values.items() if k not in RECTIFIER_INPUTS})
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ Values may carry a unit, ``"15 deg"`` or ``"374.8 rpm"``; they are converted to 
 """
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -77,6 +78,9 @@ class Experiment:
         self.transient_follows_length = self.transient is None
         if self.transient is None:
             self.transient = default_transient(self.start, self.stop)
+        #: what ``Scene.with_overrides`` did to the scene's transient to fit a shortened run
+        #: (a sentence for the user and the report), else None
+        self.transient_note: str | None = None
 
 
 def default_transient(start: float, stop: float) -> float:
@@ -136,8 +140,8 @@ class Scene:
             if "." in key:
                 comp, param = key.split(".", 1)
                 if comp not in components:
-                    raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name} "
-                                     f"(components: {', '.join(components)})")
+                    raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name}"
+                                     f"{did_you_mean(comp, components)} (components: {', '.join(components)})")
                 components[comp].parameters[param] = value
             else:
                 components_with = [n for n, c in components.items() if key in c.parameters]
@@ -145,11 +149,36 @@ class Scene:
                     raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
                                      f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
                 components[components_with[0]].parameters[key] = value
-        if self.experiment.transient_follows_length and not any(
-                a.split("=", 1)[0].strip() == "experiment.transient" for a in assignments):
+        transient_set = any(a.split("=", 1)[0].strip() == "experiment.transient" for a in assignments)
+        if self.experiment.transient_follows_length and not transient_set:
             experiment.transient = default_transient(experiment.start, experiment.stop)
             experiment.transient_follows_length = True
+        elif not transient_set:
+            experiment.transient_follows_length = False
+            if (experiment.start, experiment.stop) == (self.experiment.start, self.experiment.stop):
+                experiment.transient_note = self.experiment.transient_note
+            _fit_transient(self.experiment, experiment)
         return replace(self, components=components, experiment=experiment, limits=limits)
+
+
+def _fit_transient(scene: Experiment, run: Experiment):
+    """A run made shorter than its scene (``--stop``, ``--set experiment.stop``) keeps the
+    scene's start-up transient when that fits; when it does not, the transient takes the
+    same share of the shortened run as of the scene's, and ``run.transient_note`` says so.
+    A transient the user sets is left to ``experiment_findings`` (strict)."""
+    try:
+        before, after = float(scene.stop - scene.start), float(run.stop - run.start)
+        if not all(math.isfinite(v) for v in (before, after, scene.transient, run.transient)):
+            return
+    except (TypeError, ValueError):
+        return      # unsound times: experiment_findings names them
+    if after <= 0 or before <= 0 or run.transient < after or not 0 <= scene.transient < before:
+        return
+    run.transient = scene.transient * after / before
+    run.transient_note = (f"the scene's start-up transient of {scene.transient:g} s does not fit a run of "
+                          f"{after:g} s: statistics after {run.transient:.4g} s instead (the same share, "
+                          f"{100 * scene.transient / before:.3g} % of the run; --set experiment.transient=T "
+                          "chooses it)")
 
 
 def coerce(raw: str):
@@ -226,8 +255,9 @@ def experiment_value(field_name: str, value, label: str):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected true or false")
         return value
     if field_name not in EXPERIMENT_TIMES:
-        raise SceneError(f"{label}: the experiment has no field '{field_name}' (fields: "
-                         f"{', '.join(EXPERIMENT_TIMES + ('master', 'strict'))})")
+        fields = EXPERIMENT_TIMES + ("master", "strict")
+        raise SceneError(f"{label}: the experiment has no field '{field_name}'{did_you_mean(field_name, fields)} "
+                         f"(fields: {', '.join(fields)})")
     if isinstance(value, str):
         value = quantity(value, label, "s")
     if not units.is_number(value):
@@ -243,8 +273,16 @@ def resolve(name_or_path: str | Path) -> Path:
     candidate = SCENES / f"{name_or_path}.toml"
     if candidate.exists():
         return candidate
-    known = ", ".join(sorted(p.stem for p in SCENES.glob("*.toml")))
-    raise SceneError(f"no scene '{name_or_path}' (a .toml path or one of: {known})")
+    known = sorted(p.stem for p in SCENES.glob("*.toml"))
+    raise SceneError(f"no scene '{name_or_path}'{did_you_mean(str(name_or_path), known)} (a .toml path or one of: "
+                     f"{', '.join(known)})")
+
+
+def did_you_mean(word: str, known) -> str:
+    """`` (did you mean 'X'?)`` for the name in ``known`` closest to a mistyped ``word``
+    (difflib's ratio of at least 0.6), else ``""``."""
+    close = difflib.get_close_matches(word, list(known), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 #: what a variant (``extends = "base"``) does not take from its base: its identity
@@ -391,7 +429,9 @@ def validate(scene: Scene, descriptions: dict) -> list[str]:
         for param, value in spec.parameters.items():
             var = variables[name].get(param)
             if var is None:
-                findings.append(f"component '{name}': {spec.fmu} has no variable '{param}'")
+                settable = [v for v, mv in variables[name].items() if mv.causality in ("parameter", "input")]
+                findings.append(f"component '{name}': {spec.fmu} has no variable '{param}'"
+                                f"{did_you_mean(param, settable)}")
             elif var.causality not in ("parameter", "input"):
                 findings.append(f"component '{name}': '{param}' is an {var.causality}, not a parameter or input")
             else:

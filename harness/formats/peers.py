@@ -83,7 +83,7 @@ import numpy as np
 from harness.engine import component as harness_component
 from harness.description import scene as scenes
 from harness.description.scene import step_problem
-from harness.paths import FMUS, ROOT
+from harness.paths import CODE, FMUS
 from harness.engine.run import RunResult, recorded_names
 from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
 
@@ -502,7 +502,7 @@ def _simulate_libcosim_in_child(setup: _SceneSetup, step: float, peer: str, tole
         request.write_bytes(pickle.dumps(dict(scene=setup.scene, fmu_dir=str(setup.fmu_dir), record=setup.record,
                                               step=step, peer=peer, tolerance=tolerance)))
         # libcosim unpacks the FMUs under TMPDIR: there, they go even if the child aborts.
-        child = subprocess.run([sys.executable, "-c", _CHILD, str(ROOT), str(request), str(answer)],
+        child = subprocess.run([sys.executable, "-c", _CHILD, str(CODE), str(request), str(answer)],
                                capture_output=True, text=True, errors="replace",
                                env=dict(os.environ, TMPDIR=scratch))
         outcome = pickle.loads(answer.read_bytes()) if answer.exists() else None

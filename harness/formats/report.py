@@ -25,6 +25,7 @@ def summarize(result: RunResult, reference=None) -> dict:
         "step_s": result.step,
         "stop_s": scene.experiment.stop,
         "transient_s": scene.experiment.transient,
+        "transient_note": getattr(scene.experiment, "transient_note", None),
         "ok": result.ok,
         "failure": result.failure,
         "diagnosis": getattr(result, "diagnosis", None),
@@ -80,8 +81,13 @@ def write_report(path: Path, summary: dict):
                   f"plots below use 1 row in {st['stride']}, the energy balance every row."]
     stats = summary.get("statistics")
     if stats:
-        lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", "",
-                  "| signal | mean | amplitude A = (max-min)/2 | unevenness (w_max-w_min)/w_mean |",
+        lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", ""]
+        if summary.get("transient_note"):
+            lines += [f"The run is shorter than its scene: {summary['transient_note']}.", ""]
+        if not any(stats.values()):
+            lines += [f"No steady window: the run ended before the start-up transient did (t < "
+                      f"{summary['transient_s']:g} s), so there are no statistics.", ""]
+        lines += ["| signal | mean | amplitude A = (max-min)/2 | unevenness (w_max-w_min)/w_mean |",
                   "|---|---|---|---|"]
         for short, s in stats.items():
             if s:

@@ -31,7 +31,7 @@ ATOL = 1e-12
 def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
                     atol: float = ATOL, method: str = "DOP853"):
     name = kinds.rectifier(scene)
-    if len(scene.components) != 1 or scene.connections:
+    if len(scene.components) != 1 or scene.connections or any(v != 0 for v in kinds.rectifier_inputs(scene).values()):
         raise ReferenceUnavailable(f"scene '{scene.name}': the rectifier's reference covers the rectifier alone "
                                    "(its port unconnected, tau = 0)")
     path = cache_path(scene, times, rtol, atol, method)

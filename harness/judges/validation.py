@@ -113,6 +113,18 @@ class Findings:
     problems: list[str] = field(default_factory=list)
     #: remarks that do not fail it (columns the reference does not have, ...)
     notes: list[str] = field(default_factory=list)
+    #: the span judged [s] and the reference's whole span (``compare_span``; None: not said)
+    span: tuple[float, float] | None = None
+    whole_span: tuple[float, float] | None = None
+
+    def describe_span(self) -> str:
+        """"t = 0 ... 1 s of the reference's 0 ... 10 s" (or "the reference's whole span, ...")."""
+        if self.span is None:
+            return ""
+        if self.whole_span is None or tuple(self.span) == tuple(self.whole_span):
+            return f"the reference's whole span, t = {self.span[0]:g} ... {self.span[1]:g} s"
+        return (f"t = {self.span[0]:g} ... {self.span[1]:g} s of the reference's "
+                f"{self.whole_span[0]:g} ... {self.whole_span[1]:g} s")
 
     @property
     def passed(self) -> bool:
@@ -124,6 +136,8 @@ class Findings:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "passed": self.passed, "tolerance": self.tolerance.describe(),
+                "span_s": list(self.span) if self.span else None,
+                "reference_span_s": list(self.whole_span) if self.whole_span else None,
                 "problems": list(self.problems), "notes": list(self.notes),
                 "signals": {s.name: {k: _json_number(v) for k, v in vars(s).items() if k not in ("name", "outside_times")}
                             for s in self.signals}}
@@ -187,8 +201,10 @@ def result_window(t: np.ndarray, y: np.ndarray, at: np.ndarray) -> tuple[np.ndar
 
 
 def compare_signal(name: str, t: np.ndarray, y: np.ndarray, t_ref: np.ndarray, y_ref: np.ndarray,
-                   tolerance: Tolerance) -> tuple[SignalFinding, Band]:
-    """One signal against its reference: errors, fraction outside the band, verdict."""
+                   tolerance: Tolerance, scale: np.ndarray | None = None) -> tuple[SignalFinding, Band]:
+    """One signal against its reference: errors, fraction outside the band, verdict.
+    ``scale``: the values whose range sets the ``lever`` band's width (default ``y_ref``;
+    a window passes the whole reference, so that it is judged by the same band)."""
     t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
     t_ref, y_ref = np.asarray(t_ref, dtype=float), np.asarray(y_ref, dtype=float)
     slack = 1e-9 * max(1.0, abs(float(t_ref[-1])))
@@ -201,7 +217,7 @@ def compare_signal(name: str, t: np.ndarray, y: np.ndarray, t_ref: np.ndarray, y
         flags_at, flags = t, outside(t, y, b)
         n = len(t)                       # the cross-check divides by all result samples
     else:
-        width = _width(y_ref, tolerance.dy)
+        width = _width(y_ref if scale is None else np.asarray(scale, dtype=float), tolerance.dy)
         low, high = result_window(t, y, t_cmp)
         flags = (y_true < low - width) | (y_true > high + width) | ~np.isfinite(low) | ~np.isfinite(high)
         flags_at = t_cmp
@@ -289,13 +305,15 @@ def span_problems(times: np.ndarray, start: float, stop: float) -> list[str]:
     if first > start + slack:
         problems.append(f"the result starts at t = {first:.6g} s, after the start time ({start:g} s): {share}")
     if last < stop - slack:
-        problems.append(f"the result ends at t = {last:.6g} s, before the stop time ({stop:g} s): {share}")
+        problems.append(f"the result ends at t = {last:.6g} s, before the stop time ({stop:g} s): {share}; "
+                        "a window, --window START:STOP, judges a part of the span")
     return problems
 
 
 def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], reference_times: np.ndarray,
             reference: dict[str, np.ndarray], tolerance: Tolerance = TOLERANCES["lever"],
-            start: float | None = None, stop: float | None = None) -> tuple[Findings, dict[str, Band]]:
+            start: float | None = None, stop: float | None = None,
+            scales: dict[str, np.ndarray] | None = None) -> tuple[Findings, dict[str, Band]]:
     """Every signal of ``reference`` against the result ``traces`` (both by name, on their own
     time grids).  The result must cover ``start ... stop`` (default: the reference's span).
     Returns the findings and the band of each compared signal (for plots)."""
@@ -325,7 +343,8 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
     for signal, column in mapping.items():
         findings.problems += value_problems(signal, times, np.asarray(traces[column], dtype=float),
                                             np.asarray(reference[signal], dtype=float))
-        finding, b = compare_signal(signal, times, traces[column], reference_times, reference[signal], tolerance)
+        finding, b = compare_signal(signal, times, traces[column], reference_times, reference[signal], tolerance,
+                                    None if scales is None else scales.get(signal))
         findings.signals.append(finding)
         bands[signal] = b
     if tolerance.cross_check and findings.signals:
@@ -347,6 +366,42 @@ def cross_check_blind_spot(tolerance: Tolerance, reference_times: np.ndarray, si
             f"({100 * tolerance.dy:g} % of each signal's range: {margins}) passes any change smaller than that. "
             "It sees a mean or a slow motion moved by more than the margin; the default 'lever' figures judge "
             "the ripple")
+
+
+def compare_span(name: str, times: np.ndarray, traces: dict[str, np.ndarray], reference_times: np.ndarray,
+                 reference: dict[str, np.ndarray], tolerance: Tolerance, start: float, stop: float,
+                 whole: tuple[float, float] | None = None) -> tuple[Findings, dict[str, Band]]:
+    """``compare`` over ``start ... stop`` [s], a window of the reference's span ``whole``
+    (default: the reference's first and last time): only the reference's samples in the
+    window are judged, the result needs to cover the window only, and the findings say
+    which span was judged.  The ``lever`` band keeps the width it has over the whole
+    reference (a window judges fewer samples, not by a narrower band); the cross-check's
+    band is built over the window, as the cross-check builds it over what it is given."""
+    t_ref = np.asarray(reference_times, dtype=float)
+    scales = None
+    whole = (float(t_ref[0]), float(t_ref[-1])) if whole is None else (float(whole[0]), float(whole[1]))
+    start, stop = float(start), float(stop)
+    if (start, stop) != whole:
+        slack = 1e-9 * max(1.0, abs(stop))
+        keep = (t_ref >= start - slack) & (t_ref <= stop + slack)
+        if np.count_nonzero(keep) < 2:
+            findings = Findings(name, tolerance, span=(start, stop), whole_span=whole)
+            findings.problems.append(f"the window t = {start:g} ... {stop:g} s holds {np.count_nonzero(keep)} of "
+                                     "the reference's samples; at least two are needed")
+            return findings, {}
+        scales = reference
+        reference = {k: np.asarray(v, dtype=float)[keep] for k, v in reference.items()}
+        t_ref = t_ref[keep]
+        t = np.asarray(times, dtype=float)
+        if len(t) >= 2 and np.all(np.isfinite(t)) and np.all(np.diff(t) >= 0):
+            # the result's samples in the window and one beyond each end: the band's
+            # horizontal tolerance looks one result step to either side
+            low = max(int(np.searchsorted(t, start - slack, "left")) - 1, 0)
+            high = min(int(np.searchsorted(t, stop + slack, "right")) + 1, len(t))
+            times, traces = t[low:high], {k: np.asarray(v)[low:high] for k, v in traces.items()}
+    findings, bands = compare(name, times, traces, t_ref, reference, tolerance, start, stop, scales)
+    findings.span, findings.whole_span = (start, stop), whole
+    return findings, bands
 
 
 def fmpy_max_outside(times: np.ndarray, traces: dict, reference_times: np.ndarray, reference: dict) -> float:

@@ -260,7 +260,12 @@ def _run_dask(pending, log, address, bar):
         finishing = as_completed(list(futures))
         while not finishing.is_empty():
             if interrupt.requested():       # Ctrl-C: the unfinished cases are cancelled, not done
-                client.cancel([f for f in futures if not f.done()])
+                unfinished = [f for f in futures if not f.done()]
+                under_way = _executing(client, unfinished)
+                client.cancel(unfinished)
+                for future in unfinished:
+                    if future.key in under_way:
+                        log.interrupted(futures[future]["key"])
                 interrupt.check()
             batch = finishing.next_batch(block=False)
             if not batch:
@@ -274,6 +279,16 @@ def _run_dask(pending, log, address, bar):
                 log.record(case["key"], result)
                 if bar is not None:
                     bar.update(1)
+
+
+def _executing(client, futures) -> set:
+    """The keys of ``futures`` a worker is running now (not those queued on a worker):
+    Dask's call stacks are of running tasks only."""
+    try:
+        stacks = client.call_stack(keys=[f.key for f in futures])
+    except Exception:  # noqa: BLE001 - a lost scheduler: nothing is known to be under way
+        return set()
+    return {key for per_worker in stacks.values() for key in per_worker}
 
 
 # ----------------------------------------------------------------------------------------

@@ -77,8 +77,10 @@ LOAD = (
     Parameter("load_kind", "random", "", "technological load: constant, random (mean + seeded band-limited part, "
               "which may carry a shaft-order component and a narrow band: order_share, narrowband_share), fourier "
               "(angle-periodic series) or table (time series)", kind="string", choices=LOAD_KINDS),
-    Parameter("mean_torque", 107.5, "N.m", "mean technological resistance Mm", -1e6, 1e6),
-    Parameter("random_amplitude", 8.8, "N.m", "bound dM of the random part: |Mc - Mm| <= dM", 0.0, 1e6),
+    # No load by default: the FMU alone idles at w_start instead of being driven backwards by
+    # an unopposed resistance; the scenes state their loads (kavz685: 107.5 +- 8.8 N*m).
+    Parameter("mean_torque", 0.0, "N.m", "mean technological resistance Mm", -1e6, 1e6),
+    Parameter("random_amplitude", 0.0, "N.m", "bound dM of the random part: |Mc - Mm| <= dM", 0.0, 1e6),
     Parameter("seed", 1, "", "seed of the random part (same seed, same load)", 0, 2 ** 31 - 1, kind="integer"),
     Parameter("tones", 6, "", "number of sinusoids in the random part", 1, 256, kind="integer"),
     Parameter("band_low", 2.0, "rad/s", "lowest angular frequency of the random part", 0.0, 1e5, low_open=True),
