@@ -208,22 +208,23 @@ def check(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, e
     spec = scenes.load(scene).with_overrides(list(extra or []))
     cases = plan(axes, scene, stop, extra, fmu_dir)
     for case in cases:
-        _check_experiment(spec.with_overrides(case["overrides"]).experiment, stop)
+        _check_experiment(spec.experiment, spec.with_overrides(case["overrides"]).experiment, stop)
     return cases
 
 
-def _check_experiment(e: scenes.Experiment, stop: float | None) -> None:
-    """Refuse, before anything runs, a case whose experiment no run could take (a stop
-    within the scene's start-up transient fails every case the same way)."""
+def _check_experiment(scene: scenes.Experiment, e: scenes.Experiment, stop: float | None) -> None:
+    """Refuse, before anything runs, a case whose experiment no run could take.  A sweep
+    compares steady amplitudes, so a --stop within the scene's start-up transient is
+    refused, not met by shortening the transient as `lever run --stop` does (that would
+    judge the start-up)."""
     findings = scenes.experiment_findings(e)
-    if not findings:
-        return
-    if stop is not None and not 0.0 <= e.transient < e.stop - e.start:
+    if stop is not None and (e.transient_note is not None or (findings and not 0.0 <= e.transient < e.stop - e.start)):
         raise scenes.SceneError(
-            f"--stop {stop:g} s: the scene leaves its first experiment.transient = {e.transient:g} s out of the "
-            f"amplitudes, so a case must run past it (allowed: --stop > {e.start + e.transient:g} s; or lower "
-            f"the transient with --set experiment.transient=...)")
-    raise scenes.SceneError("; ".join(findings))
+            f"--stop {stop:g} s: the scene leaves its first experiment.transient = {scene.transient:g} s out of the "
+            f"amplitudes, so a case must run past it (allowed: --stop > {scene.start + scene.transient:g} s; or "
+            f"lower the transient with --set experiment.transient=...)")
+    if findings:
+        raise scenes.SceneError("; ".join(findings))
 
 
 def _bar(total, done, dask):
