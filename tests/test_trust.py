@@ -141,6 +141,10 @@ def test_a_peer_that_made_another_number_of_steps_is_refused():
     # an adaptive peer chooses its steps, but must reach the stop time
     assert peers.experiment_problem(np.array([0.0, 3.0, 7.5, 10.0]), spec, h, fixed_step=False) is None
     assert "stopped at t = 7.5 s" in peers.experiment_problem(np.array([0.0, 3.0, 7.5]), spec, h, fixed_step=False)
+    # fmpy.ssp records no row at the start: its first row is after the first step
+    assert peers.refuse_other_experiment(_result(whole[1:]), "fmpy-ssp", spec, h).ok
+    assert not peers.refuse_other_experiment(_result(whole), "fmpy-ssp", spec, h).ok
+    assert not peers.refuse_other_experiment(_result(whole[1:-1]), "fmpy-ssp", spec, h).ok
     # a failed run keeps its own diagnosis
     assert peers.refuse_other_experiment(_result(short[:10], "diverged"), "ecos", spec, h).failure == "diverged"
 

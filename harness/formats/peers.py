@@ -179,22 +179,28 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
 
 #: peers whose step varies (their number of steps is theirs to choose)
 ADAPTIVE_PEERS = ("libcosim-ecco",)
+#: peers that record no row at the start time: their first row is after the first step
+PEERS_FROM_FIRST_STEP = ("fmpy-ssp",)
 
 
-def experiment_problem(times, scene: scenes.Scene, step: float, fixed_step: bool = True) -> str | None:
+def experiment_problem(times, scene: scenes.Scene, step: float, fixed_step: bool = True,
+                       from_first_step: bool = False) -> str | None:
     """What a run's communication points ``times`` show of an experiment other than the
     scene's: another start, another stop, another number of steps of ``step`` (a fixed-step
-    run).  None when it ran the scene's experiment."""
+    run).  ``from_first_step``: the run records no row at the start time.  None when it ran
+    the scene's experiment."""
     e = scene.experiment
     if len(times) == 0:
         return None
     # the peers write times to six decimals or more; a thousandth of a step tells a missing step
     slack = max(1e-9 * max(1.0, abs(e.stop)), 1e-3 * step)
     wanted = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
-    made = len(times) - 1
+    made = len(times) - (0 if from_first_step else 1)
+    first = e.start + step if from_first_step else e.start
     problems = []
-    if abs(times[0] - e.start) > slack:
-        problems.append(f"started at t = {times[0]:.9g} s, not {e.start:g} s")
+    if abs(times[0] - first) > slack:
+        problems.append(f"started at t = {times[0]:.9g} s, not {e.start:g} s"
+                        + (f" + one step ({first:g} s: it records no row at the start)" if from_first_step else ""))
     if fixed_step and made != wanted:
         problems.append(f"made {made} steps of {step:g} s, not the {wanted} from {e.start:g} to {e.stop:g} s")
     if (abs(times[-1] - e.stop) > slack) if fixed_step else (times[-1] < e.stop - slack):
@@ -206,7 +212,8 @@ def refuse_other_experiment(result: RunResult, name: str, scene: scenes.Scene, s
     """A peer's run that did not run the scene's experiment (``experiment_problem``) is
     refused: its errors and run time would compare another experiment with ours."""
     if result.ok:
-        problem = experiment_problem(result.times, scene, step, fixed_step=name not in ADAPTIVE_PEERS)
+        problem = experiment_problem(result.times, scene, step, fixed_step=name not in ADAPTIVE_PEERS,
+                                     from_first_step=name in PEERS_FROM_FIRST_STEP)
         if problem:
             result.failure = f"refused: peer {name} {problem}"
             result.failure_stage = "stepping"
