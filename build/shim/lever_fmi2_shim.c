@@ -657,6 +657,25 @@ typedef struct {
  * pins itself anyway. */
 static InnerApi *g_api;
 
+/* pythonfmu 0.7 keeps its PyState in a static shared_ptr that the C++ runtime destroys at
+ * exit, after which the library's ELF destructor (finalizePythonInterpreter) assigns to that
+ * destroyed shared_ptr: a use after free that now and then corrupts the heap as the host
+ * exits ("corrupted double-linked list").  Releasing the PyState first, from an exit handler
+ * registered after the inner library's static constructors (so it runs before their
+ * destructors), leaves both later steps an empty pointer.  Registered from this library, the
+ * handler also runs if the host unloads it; the inner library then makes a new PyState on its
+ * next instantiation. */
+typedef void InnerFinalizeFn(void);
+static InnerFinalizeFn *g_inner_finalize;
+
+static void release_inner_python_state(void)
+{
+    InnerFinalizeFn *finalize = __atomic_exchange_n(&g_inner_finalize, NULL, __ATOMIC_ACQ_REL);
+    if (finalize) {
+        finalize();
+    }
+}
+
 /* The directory of this library, with a trailing '/'. */
 static int own_directory(char *dir, size_t size)
 {
@@ -719,6 +738,12 @@ static InnerApi *inner_api(char *err, size_t errsize)
         free(api);
         dlclose(handle);
         api = expected;
+    } else {
+        InnerFinalizeFn *finalize = (InnerFinalizeFn *)dlsym(handle, "finalizePythonInterpreter");
+        if (finalize) {
+            __atomic_store_n(&g_inner_finalize, finalize, __ATOMIC_RELEASE);
+            atexit(release_inner_python_state);
+        }
     }
     return api;
 }
