@@ -43,7 +43,7 @@ STAGING = HERE / "tmp"
 
 #: The packages our model code imports on the importing machine (pythonfmu's Python part
 #: travels inside each FMU, in resources/pythonfmu); pinned as in constraints.txt.  None:
-#: the model runs on the standard library alone (issue 13), so a bare CPython suffices.
+#: the model runs on the standard library alone (docs/fmus.md), so a bare CPython suffices.
 RUNTIME_PACKAGES: tuple[str, ...] = ()
 
 #: model identifier -> module of lever.fmus that defines the class of that name

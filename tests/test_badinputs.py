@@ -32,7 +32,7 @@ def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     # every kind of damage to a serialized state, for every FMU
     for fmu in badinputs.DECLARED:
         edits = {c.action[2][0] for c in CORPUS if c.fmu == fmu and c.action[:2] == ("call", "edited-state")}
-        # every generic edit, and for the engine the lagged torque's own (issue 17)
+        # every generic edit, and for the engine the lagged torque's own
         assert edits - set(badinputs._STATE_EDITS) == ({"internal-empty"} if fmu == "EngineShaft" else set()), fmu
         assert set(badinputs._STATE_EDITS) <= edits, fmu
     assert len({c.name for c in CORPUS}) == len(CORPUS) > 340

@@ -154,13 +154,12 @@ def test_unknown_master_is_refused_by_simulate():
         run.simulate(kavz(*SHORT), master="newton")
 
 
-# The KAVZ-685 scene as shipped (jacobi-quadratic, 1 ms, 10 s, the spectrum load of issue 17:
-# shaft order and 415-425 rad/s) against the monolithic reference, re-measured with that load
-# (this test's own computation, run once on the shared 2-core machine, the pinned numpy/scipy): RMS
+# The KAVZ-685 scene as shipped (jacobi-quadratic, 1 ms, 10 s, the spectrum load: shaft order
+# and 415-425 rad/s) against the monolithic reference, measured with that load (this test's
+# own computation, run once on the shared 2-core machine, the pinned numpy/scipy): RMS
 # errors relative to the scale (the mean transmitted torque, the mean speed) of tau1 6.98e-6,
-# tau2 6.98e-6, w1 1.62e-6, w2 1.35e-6 (the old multisine gave 8.01e-6, 8.01e-6, 1.87e-6,
-# 1.57e-6); co-simulation energy residual 1.98e-8 of the engine's work (was 2.24e-8); the
-# reference's own 1.01e-12 (was 1.26e-12).  Each bound is 3x the measured figure: a change that
+# tau2 6.98e-6, w1 1.62e-6, w2 1.35e-6; co-simulation energy residual 1.98e-8 of the engine's
+# work; the reference's own 1.01e-12.  Each bound is 3x the measured figure: a change that
 # costs an order of accuracy (jacobi-quadratic at order 2: about 10x at this step) or an energy
 # term fails.
 KAVZ_MEASURED = {"coupling.tau1": 6.98e-6, "coupling.tau2": 6.98e-6, "engine.w": 1.62e-6, "load.w": 1.35e-6}

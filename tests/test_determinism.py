@@ -73,7 +73,7 @@ def _resume(system, driver, saved, t_mid, h, names):
                                          ("kavz685_runup_rest", "jacobi")])
 def test_serialised_state_restored_mid_run_continues_bit_identically(fmu_dir, name, master):
     """Masters without memory of their own: the FMUs' states are the whole state - the
-    lagged engine torque of kavz685_runup_rest's engine included (issue 17)."""
+    lagged engine torque of kavz685_runup_rest's engine included."""
     spec = scene.load(name).with_overrides(["experiment.stop=1", "experiment.transient=0.1",
                                                  "experiment.step=0.001", "load.seed=3"])
     h = spec.experiment.step

@@ -1,7 +1,8 @@
 """The repository stands on its own: no tracked file points at material a user who clones
 the project does not have (the developers' folder beside the checkout, the brief and
-source texts in it, an absolute path of a developer's machine), and every pointer into
-docs/physics.md names a section that exists."""
+source texts in it, an absolute path of a developer's machine), no file but the changelog
+names an issue number (which means nothing to a user), and every pointer into docs/physics.md
+names a section that exists."""
 from __future__ import annotations
 
 import re
@@ -56,6 +57,32 @@ def test_no_tracked_file_points_outside_the_repository():
             continue
         text = path.read_bytes().decode("utf-8", errors="replace")
         offenders += [f"{name}:{hit}" for hit in mentions(text)]
+    assert offenders == []
+
+
+# An issue number (the word, a number, an optional "#"): the changelog is the one place where
+# the history of the work lives.
+ISSUE_NUMBER = re.compile(r"\bissue" + r" ?#?[0-9]+", re.I)
+CHANGELOG = "docs/changelog.md"
+
+
+def test_the_issue_pattern_sees_each_spelling():
+    for line in ["(iss" + "ue 17)", "Iss" + "ue #3 found", "iss" + "ue12"]:
+        assert ISSUE_NUMBER.search(line), line
+    for line in ["an issue with the load", "tissue 17", "issues show"]:
+        assert not ISSUE_NUMBER.search(line), line
+
+
+def test_no_issue_numbers_outside_the_changelog():
+    """Code, tests and user docs say what a thing is and why; its history is the changelog's."""
+    offenders = []
+    for name in tracked_files():
+        path = ROOT / name
+        if name == CHANGELOG or not path.is_file():
+            continue
+        for number, line in enumerate(path.read_bytes().decode("utf-8", errors="replace").splitlines(), 1):
+            if ISSUE_NUMBER.search(line):
+                offenders.append(f"{name}:{number}: {line.strip()[:120]}")
     assert offenders == []
 
 

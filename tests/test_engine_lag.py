@@ -1,4 +1,4 @@
-"""The engine with a torque lag and the full Fig. 3.9-shaped characteristic (issue 17):
+"""The engine with a torque lag and the full Fig. 3.9-shaped characteristic:
 the physics against scipy, the choice of model, the named table, the FMU's saved state,
 the monolithic reference and the stability analysis with the lag's extra state."""
 from __future__ import annotations

@@ -408,7 +408,7 @@ def test_an_input_at_its_bound_is_taken_and_the_next_float_refused(components):
 
 
 # --------------------------------------------------------------------------------------
-# The model code on the standard library alone (issue 13)
+# The model code on the standard library alone (docs/fmus.md)
 # --------------------------------------------------------------------------------------
 
 # Runs an FMU's own Python (its resources folder): "bare", in an interpreter started with

@@ -1,4 +1,4 @@
-"""The harness fails safe on what users type and bring (issue 16, part B): values with
+"""The harness fails safe on what users type and bring: values with
 units of the wrong dimension, values of the wrong type, honest verdicts on traces with
 NaN or absurd samples, unconnected inputs, scenes that are not the standard driveline,
 and one error path (exit 2 and a sentence, no traceback) at every entry point; a

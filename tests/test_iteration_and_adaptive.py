@@ -113,8 +113,7 @@ def test_trapezoidal_coupling_conserves_the_spring_energy():
     assert residual < 1e-8 and residual < jacobi_residual / 100, (residual, jacobi_residual)
 
 
-# Measured on kavz685 (10 s, jacobi-quadratic's ramp, 1 ms first step), re-measured with the
-# spectrum load of issue 17 (the old multisine gave (1.49e-3, 2127) and (7.92e-5, 5045)):
+# Measured on kavz685 (10 s, jacobi-quadratic's ramp, 1 ms first step, the spectrum load):
 # tolerance -> (RMS relative torque error, accepted steps).  The error estimate is what sets both: one 10x
 # too small lets the error grow about tenfold with about half the steps, one 10x too large
 # halves the steps' length.  Allowed: the error within 3x of the measured figure, the steps

@@ -83,8 +83,8 @@ def test_deformation_and_misalignment_give_a_non_constant_ratio():
         for support, hinge in ((0.03, 0.03), (0.05, 0.0), (0.0, 0.05)):
             tf = TransferFunction(mode, 15.0 * DEG, support, hinge)
             ratio = over(tf.ratio)(REVOLUTION)
-            # scaled too when only one deformation is zero: it was U12 = 1 there while the
-            # kinematic mode was not (issue 17)
+            # scaled too when only one deformation is zero, as the kinematic mode: a fit that
+            # vanished with either deformation would give U12 = 1 there
             assert ratio.max() - ratio.min() > 1e-3, (mode, support, hinge)
 
 
@@ -98,9 +98,9 @@ def test_scaled_and_kinematic_are_synchronous_in_the_same_cases(alpha_deg, suppo
 
 
 def test_u12_is_continuous_as_alpha_goes_to_zero():
-    # U12 = 1 exactly at alpha = 0 (docs/physics.md#kinematics); before issue 17 the kinematic mode tended to
-    # 1 +- 4.5e-4 as alpha -> 0+ (the support's full tilt asin(0.03) = 1.7 deg with nothing
-    # to tilt against).  Now the tilt is at most alpha: the ripple vanishes with alpha as
+    # U12 = 1 exactly at alpha = 0 (docs/physics.md#kinematics); with the support's full tilt
+    # asin(0.03) = 1.7 deg (nothing to tilt against) the kinematic mode would tend to
+    # 1 +- 4.5e-4 as alpha -> 0+.  The tilt is at most alpha: the ripple vanishes with alpha as
     # 1.5 alpha^2 (measured: 1.5e-6 at 1e-3 rad, 1.5e-4 at 1e-2 rad, 4.6e-4 at 1 deg); the
     # scaled mode's as its fit's sin(alpha)^0.73 (1.5e-5 at 1e-6 rad, 2.4e-3 at 1e-3 rad).
     for mode in ("kinematic", "scaled"):

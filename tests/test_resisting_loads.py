@@ -1,5 +1,5 @@
-"""Loads that resist the motion and the load spectrum from the source (issue 17;
-lever.physics.friction, lever.physics.load.SpectrumLoad): closed forms of a braked shaft,
+"""Loads that resist the motion and the load spectrum from the source
+(lever.physics.friction, lever.physics.load.SpectrumLoad): closed forms of a braked shaft,
 stick and breakaway, the resistive stall scene against the monolithic reference, and the
 spectrum's components at their frequencies."""
 from __future__ import annotations
@@ -177,7 +177,7 @@ def test_without_an_order_part_the_spectrum_shaft_steps_in_closed_form():
 
 
 # --------------------------------------------------------------------------------------
-# The spectrum shaft's split step (issue 14): exact in time, RK4 on the order term only
+# The spectrum shaft's split step: exact in time, RK4 on the order term only
 # --------------------------------------------------------------------------------------
 
 KAVZ_SPECTRUM = Spectrum(order=1, order_share=0.55, order_phase=-2.12, narrowband_share=0.45)

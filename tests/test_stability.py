@@ -136,8 +136,8 @@ def test_stand_in_steps_like_the_real_fmus(name):
 
 @pytest.mark.parametrize("name", ["jacobi", "trapezoidal-newton"])
 def test_stand_in_with_a_viscous_load_steps_like_the_real_fmus(name):
-    """A load's viscous friction b_v is the one feedback of a load in the linear model
-    (issue 17): the stand-in carries it (the same smooth load of lever.physics.friction)
+    """A load's viscous friction b_v is the one feedback of a load in the linear model:
+    the stand-in carries it (the same smooth load of lever.physics.friction)
     and steps like the FMUs, and it damps the coupling mode by b_v (I1/(I1 + I2))^2."""
     c, b, viscous = 1e4, 0.5, 3.0
     spec = scene.load("kavz685").with_overrides(

@@ -1,5 +1,5 @@
 """The no-load run-up next to the monograph's statement (Fig. 4.6a: the drive shaft reaches
-its steady state in 0.42 s, n1 = 374.8 rpm, n2 = 372.6 rpm; issue 17): which engine gets
+its steady state in 0.42 s, n1 = 374.8 rpm, n2 = 372.6 rpm): which engine gets
 there, from rest and from idle.  ``lever study runup`` (or ``python -m harness.studies.runup``) prints the table that
 docs/models-and-fmus.md ("Run-up") quotes; ``--scan`` the lag scan behind the chosen Te.
 

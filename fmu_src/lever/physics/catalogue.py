@@ -93,7 +93,7 @@ LOAD = (
     Parameter("w_start", 39.0, "rad/s", "driven shaft speed at the start", -1e5, 1e5),
     Parameter("max_substep", 2.5e-4, "s", "largest internal integration step where no closed form applies",
               0.0, 1.0, low_open=True),
-    # Resisting loads (issue 17): friction and the technological resistance as a brake.
+    # Resisting loads: friction and the technological resistance as a brake.
     Parameter("load_direction", "active", "", "how Mc acts: active (a torque of fixed direction whatever the "
               "motion, e.g. a hoist) or resistive (a brake: against the motion with magnitude max(Mc, 0), holding "
               "the shaft at rest up to it)", kind="string", choices=DIRECTIONS),

@@ -1,4 +1,4 @@
-"""Loads that resist the motion (docs/physics.md#active-and-resistive-loads-friction; issue 17): Coulomb friction with
+"""Loads that resist the motion (docs/physics.md#active-and-resistive-loads-friction): Coulomb friction with
 stiction, viscous friction, and the technological resistance ``Mc = Mm +- dM`` applied as
 a brake - against the motion, holding the shaft at rest - instead of as an active torque.
 

@@ -1,8 +1,8 @@
 """The few numerical tools the physics needs, on the standard library alone (the FMUs run
-in whatever Python the importer has, without numpy; issue 13):
+in whatever Python the importer has, without numpy):
 
 * ``SeededUniform``: numpy's ``default_rng(seed).uniform`` draw for draw, bit for bit
-  (SeedSequence, PCG64, 53-bit doubles), so a seeded load is the same load as before;
+  (SeedSequence, PCG64, 53-bit doubles), so a seeded load is the same load as numpy's;
 * ``pairwise_sum``: numpy's float64 ``sum`` (its pairwise summation), bit for bit;
 * ``rfft``/``irfft``: real FFTs of power-of-two length (radix 2; not pocketfft's
   operation order, so they agree with numpy's to rounding, about 1e-16 of the largest
