@@ -787,21 +787,8 @@ _alias("check", compliance_command)
 
 
 def entry():
-    """Console entry point.  Once the command is done and its files are written, the
-    process leaves without interpreter and library teardown, keeping its exit status: a
-    heap corruption at exit ("corrupted double-linked list") was still seen once, after a
-    run interrupted while plotting, in the suite with the FMUs' kept inner instances, and
-    its cause is not yet found (docs/reliability.md)."""
-    try:
-        main.main(standalone_mode=True)
-        status = 0
-    except SystemExit as done:
-        status = done.code if isinstance(done.code, int) else (0 if done.code is None else 1)
-    from harness.engine.component import remove_extractions
-    remove_extractions()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(status)
+    """Console entry point."""
+    main.main(standalone_mode=True)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ import ast
 import re
 import math
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -553,3 +554,32 @@ def test_the_documents_name_the_python_the_fmus_native_entry_accepts(fmu_dir):
     for page in ("README.md", "docs/hosts.md", "docs/models-and-fmus.md"):
         stated = set(re.findall(r"CPython\s+(3\.\d+)\+", (REPO / page).read_text()))
         assert stated == {f"3.{oldest}"}, (page, stated)
+
+
+_INSTANTIATE_AND_EXIT = """
+import sys
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+unzipped = extract(sys.argv[1])
+md = read_model_description(unzipped)
+fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                instanceName="x")
+fmu.instantiate(); fmu.setupExperiment(startTime=0); fmu.enterInitializationMode()
+fmu.exitInitializationMode(); fmu.doStep(0, 1e-3); fmu.terminate(); fmu.freeInstance()
+"""
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="needs valgrind")
+def test_the_host_process_ends_without_touching_freed_memory(fmu_dir, tmp_path):
+    """pythonfmu 0.7's library destructor assigns to its PyState pointer after the C++ runtime
+    destroyed it at exit: a use after free that now and then corrupted the heap as a Python
+    host ended.  The native entry releases the PyState first; memcheck then sees no access
+    to freed memory from pythonfmu's teardown (without the release: one per FMU library)."""
+    log = tmp_path / "memcheck.log"
+    done = subprocess.run(["valgrind", "--error-limit=no", "--num-callers=8", f"--log-file={log}", sys.executable,
+                           "-c", _INSTANTIATE_AND_EXIT, str(fmu_dir / "EngineShaft.fmu")],
+                          env={**os.environ, "PYTHONMALLOC": "malloc"}, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    errors = log.read_text().split("\n==")
+    teardown = [e for e in errors if "finalizePythonInterpreter" in e or "onLibraryUnload" in e]
+    assert not teardown, "pythonfmu's teardown touches freed memory:\n" + "\n==".join(teardown)
