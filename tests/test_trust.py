@@ -191,3 +191,12 @@ def test_a_step_said_to_cost_less_than_a_master_that_cost_nothing_is_flagged():
     case.split = {"crossing": 0.5, "slave": 0.4, "master": 0.1}          # 1.8x: below every round's ratio
     assert "unreliable" not in bench.claims(spec, [case], {"target_error": 1e-3, "baseline": "jacobi"},
                                             rounds=rounds)["baseline_step"]
+
+
+def test_a_long_case_run_once_says_why_and_does_not_blame_the_machine():
+    case = Case("ecos", "peer", 2.5e-4, wall_times=[7.36], steps=40000, asked=3, load=[1.21, 1.25],
+                errors={"tau_rms": 1e-3})
+    row = bench.table_row(case)
+    assert row["unreliable"].startswith("from 1 of 3 runs (one took 7.36 s: a long case is not repeated): "
+                                        "the machine (load average 1.21-1.25 on"), row["unreliable"]
+    assert "too noisy" not in row["unreliable"]

@@ -514,10 +514,14 @@ def _rounds_logged(log: CaseLog | None, key: str, measure) -> dict:
     return entry
 
 
-def case_noise(case: Case) -> str:
-    """The machine's noise around a case, in words (its load and the spread of its runs)."""
+def case_noise(case: Case, problems: list[str] | None = None) -> str:
+    """The machine's noise around a case, in words (its load and the spread of its runs);
+    for ``problems`` that are only fewer runs than asked, the load alone (a long case stops
+    repeating on an idle machine too)."""
     loads = [x for x in case.load if x is not None]
     load = {"cpus": trust.cpus(), "load_min": min(loads), "load_max": max(loads)} if loads else None
+    if problems and all(p.startswith("from ") for p in problems):
+        return trust.noise(load, None).replace("machine too noisy", "the machine", 1)
     return trust.noise(load, trust.spread(case.wall_times))
 
 
@@ -805,7 +809,7 @@ def case_problems(case: Case) -> list[str]:
     its one run), a call floor above the step it bounds."""
     problems = []
     if not case.failure and case.asked:
-        problems.append(trust.runs_problem(len(case.wall_times), case.asked))
+        problems.append(trust.runs_problem(len(case.wall_times), case.asked, max(case.wall_times, default=None)))
     if case.kind == "master" and case.floor_times and case.steps and case.wall_times:
         problems.append(trust.floor_problem(stats.median(case.floor_times), case.wall / case.steps))
     return [p for p in problems if p]
@@ -832,7 +836,7 @@ def table_row(case: Case) -> dict:
             "wall_median_s": case.wall, "wall_min_s": spread["min"], "wall_max_s": spread["max"],
             "repeats": len(case.wall_times), "asked": case.asked or None,
             "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
-            "unreliable": ("; ".join(problems) + f": {case_noise(case)}") if problems else None,
+            "unreliable": ("; ".join(problems) + f": {case_noise(case, problems)}") if problems else None,
             "steps": case.steps, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
             "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
                                                  ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",

@@ -122,10 +122,12 @@ def floor_problem(floor_per_step: float | None, per_step: float | None) -> str |
     return None
 
 
-def runs_problem(done: int, asked: int) -> str | None:
-    """A figure from fewer runs than asked."""
+def runs_problem(done: int, asked: int, longest: float | None = None) -> str | None:
+    """A figure from fewer runs than asked (``longest``: the longest run's seconds, when a
+    long run is why the repeats stopped)."""
     if done < asked:
-        return f"from {done} of {asked} runs"
+        return f"from {done} of {asked} runs" + (f" (one took {longest:.3g} s: a long case is not repeated)"
+                                                 if longest is not None else "")
     return None
 
 
