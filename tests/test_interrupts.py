@@ -324,13 +324,19 @@ def test_dask_sweep_interrupted_logs_the_case_under_way(tmp_path, fmu_dir, monke
 
     def record_then_interrupt(self, key, result):
         record(self, key, result)
-        time.sleep(0.5)                                  # the worker is well into the next case
+        # Ctrl-C once the worker runs the next case (its call stack shows it), not after a
+        # fixed wait: on a fast machine the other cases could all be done by then.  The cases
+        # are long enough (8 s simulated) that it is still running when the sweep looks.
+        with distributed.Client(cluster.scheduler_address, timeout="30s") as watcher:
+            deadline = time.monotonic() + 60.0
+            while not any(watcher.call_stack().values()) and time.monotonic() < deadline:
+                time.sleep(0.02)
         monkeypatch.setattr(interrupt, "_requested", True)
 
     monkeypatch.setattr(CaseLog, "record", record_then_interrupt)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with pytest.raises(interrupt.Interrupted):
-            sweeps.sweep([axis], tmp_path, stop=2.0, extra=["experiment.transient=0.2"],
+            sweeps.sweep([axis], tmp_path, stop=8.0, extra=["experiment.transient=0.2"],
                          dask=cluster.scheduler_address, progress=False)
     entries = _case_lines(tmp_path / "cases.jsonl")
     assert [e["result"].get("status") for e in entries] == ["ok", INTERRUPTED]
