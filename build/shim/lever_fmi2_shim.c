@@ -24,6 +24,12 @@
  *      in, so fmi2GetRealStatus(fmi2LastSuccessfulTime) is true after refusals and
  *      restores.  Strings that are not UTF-8 and too small buffers get fmi2Error.
  *      A refused call (fmi2Error) changes nothing: the instance stays in its state.
+ *   3a. FMI 2.0 Model Exchange, which pythonfmu does not export: the ME functions and the
+ *      ME state machine (instantiated, initialization, event mode, continuous-time mode,
+ *      terminated) are implemented here, and fmi2GetDirectionalDerivative in both
+ *      interfaces.  The model is reached through pythonfmu's fmi2GetReal/fmi2SetReal on
+ *      value references of the shim's own "channel" (CHANNEL and above; see
+ *      fmu_src/lever/fmus/model_exchange.py), which a host's calls may not use.
  *   4. One Python thread state per host thread: pythonfmu calls PyGILState_Ensure and
  *      Release around every call, which creates and destroys a thread state each time when
  *      the calling thread is unknown to Python.  The shim registers one thread state for
@@ -151,6 +157,37 @@ typedef fmi2Status fmi2GetIntegerStatusTYPE(fmi2Component, const fmi2StatusKind,
 typedef fmi2Status fmi2GetBooleanStatusTYPE(fmi2Component, const fmi2StatusKind, fmi2Boolean *);
 typedef fmi2Status fmi2GetStringStatusTYPE(fmi2Component, const fmi2StatusKind, fmi2String *);
 
+/* Model Exchange (fmi2FunctionTypes.h). */
+typedef struct {
+    fmi2Boolean newDiscreteStatesNeeded;
+    fmi2Boolean terminateSimulation;
+    fmi2Boolean nominalsOfContinuousStatesChanged;
+    fmi2Boolean valuesOfContinuousStatesChanged;
+    fmi2Boolean nextEventTimeDefined;
+    fmi2Real nextEventTime;
+} fmi2EventInfo;
+typedef fmi2Status fmi2EnterEventModeTYPE(fmi2Component);
+typedef fmi2Status fmi2NewDiscreteStatesTYPE(fmi2Component, fmi2EventInfo *);
+typedef fmi2Status fmi2EnterContinuousTimeModeTYPE(fmi2Component);
+typedef fmi2Status fmi2CompletedIntegratorStepTYPE(fmi2Component, fmi2Boolean, fmi2Boolean *, fmi2Boolean *);
+typedef fmi2Status fmi2SetTimeTYPE(fmi2Component, fmi2Real);
+typedef fmi2Status fmi2SetContinuousStatesTYPE(fmi2Component, const fmi2Real[], size_t);
+typedef fmi2Status fmi2GetDerivativesTYPE(fmi2Component, fmi2Real[], size_t);
+typedef fmi2Status fmi2GetEventIndicatorsTYPE(fmi2Component, fmi2Real[], size_t);
+typedef fmi2Status fmi2GetContinuousStatesTYPE(fmi2Component, fmi2Real[], size_t);
+typedef fmi2Status fmi2GetNominalsOfContinuousStatesTYPE(fmi2Component, fmi2Real[], size_t);
+#define SHIM_ME_FUNCTIONS(X)                                                                       \
+    X(fmi2EnterEventMode)                                                                          \
+    X(fmi2NewDiscreteStates)                                                                       \
+    X(fmi2EnterContinuousTimeMode)                                                                 \
+    X(fmi2CompletedIntegratorStep)                                                                 \
+    X(fmi2SetTime)                                                                                 \
+    X(fmi2SetContinuousStates)                                                                     \
+    X(fmi2GetDerivatives)                                                                          \
+    X(fmi2GetEventIndicators)                                                                      \
+    X(fmi2GetContinuousStates)                                                                     \
+    X(fmi2GetNominalsOfContinuousStates)
+
 /* Every function the inner library must provide (all of them are exported by
  * pythonfmu 0.7.0).  fmi2GetTypesPlatform/fmi2GetVersion are answered by the
  * shim itself and are not needed from the inner library. */
@@ -195,6 +232,7 @@ SHIM_DECLARE(fmi2GetTypesPlatform)
 SHIM_DECLARE(fmi2GetVersion)
 SHIM_DECLARE(fmi2SetDebugLogging)
 SHIM_INNER_FUNCTIONS(SHIM_DECLARE)
+SHIM_ME_FUNCTIONS(SHIM_DECLARE)
 
 /* ------------------------------------------------------------------------- */
 /* Small helpers                                                             */
@@ -834,13 +872,16 @@ static int resource_directory(const char *uri, char *path, size_t size, char *er
 /* ------------------------------------------------------------------------- */
 
 /* The FMI 2.0 Co-Simulation states (stepInProgress and stepCanceled never occur: steps
- * are synchronous).  Bits, so that each function's allowed states are one mask. */
+ * are synchronous) and Model Exchange's event and continuous-time modes.  Bits, so that
+ * each function's allowed states are one mask. */
 typedef enum {
     ST_INSTANTIATED = 1,
     ST_INITIALIZATION = 2,
     ST_STEP_COMPLETE = 4,
     ST_STEP_FAILED = 8,
     ST_TERMINATED = 16,
+    ST_EVENT_MODE = 32,
+    ST_CONTINUOUS_TIME = 64,
 } ShimStateBit;
 
 static const char *state_name(int state)
@@ -851,11 +892,14 @@ static const char *state_name(int state)
     case ST_STEP_COMPLETE: return "step complete";
     case ST_STEP_FAILED: return "step failed";
     case ST_TERMINATED: return "terminated";
+    case ST_EVENT_MODE: return "event mode";
+    case ST_CONTINUOUS_TIME: return "continuous-time mode";
     default: return "?";
     }
 }
 
-#define ANY_STATE (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
+#define ANY_STATE (ST_INSTANTIATED | ST_INITIALIZATION | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED | \
+                   ST_EVENT_MODE | ST_CONTINUOUS_TIME)
 #define INITIALIZED (ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED)
 /* The standard's table (FMI 2.0, section 4.2.4), Co-Simulation columns, with one
  * leniency: the getters also work in 'instantiated' (they return the start values), as
@@ -889,6 +933,73 @@ static const char *state_name(int state)
 #define MASK_fmi2GetIntegerStatus INITIALIZED
 #define MASK_fmi2GetBooleanStatus INITIALIZED
 #define MASK_fmi2GetStringStatus INITIALIZED
+/* Model Exchange functions: none in Co-Simulation. */
+#define MASK_fmi2EnterEventMode 0
+#define MASK_fmi2NewDiscreteStates 0
+#define MASK_fmi2EnterContinuousTimeMode 0
+#define MASK_fmi2CompletedIntegratorStep 0
+#define MASK_fmi2SetTime 0
+#define MASK_fmi2SetContinuousStates 0
+#define MASK_fmi2GetDerivatives 0
+#define MASK_fmi2GetEventIndicators 0
+#define MASK_fmi2GetContinuousStates 0
+#define MASK_fmi2GetNominalsOfContinuousStates 0
+
+/* The standard's table (FMI 2.0, section 3.2.3), Model Exchange columns, with the same
+ * leniency for the getters.  The FMU state functions are not offered in Model Exchange
+ * (canGetAndSetFMUstate="false" there): the discrete modes are the physics' own. */
+#define ME_RUNNING (ST_EVENT_MODE | ST_CONTINUOUS_TIME)
+#define MEMASK_fmi2SetupExperiment ST_INSTANTIATED
+#define MEMASK_fmi2EnterInitializationMode ST_INSTANTIATED
+#define MEMASK_fmi2ExitInitializationMode ST_INITIALIZATION
+#define MEMASK_fmi2Terminate ME_RUNNING
+#define MEMASK_fmi2Reset ANY_STATE
+#define MEMASK_fmi2GetReal ANY_STATE
+#define MEMASK_fmi2GetInteger ANY_STATE
+#define MEMASK_fmi2GetBoolean ANY_STATE
+#define MEMASK_fmi2GetString ANY_STATE
+#define MEMASK_fmi2SetReal (ST_INSTANTIATED | ST_INITIALIZATION | ME_RUNNING)
+#define MEMASK_fmi2SetInteger (ST_INSTANTIATED | ST_INITIALIZATION | ST_EVENT_MODE)
+#define MEMASK_fmi2SetBoolean MEMASK_fmi2SetInteger
+#define MEMASK_fmi2SetString MEMASK_fmi2SetInteger
+#define MEMASK_fmi2GetFMUstate 0
+#define MEMASK_fmi2SetFMUstate 0
+#define MEMASK_fmi2FreeFMUstate 0
+#define MEMASK_fmi2SerializedFMUstateSize 0
+#define MEMASK_fmi2SerializeFMUstate 0
+#define MEMASK_fmi2DeSerializeFMUstate 0
+#define MEMASK_fmi2GetDirectionalDerivative (ST_INITIALIZATION | ME_RUNNING | ST_TERMINATED)
+#define MEMASK_fmi2SetRealInputDerivatives 0
+#define MEMASK_fmi2GetRealOutputDerivatives 0
+#define MEMASK_fmi2DoStep 0
+#define MEMASK_fmi2CancelStep 0
+#define MEMASK_fmi2GetStatus 0
+#define MEMASK_fmi2GetRealStatus 0
+#define MEMASK_fmi2GetIntegerStatus 0
+#define MEMASK_fmi2GetBooleanStatus 0
+#define MEMASK_fmi2GetStringStatus 0
+#define MEMASK_fmi2EnterEventMode ME_RUNNING
+#define MEMASK_fmi2NewDiscreteStates ST_EVENT_MODE
+#define MEMASK_fmi2EnterContinuousTimeMode ST_EVENT_MODE
+#define MEMASK_fmi2CompletedIntegratorStep ST_CONTINUOUS_TIME
+#define MEMASK_fmi2SetTime ME_RUNNING
+#define MEMASK_fmi2SetContinuousStates ST_CONTINUOUS_TIME
+#define MEMASK_fmi2GetDerivatives (ME_RUNNING | ST_TERMINATED)
+#define MEMASK_fmi2GetEventIndicators (ST_INITIALIZATION | ME_RUNNING | ST_TERMINATED)
+#define MEMASK_fmi2GetContinuousStates MEMASK_fmi2GetEventIndicators
+#define MEMASK_fmi2GetNominalsOfContinuousStates (ST_INSTANTIATED | ME_RUNNING | ST_TERMINATED)
+
+/* The channel to the model (fmu_src/lever/fmus/model_exchange.py): value references
+ * CHANNEL + (kind << CHANNEL_SHIFT) + index. */
+#define CHANNEL 0x40000000u
+#define CHANNEL_SHIFT 20
+#define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
+enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
+       CH_EVENT_INFO };
+enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2 };
+enum { SIZE_STATES = 0, SIZE_INDICATORS = 1 };
+#define COMMAND_NEW_DISCRETE_STATES 2.0
+#define EVENT_INFO_FIELDS 6
 
 /* An inner (pythonfmu) instance with the callbacks handed to it.  pythonfmu keeps a
  * *pointer* to the callbacks, so they live here, at a stable address, as long as the inner
@@ -914,7 +1025,9 @@ typedef struct {
     int dead;               /* inner instance returned fmi2Fatal: never touch it again */
     const char *deadIn;     /* the function that returned fmi2Fatal */
     int state;              /* ShimStateBit */
-    fmi2Real time;          /* the current communication point */
+    fmi2Real time;          /* the current communication point (Model Exchange: fmi2SetTime's) */
+    int me;                 /* instantiated as fmi2ModelExchange */
+    size_t nx, nz;          /* Model Exchange: continuous states, event indicators */
 } Shim;
 
 /* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
@@ -1076,21 +1189,30 @@ static void shim_refuse_state(Shim *s, const char *function, int allowed)
         appendf(where, sizeof where, "only in the instantiated phase (after fmi2Instantiate or fmi2Reset)");
     } else if (allowed == ST_INITIALIZATION) {
         appendf(where, sizeof where, "only in the initialisation phase (after fmi2EnterInitializationMode)");
+    } else if (allowed == 0 && !s->me && strcmp(function, "fmi2CancelStep") != 0) {
+        shim_error(s, "%s is a Model Exchange function: this instance was instantiated for Co-Simulation "
+                      "(fmi2CoSimulation)", function);
+        return;
+    } else if (allowed == 0 && s->me) {
+        shim_error(s, "%s is not offered by this FMU's Model Exchange interface (this instance was "
+                      "instantiated as fmi2ModelExchange; the FMU state functions are Co-Simulation's only)",
+                   function);
+        return;
     } else if (allowed == 0) {
         appendf(where, sizeof where, "only while an asynchronous step runs, and steps are synchronous");
     } else {
         appendf(where, sizeof where, "in the states");
-        for (int bit = ST_INSTANTIATED; bit <= ST_TERMINATED; bit <<= 1) {
+        for (int bit = ST_INSTANTIATED; bit <= ST_CONTINUOUS_TIME; bit <<= 1) {
             if (allowed & bit) {
                 appendf(where, sizeof where, " '%s'", state_name(bit));
             }
         }
     }
-    int early = (s->state & (ST_INSTANTIATED | ST_INITIALIZATION)) && (allowed & INITIALIZED) &&
-                !(allowed & s->state);
-    shim_error(s, "%s is not allowed in state '%s'; it is allowed %s (FMI 2.0 Co-Simulation "
+    int early = (s->state & (ST_INSTANTIATED | ST_INITIALIZATION)) &&
+                (allowed & (INITIALIZED | ME_RUNNING)) && !(allowed & s->state);
+    shim_error(s, "%s is not allowed in state '%s'; it is allowed %s (FMI 2.0 %s "
                   "state machine)%s",
-               function, state_name(s->state), where,
+               function, state_name(s->state), where, s->me ? "Model Exchange" : "Co-Simulation",
                early ? "; initialise the instance first (fmi2SetupExperiment, "
                        "fmi2EnterInitializationMode, fmi2ExitInitializationMode)" : "");
 }
@@ -1130,7 +1252,7 @@ static int succeeded(fmi2Status status) { return status == fmi2OK || status == f
 
 #define SHIM(c) ((Shim *)(c))
 #define BEGIN(name, c)                                                                             \
-    if (!shim_begin(SHIM(c), #name, MASK_##name)) return fmi2Error
+    if (!shim_begin(SHIM(c), #name, SHIM(c) && SHIM(c)->me ? MEMASK_##name : MASK_##name)) return fmi2Error
 
 /* Forward a call with arguments after the component. */
 #define FORWARD(name, c, ...)                                                                      \
@@ -1138,6 +1260,114 @@ static int succeeded(fmi2Status status) { return status == fmi2OK || status == f
         BEGIN(name, c);                                                                            \
         return shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner, __VA_ARGS__));                 \
     } while (0)
+
+/* ------------------------------------------------------------------------- */
+/* The channel to the model (Model Exchange, directional derivatives)          */
+/* ------------------------------------------------------------------------- */
+
+/* Value references of the channel for `kind`: indices from `index`, or 0..n-1 when NULL. */
+static fmi2ValueReference *channel_refs(Shim *s, const char *function, unsigned kind,
+                                        const fmi2ValueReference *index, size_t n)
+{
+    fmi2ValueReference *vrs = malloc((n ? n : 1) * sizeof *vrs);
+    if (!vrs) {
+        shim_error(s, "%s: out of memory", function);
+        return NULL;
+    }
+    for (size_t i = 0; i < n; i++) {
+        vrs[i] = CHANNEL + (kind << CHANNEL_SHIFT) + (index ? index[i] : (fmi2ValueReference)i);
+    }
+    return vrs;
+}
+
+/* Sets n values on the channel; the status as shim_end makes it. */
+static fmi2Status channel_set(Shim *s, const char *function, unsigned kind,
+                              const fmi2ValueReference *index, size_t n, const fmi2Real *values)
+{
+    fmi2ValueReference *vrs = channel_refs(s, function, kind, index, n);
+    if (!vrs) {
+        return fmi2Error;
+    }
+    fmi2Status status = shim_end(s, function, g_api->fmi2SetReal(s->inner, vrs, n, values));
+    free(vrs);
+    return status;
+}
+
+/* Reads n values from the channel into out, which is written only when the call succeeds. */
+static fmi2Status channel_get(Shim *s, const char *function, unsigned kind,
+                              const fmi2ValueReference *index, size_t n, fmi2Real *out)
+{
+    fmi2ValueReference *vrs = channel_refs(s, function, kind, index, n);
+    fmi2Real *values = malloc((n ? n : 1) * sizeof *values);
+    if (!vrs || !values) {
+        free(vrs);
+        free(values);
+        return vrs ? shim_error(s, "%s: out of memory", function) : fmi2Error;
+    }
+    fmi2Status status = shim_end(s, function, g_api->fmi2GetReal(s->inner, vrs, n, values));
+    if (succeeded(status)) {
+        memcpy(out, values, n * sizeof *values);
+    }
+    free(vrs);
+    free(values);
+    return status;
+}
+
+/* A host's value references never reach the channel: 0 (and an error logged) if one would. */
+static int host_references(Shim *s, const char *function, const fmi2ValueReference vr[], size_t nvr)
+{
+    if (nvr > 0 && !vr) {
+        shim_error(s, "%s: the value reference array is NULL with %zu values", function, nvr);
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] >= CHANNEL) {
+            shim_error(s, "%s: value reference %u is no variable of this FMU; nothing of this call was "
+                          "applied", function, vr[i]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The size a Model Exchange array argument must have. */
+static int me_array(Shim *s, const char *function, const void *array, size_t n, size_t expected,
+                    const char *what)
+{
+    if (n != expected) {
+        shim_error(s, "%s: %zu %s given, this model has %zu; nothing was done", function, n, what,
+                   expected);
+        return 0;
+    }
+    if (n > 0 && !array) {
+        shim_error(s, "%s: the array of %s is NULL", function, what);
+        return 0;
+    }
+    return 1;
+}
+
+/* Tells a fresh Python slave that it runs as Model Exchange and reads its sizes. */
+static fmi2Status me_connect(Shim *s)
+{
+    fmi2ValueReference control = CONTROL_INTERFACE;
+    fmi2Real one = 1.0;
+    fmi2Status status = channel_set(s, "fmi2Instantiate", CH_CONTROL, &control, 1, &one);
+    if (!succeeded(status)) {
+        return status;
+    }
+    fmi2ValueReference sizes[2] = {SIZE_STATES, SIZE_INDICATORS};
+    fmi2Real n[2] = {0.0, 0.0};
+    status = channel_get(s, "fmi2Instantiate", CH_CONTROL, sizes, 2, n);
+    if (succeeded(status)) {
+        if (!(n[0] >= 0.0 && n[0] < 1e6 && n[1] >= 0.0 && n[1] < 1e6)) {
+            return shim_error(s, "fmi2Instantiate: the model reports %g states and %g event indicators",
+                              n[0], n[1]);
+        }
+        s->nx = (size_t)n[0];
+        s->nz = (size_t)n[1];
+    }
+    return status;
+}
 
 /* ------------------------------------------------------------------------- */
 /* FMI 2.0 API                                                                */
@@ -1199,8 +1429,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     int ok = 0;
     if (!fmuGUID || !fmuResourceLocation) {
         shim_error(s, "fmi2Instantiate: %s is NULL", fmuGUID ? "fmuResourceLocation" : "fmuGUID");
-    } else if (fmuType != fmi2CoSimulation) {
-        shim_error(s, "fmi2Instantiate: this FMU supports Co-Simulation only");
+    } else if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        shim_error(s, "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange (0) nor fmi2CoSimulation (1)",
+                   (int)fmuType);
     } else if (resource_directory(fmuResourceLocation, resources, sizeof resources, err, sizeof err) ||
                read_config(resources, &cfg, err, sizeof err)) {
         shim_error(s, "fmi2Instantiate: %s", err);
@@ -1245,8 +1476,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         slot->own.componentEnvironment = s; /* the inner instantiate may log already */
         /* loggingOn is always true for the inner library: with it off, pythonfmu
          * suppresses errors too.  The shim filters instead. */
-        slot->inner = g_api->fmi2Instantiate(s->instanceName, fmuType, fmuGUID, resources, &slot->own, visible,
-                                             fmi2True);
+        /* pythonfmu knows Co-Simulation only; Model Exchange is the shim's, over the channel. */
+        slot->inner = g_api->fmi2Instantiate(s->instanceName, fmi2CoSimulation, fmuGUID, resources, &slot->own,
+                                             visible, fmi2True);
         if (!slot->inner) {
             pthread_mutex_unlock(&lock);
             free_slot(slot);
@@ -1258,6 +1490,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     s->slot = slot;
     s->inner = slot->inner;
     __atomic_add_fetch(&g_live_instances, 1, __ATOMIC_ACQ_REL);
+    if (fmuType == fmi2ModelExchange) {
+        s->me = 1;
+        if (!succeeded(me_connect(s))) {
+            shim_error(s, "fmi2Instantiate: the model cannot run as Model Exchange");
+            fmi2FreeInstance(s);
+            return NULL;
+        }
+    }
     return s;
 }
 
@@ -1365,7 +1605,8 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    TRANSITION(fmi2ExitInitializationMode, c, ST_STEP_COMPLETE);
+    /* Model Exchange continues in event mode, Co-Simulation in step complete. */
+    TRANSITION(fmi2ExitInitializationMode, c, SHIM(c)->me ? ST_EVENT_MODE : ST_STEP_COMPLETE);
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) { TRANSITION(fmi2Terminate, c, ST_TERMINATED); }
@@ -1378,13 +1619,20 @@ fmi2Status fmi2Reset(fmi2Component c)
     if (succeeded(status)) {
         s->state = ST_INSTANTIATED;
         s->time = 0.0;
+        if (s->me) {
+            /* a fresh Python slave: told again that it runs as Model Exchange */
+            fmi2Status connected = me_connect(s);
+            status = connected > status ? connected : status;
+        }
     }
     return status;
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
 {
-    FORWARD(fmi2GetReal, c, vr, nvr, value);
+    BEGIN(fmi2GetReal, c);
+    if (!host_references(SHIM(c), "fmi2GetReal", vr, nvr)) return fmi2Error;
+    return shim_end(SHIM(c), "fmi2GetReal", g_api->fmi2GetReal(SHIM(c)->inner, vr, nvr, value));
 }
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -1408,7 +1656,9 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[])
 {
-    FORWARD(fmi2SetReal, c, vr, nvr, value);
+    BEGIN(fmi2SetReal, c);
+    if (!host_references(SHIM(c), "fmi2SetReal", vr, nvr)) return fmi2Error;
+    return shim_end(SHIM(c), "fmi2SetReal", g_api->fmi2SetReal(SHIM(c)->inner, vr, nvr, value));
 }
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -1672,8 +1922,30 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         size_t nKnown, const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[])
 {
-    FORWARD(fmi2GetDirectionalDerivative, c, vUnknown, nUnknown, vKnown, nKnown, dvKnown,
-            dvUnknown);
+    BEGIN(fmi2GetDirectionalDerivative, c);
+    Shim *s = SHIM(c);
+    const char *function = "fmi2GetDirectionalDerivative";
+    if ((nUnknown > 0 && (!vUnknown || !dvUnknown)) || (nKnown > 0 && (!vKnown || !dvKnown))) {
+        return shim_error(s, "%s: an array is NULL (%zu unknowns, %zu knowns)", function, nUnknown, nKnown);
+    }
+    for (size_t i = 0; i < nUnknown + nKnown; i++) {
+        fmi2ValueReference vr = i < nUnknown ? vUnknown[i] : vKnown[i - nUnknown];
+        if (vr > CHANNEL_INDEX_MAX) {
+            return shim_error(s, "%s: value reference %u is no variable of this FMU", function, vr);
+        }
+    }
+    for (size_t i = 0; i < nKnown; i++) {
+        if (!isfinite(dvKnown[i])) {
+            return shim_error(s, "%s: seed dvKnown[%zu] = %g (value reference %u) is not finite; nothing was "
+                                 "computed", function, i, dvKnown[i], vKnown[i]);
+        }
+    }
+    fmi2Status status = channel_set(s, function, CH_SEEDS, vKnown, nKnown, dvKnown);
+    if (!succeeded(status)) {
+        return status;
+    }
+    fmi2Status got = channel_get(s, function, CH_DIRECTIONAL, vUnknown, nUnknown, dvUnknown);
+    return got > status ? got : status;
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -1761,3 +2033,108 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind kind, fmi2S
     (void)value;
     return shim_error(SHIM(c), "fmi2GetStringStatus: status kind %d has no string value", (int)kind);
 }
+
+/* ------------------------------------------------------------------------- */
+/* FMI 2.0 Model Exchange                                                     */
+/* ------------------------------------------------------------------------- */
+
+fmi2Status fmi2EnterEventMode(fmi2Component c)
+{
+    BEGIN(fmi2EnterEventMode, c);
+    SHIM(c)->state = ST_EVENT_MODE;
+    return fmi2OK;
+}
+
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info)
+{
+    BEGIN(fmi2NewDiscreteStates, c);
+    Shim *s = SHIM(c);
+    if (!info) {
+        return shim_error(s, "fmi2NewDiscreteStates: fmi2EventInfo is NULL");
+    }
+    fmi2ValueReference command = CONTROL_COMMAND;
+    fmi2Real code = COMMAND_NEW_DISCRETE_STATES;
+    fmi2Status status = channel_set(s, "fmi2NewDiscreteStates", CH_CONTROL, &command, 1, &code);
+    if (!succeeded(status)) {
+        return status;
+    }
+    fmi2Real fields[EVENT_INFO_FIELDS];
+    fmi2Status got = channel_get(s, "fmi2NewDiscreteStates", CH_EVENT_INFO, NULL, EVENT_INFO_FIELDS, fields);
+    if (!succeeded(got)) {
+        return got;
+    }
+    info->newDiscreteStatesNeeded = fields[0] != 0.0;
+    info->terminateSimulation = fields[1] != 0.0;
+    info->nominalsOfContinuousStatesChanged = fields[2] != 0.0;
+    info->valuesOfContinuousStatesChanged = fields[3] != 0.0;
+    info->nextEventTimeDefined = fields[4] != 0.0;
+    info->nextEventTime = fields[5];
+    return got > status ? got : status;
+}
+
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+{
+    BEGIN(fmi2EnterContinuousTimeMode, c);
+    SHIM(c)->state = ST_CONTINUOUS_TIME;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation)
+{
+    BEGIN(fmi2CompletedIntegratorStep, c);
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!enterEventMode || !terminateSimulation) {
+        return shim_error(SHIM(c), "fmi2CompletedIntegratorStep: %s is NULL",
+                          enterEventMode ? "terminateSimulation" : "enterEventMode");
+    }
+    /* no step events: the models' events are state and time events */
+    *enterEventMode = fmi2False;
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+{
+    BEGIN(fmi2SetTime, c);
+    Shim *s = SHIM(c);
+    if (!isfinite(time)) {
+        return shim_error(s, "fmi2SetTime: time %g is not finite; the time stays %.17g s", time, s->time);
+    }
+    fmi2ValueReference control = CONTROL_TIME;
+    fmi2Status status = channel_set(s, "fmi2SetTime", CH_CONTROL, &control, 1, &time);
+    if (succeeded(status)) {
+        s->time = time;
+    }
+    return status;
+}
+
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+{
+    BEGIN(fmi2SetContinuousStates, c);
+    Shim *s = SHIM(c);
+    if (!me_array(s, "fmi2SetContinuousStates", x, nx, s->nx, "states")) {
+        return fmi2Error;
+    }
+    for (size_t i = 0; i < nx; i++) {
+        if (!isfinite(x[i])) {
+            return shim_error(s, "fmi2SetContinuousStates: x[%zu] = %g is not finite; no state was set", i, x[i]);
+        }
+    }
+    return channel_set(s, "fmi2SetContinuousStates", CH_STATES, NULL, nx, x);
+}
+
+/* The Model Exchange getters of one array. */
+#define ME_GETTER(name, kind, count, what)                                                         \
+    fmi2Status name(fmi2Component c, fmi2Real out[], size_t n)                                     \
+    {                                                                                              \
+        BEGIN(name, c);                                                                            \
+        Shim *s = SHIM(c);                                                                         \
+        if (!me_array(s, #name, out, n, s->count, what)) return fmi2Error;                         \
+        return n ? channel_get(s, #name, kind, NULL, n, out) : fmi2OK;                             \
+    }
+
+ME_GETTER(fmi2GetDerivatives, CH_DERIVATIVES, nx, "derivatives")
+ME_GETTER(fmi2GetEventIndicators, CH_INDICATORS, nz, "event indicators")
+ME_GETTER(fmi2GetContinuousStates, CH_STATES, nx, "states")
+ME_GETTER(fmi2GetNominalsOfContinuousStates, CH_NOMINALS, nx, "nominals")

@@ -50,7 +50,13 @@ def feedthrough_components(scene: scenes.Scene, descriptions: dict) -> set[str]:
     but nothing is wired from it)."""
     connected = {(c.source, c.output) for c in scene.connections}
     return {name for name, md in descriptions.items()
-            if any(u.dependencies and (name, u.variable.name) in connected for u in md.outputs)}
+            if any(_on_inputs(u) and (name, u.variable.name) in connected for u in md.outputs)}
+
+
+def _on_inputs(unknown) -> bool:
+    """Whether an output depends directly on an input (its dependencies also name states,
+    for Model Exchange, which are no feedthrough)."""
+    return any(d.causality == "input" for d in unknown.dependencies or ())
 
 
 def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
@@ -133,7 +139,7 @@ class System:
         # reading them again after an input write reads them alone (see dependent_reads).
         self.input_dependent = {}
         for name, names in exposed.items():
-            depends = {u.variable.name for u in self.components[name].description.outputs if u.dependencies}
+            depends = {u.variable.name for u in self.components[name].description.outputs if _on_inputs(u)}
             exposed[name] = [v for v in names if v not in depends] + [v for v in names if v in depends]
             self.input_dependent[name] = [v for v in names if v in depends]
         self.exposed = exposed

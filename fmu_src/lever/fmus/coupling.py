@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
+from ..physics.me_coupling import CouplingME
 from ..physics.parameters import Parameter, ParameterError
 from .base import _ALL, LeverSlave, MechanicalPort, Output, guarded
+from .model_exchange import ModelExchangeSlave
 
 _BIG = 1e12
 
 
-class LeverCoupling(LeverSlave):
+class LeverCoupling(ModelExchangeSlave):
     DESCRIPTION = ("Lever-articulated (harness-lever) drive-shaft coupling with elastic elements: "
                    "theta = phi1 - Phi(phi2), T = T_el(theta) + b*(w1 - U12*w2), tau1 = -T, tau2 = U12*T")
     PARAMETERS = COUPLING
@@ -56,6 +58,8 @@ class LeverCoupling(LeverSlave):
         # built coupling takes (kinematic: alpha + tilt < 45 deg) is judged here, at the set
         # while stepping (before, at fmi2ExitInitializationMode, with the parameters), so that
         # a value the outputs cannot be computed for is refused and never applied.
+        if self._is_channel(vrs):
+            return ModelExchangeSlave.set_real.__wrapped__(self, vrs, values)
         before = {vr: getattr(self, self._real_names[vr]) for vr in vrs if vr in self._real_names}
         alpha = self.misalignment
         LeverSlave.set_real.__wrapped__(self, vrs, values)
@@ -70,6 +74,12 @@ class LeverCoupling(LeverSlave):
             self._dirty = _ALL
             self._error(f"fmi2SetReal: input 'misalignment' = {refused!r} rad cannot be taken by this coupling: "
                         f"{error}; nothing of this call was applied, 'misalignment' stays {alpha!r}")
+
+    def _me_physics(self):
+        return CouplingME(self._family)
+
+    def _physics_key(self):
+        return self._family
 
     def _coupling_for(self, alpha):
         return self._family.at(alpha)

@@ -4,15 +4,21 @@ inside ``do_step`` with the coupling torque held over the step (exactly where th
 physics has a closed form)."""
 from __future__ import annotations
 
+import bisect
 import math
 
 from ..physics import catalogue
+from ..physics.me_engine import EngineME
+from ..physics.me_load import LoadME
 from ..physics.parameters import Parameter, ParameterError
 from ..physics.shaft import LaggedShaft
-from .base import LeverSlave, MechanicalPort, Output
+from .base import MechanicalPort, Output
+from .model_exchange import ModelExchangeSlave, StateVariable
+
+_MOTION = (StateVariable("phi", "w", "phi", "phi", "rad"), StateVariable("w", "a", "w", "w", "rad/s"))
 
 
-class _ShaftSlave(LeverSlave):
+class _ShaftSlave(ModelExchangeSlave):
     INPUTS = (
         Parameter("tau", 0.0, "N.m", "torque the coupling applies to this shaft", -1e12, 1e12, fixed=False),
         # FMI 2 input derivatives, which pythonfmu cannot take, as an input of its own: a
@@ -85,6 +91,19 @@ class EngineShaft(_ShaftSlave):
         Output("engine_work", "J", "work done by the engine since the start, integral of M*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "engine_torque", "engine_work", 1.0
+    # The number of states is the model description's, whatever the parameters: without
+    # lag the engine torque's state stays at torque_start (derivative 0, used by nothing).
+    ME_STATES = _MOTION + (
+        StateVariable("engine_work", "der(engine_work)", "engine_work", "engine_work", "J",
+                      derivative_description="power of the engine M*w"),
+        StateVariable("lagged_torque", "der(lagged_torque)", "_torque", "engine_torque", "N.m",
+                      "engine torque M as a state when torque_lag > 0 (else it stays torque_start, unused)",
+                      "rate of the lagged engine torque (Mg(w) - M)/Te"),
+    )
+    # A tabulated characteristic's slope jumps at its points: one indicator, positive while
+    # the speed stays between the points around it (any number of points in one).
+    ME_EVENT_INDICATORS = 1
+    ME_STRUCTURE_CASES = ({}, {"torque_lag": 0.1}, {"characteristic": "0:600; 40:620; 80:0"})
     EQUATIONS = (
         "dphi/dt = w",
         "I1*dw/dt = M + tau(t),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k (with tau_accel: the ramp "
@@ -100,6 +119,24 @@ class EngineShaft(_ShaftSlave):
 
     def _make_shaft(self):
         return catalogue.engine_from(self._values())
+
+    def _me_physics(self):
+        return EngineME(self._shaft, self.phi_start, self.w_start)
+
+    def _physics_key(self):
+        return self._shaft
+
+    def _events_settled(self, t, x, u):
+        model = self._me_model
+        self._segment = bisect.bisect_right(model.characteristic.speeds, x[1]) if model.EVENTS else 0
+
+    def _fold_indicators(self, values):
+        if not values:
+            return [1.0]
+        k = self._segment
+        below = values[k - 1] if k > 0 else math.inf        # w - (the point below)
+        above = -values[k] if k < len(values) else math.inf   # (the point above) - w
+        return [min(below, above)]
 
     @property
     def _lagged(self) -> bool:
@@ -163,6 +200,14 @@ class LoadShaft(_ShaftSlave):
                "load_torque*w dt"),
     )
     TORQUE_OUTPUT, WORK_OUTPUT, SIGN = "load_torque", "load_work", -1.0
+    ME_STATES = _MOTION + (
+        StateVariable("load_work", "der(load_work)", "load_work", "load_work", "J",
+                      derivative_description="power the load and the friction absorb"),
+    )
+    # stick/slip of the friction (1.0, no event, without friction that sticks)
+    ME_EVENT_INDICATORS = 1
+    ME_STRUCTURE_CASES = ({}, {"order_share": 0.5, "random_amplitude": 10.0}, {"viscous_damping": 1.0},
+                          {"friction_torque": 1.0, "breakaway_torque": 2.0})
     EQUATIONS = (
         "dphi/dt = w",
         "I2*dw/dt = tau(t) - Mc(t, phi, w) - F(w, tau),  tau(t) = tau + tau_rate*(t - t_k) over the step from t_k "
@@ -178,6 +223,12 @@ class LoadShaft(_ShaftSlave):
 
     def _make_shaft(self):
         return catalogue.load_from(self._values())
+
+    def _me_physics(self):
+        return LoadME(self._shaft, self.phi_start, self.w_start)
+
+    def _physics_key(self):
+        return self._shaft
 
     def _compute_input_outputs(self):
         if self._shaft.resisting:       # the holding torque at rest depends on tau

@@ -4,10 +4,12 @@ No inputs; its output depends on time only."""
 from __future__ import annotations
 
 from ..physics import catalogue
-from .base import LeverSlave, Output
+from ..physics.me_misalignment import MisalignmentME
+from .base import Output
+from .model_exchange import ModelExchangeSlave
 
 
-class MisalignmentSource(LeverSlave):
+class MisalignmentSource(ModelExchangeSlave):
     DESCRIPTION = "Prescribed misalignment angle alpha(t) from a time table (linear, end values held)"
     PARAMETERS = catalogue.MISALIGNMENT_SOURCE
     OUTPUTS = (
@@ -21,6 +23,12 @@ class MisalignmentSource(LeverSlave):
 
     def _build(self):
         self._table = catalogue.misalignment_source_from(self._values())
+
+    def _me_physics(self):
+        return MisalignmentME(self._table)
+
+    def _physics_key(self):
+        return self._table
 
     def _compute_outputs(self):
         self.misalignment = self._table.value(self._time)

@@ -1,0 +1,445 @@
+"""FMI 2.0 Model Exchange for our FMUs, from the physics' Model Exchange interface
+(``lever.physics.me_base``): the states, their derivatives, the event indicators, the
+event updates and the analytic partials that ``fmi2GetDirectionalDerivative`` multiplies.
+
+pythonfmu 0.7 exports Co-Simulation only, so the native entry (build/shim) implements the
+Model Exchange functions and their state machine itself and reaches the model through
+pythonfmu's ``fmi2GetReal``/``fmi2SetReal`` on value references of its own, at and above
+``CHANNEL`` (far above any variable's): pythonfmu passes value references through
+untouched, and the entry refuses such references from a host, so only it uses them.  A
+reference there is ``CHANNEL + (kind << 20) + index``; every ME call is one such get or
+set, and errors are logged like any other (fmi2Error, the instance usable).
+
+A model declares its continuous states (``StateVariable``: an output of the FMU or a local
+variable declared here, and the variable holding its derivative), the number of event
+indicators, and the parameter sets whose models together show every dependency the model
+can have (the model description is one for all parameter values).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Sequence
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Real
+
+from ..physics.me_base import der
+from ..physics.parameters import UNITS, DISPLAY_UNITS
+from .base import _ALL, _CLEAN, LeverSlave, Output, _nan_values, declared_type, guarded
+
+CHANNEL = 0x40000000
+KIND_SHIFT = 20
+INDEX_MASK = (1 << KIND_SHIFT) - 1
+# kinds of channel references
+CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO = range(8)
+# CONTROL set: the interface (1: Model Exchange), the time, a command; get: the sizes
+SET_INTERFACE, SET_TIME, SET_COMMAND = 0, 1, 2
+GET_STATES, GET_INDICATORS = 0, 1
+NEW_DISCRETE_STATES = 2.0
+# EVENT_INFO: what fmi2NewDiscreteStates reports
+INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfContinuousStatesChanged",
+               "valuesOfContinuousStatesChanged", "nextEventTimeDefined", "nextEventTime")
+
+
+class StateVariable(NamedTuple):
+    """A continuous state of the Model Exchange edition."""
+    name: str              #: the variable of the state (an output, or a local declared here)
+    derivative: str        #: the variable of its derivative (an output, or a local declared here)
+    attribute: str         #: where the co-simulation edition keeps the value
+    physics: str           #: the state's name in the physics' Model Exchange model
+    unit: str = ""
+    description: str = ""              #: of a local state
+    derivative_description: str = ""   #: of a local derivative
+
+
+class ModelExchangeSlave(LeverSlave):
+    """A ``LeverSlave`` that also runs as a Model Exchange FMU.  Subclasses set
+    ``ME_STATES``, ``ME_EVENT_INDICATORS``, ``ME_STRUCTURE_CASES`` and implement
+    ``_me_physics()`` (the physics' Model Exchange model of the built model)."""
+
+    ME_STATES: Sequence[StateVariable] = ()
+    ME_EVENT_INDICATORS = 0
+    #: parameter values (over the defaults) whose models' dependencies together are every
+    #: dependency the model can have: the model description's ModelStructure is their union
+    ME_STRUCTURE_CASES: Sequence[dict] = ({},)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._me = False          # the native entry instantiated the Model Exchange interface
+        self._me_model = None     # the physics' model, made for the physics built
+        self._me_source = None
+        self._seeds = {}          # known value reference -> seed of a directional derivative
+        self._event_info = [0.0] * len(INFO_FIELDS)
+        outputs = {o.name for o in self.OUTPUTS}
+        self._me_locals = {}      # value reference -> (state index, True for the derivative)
+        for k, s in enumerate(self.ME_STATES):
+            for name, is_derivative, text in ((s.name, False, s.description),
+                                              (s.derivative, True, s.derivative_description)):
+                if name in outputs:
+                    continue
+                self.register_variable(Real(name, causality=Fmi2Causality.local, variability=Fmi2Variability.continuous,
+                                            initial=Fmi2Initial.calculated, description=text), nested=False)
+                self._me_locals[len(self.vars) - 1] = (k, is_derivative)
+        self._vr_of = {v.name: vr for vr, v in self.vars.items()}
+        self._input_names = tuple(p.name for p in self.INPUTS)
+        self._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
+
+    # -- what each model provides ----------------------------------------------------------------
+    def _me_physics(self):
+        """The physics' Model Exchange model of the built model (``me_base.ModelExchange``)."""
+        raise NotImplementedError
+
+    def _physics_key(self):
+        """What the physics' model is made from: a new one when it changes."""
+        raise NotImplementedError
+
+    def _fold_indicators(self, values: list) -> list:
+        """The FMU's event indicators from the physics' (default: those, then 1.0 for the
+        ones this model does not use)."""
+        if len(values) > self.ME_EVENT_INDICATORS:
+            raise ValueError(f"{len(values)} event indicators, {self.ME_EVENT_INDICATORS} declared")
+        return list(values) + [1.0] * (self.ME_EVENT_INDICATORS - len(values))
+
+    def _events_settled(self, t, x, u):
+        """After an event update: what the adapter keeps besides the physics (default none)."""
+
+    # -- the physics' model at the current point ----------------------------------------------------
+    def _model(self):
+        if self._model_stale or self._build_error is not None:
+            raise ValueError(f"the model is not built: {self._build_error or 'parameters changed since'}")
+        key = self._physics_key()
+        if self._me_model is None or self._me_source is not key:
+            self._me_model, self._me_source = self._me_physics(), key
+            self._start_modes()
+        return self._me_model
+
+    def _start_modes(self):
+        model = self._me_model
+        if hasattr(model, "initialize"):
+            model.initialize(self._time, self._x_physics(), self._u())
+        self._events_settled(self._time, self._x_physics(), self._u())
+
+    def _x(self) -> list:
+        return [float(getattr(self, s.attribute)) for s in self.ME_STATES]
+
+    def _x_physics(self) -> list:
+        x = self._x()
+        return [x[self._state_of_physics[name]] for name in self._me_model.STATES]
+
+    def _u(self) -> list:
+        return [float(getattr(self, name)) for name in self._me_model.INPUTS]
+
+    def _derivatives(self) -> list:
+        model = self._model()
+        out = [0.0] * len(self.ME_STATES)     # a state the physics does not have stays constant
+        for name, value in zip(model.STATES, model.derivatives(self._time, self._x_physics(), self._u())):
+            out[self._state_of_physics[name]] = value
+        return out
+
+    def _indicators(self) -> list:
+        model = self._model()
+        return self._fold_indicators(model.event_indicators(self._time, self._x_physics(), self._u()))
+
+    # -- FMI ------------------------------------------------------------------------------------------
+    @guarded()
+    def exit_initialization_mode(self):
+        LeverSlave.exit_initialization_mode.__wrapped__(self)
+        if self._me and self._phase == "stepping":
+            self._me_model = None      # modes from the inputs the host has set now
+            self._model()
+
+    def _refresh(self):
+        if not self._me:
+            return super()._refresh()
+        if self._build_error is not None or self._model_stale:
+            return
+        model = self._model()
+        values = model.outputs(self._time, self._x_physics(), self._u())
+        for name, value in zip(model.OUTPUTS, values):
+            setattr(self, name, value)
+        self._dirty = _CLEAN
+        bad = [name for name, value in zip(model.OUTPUTS, values) if not math.isfinite(value)]
+        if bad:
+            self._dirty = _ALL
+            self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with states "
+                        f"{self._x()!r} and inputs {self._u()!r}")
+
+    @staticmethod
+    def _is_channel(vrs) -> bool:
+        return bool(vrs) and max(vrs) >= CHANNEL
+
+    @guarded(default=_nan_values)
+    def get_real(self, vrs):
+        if self._is_channel(vrs):
+            return self._channel_get(vrs)
+        if self._me_locals and any(vr in self._me_locals for vr in vrs):
+            return self._get_with_locals(vrs)
+        return LeverSlave.get_real.__wrapped__(self, vrs)
+
+    @guarded()
+    def set_real(self, vrs, values):
+        if self._is_channel(vrs):
+            return self._channel_set(vrs, values)
+        return LeverSlave.set_real.__wrapped__(self, vrs, values)
+
+    def _get_with_locals(self, vrs):
+        values = []
+        derivatives = None
+        for vr in vrs:
+            if vr not in self._me_locals:
+                values.extend(LeverSlave.get_real.__wrapped__(self, [vr]))
+                continue
+            k, is_derivative = self._me_locals[vr]
+            if not is_derivative:
+                values.append(float(getattr(self, self.ME_STATES[k].attribute)))
+            elif self._phase not in ("initialization", "stepping"):
+                values.append(0.0)       # like the outputs: calculated once the model is initialised
+            else:
+                if derivatives is None:
+                    self._cs_modes()
+                    derivatives = self._derivatives()
+                values.append(derivatives[k])
+        return values
+
+    def _cs_modes(self):
+        """In co-simulation the physics' mode follows the co-simulation's memoryless law."""
+        if not self._me:
+            self._model()
+            self._start_modes()
+
+    # -- the channel ------------------------------------------------------------------------------
+    def _split(self, vrs):
+        kinds = {(vr - CHANNEL) >> KIND_SHIFT for vr in vrs}
+        if len(kinds) != 1 or min(vrs) < CHANNEL:
+            raise ValueError(f"value references {list(vrs)} mix kinds of the native entry's channel")
+        return kinds.pop(), [(vr - CHANNEL) & INDEX_MASK for vr in vrs]
+
+    def _channel_set(self, vrs, values):
+        if len(vrs) != len(values):
+            raise ValueError(f"{len(vrs)} value references but {len(values)} values")
+        kind, index = self._split(vrs)
+        if kind == CONTROL and index == [SET_INTERFACE]:
+            if self._phase != "instantiated":
+                raise ValueError("the interface is chosen at instantiation")
+            self._me = values[0] == 1.0
+        elif kind == CONTROL and index == [SET_TIME]:
+            if not math.isfinite(values[0]):
+                self._error(f"fmi2SetTime: time {values[0]!r} is not finite; the time stays {self._time!r} s")
+                return
+            self._time = float(values[0])
+            self._dirty = _ALL
+        elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
+            self._new_discrete_states()
+        elif kind == STATES:
+            self._set_states(index, values)
+        elif kind == SEEDS:
+            self._seeds = dict(zip(index, values))
+        else:
+            raise ValueError(f"value references {list(vrs)} are nothing the native entry may set")
+
+    def _channel_get(self, vrs):
+        kind, index = self._split(vrs)
+        if kind == CONTROL:
+            sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS)}
+            return [sizes[i] for i in index]
+        if kind == STATES:
+            x = self._x()
+            return [x[i] for i in index]
+        if kind == DERIVATIVES:
+            values = self._derivatives()
+            return [values[i] for i in index]
+        if kind == INDICATORS:
+            values = self._indicators()
+            return [values[i] for i in index]
+        if kind == NOMINALS:
+            return [1.0 for _ in index]
+        if kind == EVENT_INFO:
+            return [self._event_info[i] for i in index]
+        if kind == DIRECTIONAL:
+            seeds, self._seeds = self._seeds, {}
+            return self._directional(index, seeds)
+        raise ValueError(f"value references {list(vrs)} are nothing the native entry may read")
+
+    def _set_states(self, index, values):
+        n = len(self.ME_STATES)
+        if index != list(range(n)):
+            self._error(f"fmi2SetContinuousStates: {len(index)} states given, this model has {n}; nothing was set")
+            return
+        bad = [self.ME_STATES[k].name for k, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            self._error(f"fmi2SetContinuousStates: state(s) {', '.join(bad)} not finite ({list(values)!r}); "
+                        f"the states stay {self._x()!r}")
+            return
+        for s, value in zip(self.ME_STATES, values):
+            setattr(self, s.attribute, float(value))
+        self._dirty = _ALL
+
+    def _new_discrete_states(self):
+        model = self._model()
+        t, u = self._time, self._u()
+        before = self._x()
+        after = model.event_update(t, self._x_physics(), u)
+        x = list(before)
+        for name, value in zip(model.STATES, after):
+            x[self._state_of_physics[name]] = value
+        for s, value in zip(self.ME_STATES, x):
+            setattr(self, s.attribute, float(value))
+        self._events_settled(t, self._x_physics(), u)
+        upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
+        self._event_info = [0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
+                            float(upcoming) if upcoming is not None else 0.0]
+        self._dirty = _ALL
+
+    # -- directional derivatives -------------------------------------------------------------------
+    def _unknown_key(self, vr):
+        """The physics' name of the unknown with value reference ``vr`` (an output or a
+        state's derivative), or None."""
+        var = self.vars.get(vr)
+        if var is None:
+            return None
+        model = self._me_model
+        if var.name in model.OUTPUTS:
+            return var.name
+        for s in self.ME_STATES:
+            if s.derivative == var.name:
+                return der(s.physics) if s.physics in model.STATES else ""
+        return None
+
+    def _known_key(self, vr):
+        """The physics' name of the known with value reference ``vr`` (an input, or in
+        Model Exchange a state), or None."""
+        var = self.vars.get(vr)
+        if var is None:
+            return None
+        if var.name in self._input_names:
+            return var.name
+        if self._me:
+            for s in self.ME_STATES:
+                if s.name == var.name:
+                    return s.physics
+        return None
+
+    def _directional(self, unknowns, seeds):
+        model = self._model()
+        self._cs_modes()
+        knowns = {}
+        for vr, seed in seeds.items():
+            key = self._known_key(vr)
+            if key is None:
+                self._error(f"fmi2GetDirectionalDerivative: value reference {vr} is no "
+                            f"{'input or state' if self._me else 'input'} of {type(self).__name__}")
+                return _nan_values(self, unknowns)
+            if not math.isfinite(seed):
+                self._error(f"fmi2GetDirectionalDerivative: seed {seed!r} of value reference {vr} is not finite")
+                return _nan_values(self, unknowns)
+            knowns[key] = knowns.get(key, 0.0) + seed
+        keys = []
+        for vr in unknowns:
+            key = self._unknown_key(vr)
+            if key is None:
+                self._error(f"fmi2GetDirectionalDerivative: value reference {vr} is no output or state "
+                            f"derivative of {type(self).__name__}")
+                return _nan_values(self, unknowns)
+            keys.append(key)
+        partials = model.partials(self._time, self._x_physics(), self._u())
+        return [sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()) for key in keys]
+
+    # -- model description ---------------------------------------------------------------------------
+    def _structure(self) -> dict:
+        """{unknown variable: set of known variables} over ``ME_STRUCTURE_CASES`` (the FMU's
+        names: outputs and state derivatives on inputs and states)."""
+        saved = dict(self.__dict__)
+        union: dict[str, set] = {}
+        try:
+            for case in self.ME_STRUCTURE_CASES:
+                for p in self.PARAMETERS:
+                    setattr(self, p.name, case.get(p.name, p.default))
+                self._build()
+                self._model_stale, self._build_error = False, None
+                self._me_model = None
+                model = self._me_physics()
+                names = {s.physics: s.name for s in self.ME_STATES}
+                unknown = {o: o for o in model.OUTPUTS}
+                unknown.update({der(s.physics): s.derivative for s in self.ME_STATES})
+                for of, wrt in model.dependencies.items():
+                    union.setdefault(unknown[of], set()).update(names.get(w, w) for w in wrt)
+        finally:
+            self.__dict__.clear()
+            self.__dict__.update(saved)
+        return union
+
+    def to_xml(self, model_options=None) -> Element:
+        root = super().to_xml(model_options)
+        cs = root.find("CoSimulation")
+        cs.set("providesDirectionalDerivative", "true")
+        me = Element("ModelExchange", {
+            "modelIdentifier": cs.get("modelIdentifier"), "needsExecutionTool": "true",
+            "completedIntegratorStepNotNeeded": "true", "canBeInstantiatedOnlyOncePerProcess": "false",
+            "canNotUseMemoryManagementFunctions": "true", "canGetAndSetFMUstate": "false",
+            "canSerializeFMUstate": "false", "providesDirectionalDerivative": "true"})
+        root.insert(list(root).index(cs), me)
+        root.set("numberOfEventIndicators", str(self.ME_EVENT_INDICATORS))
+
+        nodes = root.find("ModelVariables").findall("ScalarVariable")
+        index_of = {node.get("name"): i for i, node in enumerate(nodes, start=1)}
+        units, types = root.find("UnitDefinitions"), root.find("TypeDefinitions")
+        defined = {u.get("name") for u in units}
+        typed_as = {t.get("name") for t in types}
+        for s in self.ME_STATES:
+            for name in (s.name, s.derivative):
+                if self._vr_of[name] in self._me_locals:
+                    spec = Output(name, s.unit if name == s.name else _rate_unit(s.unit), "")
+                    type_name, element, attrs = declared_type(spec)
+                    typed = nodes[index_of[name] - 1][0]
+                    typed.set("declaredType", type_name)
+                    typed.set("unit", spec.unit)
+                    if spec.unit in DISPLAY_UNITS:
+                        typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
+                    if spec.unit not in defined:
+                        _define_unit(units, spec.unit)
+                        defined.add(spec.unit)
+                    if type_name not in typed_as:
+                        SubElement(SubElement(types, "SimpleType", {"name": type_name}), element, attrs)
+                        typed_as.add(type_name)
+            nodes[index_of[s.derivative] - 1][0].set("derivative", str(index_of[s.name]))
+
+        structure = self._structure()
+        inputs = set(self._input_names)
+
+        def unknown(parent, name, only_inputs=False):
+            sources = sorted((index_of[n] for n in structure.get(name, ()) if not only_inputs or n in inputs))
+            attrs = {"index": str(index_of[name]), "dependencies": " ".join(map(str, sources))}
+            if sources:
+                attrs["dependenciesKind"] = " ".join("dependent" for _ in sources)
+            SubElement(parent, "Unknown", attrs)
+
+        model_structure = root.find("ModelStructure")
+        for child in list(model_structure):
+            model_structure.remove(child)
+        outputs = SubElement(model_structure, "Outputs")
+        for o in self.OUTPUTS:
+            unknown(outputs, o.name)
+        if self.ME_STATES:
+            derivatives = SubElement(model_structure, "Derivatives")
+            for s in self.ME_STATES:
+                unknown(derivatives, s.derivative)
+        # At initialisation the states are unknowns themselves (from the parameters): the
+        # initial unknowns' knowns are the inputs.
+        initial = SubElement(model_structure, "InitialUnknowns")
+        names = {o.name for o in self.OUTPUTS} | {self.vars[vr].name for vr in self._me_locals}
+        for name in sorted(names, key=index_of.get):
+            unknown(initial, name, only_inputs=True)
+        return root
+
+
+def _rate_unit(unit: str) -> str:
+    return {"rad": "rad/s", "rad/s": "rad/s2", "J": "W", "N.m": "N.m/s"}.get(unit, "")
+
+
+def _define_unit(units: Element, name: str):
+    exponents, _ = UNITS[name]
+    unit = SubElement(units, "Unit", {"name": name})
+    SubElement(unit, "BaseUnit", {k: str(v) for k, v in exponents.items()})
+    if name in DISPLAY_UNITS:
+        display = DISPLAY_UNITS[name]
+        SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})
