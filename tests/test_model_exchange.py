@@ -1,0 +1,394 @@
+"""The FMUs' Model Exchange interface (fmu_src/lever/fmus/model_exchange.py, the native
+entry's ME state machine in build/shim): the same FMU files run in fmpy's Model Exchange
+simulation with CVode as they run in co-simulation; their directional derivatives (both
+interfaces) are the physics' analytic partials and their declared dependencies hold the
+sparsity that finite differences find; ME calls out of order, NaN states and wrong sizes
+are refused with fmi2Error and the instance stays usable.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import random
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Model, FMU2Slave
+from fmpy.validation import validate_fmu
+
+ME_FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
+CHANNEL = 0x40000000   # the native entry's own value references (model_exchange.CHANNEL)
+FMI2_ERROR = 3
+
+
+@pytest.fixture(scope="module")
+def unpacked(fmu_dir, tmp_path_factory):
+    """name -> (model description, extracted directory)."""
+    out = {}
+    for name in ME_FMUS:
+        path = str(Path(fmu_dir) / f"{name}.fmu")
+        out[name] = (fmpy.read_model_description(path),
+                     fmpy.extract(path, unzipdir=str(tmp_path_factory.mktemp(name))))
+    return out
+
+
+def open_model(unpacked, name, kind=FMU2Model, parameters=None):
+    md, unzipdir = unpacked[name]
+    fmu = kind(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier=name, instanceName=name)
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    for key, value in (parameters or {}).items():
+        if isinstance(value, str):
+            fmu.setString([vr[key]], [value])
+        else:
+            fmu.setReal([vr[key]], [float(value)])
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    if kind is FMU2Model:
+        while fmu.newDiscreteStates()[0]:
+            pass
+        fmu.enterContinuousTimeMode()
+    return fmu, md, vr
+
+
+def free(fmu):
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def raw(fmu, function, argtypes, *args) -> int:
+    """The status of an FMI function called straight from the library (one fmpy does not
+    wrap for this interface)."""
+    entry = getattr(fmu.dll, function)
+    entry.argtypes, entry.restype = [ctypes.c_void_p, *argtypes], ctypes.c_int
+    return entry(fmu.component, *args)
+
+
+def refused(call, *args):
+    with pytest.raises(FMICallException) as caught:
+        call(*args)
+    assert caught.value.status == FMI2_ERROR
+
+
+# --------------------------------------------------------------------------------------
+# The model descriptions
+# --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ME_FMUS)
+def test_model_description_offers_both_interfaces(fmu_dir, name):
+    path = str(Path(fmu_dir) / f"{name}.fmu")
+    assert validate_fmu(path) == []
+    md = fmpy.read_model_description(path)
+    assert md.modelExchange is not None and md.coSimulation is not None
+    assert md.modelExchange.providesDirectionalDerivative and md.coSimulation.providesDirectionalDerivative
+    states = {"LeverCoupling": 0, "EngineShaft": 4, "LoadShaft": 3, "MisalignmentSource": 0}[name]
+    assert md.numberOfContinuousStates == states
+    assert md.numberOfEventIndicators == {"EngineShaft": 1, "LoadShaft": 1}.get(name, 0)
+    for unknown in md.derivatives:
+        assert unknown.variable.derivative is not None
+    # never "everything depends on everything": each unknown names what it depends on
+    knowns = {v.name for v in md.modelVariables if v.causality == "input"} | {
+        u.variable.derivative.name for u in md.derivatives}
+    for unknown in md.outputs + md.derivatives:
+        assert unknown.dependencies is not None, unknown.variable.name
+        assert {d.name for d in unknown.dependencies} <= knowns
+    if states:
+        assert any(len(u.dependencies) < len(knowns) for u in md.outputs + md.derivatives)
+
+
+# --------------------------------------------------------------------------------------
+# Model Exchange runs against the co-simulation edition
+# --------------------------------------------------------------------------------------
+
+def both_runs(fmu_dir, name, inputs, outputs, parameters=None, stop=1.0, rtol=1e-10):
+    path = str(Path(fmu_dir) / f"{name}.fmu")
+    runs = {}
+    for kind in ("CoSimulation", "ModelExchange"):
+        runs[kind] = fmpy.simulate_fmu(path, fmi_type=kind, solver="CVode", stop_time=stop, output_interval=stop / 20,
+                                       step_size=1e-3, relative_tolerance=rtol, input=inputs, output=outputs,
+                                       start_values=parameters or {})
+    return runs["CoSimulation"], runs["ModelExchange"]
+
+
+def constant_input(**values):
+    dtype = [("time", float)] + [(k, float) for k in values]
+    return np.array([(0.0, *values.values()), (10.0, *values.values())], dtype=dtype)
+
+
+# CVode at rtol 1e-10 against the co-simulation's closed forms (the engine's linear
+# characteristic, a constant load) or its RK4 substeps of 2.5e-4 s (error ~1e-12 here):
+# both are within 1e-7 relative of the exact solution, so 1e-6 holds on any machine and
+# still catches a wrong derivative (which moves the result by percents).
+@pytest.mark.parametrize("name, parameters, tau", [
+    ("EngineShaft", {}, -100.0),
+    ("EngineShaft", {"torque_lag": 0.05, "torque_start": 200.0}, -300.0),
+    ("EngineShaft", {"characteristic": "0:600; 30:640; 45:300; 60:0"}, -200.0),
+    ("LoadShaft", {"load_kind": "constant", "mean_torque": 50.0}, 20.0),
+    ("LoadShaft", {"load_kind": "fourier", "fourier": "40; 10:5; 3:-2"}, 10.0),
+])
+def test_me_run_matches_co_simulation(fmu_dir, name, parameters, tau):
+    outputs = ["phi", "w", "a", "engine_work" if name == "EngineShaft" else "load_work"]
+    cs, me = both_runs(fmu_dir, name, constant_input(tau=tau, tau_rate=0.0, tau_accel=0.0), outputs, parameters)
+    for out in outputs:
+        scale = max(np.max(np.abs(cs[out])), 1.0)
+        # the ME result has rows of its own at events: read it at the output points
+        assert np.max(np.abs(cs[out] - np.interp(cs["time"], me["time"], me[out]))) <= 1e-6 * scale, (
+            out, cs[out][-1], me[out][-1])
+
+
+def test_me_friction_stop_and_hold(fmu_dir):
+    # Coulomb friction brakes the shaft from 39 rad/s to rest (at t = 39*0.161/20 s =
+    # 0.314 s): the stop is an event, after which static friction holds it.  The
+    # co-simulation edition locates the stop inside its step; the closed form is exact.
+    parameters = {"load_kind": "constant", "mean_torque": 0.0, "friction_torque": 20.0, "breakaway_torque": 30.0}
+    cs, me = both_runs(fmu_dir, "LoadShaft", constant_input(tau=0.0, tau_rate=0.0, tau_accel=0.0),
+                       ["phi", "w"], parameters)
+    stop = 39.0 * 0.161 / 20.0
+    assert me["w"][-1] == 0.0 and cs["w"][-1] == 0.0
+    exact = 39.0 * stop / 2.0
+    assert me["phi"][-1] == pytest.approx(exact, rel=1e-6)
+    assert cs["phi"][-1] == pytest.approx(exact, rel=1e-6)
+
+
+def test_me_stateless_models_match_co_simulation(fmu_dir):
+    t = np.linspace(0.0, 1.0, 11)
+    inputs = np.array(list(zip(t, 0.1 * np.sin(3 * t), 40 + t, 0.05 * t, 39 + 2 * t, np.full_like(t, 0.2))),
+                      dtype=[("time", float), ("phi1", float), ("w1", float), ("phi2", float), ("w2", float),
+                             ("misalignment", float)])
+    outputs = ["tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"]
+    cs, me = both_runs(fmu_dir, "LeverCoupling", inputs, outputs, {"transfer_mode": "kinematic"})
+    for out in outputs:
+        # fmpy's co-simulation records the outputs after each step, from the inputs at its
+        # start: its row k + 1 is Model Exchange's row k
+        assert np.allclose(cs[out][1:], me[out][:-1], rtol=1e-12, atol=1e-12), out
+    cs, me = both_runs(fmu_dir, "MisalignmentSource", None, ["misalignment", "misalignment_rate"],
+                       {"table": "0:0.1; 0.33:0.2; 0.71:0.05"})
+    # the rate jumps at the table's times: time events, rows of their own in the ME result
+    assert {0.33, 0.71} <= set(me["time"])
+    for out in ("misalignment", "misalignment_rate"):
+        at_points = np.interp(cs["time"], me["time"], me[out])
+        assert np.allclose(cs[out], at_points, rtol=1e-12, atol=1e-12), out
+
+
+# --------------------------------------------------------------------------------------
+# Directional derivatives: the analytic partials against central differences
+# --------------------------------------------------------------------------------------
+
+def me_unknowns(fmu, md, vr, nx):
+    """The derivatives, then the outputs, at the point set."""
+    dx = (ctypes.c_double * max(nx, 1))()
+    if nx:
+        fmu.getDerivatives(dx, nx)
+    return list(dx)[:nx] + fmu.getReal([vr[u.variable.name] for u in md.outputs])
+
+
+def set_point(fmu, md, vr, x, u):
+    names = [v.name for v in md.modelVariables if v.causality == "input"]
+    fmu.setReal([vr[n] for n in names], [u[n] for n in names])
+    if x:
+        fmu.setContinuousStates((ctypes.c_double * len(x))(*x), len(x))
+
+
+def shaft_inputs(r):
+    return {"tau": r.uniform(-500, 500), "tau_rate": r.uniform(-1e3, 1e3), "tau_accel": r.uniform(-1e4, 1e4)}
+
+
+POINTS = {
+    "LeverCoupling": ({"transfer_mode": "kinematic"}, lambda r: {
+        "phi1": r.uniform(-3, 3), "w1": r.uniform(-50, 50), "phi2": r.uniform(-3, 3), "w2": r.uniform(-50, 50),
+        "misalignment": r.uniform(0.05, 0.35)}, lambda r: []),
+    "EngineShaft": ({"torque_lag": 0.05}, lambda r: shaft_inputs(r),
+                    lambda r: [r.uniform(-5, 5), r.uniform(1, 60), r.uniform(0, 100), r.uniform(-300, 600)]),
+    "LoadShaft": ({"load_kind": "fourier", "fourier": "40; 10:5; 3:-2", "viscous_damping": 0.3},
+                  lambda r: shaft_inputs(r),
+                  lambda r: [r.uniform(-5, 5), r.uniform(1, 60), r.uniform(0, 100)]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(POINTS))
+def test_directional_derivatives_are_central_differences(unpacked, name):
+    parameters, draw_u, draw_x = POINTS[name]
+    fmu, md, vr = open_model(unpacked, name, parameters=parameters)
+    try:
+        nx = md.numberOfContinuousStates
+        states = [u.variable.derivative.name for u in md.derivatives]
+        inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+        unknowns = [u.variable.name for u in md.derivatives] + [u.variable.name for u in md.outputs]
+        declared = [{d.name for d in u.dependencies} for u in list(md.derivatives) + list(md.outputs)]
+        rng = random.Random(31)
+        for _ in range(5):
+            x, u = draw_x(rng), draw_u(rng)
+            for k, known in enumerate(states + inputs):
+                set_point(fmu, md, vr, x, u)
+                analytic = fmu.getDirectionalDerivative([vr[n] for n in unknowns], [vr[known]], [1.0])
+                value = x[k] if k < nx else u[known]
+                h = 1e-6 * max(abs(value), 1.0)
+                sides = []
+                for sign in (1.0, -1.0):
+                    xs, us = list(x), dict(u)
+                    if k < nx:
+                        xs[k] = value + sign * h
+                    else:
+                        us[known] = value + sign * h
+                    set_point(fmu, md, vr, xs, us)
+                    sides.append(me_unknowns(fmu, md, vr, nx))
+                for j, name_j in enumerate(unknowns):
+                    central = (sides[0][j] - sides[1][j]) / (2 * h)
+                    scale = max(abs(central), abs(analytic[j]), 1.0)
+                    assert abs(analytic[j] - central) <= 1e-6 * scale, (name_j, known, analytic[j], central)
+                    if abs(central) > 1e-9 * scale:
+                        # the sparsity finite differences find is declared
+                        assert known in declared[j], (name_j, known)
+    finally:
+        free(fmu)
+
+
+def test_co_simulation_directional_derivative(unpacked):
+    """In co-simulation: the outputs with respect to the inputs, from the same partials."""
+    fmu, md, vr = open_model(unpacked, "LeverCoupling", FMU2Slave, {"transfer_mode": "kinematic"})
+    try:
+        inputs = {"phi1": 0.3, "w1": 40.0, "phi2": 0.1, "w2": 39.0, "misalignment": 0.2}
+        outputs = ["tau1", "tau2", "U12", "theta"]
+        for known in inputs:
+            fmu.setReal([vr[n] for n in inputs], list(inputs.values()))
+            analytic = fmu.getDirectionalDerivative([vr[n] for n in outputs], [vr[known]], [1.0])
+            h = 1e-6 * max(abs(inputs[known]), 1.0)
+            sides = []
+            for sign in (1.0, -1.0):
+                fmu.setReal([vr[known]], [inputs[known] + sign * h])
+                sides.append(fmu.getReal([vr[n] for n in outputs]))
+            for j, out in enumerate(outputs):
+                central = (sides[0][j] - sides[1][j]) / (2 * h)
+                assert abs(analytic[j] - central) <= 1e-6 * max(abs(central), 1.0), (out, known)
+        # a state is no known in co-simulation; an output no known at all
+        refused(fmu.getDirectionalDerivative, [vr["tau1"]], [vr["tau2"]], [1.0])
+        assert fmu.getDirectionalDerivative([vr["U12"]], [vr["w1"]], [1.0]) == [0.0]
+    finally:
+        free(fmu)
+
+
+# --------------------------------------------------------------------------------------
+# The ME state machine and bad calls: fmi2Error, the instance usable
+# --------------------------------------------------------------------------------------
+
+def test_me_calls_out_of_order_are_refused(unpacked):
+    md, unzipdir = unpacked["LoadShaft"]
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier="LoadShaft", instanceName="order")
+    fmu.instantiate()
+    nx = md.numberOfContinuousStates
+    x = (ctypes.c_double * nx)()
+    try:
+        refused(fmu.getDerivatives, x, nx)                 # instantiated: not yet
+        refused(fmu.setTime, 0.5)
+        refused(fmu.enterEventMode)
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        refused(fmu.setContinuousStates, x, nx)            # initialization mode
+        refused(fmu.newDiscreteStates)
+        fmu.getContinuousStates(x, nx)                     # allowed there
+        fmu.exitInitializationMode()                       # -> event mode
+        refused(fmu.setContinuousStates, x, nx)            # event mode: only in continuous time
+        refused(fmu.completedIntegratorStep)
+        assert raw(fmu, "fmi2DoStep", [ctypes.c_double, ctypes.c_double, ctypes.c_int], 0.0, 0.1, 1) == FMI2_ERROR
+        state = ctypes.c_void_p()
+        assert raw(fmu, "fmi2GetFMUstate", [ctypes.c_void_p], ctypes.byref(state)) == FMI2_ERROR
+        fmu.newDiscreteStates()
+        fmu.enterContinuousTimeMode()
+        refused(fmu.newDiscreteStates)                     # continuous time: enter event mode first
+        refused(fmu.enterContinuousTimeMode)
+        refused(fmu.exitInitializationMode)
+        # still usable: a full round of continuous-time calls
+        fmu.setTime(0.1)
+        fmu.getContinuousStates(x, nx)
+        fmu.setContinuousStates(x, nx)
+        dx = (ctypes.c_double * nx)()
+        fmu.getDerivatives(dx, nx)
+        assert dx[0] == x[1]
+        assert fmu.completedIntegratorStep() == (False, False)
+        fmu.enterEventMode()
+        fmu.newDiscreteStates()
+        fmu.terminate()
+        refused(fmu.setTime, 0.2)                          # terminated
+        fmu.getDerivatives(dx, nx)                         # still readable
+    finally:
+        fmu.freeInstance()
+
+
+def test_me_bad_arguments_are_refused(unpacked):
+    fmu, md, vr = open_model(unpacked, "EngineShaft")
+    nx, nz = md.numberOfContinuousStates, md.numberOfEventIndicators
+    try:
+        x = (ctypes.c_double * nx)()
+        fmu.getContinuousStates(x, nx)
+        before = list(x)
+        for k in range(nx):
+            for bad in (math.nan, math.inf):
+                y = (ctypes.c_double * nx)(*before)
+                y[k] = bad
+                refused(fmu.setContinuousStates, y, nx)
+        big = (ctypes.c_double * (nx + 1))()
+        refused(fmu.setContinuousStates, big, nx + 1)     # wrong sizes
+        refused(fmu.setContinuousStates, x, nx - 1)
+        refused(fmu.getDerivatives, big, nx + 1)
+        refused(fmu.getContinuousStates, big, nx - 1)
+        refused(fmu.getEventIndicators, big, nz + 1)
+        refused(fmu.getNominalsOfContinuousStates, big, nx + 1)
+        refused(fmu.setContinuousStates, None, nx)         # NULL
+        refused(fmu.getDerivatives, None, nx)
+        refused(fmu.fmi2NewDiscreteStates, fmu.component, None)
+        refused(fmu.setTime, math.nan)
+        refused(fmu.getReal, [CHANNEL])                    # the native entry's own references
+        refused(fmu.setReal, [CHANNEL + 1], [0.0])
+        refused(fmu.getDirectionalDerivative, [vr["a"]], [vr["tau"]], [math.nan])
+        refused(fmu.getDirectionalDerivative, [vr["a"]], [CHANNEL], [1.0])
+        refused(fmu.getDirectionalDerivative, [vr["tau"]], [vr["w"]], [1.0])   # an input is no unknown
+        refused(fmu.setReal, [vr["inertia"]], [1.0])       # a parameter after initialisation
+        # nothing changed, the instance is usable
+        after = (ctypes.c_double * nx)()
+        fmu.getContinuousStates(after, nx)
+        assert list(after) == before
+        dx = (ctypes.c_double * nx)()
+        fmu.getDerivatives(dx, nx)
+        assert all(math.isfinite(v) for v in dx)
+        z = (ctypes.c_double * nz)()
+        fmu.getEventIndicators(z, nz)
+    finally:
+        free(fmu)
+
+
+def test_me_functions_are_refused_in_co_simulation(unpacked):
+    fmu, md, vr = open_model(unpacked, "EngineShaft", FMU2Slave)
+    try:
+        for function, argtypes, args in (("fmi2SetTime", [ctypes.c_double], (0.1,)), ("fmi2EnterEventMode", [], ()),
+                                         ("fmi2EnterContinuousTimeMode", [], ())):
+            assert raw(fmu, function, argtypes, *args) == FMI2_ERROR, function
+        x = (ctypes.c_double * 4)()
+        assert raw(fmu, "fmi2GetDerivatives", [ctypes.c_void_p, ctypes.c_size_t], x, 4) == FMI2_ERROR
+        fmu.doStep(0.0, 1e-3)                              # Co-Simulation goes on
+        assert fmu.getReal([vr["w"]])[0] > 0.0
+    finally:
+        free(fmu)
+
+
+def test_me_instances_reset_and_reuse(unpacked):
+    """fmi2Reset and a freed instance's reuse keep the interface: Model Exchange again."""
+    fmu, md, vr = open_model(unpacked, "LoadShaft")
+    nx = md.numberOfContinuousStates
+    fmu.reset()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.newDiscreteStates()
+    fmu.enterContinuousTimeMode()
+    x = (ctypes.c_double * nx)()
+    fmu.getContinuousStates(x, nx)
+    assert list(x)[:2] == [0.0, 39.0]
+    free(fmu)
+    cs, _, cvr = open_model(unpacked, "LoadShaft", FMU2Slave)   # the kept inner instance, now co-simulation
+    cs.doStep(0.0, 1e-3)
+    assert cs.getReal([cvr["phi"]])[0] > 0.0
+    free(cs)
