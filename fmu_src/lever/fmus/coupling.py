@@ -5,7 +5,10 @@ from __future__ import annotations
 from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
 from ..physics.parameters import Parameter, ParameterError
-from .base import _ALL, LeverSlave, MechanicalPort, Output, guarded
+from .base import LeverSlave
+from .declarations import MechanicalPort, Output
+from .guard import guarded
+from .recompute import ALL
 
 _BIG = 1e12
 
@@ -67,7 +70,7 @@ class LeverCoupling(LeverSlave):
             refused = self.misalignment
             for vr, value in before.items():
                 setattr(self, self._real_names[vr], value)
-            self._dirty = _ALL
+            self._dirty = ALL
             self._error(f"fmi2SetReal: input 'misalignment' = {refused!r} rad cannot be taken by this coupling: "
                         f"{error}; nothing of this call was applied, 'misalignment' stays {alpha!r}")
 

@@ -9,7 +9,8 @@ import math
 from ..physics import catalogue
 from ..physics.parameters import Parameter, ParameterError
 from ..physics.shaft import LaggedShaft
-from .base import LeverSlave, MechanicalPort, Output
+from .base import LeverSlave
+from .declarations import MechanicalPort, Output
 
 
 class _ShaftSlave(LeverSlave):

@@ -4,7 +4,8 @@ No inputs; its output depends on time only."""
 from __future__ import annotations
 
 from ..physics import catalogue
-from .base import LeverSlave, Output
+from .base import LeverSlave
+from .declarations import Output
 
 
 class MisalignmentSource(LeverSlave):
