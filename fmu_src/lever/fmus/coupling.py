@@ -6,8 +6,11 @@ from ..physics import catalogue
 from ..physics.catalogue import COUPLING, MISALIGNMENT
 from ..physics.me_coupling import CouplingME
 from ..physics.parameters import Parameter, ParameterError
-from .base import _ALL, LeverSlave, MechanicalPort, Output, guarded
+from .base import LeverSlave
+from .declarations import MechanicalPort, Output
+from .guard import guarded
 from .model_exchange import ModelExchangeSlave
+from .recompute import ALL
 
 _BIG = 1e12
 
@@ -71,7 +74,7 @@ class LeverCoupling(ModelExchangeSlave):
             refused = self.misalignment
             for vr, value in before.items():
                 setattr(self, self._real_names[vr], value)
-            self._dirty = _ALL
+            self._dirty = ALL
             self._error(f"fmi2SetReal: input 'misalignment' = {refused!r} rad cannot be taken by this coupling: "
                         f"{error}; nothing of this call was applied, 'misalignment' stays {alpha!r}")
 

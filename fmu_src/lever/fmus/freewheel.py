@@ -13,7 +13,8 @@ import math
 from ..physics import catalogue
 from ..physics.freewheel import EVENTS, FREE, STATE, STICK
 from ..physics.parameters import Parameter, ParameterError
-from .base import LeverSlave, Output
+from .base import LeverSlave
+from .declarations import Output
 
 _PORT = ("tau",)
 

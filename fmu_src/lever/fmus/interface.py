@@ -16,7 +16,7 @@ import math
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from .. import physics
-from .base import declared_type
+from .model_description import declared_type
 
 OSP_NAMESPACE = "https://open-simulation-platform.com/OspModelDescription/1.0.0"
 

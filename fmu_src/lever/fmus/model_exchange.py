@@ -25,7 +25,11 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Real
 
 from ..physics.me_base import der
 from ..physics.parameters import UNITS, DISPLAY_UNITS
-from .base import _ALL, _CLEAN, LeverSlave, Output, _nan_values, declared_type, guarded
+from .base import LeverSlave, _nan_values
+from .declarations import Output
+from .guard import guarded
+from .model_description import declared_type
+from .recompute import ALL, CLEAN
 
 CHANNEL = 0x40000000
 KIND_SHIFT = 20
@@ -157,10 +161,10 @@ class ModelExchangeSlave(LeverSlave):
         values = model.outputs(self._time, self._x_physics(), self._u())
         for name, value in zip(model.OUTPUTS, values):
             setattr(self, name, value)
-        self._dirty = _CLEAN
+        self._dirty = CLEAN
         bad = [name for name, value in zip(model.OUTPUTS, values) if not math.isfinite(value)]
         if bad:
-            self._dirty = _ALL
+            self._dirty = ALL
             self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with states "
                         f"{self._x()!r} and inputs {self._u()!r}")
 
@@ -227,7 +231,7 @@ class ModelExchangeSlave(LeverSlave):
                 self._error(f"fmi2SetTime: time {values[0]!r} is not finite; the time stays {self._time!r} s")
                 return
             self._time = float(values[0])
-            self._dirty = _ALL
+            self._dirty = ALL
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
@@ -272,7 +276,7 @@ class ModelExchangeSlave(LeverSlave):
             return
         for s, value in zip(self.ME_STATES, values):
             setattr(self, s.attribute, float(value))
-        self._dirty = _ALL
+        self._dirty = ALL
 
     def _new_discrete_states(self):
         model = self._model()
@@ -288,7 +292,7 @@ class ModelExchangeSlave(LeverSlave):
         upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
         self._event_info = [0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
                             float(upcoming) if upcoming is not None else 0.0]
-        self._dirty = _ALL
+        self._dirty = ALL
 
     # -- directional derivatives -------------------------------------------------------------------
     def _unknown_key(self, vr):

@@ -12,7 +12,7 @@ from ..physics.me_engine import EngineME
 from ..physics.me_load import LoadME
 from ..physics.parameters import Parameter, ParameterError
 from ..physics.shaft import LaggedShaft
-from .base import MechanicalPort, Output
+from .declarations import MechanicalPort, Output
 from .model_exchange import ModelExchangeSlave, StateVariable
 
 _MOTION = (StateVariable("phi", "w", "phi", "phi", "rad"), StateVariable("w", "a", "w", "w", "rad/s"))

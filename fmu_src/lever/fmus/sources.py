@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from ..physics import catalogue
 from ..physics.me_misalignment import MisalignmentME
-from .base import Output
+from .declarations import Output
 from .model_exchange import ModelExchangeSlave
 
 

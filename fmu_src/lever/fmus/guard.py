@@ -1,0 +1,36 @@
+"""FMI entry points that never raise into the host.
+
+pythonfmu 0.7 turns any Python exception into fmi2Fatal and frees the Python instance while
+keeping a dangling pointer to it, so an exception could crash the importer on its next call.
+Instead a refused call logs an error (the native entry that our build puts in front of
+pythonfmu's library returns it as fmi2Error) and leaves the instance usable.
+"""
+from __future__ import annotations
+
+import functools
+import traceback
+
+from ..physics.parameters import ParameterError
+
+
+def guarded(default=None):
+    """Run an FMI entry point so that no exception escapes: it is logged as an error
+    naming the call, and ``default`` (or ``default(self, *args)`` when callable) is
+    returned instead."""
+
+    def wrap(method):
+        @functools.wraps(method)
+        def call(self, *args):
+            try:
+                return method(self, *args)
+            except ParameterError as error:
+                self._error(f"{method.__name__}: {error}")
+            except Exception as error:  # noqa: BLE001 - the importer must survive anything
+                where = traceback.extract_tb(error.__traceback__)[-1]
+                self._error(f"{method.__name__}: internal error {type(error).__name__}: {error} "
+                            f"(at {where.name}, line {where.lineno})")
+            return default(self, *args) if callable(default) else default
+
+        return call
+
+    return wrap

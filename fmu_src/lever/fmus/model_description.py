@@ -1,0 +1,120 @@
+"""The model description (modelDescription.xml) an adapter's declarations give: pythonfmu's,
+with the units, type definitions, ranges and output dependencies it leaves out."""
+from __future__ import annotations
+
+import math
+from xml.etree.ElementTree import Element, SubElement
+
+from ..physics.parameters import DISPLAY_UNITS, QUANTITIES, UNITS, Parameter
+from .declarations import Output
+from .values import closed_bounds
+
+
+def declared_type(spec) -> tuple[str, str, dict]:
+    """The FMI type definition a declared variable refers to: (type name, FMI type
+    element, attributes of that element)."""
+    kind = getattr(spec, "kind", "real")
+    if kind == "real":
+        unit = spec.unit or "1"
+        quantity = QUANTITIES[unit]
+        attrs = {"quantity": quantity}
+        if unit != "1":
+            attrs["unit"] = unit
+            if unit in DISPLAY_UNITS:
+                attrs["displayUnit"] = DISPLAY_UNITS[unit]
+        return quantity, "Real", attrs
+    if kind == "integer":
+        return _camel(spec.name), "Integer", {"quantity": _camel(spec.name)}
+    if spec.choices:
+        return _camel(spec.name), "String", {}
+    return "PointTable", "String", {}
+
+
+def _camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.split("_"))
+
+
+class ModelDescription:
+    """``to_xml`` of a ``LeverSlave`` (its ``_declared``, ``INPUTS``, ``OUTPUTS``, ``FEEDTHROUGH``)."""
+
+    @classmethod
+    def dependencies(cls, output: Output) -> list[str]:
+        """The inputs ``output`` depends on directly (its ``depends_on``, else all inputs
+        with direct feedthrough, none without)."""
+        if output.depends_on is not None:
+            return list(output.depends_on)
+        return [p.name for p in cls.INPUTS] if cls.FEEDTHROUGH else []
+
+    def to_xml(self, model_options=None) -> Element:
+        """pythonfmu's description plus what it leaves out: units (with display units),
+        min/max of parameters and inputs, and the output dependencies (outputs depend on
+        the inputs only where the element has direct feedthrough)."""
+        root = super().to_xml(model_options or {})
+        used = sorted({spec.unit for spec in self._declared.values() if spec.unit not in ("", "1")})
+        units = Element("UnitDefinitions")
+        for name in used:
+            exponents, _ = UNITS[name]
+            unit = SubElement(units, "Unit", {"name": name})
+            SubElement(unit, "BaseUnit", {k: str(v) for k, v in exponents.items()})
+            if name in DISPLAY_UNITS:
+                display = DISPLAY_UNITS[name]
+                SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})
+        position = list(root).index(root.find("CoSimulation")) + 1
+        root.insert(position, units)
+        # One type definition per quantity (and per kind of string), as the Reference-FMUs
+        # do; every variable refers to its type.
+        types = Element("TypeDefinitions")
+        seen = {}
+        for spec in self._declared.values():
+            name, element, attrs = declared_type(spec)
+            if name in seen:
+                continue
+            seen[name] = True
+            description = {"PointTable": "a table of points as text, 'x:y; x:y; ...'"}.get(name)
+            if getattr(spec, "choices", None):
+                description = "one of " + ", ".join(repr(c) for c in spec.choices)
+            simple = SubElement(types, "SimpleType", {"name": name, **({"description": description}
+                                                                        if description else {})})
+            SubElement(simple, element, attrs)
+        root.insert(position + 1, types)
+
+        nodes = root.find("ModelVariables").findall("ScalarVariable")
+        index_of = {node.get("name"): i for i, node in enumerate(nodes, start=1)}
+        for node in nodes:
+            name = node.get("name")
+            spec = self._declared.get(name)
+            typed = node[0]
+            if spec is None:
+                continue
+            typed.set("declaredType", declared_type(spec)[0])
+            if typed.tag not in ("Real", "Integer"):
+                continue
+            if typed.tag == "Real" and spec.unit not in ("", "1"):
+                typed.set("unit", spec.unit)
+                if spec.unit in DISPLAY_UNITS:
+                    typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
+            if getattr(spec, "derivative_of", ""):
+                typed.set("derivative", str(index_of[spec.derivative_of]))
+            if isinstance(spec, Parameter):
+                # FMI's min and max are inclusive: an open bound is declared as the nearest
+                # double inside it, so that the declaration says exactly what is accepted
+                as_text = repr if typed.tag == "Real" else (lambda x: str(int(x)))
+                low, high = closed_bounds(spec)
+                if math.isfinite(spec.low):
+                    typed.set("min", as_text(low))
+                if math.isfinite(spec.high):
+                    typed.set("max", as_text(high))
+
+        structure = root.find("ModelStructure")
+        for child in list(structure):
+            structure.remove(child)
+        outputs = SubElement(structure, "Outputs")
+        initial = SubElement(structure, "InitialUnknowns")
+        for o in self.OUTPUTS:
+            sources = self.dependencies(o)
+            attrs = {"index": str(index_of[o.name]), "dependencies": " ".join(str(index_of[n]) for n in sources)}
+            if sources:
+                attrs["dependenciesKind"] = " ".join("dependent" for _ in sources)
+            SubElement(outputs, "Unknown", attrs)
+            SubElement(initial, "Unknown", dict(attrs))
+        return root
