@@ -19,7 +19,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.validation import validate_fmu
 
-ME_FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
+ME_FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource", "FreewheelRectifier")
 CHANNEL = 0x40000000   # the native entry's own value references (model_exchange.CHANNEL)
 FMI2_ERROR = 3
 
@@ -85,9 +85,10 @@ def test_model_description_offers_both_interfaces(fmu_dir, name):
     md = fmpy.read_model_description(path)
     assert md.modelExchange is not None and md.coSimulation is not None
     assert md.modelExchange.providesDirectionalDerivative and md.coSimulation.providesDirectionalDerivative
-    states = {"LeverCoupling": 0, "EngineShaft": 4, "LoadShaft": 3, "MisalignmentSource": 0}[name]
+    states = {"LeverCoupling": 0, "EngineShaft": 4, "LoadShaft": 3, "MisalignmentSource": 0,
+              "FreewheelRectifier": 11}[name]
     assert md.numberOfContinuousStates == states
-    assert md.numberOfEventIndicators == {"EngineShaft": 1, "LoadShaft": 1}.get(name, 0)
+    assert md.numberOfEventIndicators == {"EngineShaft": 1, "LoadShaft": 1, "FreewheelRectifier": 8}.get(name, 0)
     for unknown in md.derivatives:
         assert unknown.variable.derivative is not None
     # never "everything depends on everything": each unknown names what it depends on
@@ -104,11 +105,12 @@ def test_model_description_offers_both_interfaces(fmu_dir, name):
 # Model Exchange runs against the co-simulation edition
 # --------------------------------------------------------------------------------------
 
-def both_runs(fmu_dir, name, inputs, outputs, parameters=None, stop=1.0, rtol=1e-10):
+def both_runs(fmu_dir, name, inputs, outputs, parameters=None, stop=1.0, rtol=1e-10, interval=None):
     path = str(Path(fmu_dir) / f"{name}.fmu")
     runs = {}
     for kind in ("CoSimulation", "ModelExchange"):
-        runs[kind] = fmpy.simulate_fmu(path, fmi_type=kind, solver="CVode", stop_time=stop, output_interval=stop / 20,
+        runs[kind] = fmpy.simulate_fmu(path, fmi_type=kind, solver="CVode", stop_time=stop,
+                                       output_interval=interval or stop / 20,
                                        step_size=1e-3, relative_tolerance=rtol, input=inputs, output=outputs,
                                        start_values=parameters or {})
     return runs["CoSimulation"], runs["ModelExchange"]
@@ -154,6 +156,23 @@ def test_me_friction_stop_and_hold(fmu_dir):
     assert cs["phi"][-1] == pytest.approx(exact, rel=1e-6)
 
 
+def test_me_freewheel_matches_co_simulation(fmu_dir):
+    # The rectifier's gaps and stick/slip are events (8 indicators); its co-simulation
+    # edition steps RK4 with located events.  At CVode's rtol 1e-9 both agree within
+    # 2e-6 of the largest value over 0.1 s of engagements and releases (the half-couplings'
+    # speed, which rings at the contacts, 1.6e-5 at one output point); 1e-4 leaves room for
+    # another machine's last bits in the event location and still catches a wrong
+    # derivative or a missed event (which move the result by percents).  The output interval is short:
+    # between output points fmpy's CVode may take at most 500 steps, and the contacts
+    # (2000-5000 rad/s) need many.
+    outputs = ["phi", "w", "half_coupling_speed", "driven_speed", "input_work", "dissipated_energy"]
+    cs, me = both_runs(fmu_dir, "FreewheelRectifier", None, outputs, stop=0.1, rtol=1e-9, interval=1e-3)
+    for out in outputs:
+        scale = max(np.max(np.abs(cs[out])), 1e-3)
+        assert np.max(np.abs(cs[out] - np.interp(cs["time"], me["time"], me[out]))) <= 1e-4 * scale, (
+            out, cs[out][-1], me[out][-1])
+
+
 def test_me_stateless_models_match_co_simulation(fmu_dir):
     t = np.linspace(0.0, 1.0, 11)
     inputs = np.array(list(zip(t, 0.1 * np.sin(3 * t), 40 + t, 0.05 * t, 39 + 2 * t, np.full_like(t, 0.2))),
@@ -197,7 +216,15 @@ def shaft_inputs(r):
     return {"tau": r.uniform(-500, 500), "tau_rate": r.uniform(-1e3, 1e3), "tau_accel": r.uniform(-1e4, 1e4)}
 
 
+def freewheel_states(r):
+    angles = [r.uniform(-0.05, 0.05) for _ in range(4)]
+    speeds = [r.uniform(-3.0, 3.0) for _ in range(4)]
+    return [v for pair in zip(angles, speeds) for v in pair] + [r.uniform(0, 10) for _ in range(3)]
+
+
 POINTS = {
+    "FreewheelRectifier": ({}, lambda r: {"tau": r.uniform(-20, 20), "tau_rate": r.uniform(-100, 100)},
+                           freewheel_states),
     "LeverCoupling": ({"transfer_mode": "kinematic"}, lambda r: {
         "phi1": r.uniform(-3, 3), "w1": r.uniform(-50, 50), "phi2": r.uniform(-3, 3), "w2": r.uniform(-50, 50),
         "misalignment": r.uniform(0.05, 0.35)}, lambda r: []),
@@ -219,6 +246,10 @@ def test_directional_derivatives_are_central_differences(unpacked, name):
         inputs = [v.name for v in md.modelVariables if v.causality == "input"]
         unknowns = [u.variable.name for u in md.derivatives] + [u.variable.name for u in md.outputs]
         declared = [{d.name for d in u.dependencies} for u in list(md.derivatives) + list(md.outputs)]
+        # the freewheel's outputs beyond its port, states and derivatives: by central
+        # differences inside the FMU (model_exchange._central_difference), compared looser
+        analytic_names = set(states) | {u.variable.name for u in md.derivatives} | {"phi", "w", "a"}
+        numerical = {n for n in unknowns if name == "FreewheelRectifier" and n not in analytic_names}
         rng = random.Random(31)
         for _ in range(5):
             x, u = draw_x(rng), draw_u(rng)
@@ -239,7 +270,8 @@ def test_directional_derivatives_are_central_differences(unpacked, name):
                 for j, name_j in enumerate(unknowns):
                     central = (sides[0][j] - sides[1][j]) / (2 * h)
                     scale = max(abs(central), abs(analytic[j]), 1.0)
-                    assert abs(analytic[j] - central) <= 1e-6 * scale, (name_j, known, analytic[j], central)
+                    tolerance = 1e-4 if name_j in numerical else 1e-6
+                    assert abs(analytic[j] - central) <= tolerance * scale, (name_j, known, analytic[j], central)
                     if abs(central) > 1e-9 * scale:
                         # the sparsity finite differences find is declared
                         assert known in declared[j], (name_j, known)

@@ -12,14 +12,18 @@ import math
 
 from ..physics import catalogue
 from ..physics.freewheel import EVENTS, FREE, STATE, STICK
+from ..physics.me_freewheel import FreewheelME
 from ..physics.parameters import Parameter, ParameterError
-from .base import LeverSlave
 from .declarations import Output
+from .model_exchange import ModelExchangeSlave, StateVariable
 
 _PORT = ("tau",)
+_BODIES = (("half_coupling", "phi2", "w2"), ("driven", "phi3", "w3"), ("torsion_end", "phi4", "w4"))
+_ANGLES = ("half_coupling_angle", "driven_angle", "torsion_end_angle", "phi")
+_SPEEDS = ("half_coupling_speed", "driven_speed", "torsion_end_speed", "w")
 
 
-class FreewheelRectifier(LeverSlave):
+class FreewheelRectifier(ModelExchangeSlave):
     DESCRIPTION = ("Axial freewheel vibration rectifier (rocker phi0 (1 - cos(omega t)), ball ramps with gap z1, "
                    "friction discs with stick/slip, torsion shaft with gap z2, gear mesh with gap z3, flywheel J5)")
     PARAMETERS = catalogue.FREEWHEEL
@@ -70,8 +74,38 @@ class FreewheelRectifier(LeverSlave):
         Output("events", "1", "events located since the start (gap edges, stick/slip changes)"),
     )
 
+    # Model Exchange: the state vector (``freewheel.STATE``) is the bodies' angles and speeds
+    # and the energies, all outputs already; the modes (discs, flywheel) are discrete states.
+    ME_STATES = tuple(
+        s for body, phi, w in _BODIES for s in (
+            StateVariable(f"{body}_angle", f"{body}_speed", "", phi, "rad"),
+            StateVariable(f"{body}_speed", f"{body}_acceleration", "", w, "rad/s"))) + (
+        StateVariable("phi", "w", "", "phi5", "rad"), StateVariable("w", "a", "", "w5", "rad/s"),
+        StateVariable("input_work", "der(input_work)", "", "input_work", "J",
+                      derivative_description="power the rocker puts in, T12*w1"),
+        StateVariable("output_work", "der(output_work)", "", "output_work", "J",
+                      derivative_description="power delivered to the resistance and the port"),
+        StateVariable("dissipated_energy", "der(dissipated_energy)", "", "dissipated_energy", "J",
+                      derivative_description="power dissipated in the discs, balls and dampers"))
+    ME_EVENT_INDICATORS = len(EVENTS)
+    # The outputs beyond the port's: the rocker's follow the time alone, the modes and the
+    # event count change at events only; the rest on the states they are made of (the
+    # torques on every body's motion: the contacts' branches couple them).
+    ME_OUTPUT_DEPENDENCIES = {
+        "rocker_angle": (), "rocker_speed": (), "rocker_acceleration": (),
+        "msm_deflection": ("half_coupling_angle",), "msm_contact": ("half_coupling_angle",),
+        "torsion_twist": ("driven_angle", "torsion_end_angle"), "torsion_contact": ("driven_angle", "torsion_end_angle"),
+        "mesh_deflection": ("torsion_end_angle", "phi"), "mesh_contact": ("torsion_end_angle", "phi"),
+        "disc_slip": (), "flywheel_stuck": (), "events": (),
+        **{name: _ANGLES + _SPEEDS for name in ("rocker_torque", "disc_torque", "disc_capacity", "torsion_torque",
+                                                 "mesh_torque")},
+        "resistance": _ANGLES + _SPEEDS + ("tau",),
+        "kinetic_energy": _SPEEDS, "elastic_energy": _ANGLES,
+    }
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self._me_integrated = False    # Model Exchange: states set since the last event
         self._model = None
         self._y = None
         self._disc = 0
@@ -84,6 +118,34 @@ class FreewheelRectifier(LeverSlave):
     def _reset_state(self):
         self._y, self._disc, self._fly = self._model.start()
         self._events = 0
+
+    def _x(self):
+        return list(self._y)
+
+    def _set_x(self, x):
+        self._y = [float(v) for v in x]
+        self._me_integrated = True
+
+    def _me_physics(self):
+        model = FreewheelME(self._model)
+        model.disc, model.fly = self._disc, self._fly
+        return model
+
+    def _physics_key(self):
+        return self._model
+
+    def _me_output_values(self, model, t, x, u):
+        return self._model.named_outputs(t, x, model.disc, model.fly, u[0], self._events)
+
+    def _modes_from_co_simulation(self):
+        self._me_model.disc, self._me_model.fly = self._disc, self._fly
+
+    def _events_settled(self, t, x, u):
+        # an event the integrator stopped at (not the event iteration of the initialisation)
+        if self._me_integrated:
+            self._events += 1
+        self._me_integrated = False
+        self._disc, self._fly = self._me_model.disc, self._me_model.fly
 
     def _compute_outputs(self):
         values = self._model.named_outputs(self._time, self._y, self._disc, self._fly, self.tau, self._events)

@@ -45,6 +45,10 @@ INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfCont
                "valuesOfContinuousStatesChanged", "nextEventTimeDefined", "nextEventTime")
 
 
+#: an output whose directional derivative is taken by central differences
+_NUMERICAL = "numerical"
+
+
 class StateVariable(NamedTuple):
     """A continuous state of the Model Exchange edition."""
     name: str              #: the variable of the state (an output, or a local declared here)
@@ -66,6 +70,9 @@ class ModelExchangeSlave(LeverSlave):
     #: parameter values (over the defaults) whose models' dependencies together are every
     #: dependency the model can have: the model description's ModelStructure is their union
     ME_STRUCTURE_CASES: Sequence[dict] = ({},)
+    #: the dependencies (FMU names) of outputs that are neither the physics' outputs nor
+    #: state derivatives (a model with more outputs than its physics' ME model names)
+    ME_OUTPUT_DEPENDENCIES: dict = {}
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -107,8 +114,20 @@ class ModelExchangeSlave(LeverSlave):
     def _events_settled(self, t, x, u):
         """After an event update: what the adapter keeps besides the physics (default none)."""
 
+    def _x(self) -> list:
+        """The continuous states, in the order of ``ME_STATES``."""
+        return [float(getattr(self, s.attribute)) for s in self.ME_STATES]
+
+    def _set_x(self, x):
+        for s, value in zip(self.ME_STATES, x):
+            setattr(self, s.attribute, float(value))
+
+    def _me_output_values(self, model, t, x, u) -> dict:
+        """The outputs by name in Model Exchange (default: the physics' model's)."""
+        return dict(zip(model.OUTPUTS, model.outputs(t, x, u)))
+
     # -- the physics' model at the current point ----------------------------------------------------
-    def _model(self):
+    def _me_current(self):
         if self._model_stale or self._build_error is not None:
             raise ValueError(f"the model is not built: {self._build_error or 'parameters changed since'}")
         key = self._physics_key()
@@ -123,9 +142,6 @@ class ModelExchangeSlave(LeverSlave):
             model.initialize(self._time, self._x_physics(), self._u())
         self._events_settled(self._time, self._x_physics(), self._u())
 
-    def _x(self) -> list:
-        return [float(getattr(self, s.attribute)) for s in self.ME_STATES]
-
     def _x_physics(self) -> list:
         x = self._x()
         return [x[self._state_of_physics[name]] for name in self._me_model.STATES]
@@ -134,14 +150,14 @@ class ModelExchangeSlave(LeverSlave):
         return [float(getattr(self, name)) for name in self._me_model.INPUTS]
 
     def _derivatives(self) -> list:
-        model = self._model()
+        model = self._me_current()
         out = [0.0] * len(self.ME_STATES)     # a state the physics does not have stays constant
         for name, value in zip(model.STATES, model.derivatives(self._time, self._x_physics(), self._u())):
             out[self._state_of_physics[name]] = value
         return out
 
     def _indicators(self) -> list:
-        model = self._model()
+        model = self._me_current()
         return self._fold_indicators(model.event_indicators(self._time, self._x_physics(), self._u()))
 
     # -- FMI ------------------------------------------------------------------------------------------
@@ -150,19 +166,19 @@ class ModelExchangeSlave(LeverSlave):
         LeverSlave.exit_initialization_mode.__wrapped__(self)
         if self._me and self._phase == "stepping":
             self._me_model = None      # modes from the inputs the host has set now
-            self._model()
+            self._me_current()
 
     def _refresh(self):
         if not self._me:
             return super()._refresh()
         if self._build_error is not None or self._model_stale:
             return
-        model = self._model()
-        values = model.outputs(self._time, self._x_physics(), self._u())
-        for name, value in zip(model.OUTPUTS, values):
+        model = self._me_current()
+        values = self._me_output_values(model, self._time, self._x_physics(), self._u())
+        for name, value in values.items():
             setattr(self, name, value)
         self._dirty = CLEAN
-        bad = [name for name, value in zip(model.OUTPUTS, values) if not math.isfinite(value)]
+        bad = [name for name, value in values.items() if not math.isfinite(value)]
         if bad:
             self._dirty = ALL
             self._error(f"output(s) {', '.join(bad)} are not finite at t = {self._time!r} s with states "
@@ -195,7 +211,7 @@ class ModelExchangeSlave(LeverSlave):
                 continue
             k, is_derivative = self._me_locals[vr]
             if not is_derivative:
-                values.append(float(getattr(self, self.ME_STATES[k].attribute)))
+                values.append(self._x()[k])
             elif self._phase not in ("initialization", "stepping"):
                 values.append(0.0)       # like the outputs: calculated once the model is initialised
             else:
@@ -206,10 +222,15 @@ class ModelExchangeSlave(LeverSlave):
         return values
 
     def _cs_modes(self):
-        """In co-simulation the physics' mode follows the co-simulation's memoryless law."""
+        """In co-simulation the physics' modes follow the co-simulation edition's."""
         if not self._me:
-            self._model()
-            self._start_modes()
+            self._me_current()
+            self._modes_from_co_simulation()
+
+    def _modes_from_co_simulation(self):
+        """Default: the modes the physics' model takes from the state (a load's memoryless
+        law, an engine's segment)."""
+        self._start_modes()
 
     # -- the channel ------------------------------------------------------------------------------
     def _split(self, vrs):
@@ -274,20 +295,18 @@ class ModelExchangeSlave(LeverSlave):
             self._error(f"fmi2SetContinuousStates: state(s) {', '.join(bad)} not finite ({list(values)!r}); "
                         f"the states stay {self._x()!r}")
             return
-        for s, value in zip(self.ME_STATES, values):
-            setattr(self, s.attribute, float(value))
+        self._set_x(values)
         self._dirty = ALL
 
     def _new_discrete_states(self):
-        model = self._model()
+        model = self._me_current()
         t, u = self._time, self._u()
         before = self._x()
         after = model.event_update(t, self._x_physics(), u)
         x = list(before)
         for name, value in zip(model.STATES, after):
             x[self._state_of_physics[name]] = value
-        for s, value in zip(self.ME_STATES, x):
-            setattr(self, s.attribute, float(value))
+        self._set_x(x)
         self._events_settled(t, self._x_physics(), u)
         upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
         self._event_info = [0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
@@ -307,6 +326,11 @@ class ModelExchangeSlave(LeverSlave):
         for s in self.ME_STATES:
             if s.derivative == var.name:
                 return der(s.physics) if s.physics in model.STATES else ""
+        for s in self.ME_STATES:
+            if s.name == var.name:
+                return ("state", s.physics)
+        if var.name in self._declared and var.causality.name == "output":
+            return _NUMERICAL
         return None
 
     def _known_key(self, vr):
@@ -324,7 +348,7 @@ class ModelExchangeSlave(LeverSlave):
         return None
 
     def _directional(self, unknowns, seeds):
-        model = self._model()
+        model = self._me_current()
         self._cs_modes()
         knowns = {}
         for vr, seed in seeds.items():
@@ -345,8 +369,34 @@ class ModelExchangeSlave(LeverSlave):
                             f"derivative of {type(self).__name__}")
                 return _nan_values(self, unknowns)
             keys.append(key)
-        partials = model.partials(self._time, self._x_physics(), self._u())
-        return [sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()) for key in keys]
+        t, x, u = self._time, self._x_physics(), self._u()
+        partials = model.partials(t, x, u)
+        out = []
+        numerical = None
+        for key in keys:
+            if isinstance(key, tuple):           # an output that is a state: itself
+                out.append(knowns.get(key[1], 0.0) if self._me else 0.0)
+            elif key == _NUMERICAL:
+                if numerical is None:
+                    numerical = self._central_difference(model, t, x, u, knowns)
+                out.append(numerical[self.vars[unknowns[len(out)]].name])
+            else:
+                out.append(sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()))
+        return out
+
+    def _central_difference(self, model, t, x, u, knowns) -> dict:
+        """The outputs' derivative along the seed by central differences of
+        ``_me_output_values``: for the outputs that the physics' model has no partials of
+        (a freewheel's torques and energies; documented as numerical)."""
+        scale = max([1.0] + [abs(v) for v in x] + [abs(v) for v in u])
+        size = max([abs(v) for v in knowns.values()] + [1e-300])
+        h = 1e-6 * scale / size
+        sides = []
+        for sign in (1.0, -1.0):
+            xs = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.STATES, x)]
+            us = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.INPUTS, u)]
+            sides.append(self._me_output_values(model, t, xs, us))
+        return {name: (sides[0][name] - sides[1][name]) / (2.0 * h) for name in sides[0]}
 
     # -- model description ---------------------------------------------------------------------------
     def _structure(self) -> dict:
@@ -370,6 +420,14 @@ class ModelExchangeSlave(LeverSlave):
         finally:
             self.__dict__.clear()
             self.__dict__.update(saved)
+        for state in self.ME_STATES:     # an output that is a state is that state
+            union.setdefault(state.name, {state.name})
+        for name, wrt in self.ME_OUTPUT_DEPENDENCIES.items():
+            union.setdefault(name, set()).update(wrt)
+        missing = [o.name for o in self.OUTPUTS if o.name not in union]
+        if missing:
+            raise ValueError(f"{type(self).__name__}: the dependencies of output(s) {', '.join(missing)} are "
+                             "not declared (ME_OUTPUT_DEPENDENCIES)")
         return union
 
     def to_xml(self, model_options=None) -> Element:
