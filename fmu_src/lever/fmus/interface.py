@@ -71,7 +71,7 @@ def documentation_html(model, requirements: list[str]) -> str:
     sections = [
         f"<h1>{name}</h1>",
         f"<p>{_e(model.DESCRIPTION)}</p>",
-        "<p>FMI 2.0 co-simulation FMU of the lever-cosim project (version "
+        "<p>FMI 2.0 FMU (co-simulation and model exchange) of the lever-cosim project (version "
         f"{_e(model.version)}, license {_e(model.license)}). Default experiment: {experiment.start_time} s to "
         f"{experiment.stop_time} s, communication step {experiment.step_size} s.</p>",
         "<h2>Equations</h2>",
@@ -96,7 +96,9 @@ def documentation_html(model, requirements: list[str]) -> str:
         "<li>get/set and serialise the FMU state: yes (the complete state; a restored state continues "
         "bit-identically)</li>"
         "<li>input derivatives: no (shafts take the torque's rate as the input <code>tau_rate</code>)</li>"
-        "<li>several instances per process: yes</li></ul>",
+        "<li>several instances per process: yes</li>"
+        "<li>model exchange: yes, the same file (get/set of the FMU state in co-simulation only)</li>"
+        "<li>directional derivatives: yes, in both interfaces, from the model's analytic partials</li></ul>",
         "<h2>Host requirements</h2>",
         "<p>The model runs in Python inside the importer (pythonfmu 0.7; its Python part is in "
         f"<code>resources/pythonfmu</code>), {packages}. A Python host's own interpreter is used. In any "
