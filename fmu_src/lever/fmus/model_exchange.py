@@ -212,8 +212,8 @@ class ModelExchangeSlave(LeverSlave):
             k, is_derivative = self._me_locals[vr]
             if not is_derivative:
                 values.append(self._x()[k])
-            elif self._phase not in ("initialization", "stepping"):
-                values.append(0.0)       # like the outputs: calculated once the model is initialised
+            elif self._phase == "instantiated" or self._model_stale or self._build_error is not None:
+                values.append(0.0)       # like the outputs: calculated once the model is built
             else:
                 if derivatives is None:
                     self._cs_modes()
