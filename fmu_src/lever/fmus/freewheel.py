@@ -103,9 +103,10 @@ class FreewheelRectifier(ModelExchangeSlave):
         "kinetic_energy": _SPEEDS, "elastic_energy": _ANGLES,
     }
 
+    _me_integrated = False    # Model Exchange: states set since the last event
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._me_integrated = False    # Model Exchange: states set since the last event
         self._model = None
         self._y = None
         self._disc = 0

@@ -10,6 +10,10 @@ untouched, and the entry refuses such references from a host, so only it uses th
 reference there is ``CHANNEL + (kind << 20) + index``; every ME call is one such get or
 set, and errors are logged like any other (fmi2Error, the instance usable).
 
+Directional derivatives are the physics' partials; an output the physics' model has no
+partials of (the freewheel's torques and energies) takes central differences of its value
+instead (``_central_difference``), which docs/hosts.md says.
+
 A model declares its continuous states (``StateVariable``: an output of the FMU or a local
 variable declared here, and the variable holding its derivative), the number of event
 indicators, and the parameter sets whose models together show every dependency the model
@@ -49,6 +53,12 @@ INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfCont
 _NUMERICAL = "numerical"
 
 
+def _read_by_get_real():
+    """pythonfmu's getter of a local variable, which it never calls (``get_real`` reads the
+    locals): one function for all instead of a closure per instance."""
+    raise NotImplementedError("read through get_real")
+
+
 class StateVariable(NamedTuple):
     """A continuous state of the Model Exchange edition."""
     name: str              #: the variable of the state (an output, or a local declared here)
@@ -74,26 +84,43 @@ class ModelExchangeSlave(LeverSlave):
     #: state derivatives (a model with more outputs than its physics' ME model names)
     ME_OUTPUT_DEPENDENCIES: dict = {}
 
+    # Per instance only what changes (rebound, never mutated in place); the layout, the
+    # same for every instance of a class, is the class's (``_layout``).  A host that
+    # instantiates and frees in a loop leaves each freed Python slave to the cyclic
+    # collector: the fewer objects one holds, the less waits for it.
+    _me = False               # the native entry instantiated the Model Exchange interface
+    _me_model = None          # the physics' model, made for the physics built
+    _me_source = None
+    _seeds: dict = {}         # known value reference -> seed of a directional derivative
+    _event_info = (0.0,) * len(INFO_FIELDS)
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._me = False          # the native entry instantiated the Model Exchange interface
-        self._me_model = None     # the physics' model, made for the physics built
-        self._me_source = None
-        self._seeds = {}          # known value reference -> seed of a directional derivative
-        self._event_info = [0.0] * len(INFO_FIELDS)
         outputs = {o.name for o in self.OUTPUTS}
-        self._me_locals = {}      # value reference -> (state index, True for the derivative)
+        for s in self.ME_STATES:
+            for name, text in ((s.name, s.description), (s.derivative, s.derivative_description)):
+                if name not in outputs:
+                    self.register_variable(Real(name, causality=Fmi2Causality.local,
+                                                variability=Fmi2Variability.continuous,
+                                                initial=Fmi2Initial.calculated, description=text,
+                                                getter=_read_by_get_real), nested=False)
+        if "_me_locals" not in type(self).__dict__:
+            self._layout()
+
+    def _layout(self):
+        cls = type(self)
+        #: value reference -> (state index, True for the derivative)
+        cls._me_locals = {}
+        cls._vr_of = {v.name: vr for vr, v in self.vars.items()}
         for k, s in enumerate(self.ME_STATES):
-            for name, is_derivative, text in ((s.name, False, s.description),
-                                              (s.derivative, True, s.derivative_description)):
-                if name in outputs:
-                    continue
-                self.register_variable(Real(name, causality=Fmi2Causality.local, variability=Fmi2Variability.continuous,
-                                            initial=Fmi2Initial.calculated, description=text), nested=False)
-                self._me_locals[len(self.vars) - 1] = (k, is_derivative)
-        self._vr_of = {v.name: vr for vr, v in self.vars.items()}
-        self._input_names = tuple(p.name for p in self.INPUTS)
-        self._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
+            for name, is_derivative in ((s.name, False), (s.derivative, True)):
+                if self.vars[cls._vr_of[name]].causality == Fmi2Causality.local:
+                    cls._me_locals[cls._vr_of[name]] = (k, is_derivative)
+        # The locals are registered last and the channel lies above them: one comparison
+        # tells a co-simulation master's read (all below) from anything else.
+        cls._special_from = min(cls._me_locals) if cls._me_locals else CHANNEL
+        cls._input_names = tuple(p.name for p in self.INPUTS)
+        cls._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
 
     # -- what each model provides ----------------------------------------------------------------
     def _me_physics(self):
@@ -190,9 +217,9 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        if self._is_channel(vrs):
-            return self._channel_get(vrs)
-        if self._me_locals and any(vr in self._me_locals for vr in vrs):
+        if vrs and max(vrs) >= self._special_from:
+            if self._is_channel(vrs):
+                return self._channel_get(vrs)
             return self._get_with_locals(vrs)
         return LeverSlave.get_real.__wrapped__(self, vrs)
 
@@ -309,8 +336,8 @@ class ModelExchangeSlave(LeverSlave):
         self._set_x(x)
         self._events_settled(t, self._x_physics(), u)
         upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
-        self._event_info = [0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
-                            float(upcoming) if upcoming is not None else 0.0]
+        self._event_info = (0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
+                            float(upcoming) if upcoming is not None else 0.0)
         self._dirty = ALL
 
     # -- directional derivatives -------------------------------------------------------------------
