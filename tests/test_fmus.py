@@ -16,7 +16,10 @@ from lever.physics import catalogue
 
 DEG = math.pi / 180.0
 FMI2_ERROR = 3
-DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12", "order_share", "narrowband_share"}
+DIMENSIONLESS = {"support_deformation", "hinge_deformation", "U12", "order_share", "narrowband_share",
+                 # the rectifier's friction coefficients, contact and slip states, event count
+                 "disc_friction", "ball_friction", "msm_contact", "torsion_contact", "mesh_contact", "disc_slip",
+                 "flywheel_stuck", "events"}
 COUPLING_INPUTS = {"phi1", "w1", "phi2", "w2", "misalignment"}
 
 
