@@ -46,16 +46,6 @@ STAGING = HERE / "tmp"
 #: the model runs on the standard library alone (docs/fmus.md), so a bare CPython suffices.
 RUNTIME_PACKAGES: tuple[str, ...] = ()
 
-#: model identifier -> module of lever.fmus that defines the class of that name
-MODELS = {
-    "LeverCoupling": "coupling",
-    "EngineShaft": "shafts",
-    "LoadShaft": "shafts",
-    "FreewheelRectifier": "freewheel",
-    "MisalignmentSource": "sources",
-}
-
-
 # pythonfmu 0.7 executes this file again at every fmi2Instantiate and then releases one
 # reference to the module's dict that it never took (PyModule_GetDict is a borrowed
 # reference).  Each execution therefore takes one reference of its own, so the dict
@@ -71,6 +61,11 @@ def _load(path: Path, name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+#: model identifier -> module of lever.fmus that defines the class of that name, from the
+#: list of our FMUs (lever/fmus/registry.py, read by its path: the package is not staged yet)
+MODELS = {m.name: m.module for m in _load(SOURCE / "fmus" / "registry.py", "_lever_fmu_registry").MODELS}
 
 
 def runtime_requirements() -> list[str]:

@@ -346,7 +346,8 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
 
     known = crosscheck.all_names()
     if name not in known:
-        raise InputError(f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
+        raise InputError(crosscheck.why_no_reference(name)
+                         or f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
     if tolerance not in judge.TOLERANCES:
         raise InputError(f"tolerance {tolerance!r}: one of {', '.join(judge.TOLERANCES)}")
     _step_problem(step)

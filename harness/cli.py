@@ -646,7 +646,8 @@ def _reference_names(names) -> list[str]:
     known = crosscheck.all_names()
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise UserError(f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
+        said = "; ".join(filter(None, map(crosscheck.why_no_reference, unknown)))
+        raise UserError(said or f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
     return list(names) or known
 
 

@@ -14,11 +14,11 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
 from harness.engine.component import add_log_listener, log_callbacks
+from lever.fmus.registry import NAMES as FMUS
 
 _said: list[str] = []
 add_log_listener(lambda name, status, category, text: _said.append(text) if status >= 2 else None)
 
-FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource", "FreewheelRectifier")
 STEPS = (1e-300, 1e-100, 1e-12, 1e-3, 1e4, 1e9, 1e30, 1e300)
 #: where the start matters too (the substeps' resolution of time)
 STARTS = (0.0, 1e6)

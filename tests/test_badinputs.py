@@ -1,4 +1,4 @@
-"""The bad-input corpus (harness/badinputs.py) through fmpy's FMU2Slave on the built FMUs:
+"""The bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave on the built FMUs:
 every case is refused with fmi2Error/fmi2Discard and a message naming the variable and
 what is allowed, nothing is fatal, and every instance is freed cleanly."""
 from __future__ import annotations
@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from harness.formats import badinputs
+from lever.fmus.registry import NAMES as FMU_NAMES
 
 CORPUS = badinputs.corpus()
 
@@ -19,10 +20,17 @@ def test_bad_input_is_refused_with_a_message(fmu_dir, case):
 
 def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     categories = {(c.fmu, c.category) for c in CORPUS}
-    for fmu in badinputs.DECLARED:
-        for category in ("non-finite parameter", "non-finite input", "set after initialisation",
-                         "out-of-order call", "bad step", "bad state", "malformed table", "set on an output",
-                         "set in a wrong state", "wrong type or reference"):
+    assert set(badinputs.DECLARED) == set(FMU_NAMES)
+    for fmu, (parameters, inputs) in badinputs.DECLARED.items():
+        expected = {"set after initialisation", "out-of-order call", "bad step", "bad state", "set on an output",
+                    "wrong type or reference"}
+        if any(p.kind == "real" for p in parameters):
+            expected.add("non-finite parameter")
+        if any(p.kind == "string" and not p.choices for p in parameters):     # a table
+            expected.add("malformed table")
+        if inputs:
+            expected |= {"non-finite input", "set in a wrong state"}
+        for category in expected:
             assert (fmu, category) in categories, (fmu, category)
     for fmu in ("EngineShaft", "LoadShaft"):
         assert (fmu, "non-positive inertia") in categories
@@ -32,10 +40,11 @@ def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     # every kind of damage to a serialized state, for every FMU
     for fmu in badinputs.DECLARED:
         edits = {c.action[2][0] for c in CORPUS if c.fmu == fmu and c.action[:2] == ("call", "edited-state")}
-        # every generic edit, and for the engine the lagged torque's own
+        # every generic edit its state has something for, and for the engine the lagged torque's own
         assert edits - set(badinputs._STATE_EDITS) == ({"internal-empty"} if fmu == "EngineShaft" else set()), fmu
-        assert set(badinputs._STATE_EDITS) <= edits, fmu
-    assert len({c.name for c in CORPUS}) == len(CORPUS) > 340
+        assert set(badinputs.state_edits(fmu)) <= edits, fmu
+    assert len(badinputs.state_edits("MisalignmentSource")) == len(badinputs._STATE_EDITS) - 3   # no input or real
+    assert len({c.name for c in CORPUS}) == len(CORPUS) > 800
 
 
 def test_the_summary_counts_cases_and_names_failures(fmu_dir):

@@ -31,10 +31,10 @@ from harness.formats import ssp
 from harness.studies import hosts
 from harness.cli import main as cli
 from harness.engine.component import Component
+from lever.fmus.registry import NAMES as FMU_NAMES
 from lever.physics import catalogue
 
 REPO = Path(__file__).resolve().parents[1]
-FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 
 
@@ -192,7 +192,7 @@ def _physics_alone(fmu: str, parameters: dict, times: np.ndarray) -> dict[str, n
     return {"coupling.tau1": np.full_like(times, r.tau1), "coupling.tau2": np.full_like(times, r.tau2)}
 
 
-@pytest.mark.parametrize("fmu", FMU_NAMES)
+@pytest.mark.parametrize("fmu", list(ALONE))
 def test_each_fmu_alone_in_libcosim_matches_our_harness_and_the_physics(fmu, fmu_dir):
     parameters, record = ALONE[fmu]
     spec = _alone(fmu, parameters, record)
@@ -393,7 +393,7 @@ def _without_build_python(unzipped: Path) -> None:
                            if not line.startswith("python_")))
 
 
-@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+@pytest.mark.parametrize("fmu", list(hosts.C_IMPORTER_CASES))
 def test_a_c_host_in_a_bare_environment_runs_each_fmu(fmu, fmu_dir, c_host, tmp_path):
     """env -i PATH=/usr/bin:/bin, no LD_PRELOAD: the FMU loads the Python it was built with."""
     unzipped = _unzipped(fmu_dir, fmu, tmp_path / fmu)
@@ -419,7 +419,7 @@ def test_a_c_host_calling_from_several_threads_gets_the_same_numbers(threads, fm
 
 
 @pytest.mark.skipif(not SYSTEM_PYTHON.exists(), reason="needs the system's python3")
-@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+@pytest.mark.parametrize("fmu", list(hosts.C_IMPORTER_CASES))
 def test_a_c_host_on_a_bare_system_cpython(fmu, fmu_dir, c_host, tmp_path):
     """Without the build's Python the FMU asks python3 on PATH: /usr/bin/python3, with no
     third-party package (the model code runs on the standard library alone)."""
@@ -437,7 +437,7 @@ OLDEST_PYTHON = sorted((Path(os.environ.get("PYENV_ROOT") or Path.home() / ".pye
 
 
 @pytest.mark.skipif(not OLDEST_PYTHON, reason="no CPython 3.9 shared library on this machine")
-@pytest.mark.parametrize("fmu", FMU_NAMES + ("MisalignmentSource",))
+@pytest.mark.parametrize("fmu", list(hosts.C_IMPORTER_CASES))
 def test_a_c_host_on_the_oldest_supported_cpython(fmu, fmu_dir, c_host, tmp_path):
     """LEVER_FMU_LIBPYTHON naming a CPython 3.9 library: the model code and pythonfmu's Python
     part run on it, with the numbers of this process's Python."""

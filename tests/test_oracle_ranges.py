@@ -25,6 +25,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
 from harness.engine import component
+from lever.fmus.registry import NAMES as FMU_NAMES
 
 pytestmark = pytest.mark.oracle
 
@@ -227,7 +228,7 @@ def test_each_bound_is_enforced_by_the_fmu(fmu_dir, fmu, name, label, value, ok,
 def test_the_table_covers_every_declared_real_and_integer_parameter(fmu_dir):
     """A parameter the FMUs declare but the table misses would escape the check."""
     typed = {(f, n) for f, n, *_ in RANGES} | {(f, n) for f, n, *_ in INTEGER_RANGES}
-    for fmu in ("LeverCoupling", "EngineShaft", "LoadShaft", "FreewheelRectifier"):
+    for fmu in FMU_NAMES:
         md = fmpy.read_model_description(str(fmu_dir / f"{fmu}.fmu"))
         declared = {(fmu, v.name) for v in md.modelVariables
                     if v.causality == "parameter" and v.type in ("Real", "Integer")}
@@ -238,7 +239,7 @@ def _declared_bounds(fmu_dir):
     """(FMU, variable, label, value, accepted?): each Real parameter's and input's declared
     min and max (accepted: FMI 2.0's bounds are inclusive) and the double just outside."""
     out = []
-    for fmu in ("LeverCoupling", "EngineShaft", "LoadShaft", "FreewheelRectifier", "MisalignmentSource"):
+    for fmu in FMU_NAMES:
         md = fmpy.read_model_description(str(fmu_dir / f"{fmu}.fmu"))
         for v in md.modelVariables:
             if v.type != "Real" or v.causality not in ("parameter", "input"):

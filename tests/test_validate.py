@@ -124,10 +124,30 @@ def test_reference_files_are_in_the_cross_check_layout():
         opt = read_ref_opt_file(str(p["opt"]))
         ref = read_csv(str(p["ref"]))
         assert ref.dtype.names[0] == "time" and ref["time"][0] == opt["StartTime"] and ref["time"][-1] == opt["StopTime"]
-        assert p["in"].exists() == (name in crosscheck.FMU_CASES)
+        driven = name in crosscheck.FMU_CASES and crosscheck.FMU_CASES[name].inputs is not None
+        assert p["in"].exists() == driven
         assert p["ref"].stat().st_size < 400_000      # small enough to commit (the rectifier: 34 signals)
-        if name in crosscheck.FMU_CASES:
+        if driven:
             assert set(read_csv(str(p["in"])).dtype.names) > {"time"}
+
+
+def test_every_fmu_has_a_stand_alone_reference_or_says_why_not():
+    """Each FMU of the registry: a case and its committed traces, or the reason it has none;
+    no case of an FMU the registry does not have."""
+    from lever.fmus import registry
+
+    for model in registry.MODELS:
+        if not model.no_reference:
+            assert crosscheck.read(model.name).kind == "fmu", model.name
+    # a case written for a name the registry does not have, or says has none, is never run
+    assert set(crosscheck._CASES) == set(crosscheck.FMU_CASES)
+
+
+def test_validating_an_fmu_without_a_stand_alone_reference_says_why_and_what_instead():
+    result = CliRunner().invoke(main, ["validate", "FreewheelRectifier"])
+    assert result.exit_code == 2
+    assert "FreewheelRectifier has no stand-alone reference" in result.output
+    assert "lever validate freewheel_rectifier" in result.output
 
 
 def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monkeypatch):

@@ -15,9 +15,10 @@ communication points off by more than rounding, and steps too costly to take (a 
 a tiny ``max_substep``).  The importing process - the one running
 the corpus - survives all of it.
 
-Cases for the declared parameters and inputs are generated from the catalogue (every
-real: NaN, +inf, -inf and the nearest values outside its range; every fixed parameter:
-a change after initialisation), the rest are written out by hand.
+Cases for the declared parameters and inputs are generated from the adapters of every
+FMU of ``lever.fmus.registry`` (every real: NaN, +inf, -inf and the nearest values
+outside its range; every fixed parameter: a change after initialisation), the rest are
+written out by hand.
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lever.physics import catalogue
+from lever.fmus import registry
 from lever.physics.parameters import Parameter
 
 from harness.paths import FMUS
@@ -34,18 +35,18 @@ from harness.paths import FMUS
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = range(5)
 REFUSED = (FMI2_DISCARD, FMI2_ERROR)
 
-#: FMU -> (parameters, inputs), as the adapters declare them
-DECLARED = {
-    "LeverCoupling": (catalogue.COUPLING, ("phi1", "w1", "phi2", "w2", "misalignment")),
-    "EngineShaft": (catalogue.ENGINE, ("tau", "tau_rate", "tau_accel")),
-    "LoadShaft": (catalogue.LOAD, ("tau", "tau_rate", "tau_accel")),
-}
+#: FMU -> its adapter class, for every FMU of the registry
+_ADAPTERS = {m.name: m.adapter() for m in registry.MODELS}
+#: FMU -> (parameters, names of its inputs), as the adapters declare them
+DECLARED = {fmu: (tuple(cls.PARAMETERS), tuple(p.name for p in cls.INPUTS)) for fmu, cls in _ADAPTERS.items()}
 PHASES = ("instantiated", "initialization", "stepping")
 DEG = math.pi / 180.0
 
 #: Well-formed values of the table parameters (for changing them after initialisation).
-_GOOD_TABLES = {"elastic_table": "0.1:10; 0.2:30", "characteristic": "0:600; 100:0", "fourier": "100; 1:2",
-                "table": "0:100; 1:110"}
+_GOOD_TABLES = {("LeverCoupling", "elastic_table"): "0.1:10; 0.2:30",
+                ("EngineShaft", "characteristic"): "0:600; 100:0",
+                ("LoadShaft", "fourier"): "100; 1:2", ("LoadShaft", "table"): "0:100; 1:110",
+                ("MisalignmentSource", "table"): "0:0.2; 1:0.3"}
 
 
 @dataclass(frozen=True)
@@ -78,16 +79,8 @@ class Case:
 
 
 def _declared(fmu: str, name: str) -> Parameter:
-    parameters, inputs = DECLARED[fmu]
-    by_name = {p.name: p for p in parameters}
-    if name in by_name:
-        return by_name[name]
-    from lever.fmus.coupling import LeverCoupling
-    from lever.fmus.shafts import EngineShaft
-    cls = {"LeverCoupling": LeverCoupling, "EngineShaft": EngineShaft}.get(fmu)
-    if cls is None:
-        from lever.fmus.shafts import LoadShaft as cls
-    return {p.name: p for p in cls.INPUTS}[name]
+    cls = _ADAPTERS[fmu]
+    return {p.name: p for p in (*cls.PARAMETERS, *cls.INPUTS)}[name]
 
 
 def _outside(p: Parameter) -> list[tuple[str, float]]:
@@ -146,7 +139,7 @@ def _generated() -> list[Case]:
             elif p.choices:
                 good = next(c for c in p.choices if c != p.default)
             else:
-                good = _GOOD_TABLES[p.name]
+                good = _GOOD_TABLES[fmu, p.name]
             assert p.problem(good) is None, (p.name, good)
             cases.append(Case(fmu, "set after initialisation", f"{p.name} changed after initialisation", "stepping",
                               ("set", p.name, good), (f"'{p.name}'", "fixed", "after initialisation")))
@@ -184,6 +177,12 @@ def _by_hand() -> list[Case]:
     for fmu, name, text, fragments, setup in _TABLES:
         cases.append(Case(fmu, "malformed table", f"{name} = {text!r}", "instantiated", ("set", name, text),
                           (f"'{name}'",) + fragments, setup=setup))
+    # The source's table is read when the model is built (its angles judged against the
+    # coupling's misalignment range): refused at the end of initialisation.
+    for text, fragments in (("0:0.1", ("at least 2",)), ("0:0.1; 0:0.2", ("strictly increasing",)),
+                            ("0:0.1; 1:2", ("the angle at t = 1 s", "outside"))):
+        cases.append(Case("MisalignmentSource", "malformed table", f"table = {text!r}", "instantiated",
+                          ("set", "table", text), ("'table'",) + fragments, refused_by="exit"))
     # Values that are each in range but do not fit together: refused when the model is built.
     cases += [
         Case("LeverCoupling", "misalignment out of range", "kinematic alpha + support tilt >= 45 deg",
@@ -282,7 +281,7 @@ def _by_hand() -> list[Case]:
         ]
         cases += [Case(fmu, "bad state", f"fmi2SetFMUstate of its own state, {label}", "stepping",
                        ("call", "edited-state", (edit,)), ("FMUstate",) + fragments)
-                  for edit, (label, fragments) in _STATE_EDITS.items()]
+                  for edit, (label, fragments) in _STATE_EDITS.items() if edit in state_edits(fmu)]
         cases += _boundary_cases(fmu)
     return cases
 
@@ -309,6 +308,15 @@ _STATE_EDITS = {
     "frame-state": ("whose native header says terminated over a stepping model", ("disagree",)),
     "frame-time-bit": ("with one bit of the native header's time flipped", ("disagree",)),
 }
+
+
+def state_edits(fmu: str) -> tuple[str, ...]:
+    """The edits of ``_STATE_EDITS`` that ``fmu``'s state has something for (an input, a
+    real parameter)."""
+    parameters, inputs = DECLARED[fmu]
+    needs = {"nan-input": bool(inputs), "parameter-range": any(p.kind == "real" for p in parameters),
+             "parameter-type": any(p.kind == "real" for p in parameters)}
+    return tuple(edit for edit in _STATE_EDITS if needs.get(edit, True))
 
 
 #: The native entry's frame around the model's serialized state (build/shim: magic[8]
@@ -362,7 +370,7 @@ def _edited_model_state(data: bytes, edit: str, fmu: str) -> bytes:
     else:
         variables = state["variables"]
         parameters, inputs = DECLARED[fmu]
-        first_real_parameter = next(p.name for p in parameters if p.kind == "real")
+        first_real_parameter = next((p.name for p in parameters if p.kind == "real"), None)
         if edit == "format":
             header["format"] = 99
         elif edit == "model":
@@ -399,6 +407,8 @@ def _boundary_cases(fmu: str) -> list[Case]:
         for phase, value in (("stepping", 1.5), ("initialization", math.nan)):
             cases.append(Case(fmu, "set on an output", f"fmi2SetReal on output {name} = {value} ({phase})", phase,
                               ("set", name, value), (f"'{name}'", "cannot be set", "output")))
+    if not inputs:
+        return cases + [_unknown_reference(fmu)]
     first_input = inputs[0]
     cases += [
         Case(fmu, "set on an output", f"one call setting input {first_input} and output {outputs[0]}", "stepping",
@@ -410,18 +420,18 @@ def _boundary_cases(fmu: str) -> list[Case]:
              ("call", "set-as", ("setInteger", first_input, 1)), (f"'{first_input}'", "Real variable")),
         Case(fmu, "wrong type or reference", f"fmi2SetBoolean on the Real input {first_input}", "stepping",
              ("call", "set-as", ("setBoolean", first_input, True)), (f"'{first_input}'", "Real variable")),
-        Case(fmu, "wrong type or reference", "fmi2SetReal of an unknown value reference", "stepping",
-             ("call", "set-unknown", ()), ("value reference", "no variable")),
+        _unknown_reference(fmu),
     ]
     return cases
 
 
+def _unknown_reference(fmu: str) -> Case:
+    return Case(fmu, "wrong type or reference", "fmi2SetReal of an unknown value reference", "stepping",
+                ("call", "set-unknown", ()), ("value reference", "no variable"))
+
+
 #: FMU -> its outputs (as the adapters declare them)
-_OUTPUTS = {
-    "LeverCoupling": ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"),
-    "EngineShaft": ("phi", "w", "a", "engine_torque", "engine_work"),
-    "LoadShaft": ("phi", "w", "a", "load_torque", "load_work"),
-}
+_OUTPUTS = {fmu: tuple(o.name for o in cls.OUTPUTS) for fmu, cls in _ADAPTERS.items()}
 
 
 def corpus() -> list[Case]:

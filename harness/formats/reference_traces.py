@@ -1,6 +1,6 @@
 """Reference traces in the FMI cross-check layout (``resources/reference/<NAME>/``):
 
-* ``<NAME>_in.csv``  the inputs that drive an FMU stand-alone (FMUs only),
+* ``<NAME>_in.csv``  the inputs that drive an FMU stand-alone (FMUs with inputs only),
 * ``<NAME>_ref.csv`` the outputs it must produce,
 * ``<NAME>_ref.opt`` ``StepSize, StartTime, StopTime, RelTol`` (one ``key,value`` per line).
 
@@ -11,15 +11,16 @@ with 9 significant digits.  A row repeated at the same time is a discontinuity o
 Every trace is computed by the project from the physics (``lever.physics``) and the
 monolithic reference solver (``harness.judges.monolithic``), never by running the FMU under test:
 
-* an FMU case drives the FMU with analytic input signals; its reference is the exact
+* an FMU case (``FMU_CASES``: each FMU of ``lever.fmus.registry`` that has one) runs the
+  FMU alone, with its defaults, driven by analytic input signals; its reference is the exact
   response: a shaft's motion integrated by scipy (DOP853, rtol = atol = 1e-10) under the
-  continuous torque, the coupling's algebraic outputs.  An output that depends directly on
-  an input (the coupling's, a shaft's acceleration ``a``; the model descriptions declare
-  it) is taken with the input the FMU holds when the output is read.  That is the
-  cross-check's sampling, as fmpy's ``simulate_fmu`` does it: set the inputs at ``t_k``,
-  step to ``t_k+1``, read the outputs - so the reference at ``t_k+1`` sees the inputs of
-  ``t_k`` (an importer that sets the next inputs before it reads gets the coupling's
-  outputs one step early: within the ``lever`` tolerance's horizontal step, see
+  continuous torque, the coupling's algebraic outputs, the misalignment source's time table.
+  An output that depends directly on an input (the coupling's, a shaft's acceleration ``a``;
+  the model descriptions declare it) is taken with the input the FMU holds when the output
+  is read.  That is the cross-check's sampling, as fmpy's ``simulate_fmu`` does it: set the
+  inputs at ``t_k``, step to ``t_k+1``, read the outputs - so the reference at ``t_k+1``
+  sees the inputs of ``t_k`` (an importer that sets the next inputs before it reads gets the
+  coupling's outputs one step early: within the ``lever`` tolerance's horizontal step, see
   ``harness.judges.validation``);
 * a scene's reference is ``harness.judges.monolithic.solve`` of the scene (its recorded signals),
   kept every ``k``-th communication step so that a 10 s scene keeps about 1000 rows.
@@ -36,6 +37,8 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+from lever.fmus import registry
 
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESOURCES, SCENES
@@ -167,8 +170,18 @@ def write(reference: ReferenceTraces, root: Path | None = None) -> list[Path]:
     return written + [p["ref"], p["opt"]]
 
 
+def why_no_reference(name: str) -> str | None:
+    """Why the FMU ``name`` has no stand-alone reference, as the registry says (None: any
+    other name)."""
+    if name in registry.NAMES and registry.model(name).no_reference:
+        return f"{name} has no stand-alone reference: {registry.model(name).no_reference}"
+    return None
+
+
 def read(name: str, root: Path | None = None) -> ReferenceTraces:
     p = paths(name, root)
+    if why_no_reference(name):
+        raise TraceFileError(why_no_reference(name))
     if not p["ref"].exists():
         raise TraceFileError(f"no committed reference for '{name}' ({p['ref']} is missing; "
                              f"`lever reference --update {name}` makes it)")
@@ -199,8 +212,9 @@ class FmuCase:
     stop: float
     step: float
     outputs: tuple[str, ...]
-    #: (t, left=False) -> input columns; at ``events`` they jump (``left``: the value before)
-    inputs: Callable
+    #: (t, left=False) -> input columns; at ``events`` they jump (``left``: the value before);
+    #: None: the FMU has no inputs
+    inputs: Callable | None
     #: times -> exact outputs
     exact: Callable
     events: tuple[float, ...] = ()
@@ -210,9 +224,12 @@ class FmuCase:
         n = int(round((self.stop - self.start) / self.step))
         return self.start + self.step * np.arange(n + 1)
 
-    def input_traces(self) -> Traces:
+    def input_traces(self) -> Traces | None:
         """The inputs at every communication point; at an event two rows at the same
-        time, the left value first (fmpy's ``Input`` applies the right one from there on)."""
+        time, the left value first (fmpy's ``Input`` applies the right one from there on).
+        None for an FMU without inputs (no ``_in.csv``)."""
+        if self.inputs is None:
+            return None
         t = self.grid()
         values = self.inputs(t)
         for e in sorted(self.events, reverse=True):
@@ -315,7 +332,17 @@ def _shaft_exact(kind: str, spec):
     return exact
 
 
-FMU_CASES = {
+# MisalignmentSource: its default table (15 deg held); it has no inputs.
+def _source_exact(t):
+    """A time table's value and rate at ``t`` (the table the source is built with)."""
+    from lever.physics import catalogue
+
+    table = catalogue.misalignment_source_from({})
+    return {"misalignment": np.array([table.value(x) for x in t]),
+            "misalignment_rate": np.array([table.rate(x) for x in t])}
+
+
+_CASES = {
     "LeverCoupling": FmuCase(
         "LeverCoupling", "defaults (KAVZ-685); flanges at about 38 rad/s with a 2 Hz and a 74 rad/s deflection, "
         "misalignment 15 deg stepping to 20 deg at 0.5 s", 1.0, 1e-3,
@@ -331,7 +358,12 @@ FMU_CASES = {
         "components", 1.0, 1e-3,
         ("phi", "w", "a", "load_torque", "load_work"),
         _torque_inputs(_LOAD_TAU), _shaft_exact("load", _LOAD_TAU)),
+    "MisalignmentSource": FmuCase(
+        "MisalignmentSource", "defaults (15 deg held); no inputs: the output is a function of time", 1.0, 1e-3,
+        ("misalignment", "misalignment_rate"), None, _source_exact),
 }
+#: model identifier -> its stand-alone case, for each FMU of the registry that has one
+FMU_CASES = {m.name: _CASES[m.name] for m in registry.MODELS if not m.no_reference}
 
 
 def generate_fmu(name: str) -> ReferenceTraces:
@@ -484,7 +516,8 @@ def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = N
 
     opt = reference.opt
     inputs = reference.inputs
-    signal = np.rec.fromarrays([inputs.times] + list(inputs.signals.values()), names=["time"] + list(inputs.signals))
+    signal = None if inputs is None else np.rec.fromarrays([inputs.times] + list(inputs.signals.values()),
+                                                           names=["time"] + list(inputs.signals))
     outputs = list(reference.outputs.signals)
     how = f"fmpy.simulate_fmu, step {opt.step:g} s, {opt.start:g}...{opt.stop:g} s"
     component = Component(name, fmu_dir / f"{name}.fmu")
