@@ -82,6 +82,7 @@ import numpy as np
 
 from harness.engine import component as harness_component
 from harness.description import scene as scenes
+from harness.description import typed_values
 from harness.description.scene import step_problem
 from harness.paths import CODE, FMUS
 from harness.engine.run import RunResult, recorded_names
@@ -344,7 +345,8 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
         try:
             stage = "initialisation"
             for name, fmu in slaves.items():
-                _set_fmpy_parameters(fmu, setup.variables[name], setup.parameters[name])
+                for param, value in setup.parameters[name].items():
+                    typed_values.set_on(fmu, setup.variables[name][param], value, f"{name}.{param}")
                 fmu.setupExperiment(startTime=e.start, stopTime=e.stop)
                 fmu.enterInitializationMode()
             propagate()
@@ -380,19 +382,6 @@ def _simulate_fmpy_jacobi(setup: _SceneSetup, step: float) -> RunResult:
     traces = {item: table[:, k].copy() for k, item in enumerate(setup.record)}
     return RunResult(scene, "fmpy-jacobi", step, grid[:len(rows)].copy(), traces, wall,
                      {"steps": n_steps}, failure, stage if failure else None)
-
-
-def _set_fmpy_parameters(fmu, variables: dict, parameters: dict):
-    for name, value in parameters.items():
-        var = variables[name]
-        if var.type == "Real":
-            fmu.setReal([var.valueReference], [float(value)])
-        elif var.type in ("Integer", "Enumeration"):
-            fmu.setInteger([var.valueReference], [int(value)])
-        elif var.type == "Boolean":
-            fmu.setBoolean([var.valueReference], [bool(value)])
-        elif var.type == "String":
-            fmu.setString([var.valueReference], [str(value)])
 
 
 # -- fmpy-ssp ---------------------------------------------------------------------------------
@@ -618,16 +607,11 @@ def _run_libcosim(setup: _SceneSetup, step: float, peer: str, tolerance: float) 
         stage = "initialisation"
         for name, values in ({} if from_file else setup.parameters).items():
             for param, value in values.items():
-                var, i = setup.variables[name][param], index[name]
-                if var.type == "Real":
-                    ok = execution.real_initial_value(i, var.valueReference, float(value))
-                elif var.type in ("Integer", "Enumeration"):
-                    ok = execution.integer_initial_value(i, var.valueReference, int(value))
-                elif var.type == "Boolean":
-                    ok = execution.boolean_initial_value(i, var.valueReference, bool(value))
-                else:
-                    ok = execution.string_initial_value(i, var.valueReference, str(value))
-                _check(ok, f"setting {name}.{param} = {value!r}")
+                var = setup.variables[name][param]
+                # libcosim's real_initial_value, integer_initial_value, ...: one per FMI call type
+                set_initial = getattr(execution, f"{typed_values.CALL_TYPE[var.type].lower()}_initial_value")
+                _check(set_initial(index[name], var.valueReference, typed_values.typed(var, value, f"{name}.{param}")),
+                       f"setting {name}.{param} = {value!r}")
         stage = "stepping"
         _check(execution.simulate_until(stop_ns), f"simulate_until({e.stop:g} s)")
     except LibcosimError as caught:
