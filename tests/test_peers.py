@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from harness.judges import metrics
-from harness.formats import peers
+from harness import peers
 from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene

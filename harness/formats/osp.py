@@ -92,7 +92,7 @@ def group_connections(scene: scenes.Scene, groups: dict[str, list[Group]]) \
 
 
 def power_bonds(scene: scenes.Scene, groups: dict[str, list[Group]]) -> list[tuple[str, str, str, str, str, str]]:
-    """The power bonds of the scene's port connections, as ``harness.formats.peers`` hands them to
+    """The power bonds of the scene's port connections, as ``harness.peers.libcosim`` hands them to
     libcosim's ECCO: ``(a, a_effort_input, a_flow_output, b, b_effort_output,
     b_flow_input)`` where ``a`` takes the effort (torque) and gives the flow (speed)."""
     bonds = []
