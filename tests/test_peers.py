@@ -103,3 +103,12 @@ def test_a_new_peer_needs_only_its_class_and_its_name_in_the_registry(monkeypatc
     assert refused.failure.startswith("refused: peer hold made 150 steps of 0.001 s, not the 300"), refused.failure
     with pytest.raises(ValueError, match="hold: no start but 0"):
         peers.simulate_peer("hold", spec.with_overrides(["experiment.start=0.1"]), 1e-3, fmu_dir)
+
+
+def test_the_benchmark_runs_a_peer_by_its_name(fmu_dir):
+    from harness.studies import bench
+
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    case = bench.run_peer(spec, "fmpy-jacobi", 1e-3, 1, fmu_dir, 5.0)
+    assert case.failure is None and case.steps == 300 and case.errors["tau_rms"] < 1e-2, case
+    assert bench.run_peer(spec, "simulink", 1e-3, 1, fmu_dir, 5.0).failure.startswith("not run: unknown peer")
