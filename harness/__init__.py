@@ -1,8 +1,8 @@
 """The co-simulation harness on fmpy, in layers that use only the layers below them
 (docs/architecture.md): ``description`` (scenes) -> ``engine`` (components, system,
 masters, run, traces, guard) -> ``judges`` (monolithic reference, metrics, stability,
-validation) -> ``formats`` (SSP, OSP, container, reference traces, reports, compliance,
-peers) -> ``studies`` (bench, sweep, stability map, measured, engines) -> ``cli``."""
+validation) -> ``formats`` (SSP, OSP, container, reference traces, reports, compliance)
+-> ``peers`` (other engines) -> ``studies`` (bench, sweep, stability map, measured, engines) -> ``cli``."""
 from importlib import import_module
 
 #: where the modules of the flat harness went: ``from harness import masters`` (and the
@@ -14,7 +14,7 @@ MOVED = {"scene": "harness.description.scene", "component": "harness.engine.comp
          "metrics": "harness.judges.metrics", "stability": "harness.judges.stability",
          "validate": "harness.judges.validation", "crosscheck": "harness.formats.reference_traces",
          "ssp": "harness.formats.ssp", "osp": "harness.formats.osp", "container": "harness.formats.container",
-         "peers": "harness.formats.peers", "report": "harness.formats.report",
+         "peers": "harness.peers", "report": "harness.formats.report",
          "badinputs": "harness.formats.badinputs", "bench": "harness.studies.bench",
          "sweep": "harness.studies.sweep", "stabilitymap": "harness.studies.stabilitymap",
          "measured": "harness.studies.measured", "engines": "harness.studies.engines",

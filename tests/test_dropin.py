@@ -23,7 +23,7 @@ from fmpy import read_model_description
 from harness import compliance
 from harness.studies import engines
 from harness.formats import osp
-from harness.formats import peers
+from harness import peers
 from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene

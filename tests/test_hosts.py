@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from harness import run, scene, ssp
+from harness.peers import ecos
 from harness.studies import hosts
 from harness.cli import main as cli
 
@@ -22,7 +23,7 @@ ALONE = {"EngineShaft": ["w", "phi", "engine_torque"], "LoadShaft": ["w", "phi",
 @pytest.fixture(scope="module")
 def ecos_bin(tmp_path_factory):
     path = tmp_path_factory.mktemp("ecos")
-    hosts.ecos_program(path)     # EcosUnavailable fails the tests: ecospy and tbb are test dependencies
+    ecos.ecos_program(path)     # EcosUnavailable fails the tests: ecospy and tbb are test dependencies
     return path
 
 
@@ -32,8 +33,8 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
 
     target = tmp_path / f"{fmu}.fmu"
     shutil.copy(fmu_dir / f"{fmu}.fmu", target)
-    result = hosts.run_ecos(target, 0.2, 1e-3, ecos_bin)
-    times, traces = hosts.ecos_traces(result.csv)
+    result = ecos.run_ecos(target, 0.2, 1e-3, ecos_bin)
+    times, traces = ecos.ecos_traces(result.csv)
     name = fmu.lower()
     spec = scene.Scene(name=f"{name}_alone", description=f"{fmu} alone",
                        components={name: scene.ComponentSpec(fmu, {})}, connections=[],
@@ -52,8 +53,8 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
 def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_path):
     spec = scene.load("kavz685")
     archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
-    result = hosts.run_ecos(archive, spec.experiment.stop, spec.experiment.step, ecos_bin, record=list(spec.record))
-    times, traces = hosts.ecos_traces(result.csv)
+    result = ecos.run_ecos(archive, spec.experiment.stop, spec.experiment.step, ecos_bin, record=list(spec.record))
+    times, traces = ecos.ecos_traces(result.csv)
     assert times[-1] == pytest.approx(spec.experiment.stop, abs=1e-9)
     assert sorted(traces) == sorted(spec.record)          # ecos logged what its CSV configuration names
     names = list(spec.record)
@@ -70,8 +71,8 @@ def test_ecos_applies_the_exported_parameter_values(fmu_dir, ecos_bin, tmp_path)
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.3", "experiment.transient=0.1",
                                                  "load.mean_torque=200", "load.random_amplitude=0"])
     archive = ssp.export(spec, tmp_path / "k.ssp", fmu_dir)
-    result = hosts.run_ecos(archive, 0.3, 1e-3, ecos_bin, record=["load.load_torque"])
-    _, traces = hosts.ecos_traces(result.csv)
+    result = ecos.run_ecos(archive, 0.3, 1e-3, ecos_bin, record=["load.load_torque"])
+    _, traces = ecos.ecos_traces(result.csv)
     assert np.allclose(traces["load.load_torque"], 200.0, rtol=0, atol=1e-9), \
         "ecos ignored the SSP parameter set: the load torque is not the exported mean_torque = 200 N*m"
 
@@ -85,13 +86,13 @@ def test_ecos_makes_every_step_to_the_stop_time(fmu_dir, ecos_bin, tmp_path):
 
     target = tmp_path / "EngineShaft.fmu"
     shutil.copy(fmu_dir / "EngineShaft.fmu", target)
-    times, _ = hosts.ecos_traces(hosts.run_ecos(target, 0.2, 1e-3, ecos_bin).csv)
+    times, _ = ecos.ecos_traces(ecos.run_ecos(target, 0.2, 1e-3, ecos_bin).csv)
     assert len(times) == 201 and times[-1] == pytest.approx(0.2, abs=1e-9), (len(times), times[-1])
 
 
 def test_ecos_says_what_failed(tmp_path, ecos_bin):
     with pytest.raises(RuntimeError, match="ecos failed"):
-        hosts.run_ecos(tmp_path / "missing.ssp", 0.1, 1e-3, ecos_bin)
+        ecos.run_ecos(tmp_path / "missing.ssp", 0.1, 1e-3, ecos_bin)
 
 
 def test_lever_hosts_writes_the_table(tmp_path, fmu_dir):
@@ -112,11 +113,11 @@ def test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi(fmu_dir, ecos_
     (to ecos's six decimals), both giving the shafts the coupling torque of the states one
     step older than our jacobi does; ecos logs the torque of the new states, libcosim the
     torque the shafts were given (ecos's row k is libcosim's row k + 1)."""
-    from harness.formats import peers
+    from harness import peers
 
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.1", "experiment.transient=0.02"])
     archive = ssp.export(spec, tmp_path / "k.ssp", fmu_dir)
-    times, traces = hosts.ecos_traces(hosts.run_ecos(archive, 0.1, 1e-3, ecos_bin, record=list(spec.record)).csv)
+    times, traces = ecos.ecos_traces(ecos.run_ecos(archive, 0.1, 1e-3, ecos_bin, record=list(spec.record)).csv)
     libcosim = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)
     ours = run.simulate(spec, "jacobi", 1e-3, fmu_dir)
     assert len(times) == len(libcosim.times) == len(ours.times) == 101

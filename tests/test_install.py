@@ -77,6 +77,9 @@ def test_the_wheel_carries_what_an_installed_lever_needs_and_leaves_the_clones_b
                    "resources/reference/EngineShaft/EngineShaft_in.csv",
                    "resources/data/monograph/harmonics_driven.csv", "tests/c_host/minimal_importer.c"):
         assert project + needed in names, f"the wheel lacks {needed}"
+    # every package of the harness (pyproject.toml lists them one by one)
+    packages = sorted(str(p.relative_to(REPO)) for p in (REPO / "harness").rglob("__init__.py"))
+    assert [p for p in packages if p not in names] == []
     scenes = {p.name for p in (REPO / "resources" / "scenes").glob("*.toml")}
     assert {n.rsplit("/", 1)[1] for n in names if n.startswith(project + "resources/scenes/")} == scenes
     assert not [n for n in names if n.endswith(".fmu") or "/build/fmus/" in n or "/results/" in n]

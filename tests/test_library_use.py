@@ -139,7 +139,7 @@ def test_after_an_error_only_free_after_fatal_nothing(fmu_dir, status, calls):
 
 
 def test_the_fmpy_peer_ends_a_refused_initialisation_without_fmi2terminate(fmu_dir):
-    from harness.formats.peers import simulate_peer
+    from harness.peers import simulate_peer
 
     logged: list[str] = []
     listener = lambda instance, status, category, text: logged.append(text)

@@ -170,7 +170,7 @@ def _ours(archive) -> float:
 
 
 def test_the_archive_runs_in_libcosim(archive, tmp_path):
-    # its own process, as harness.formats.peers runs libcosim (an abort would end it)
+    # its own process, as harness.peers runs libcosim (an abort would end it)
     done = subprocess.run([sys.executable, "-c", LIBCOSIM, str(archive), str(_tau1_reference(archive))],
                           capture_output=True, text=True, timeout=300,
                           env={**__import__("os").environ, "TMPDIR": str(tmp_path)})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from harness.judges import metrics
-from harness.formats import peers
+from harness import peers
 from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene
@@ -65,3 +65,50 @@ def test_libcosim_reports_a_refused_parameter_instead_of_crashing(fmu_dir):
     result = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)
     assert not result.ok and result.failure_stage == "initialisation"
     assert "transfer_mode" in result.failure
+
+
+def test_every_peer_keeps_the_contract(fmu_dir):
+    """Each registered peer runs a short scene under its own name, reports the counters it
+    declares, and ran the scene's experiment (a peer that did not is refused)."""
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.02", "experiment.transient=0.01"])
+    for name, peer in peers.PEERS.items():
+        assert peer.name == name and peer.summary and peer.timed, name
+        result = peers.simulate_peer(name, spec, 1e-3, fmu_dir, tolerance=1e-2)
+        assert result.ok, (name, result.failure)
+        assert result.master == name or name.startswith("lever"), (name, result.master)
+        assert set(peer.counters) <= set(result.counters), (name, result.counters)
+        assert set(result.traces) == set(run.recorded_names(spec)) and result.wall_time > 0, name
+
+
+def test_a_new_peer_needs_only_its_class_and_its_name_in_the_registry(monkeypatch, fmu_dir):
+    """The registry is the one place a peer is named: a peer added there is run, checked and
+    refused like the others."""
+    from harness.peers.base import Peer
+
+    class Hold(Peer):
+        name, summary = "hold", "every recorded variable held at 1 (no FMU stepped)"
+
+        def scene_problem(self, setup):
+            return "hold: no start but 0" if setup.scene.experiment.start else None
+
+        def run(self, setup, step, tolerance, environment):
+            grid = setup.time_grid(step)[::2]          # every other point: another experiment
+            return run.RunResult(setup.scene, self.name, step, grid, {n: np.ones(len(grid)) for n in setup.record},
+                                 1e-3, {"steps": len(grid) - 1})
+
+    monkeypatch.setitem(peers.PEERS, "hold", Hold())
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    assert peers.available("hold") is None
+    refused = peers.simulate_peer("hold", spec, 1e-3, fmu_dir)
+    assert refused.failure.startswith("refused: peer hold made 150 steps of 0.001 s, not the 300"), refused.failure
+    with pytest.raises(ValueError, match="hold: no start but 0"):
+        peers.simulate_peer("hold", spec.with_overrides(["experiment.start=0.1"]), 1e-3, fmu_dir)
+
+
+def test_the_benchmark_runs_a_peer_by_its_name(fmu_dir):
+    from harness.studies import bench
+
+    spec = scene.load("kavz685").with_overrides(SHORT)
+    case = bench.run_peer(spec, "fmpy-jacobi", 1e-3, 1, fmu_dir, 5.0)
+    assert case.failure is None and case.steps == 300 and case.errors["tau_rms"] < 1e-2, case
+    assert bench.run_peer(spec, "simulink", 1e-3, 1, fmu_dir, 5.0).failure.startswith("not run: unknown peer")

@@ -10,9 +10,10 @@ from click.testing import CliRunner
 
 from harness.cli import main as cli
 from harness.description import scene
-from harness.formats import peers, reference_traces, ssp
+from harness import peers
+from harness.formats import reference_traces, ssp
 from harness.judges import validation
-from harness.studies import hosts
+from harness.peers import ecos
 
 ENGINES = ["lever", "libcosim", "ecos", "fmpy.ssp"]
 
@@ -43,8 +44,8 @@ def _run(engine: str, archive, tmp_path, fmu_dir):
         assert result.ok, result.failure
         return result.times, result.traces
     if engine == "ecos":
-        result = hosts.run_ecos(archive, e.stop, e.step, tmp_path / "bin", record=list(spec.record))
-        return hosts.ecos_traces(result.csv)
+        result = ecos.run_ecos(archive, e.stop, e.step, tmp_path / "bin", record=list(spec.record))
+        return ecos.ecos_traces(result.csv)
     from fmpy.ssp.simulation import simulate_ssp
     from fmpy.ssp.ssd import read_ssv
 

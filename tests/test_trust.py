@@ -10,7 +10,7 @@ import pytest
 
 from harness.description import scene
 from harness.engine.run import RunResult
-from harness.formats import peers
+from harness import peers
 from harness.studies import bench, hosts, trust
 from harness.studies.bench import Case
 
@@ -159,7 +159,6 @@ def test_lever_hosts_reports_the_ratio_round_by_round_with_the_load(monkeypatch)
         def __init__(self):
             self.wall_time = next(walls)
 
-    monkeypatch.setattr(hosts, "simulate", lambda *a, **k: Result())
     monkeypatch.setattr(hosts.peers, "simulate_peer", lambda *a, **k: Result())
     report = hosts.time_hosts(spec, 1e-3, 3, hosts=("harness-jacobi", "libcosim-fixed"), log=lambda text: None)
     row = report["hosts"]["libcosim-fixed"]

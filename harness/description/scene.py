@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from harness.description import units
+from harness.description import typed_values, units
 from harness.description.tables import MeasuredDataError, load_series, read_table
 from harness.paths import DATA, SCENES
 
@@ -573,10 +573,6 @@ def unconnected_message(inputs: list[str]) -> str:
             "experiment.strict = true / --strict to refuse such a scene)")
 
 
-#: the range of FMI 2.0's fmi2Integer (a C int)
-INTEGER_RANGE = (-2 ** 31, 2 ** 31 - 1)
-
-
 def value_findings(label: str, var, value) -> list[str]:
     """Findings about ``value`` for the model variable ``var``: its type (strict: a TOML
     boolean is no number, a fraction no integer, a list, table or date no parameter), its
@@ -587,20 +583,8 @@ def value_findings(label: str, var, value) -> list[str]:
             value = quantity(value, label)
         except SceneError as error:
             return [str(error)]
-    if var.type == "String":
-        return [] if isinstance(value, str) else [f"{label} = {given}: expected a string"]
-    if var.type == "Boolean":
-        return [] if isinstance(value, bool) else [f"{label} = {given}: expected true or false"]
-    if var.type in ("Integer", "Enumeration"):
-        if isinstance(value, float) and math.isfinite(value) and value.is_integer():
-            value = int(value)
-        if not isinstance(value, int) or isinstance(value, bool):
-            return [f"{label} = {given}: expected a whole number ({var.description})"]
-        low = max(int(var.min) if var.min is not None else INTEGER_RANGE[0], INTEGER_RANGE[0])
-        high = min(int(var.max) if var.max is not None else INTEGER_RANGE[1], INTEGER_RANGE[1])
-        if not low <= value <= high:
-            return [f"{label} = {value} is outside its allowed range [{low}, {high}] ({var.description})"]
-        return []
+    if var.type != "Real":
+        return typed_values.findings(label, var, value, given)
     unit_text = f" {var.unit}" if var.unit else ""
     if isinstance(value, str):
         if units.split(value) is None:

@@ -25,6 +25,7 @@ from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, 
 from fmpy.fmi1 import FMICallException
 from fmpy.logging import addLoggerProxy
 
+from harness.description import typed_values
 from harness.engine.interface import RawCalls
 
 _STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
@@ -277,19 +278,8 @@ class Component:
         """Apply parameter values by name (numbers, integers, strings, booleans)."""
         for name, value in values.items():
             var = self.variable(name)
-            if var.type == "Real":
-                self._checked(f"fmi2SetReal({name} = {value!r})", self.fmu.setReal, [var.valueReference],
-                              [float(value)])
-            elif var.type in ("Integer", "Enumeration"):
-                if isinstance(value, float) and value != int(value):
-                    raise ValueError(f"{self.name}.{name} is an integer, got {value!r}")
-                self._checked(f"fmi2SetInteger({name} = {value!r})", self.fmu.setInteger, [var.valueReference],
-                              [int(value)])
-            elif var.type == "Boolean":
-                self._checked(f"fmi2SetBoolean({name})", self.fmu.setBoolean, [var.valueReference], [bool(value)])
-            elif var.type == "String":
-                self._checked(f"fmi2SetString({name})", self.fmu.setString, [var.valueReference],
-                              [str(value)])
+            self._checked(typed_values.call_text(var, name, value), typed_values.set_on, self.fmu, var, value,
+                          f"{self.name}.{name}")
 
     def initialize(self, start: float, stop: float | None):
         self.time = start

@@ -24,6 +24,7 @@ import zipfile
 from pathlib import Path
 
 from harness.description import scene as scenes
+from harness.description import typed_values
 from harness.paths import FMUS
 from harness.engine.system import (SceneInvalid, converted, dependency_order, descriptions_for, feedthrough_components,
                                    fmu_path)
@@ -60,9 +61,8 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
     for name, spec in scene.components.items():
         for param, raw in spec.parameters.items():
             inner = variables[name][param]
-            value = converted(inner, raw, f"{name}.{param}")
-            start = repr(float(value)) if inner.type == "Real" else (
-                str(int(value)) if inner.type in ("Integer", "Enumeration") else str(value))
+            label = f"{name}.{param}"
+            _, start = typed_values.literal(inner, converted(inner, raw, label), label)
             outer = ModelVariable(name=container_name(f"{name}.{param}"), type=inner.type, causality="parameter",
                                   variability="fixed", initial="exact", description=f"{name}: {inner.description}")
             outer.start = start

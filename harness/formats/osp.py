@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from harness.description import scene as scenes
+from harness.description import typed_values
 from harness.paths import FMUS
 from harness.engine.system import converted, fmu_path
 
@@ -91,7 +92,7 @@ def group_connections(scene: scenes.Scene, groups: dict[str, list[Group]]) \
 
 
 def power_bonds(scene: scenes.Scene, groups: dict[str, list[Group]]) -> list[tuple[str, str, str, str, str, str]]:
-    """The power bonds of the scene's port connections, as ``harness.formats.peers`` hands them to
+    """The power bonds of the scene's port connections, as ``harness.peers.libcosim`` hands them to
     libcosim's ECCO: ``(a, a_effort_input, a_flow_output, b, b_effort_output,
     b_flow_input)`` where ``a`` takes the effort (torque) and gives the flow (speed)."""
     bonds = []
@@ -128,10 +129,8 @@ def system_structure(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str:
             variables = {v.name: v for v in descriptions[spec.fmu].modelVariables}
             initial = ET.SubElement(simulator, "InitialValues")
             for param, raw in spec.parameters.items():
-                value = converted(variables[param], raw, f"{name}.{param}")
-                kind = variables[param].type
-                text = repr(float(value)) if kind == "Real" else (
-                    str(int(value)) if kind in ("Integer", "Enumeration") else str(value))
+                label = f"{name}.{param}"
+                kind, text = typed_values.literal(variables[param], converted(variables[param], raw, label), label)
                 ET.SubElement(ET.SubElement(initial, "InitialValue", {"variable": param}), kind, {"value": text})
     connections = ET.SubElement(root, "Connections")
     covered, rest = group_connections(scene, scene_groups(scene, fmu_dir))

@@ -27,7 +27,6 @@ An exported archive holds
 """
 from __future__ import annotations
 
-import math
 import shutil
 import xml.etree.ElementTree as ET
 import zipfile
@@ -36,7 +35,7 @@ from pathlib import Path
 from lever.physics.parameters import UNITS
 
 from harness.description import scene as scenes
-from harness.description import units
+from harness.description import typed_values, units
 from harness.paths import FMUS
 from harness.engine.component import scratch_folder
 from harness.engine.system import SceneInvalid, converted, descriptions_for, fmu_path
@@ -234,17 +233,11 @@ def _parameters(root: ET.Element, values: dict, md, component: str, qualify: boo
         value = converted(var, raw, f"{component}.{param}")
         parameter = ET.SubElement(parameters, _q("ssv", "Parameter"),
                                   {"name": f"{component}.{param}" if qualify else param})
-        if var.type == "Real":
-            attrs = {"value": _number(value)}
-            if var.unit:
-                attrs["unit"] = var.unit
-            ET.SubElement(parameter, _q("ssv", "Real"), attrs)
-        elif var.type in ("Integer", "Enumeration"):
-            ET.SubElement(parameter, _q("ssv", "Integer"), {"value": str(int(value))})
-        elif var.type == "Boolean":
-            ET.SubElement(parameter, _q("ssv", "Boolean"), {"value": "true" if value else "false"})
-        else:
-            ET.SubElement(parameter, _q("ssv", "String"), {"value": str(value)})
+        kind, text = typed_values.literal(var, value, f"{component}.{param}")
+        attrs = {"value": text}
+        if kind == "Real" and var.unit:
+            attrs["unit"] = var.unit
+        ET.SubElement(parameter, _q("ssv", kind), attrs)
 
 
 # -- load ---------------------------------------------------------------------------------------
@@ -385,32 +378,22 @@ def parameter_values(parameter_set: ET.Element, prefix: str = "", defined_units:
 
 
 def _typed_value(name: str, kind: str, raw, unit: str | None, defined_units: dict):
-    allowed = {"Real": "a number", "Integer": "a whole number", "Enumeration": "a whole number",
-               "Boolean": "true, false, 1 or 0", "String": "a string"}
+    forms = typed_values.LITERAL_FORMS
     if raw is None:
         raise scenes.SceneError(f"SSP parameter {name}: its {kind} has no value attribute")
+    if kind not in forms:
+        raise scenes.SceneError(f"SSP parameter {name}: unknown type {kind} (known: {', '.join(forms)})")
     try:
-        if kind == "Real":
-            value = float(raw)
-            if not math.isfinite(value):
-                raise scenes.SceneError(f"SSP parameter {name} = {raw} is not finite")
-            if not unit:
-                return value
-            if unit in defined_units and not _pint_knows(unit):
-                scale, si = defined_units[unit]
-                return f"{value * scale!r} {si}"
-            return f"{value!r} {unit}"
-        if kind in ("Integer", "Enumeration"):
-            return int(raw)
-        if kind == "Boolean":
-            if raw not in ("true", "false", "1", "0"):
-                raise ValueError(raw)
-            return raw in ("true", "1")
-        if kind == "String":
-            return raw
+        value = typed_values.parse_literal(kind, raw)
     except ValueError:
-        raise scenes.SceneError(f"SSP parameter {name} = {raw!r}: expected {allowed[kind]} ({kind})") from None
-    raise scenes.SceneError(f"SSP parameter {name}: unknown type {kind} (known: {', '.join(allowed)})")
+        raise scenes.SceneError(f"SSP parameter {name} = {raw!r}: expected {forms[kind]} ({kind})") from None
+    if kind != "Real" or not unit:
+        return value
+    # a number with a unit: left as "<value> <unit>" for the scene's check to convert or refuse
+    if unit in defined_units and not _pint_knows(unit):
+        scale, si = defined_units[unit]
+        return f"{value * scale!r} {si}"
+    return f"{value!r} {unit}"
 
 
 def _pint_knows(unit: str) -> bool:

@@ -469,8 +469,6 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
                     flat = flat[len(buffer):]
                 points.append((-(k + 1) * step, values))
             driver.history = deque(points, maxlen=slots)
-        elif hasattr(driver, "_history"):
-            driver.history.clear()          # an iterative master's first guess: converged anyway
         driver.t = 0.0
         try:
             driver.step(step, t_next=step)

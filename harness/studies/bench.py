@@ -204,7 +204,7 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: P
 
 
 def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
-    from harness.formats import peers
+    from harness import peers
     case = Case(name, "peer", step, tolerance)
     reason = peers.available(name)
     if reason:

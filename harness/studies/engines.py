@@ -10,19 +10,18 @@ from __future__ import annotations
 
 import json
 import statistics
-import time as clock
 from pathlib import Path
 
 import numpy as np
 
+from harness import peers
 from harness.judges import metrics
-from harness.formats import peers
 from harness.judges import monolithic as reference
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
-from harness.engine.run import RunResult, recorded_names, simulate
+from harness.engine.run import RunResult
 
-#: engine -> (what runs, how its master errs)
+#: the engines compared, peers of ``harness.peers``: name -> (what runs, how its master errs)
 ENGINES = {
     "lever": ("our harness, the scene's master", "the scene's master (jacobi-quadratic: third order)"),
     "lever-jacobi": ("our harness, master jacobi", "zero-order hold of the torques: first order"),
@@ -39,46 +38,11 @@ ECCO_TOLERANCE = 1e-3
 
 
 def run_engine(engine: str, scene: scenes.Scene, step: float, fmu_dir: Path = FMUS) -> RunResult:
-    """One run of ``scene`` in ``engine`` at communication step ``step``."""
-    if engine == "lever":
-        return simulate(scene, None, step, fmu_dir)
-    if engine == "lever-jacobi":
-        return simulate(scene, "jacobi", step, fmu_dir)
-    if engine == "container":
-        return _run_container(scene, step, fmu_dir)
-    if engine in peers.PEERS:
-        return peers.simulate_peer(engine, scene, step, fmu_dir,
-                                   tolerance=ECCO_TOLERANCE if engine == "libcosim-ecco" else None)
-    raise ValueError(f"unknown engine '{engine}' (known: {', '.join(ENGINES)})")
-
-
-def _run_container(scene: scenes.Scene, step: float, fmu_dir: Path) -> RunResult:
-    import tempfile
-    from dataclasses import replace
-
-    import fmpy
-
-    from harness.formats.container import container_name, build_container
-
-    e = scene.experiment
-    names = recorded_names(scene)
-    record_scene = replace(scene, record=names, experiment=replace(e, step=step))
-    with tempfile.TemporaryDirectory(prefix="lever-container-") as scratch:
-        fmu = build_container(record_scene, Path(scratch) / f"{scene.name}.fmu", fmu_dir)
-        started = clock.perf_counter()
-        failure = None
-        try:
-            table = fmpy.simulate_fmu(str(fmu), start_time=e.start, stop_time=e.stop, output_interval=step,
-                                      output=[container_name(n) for n in names])
-        except Exception as error:  # noqa: BLE001 - reported as the run's failure
-            table, failure = None, f"{type(error).__name__}: {error} (container, step {step:g} s)"
-        wall = clock.perf_counter() - started
-    if table is None:
-        return RunResult(scene, "container", step, np.empty(0), {n: np.empty(0) for n in names}, wall, {},
-                         failure, "stepping")
-    traces = {n: np.asarray(table[container_name(n)], dtype=float) for n in names}
-    return RunResult(scene, "container", step, np.asarray(table["time"], dtype=float), traces, wall,
-                     {"steps": len(table) - 1})
+    """One run of ``scene`` in ``engine`` (a peer of ``harness.peers``) at communication
+    step ``step``; an adaptive engine (ECCO) at ``ECCO_TOLERANCE``."""
+    if engine not in peers.PEERS:
+        raise ValueError(f"unknown engine '{engine}' (known: {', '.join(ENGINES)})")
+    return peers.simulate_peer(engine, scene, step, fmu_dir, tolerance=ECCO_TOLERANCE)
 
 
 def reference_errors(scene: scenes.Scene, result: RunResult) -> dict:

@@ -23,8 +23,8 @@ to our harness is the median [min-max] of the ratios within each round
 (``harness.studies.trust.paired_ratio``); the report states the machine's load average.  A
 host whose output shows another experiment (another stop time or number of steps) is refused.
 
-``run_ecos`` and ``ecos_traces`` (``harness.formats.ecos``, also the benchmark's peer ``ecos``)
-are what the tests use to run ecos.
+The hosts other than the C importer are peers of ``harness.peers`` (``harness-jacobi`` is its
+``lever-jacobi``): each is timed by its own run's wall time.
 """
 from __future__ import annotations
 
@@ -38,15 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..formats import peers, ssp
+from .. import peers
+from ..peers import BARE_ENVIRONMENT
 from . import trust
-# ecos's runner lives with the peers (layer 4), which run it in `lever bench` too
-from ..formats.ecos import BARE_ENVIRONMENT, EcosRun, EcosUnavailable, ecos_program, ecos_traces, run_ecos  # noqa: F401
 from ..description import scene as scenes
 from ..paths import FMUS, RESULTS, ROOT
-from ..engine.run import simulate
-
-HOSTS = ("harness-jacobi", "libcosim-fixed", "ecos", "ecos-serial", "ecos-log-all", "c-importer")
 
 
 def set_up_environment() -> dict:
@@ -98,7 +94,23 @@ def run_c_importer(program: Path, unzipped: Path, model: str, steps: int, step: 
                            str(steps)], env=env, capture_output=True, text=True, timeout=timeout)
 
 
-def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path, env: dict | None) -> float:
+class _Peer:
+    """A host that is a peer of ``harness.peers``: the wall time of its run and its failure
+    (None).  ``scene_record``: it records the scene's list only (not what the scene's
+    features add)."""
+
+    def __init__(self, peer: str, scene_record: bool = False):
+        self.peer, self.scene_record = peer, scene_record
+
+    def __call__(self, scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
+                 env: dict | None) -> tuple[float, str | None]:
+        result = peers.simulate_peer(self.peer, scene, step, fmu_dir,
+                                     record=list(scene.record) if self.scene_record else None, environment=env)
+        return result.wall_time, result.failure
+
+
+def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
+                     env: dict | None) -> tuple[float, None]:
     from fmpy import extract
 
     program = scratch / "bin" / "minimal_importer"
@@ -116,7 +128,15 @@ def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: P
         if done.returncode != 0 or not loop:
             raise RuntimeError(f"the C importer failed on {model} (exit {done.returncode}):\n{done.stderr[-2000:]}")
         total += float(loop.group(1))
-    return total
+    return total, None
+
+
+#: each host, in the order a round runs them, and how it is timed: ecos logs the scene's
+#: record (its ``--csvConfig``) or, ``ecos-log-all``, every variable
+_TIMERS = {"harness-jacobi": _Peer("lever-jacobi"), "libcosim-fixed": _Peer("libcosim-fixed"),
+           "ecos": _Peer("ecos", scene_record=True), "ecos-serial": _Peer("ecos-serial", scene_record=True),
+           "ecos-log-all": _Peer("ecos-log-all", scene_record=True), "c-importer": _c_importer_time}
+HOSTS = tuple(_TIMERS)
 
 
 def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,
@@ -128,32 +148,14 @@ def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = F
     load = trust.LoadLog()
     with tempfile.TemporaryDirectory(prefix="lever-hosts-") as scratch:
         scratch = Path(scratch)
-        archive = ssp.export(scene, scratch / f"{scene.name}.ssp", fmu_dir) \
-            if {"ecos", "ecos-serial", "ecos-log-all"} & set(hosts) else None
         for k in range(repeats):
             load.sample()
             for host in hosts:
-                if host == "harness-jacobi":
-                    result = simulate(scene, "jacobi", step, fmu_dir)
-                    ok, wall = result.ok, result.wall_time
-                elif host == "libcosim-fixed":
-                    result = peers.simulate_peer("libcosim-fixed", scene, step, fmu_dir)
-                    ok, wall = result.ok, result.wall_time
-                elif host in ("ecos", "ecos-serial", "ecos-log-all"):
-                    run = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", native_env,
-                                   parallel=host != "ecos-serial",
-                                   record=None if host == "ecos-log-all" else list(scene.record))
-                    wall, ok = run.wall_time, True
-                    # a host that ran another experiment is not timed against ours
-                    problem = peers.experiment_problem(ecos_traces(run.csv)[0], scene, step)
-                    if problem:
-                        raise RuntimeError(f"{host} refused: it {problem}")
-                elif host == "c-importer":
-                    wall, ok = _c_importer_time(scene, step, fmu_dir, scratch, native_env), True
-                else:
+                if host not in _TIMERS:
                     raise ValueError(f"unknown host '{host}' (known: {', '.join(HOSTS)})")
-                if not ok:
-                    raise RuntimeError(f"{host} failed: {result.failure}")
+                wall, failure = _TIMERS[host](scene, step, fmu_dir, scratch, native_env)
+                if failure:
+                    raise RuntimeError(f"{host} failed: {failure}")
                 times[host].append(wall)
                 log(f"  run {k + 1}/{repeats} {host}: {wall:.3f} s")
     load.sample()

@@ -1,6 +1,11 @@
 """ecos (PyPI ``ecospy``), the C++ co-simulation engine, run through its command-line
-program on an SSP archive or an FMU: what ``lever hosts`` times and ``lever bench``'s peer
-``ecos`` runs (``harness.formats.peers``).
+program on an SSP archive or an FMU (``run_ecos``, ``ecos_traces``), and the peers that run
+a scene's SSP export with it (``Ecos``): ``ecos`` steps the FMUs in parallel threads (its
+default) and logs what the harness records (a ``--csvConfig``); ``ecos-serial`` steps them
+one after the other (``--noParallel``); ``ecos-log-all`` logs with ecos's default CSV log,
+every variable of every FMU each step (about 60 reads a step, each a Python call: where
+ecos's time goes by default).  Their wall time is ecos's own stepping loop's, from its
+progress log.
 
 The program runs in a bare environment by default (``PATH=/usr/bin:/bin``, and the path to
 PyPI ``tbb``'s ``libtbb.so.12``, ecos's own need): our FMUs find their Python themselves.
@@ -9,18 +14,19 @@ from __future__ import annotations
 
 import csv
 import importlib.metadata
+import math
 import re
 import shutil
 import subprocess
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from harness.engine.run import RunResult
 from harness.formats import ssp
-
-#: The environment of a host that is not a Python process and was set up for nothing.
-BARE_ENVIRONMENT = {"PATH": "/usr/bin:/bin"}
+from harness.peers.base import BARE_ENVIRONMENT, Peer, SceneSetup
 
 
 class EcosUnavailable(RuntimeError):
@@ -40,15 +46,6 @@ def _installed():
     if program is None or tbb is None:
         raise EcosUnavailable("ecospy's binaries/ecos or tbb's libtbb.so.12 is missing from the installed wheels")
     return program, tbb
-
-
-def unavailable() -> str | None:
-    """None if ecos can run here, else why not."""
-    try:
-        _installed()
-    except EcosUnavailable as reason:
-        return str(reason)
-    return None
 
 
 def ecos_program(cache: Path) -> tuple[Path, Path]:
@@ -140,3 +137,48 @@ def ecos_traces(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     table = [[float(row[i]) for i in [header.index("time"), *columns.values()]] for row in rows[1:] if row]
     data = np.array(table)
     return data[:, 0], {name: data[:, k + 1] for k, name in enumerate(columns)}
+
+
+class Ecos(Peer):
+    """ecos's program on the scene's SSP export, in ``environment`` (default bare): the FMUs
+    stepped in parallel threads or one after the other, logging the recorded variables or
+    every variable."""
+
+    timed = "ecos's own stepping loop, from its progress log"
+    counters = ()
+
+    def __init__(self, name: str = "ecos", parallel: bool = True, log_all: bool = False):
+        self.name, self.parallel, self.log_all = name, parallel, log_all
+        self.summary = ("the C++ engine ecos (ecospy's program) on the scene's SSP export, FMUs in "
+                        + ("parallel threads" if parallel else "one thread (--noParallel)")
+                        + (", logging every variable of every FMU (its default CSV log)" if log_all else ""))
+
+    def unavailable(self) -> str | None:
+        try:
+            _installed()
+        except EcosUnavailable as reason:
+            return str(reason)
+        return None
+
+    def scene_problem(self, setup: SceneSetup) -> str | None:
+        scene = setup.scene
+        if scene.experiment.start != 0.0:
+            return f"peer '{self.name}' simulates from t = 0 only; scene '{scene.name}' starts at " \
+                   f"{scene.experiment.start:g} s"
+        return None
+
+    def run(self, setup: SceneSetup, step: float, tolerance: float | None, environment: dict | None) -> RunResult:
+        scene, names = setup.scene, setup.record
+        with tempfile.TemporaryDirectory(prefix="lever-ecos-") as scratch:
+            scratch = Path(scratch)
+            archive = ssp.export(scene, scratch / f"{scene.name}.ssp", setup.fmu_dir)
+            try:
+                run = run_ecos(archive, scene.experiment.stop, step, scratch / "bin", environment,
+                               parallel=self.parallel, record=None if self.log_all else names)
+            except RuntimeError as error:
+                return setup.nothing_run(self.name, step, math.nan, str(error), "stepping")
+            times, traces = ecos_traces(run.csv)
+        missing = [n for n in names if n not in traces]
+        if missing:
+            raise ValueError(f"peer '{self.name}' logged no {', '.join(missing)}")
+        return RunResult(scene, self.name, step, times, {n: traces[n] for n in names}, run.wall_time, {})

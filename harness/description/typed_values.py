@@ -1,0 +1,105 @@
+"""A value of an FMI 2.0 variable, by the variable's type (Real, Integer, Enumeration,
+Boolean, String): a scene's value checked for it, converted to what the FMU takes, set on
+an fmpy ``FMU2Slave``, written as the text of an SSV/OSP/model-description value and read
+back from one.  Every place that sets or writes a start value goes through here (as
+fmpy's ``apply_start_values`` is its one setter), so a type is handled the same way in
+the harness, the peers and the exported files.
+"""
+from __future__ import annotations
+
+import math
+
+#: the fmi2Set/fmi2Get call each type goes through - an Enumeration is an Integer to them -
+#: and the element its value takes in SSV and OSP files
+CALL_TYPE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean",
+             "String": "String"}
+
+#: the range of FMI 2.0's fmi2Integer (a C int)
+INTEGER_RANGE = (-2 ** 31, 2 ** 31 - 1)
+
+#: what the text of a value of each type must be, as the messages about a malformed one say it
+LITERAL_FORMS = {"Real": "a number", "Integer": "a whole number", "Enumeration": "a whole number",
+                 "Boolean": "true, false, 1 or 0", "String": "a string"}
+
+
+def findings(label: str, var, value, given: str) -> list[str]:
+    """Findings about a scene's ``value`` for ``var``, a variable that is no Real (a Real's
+    value is a quantity, checked with its unit by ``harness.description.scene``): strict
+    types - a TOML boolean is no number, a fraction no integer - and an integer's
+    [min, max] within fmi2Integer's range.  ``given`` is how the messages show the value."""
+    kind = CALL_TYPE[var.type]
+    if kind == "String":
+        return [] if isinstance(value, str) else [f"{label} = {given}: expected a string"]
+    if kind == "Boolean":
+        return [] if isinstance(value, bool) else [f"{label} = {given}: expected true or false"]
+    if kind == "Integer":
+        if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+            value = int(value)
+        if not isinstance(value, int) or isinstance(value, bool):
+            return [f"{label} = {given}: expected a whole number ({var.description})"]
+        low = max(int(var.min) if var.min is not None else INTEGER_RANGE[0], INTEGER_RANGE[0])
+        high = min(int(var.max) if var.max is not None else INTEGER_RANGE[1], INTEGER_RANGE[1])
+        if not low <= value <= high:
+            return [f"{label} = {value} is outside its allowed range [{low}, {high}] ({var.description})"]
+        return []
+    raise ValueError(f"{label}: a Real's value is a quantity, checked with its unit")
+
+
+def typed(var, value, label: str):
+    """``value`` as ``var``'s FMI call takes it: a float, an int, a bool or a str.  A
+    fraction given for an integer raises ``ValueError`` naming ``label`` (it is never
+    rounded)."""
+    kind = CALL_TYPE[var.type]
+    if kind == "Real":
+        return float(value)
+    if kind == "Integer":
+        if isinstance(value, float) and value != int(value):
+            raise ValueError(f"{label} is an integer, got {value!r}")
+        return int(value)
+    if kind == "Boolean":
+        return bool(value)
+    return str(value)
+
+
+def set_on(fmu, var, value, label: str) -> None:
+    """Set ``var`` to ``value`` on ``fmu``, an fmpy ``FMU2Slave`` (its ``setReal``,
+    ``setInteger``, ``setBoolean`` or ``setString``)."""
+    getattr(fmu, f"set{CALL_TYPE[var.type]}")([var.valueReference], [typed(var, value, label)])
+
+
+def call_text(var, name: str, value) -> str:
+    """How a failed set names its call: ``fmi2SetReal(stiffness = 715.4)``; a string's
+    value is left out (it may be a whole table)."""
+    kind = CALL_TYPE[var.type]
+    return f"fmi2Set{kind}({name})" if kind == "String" else f"fmi2Set{kind}({name} = {value!r})"
+
+
+def literal(var, value, label: str) -> tuple[str, str]:
+    """``(element, text)`` of ``value`` in an SSV, OSP or model-description file:
+    ``("Real", "715.4")`` (Python's shortest round-trip repr), ``("Integer", "3")``,
+    ``("Boolean", "true")`` (xs:boolean), ``("String", text)``."""
+    kind = CALL_TYPE[var.type]
+    value = typed(var, value, label)
+    if kind == "Real":
+        return kind, repr(value)
+    if kind == "Boolean":
+        return kind, "true" if value else "false"
+    return kind, str(value)
+
+
+def parse_literal(kind: str, text: str):
+    """The value the text of an SSV/OSP element of type ``kind`` (a key of
+    ``LITERAL_FORMS``) writes; ``ValueError`` when it is not ``LITERAL_FORMS[kind]`` (a
+    Real must be finite)."""
+    if kind == "Real":
+        value = float(text)
+        if not math.isfinite(value):
+            raise ValueError(text)
+        return value
+    if CALL_TYPE[kind] == "Integer":
+        return int(text)
+    if kind == "Boolean":
+        if text not in ("true", "false", "1", "0"):
+            raise ValueError(text)
+        return text in ("true", "1")
+    return text
