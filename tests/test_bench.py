@@ -236,3 +236,61 @@ def test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion(mo
         bench.call_prices(kavz, n_steps=3000)
     # after 3 s the driveline turns at its steady 36-38 rad/s (the scene's run: 36.66 mean)
     assert 35.0 < seen["engine"] < 39.0 and 35.0 < seen["load"] < 39.0, seen
+
+
+def test_the_floor_step_makes_the_calls_of_a_jacobi_step(fmu_dir):
+    # The floor is what a master that does nothing else pays: the engine's own step of the
+    # calls, the very calls a jacobi step makes (a step, a read and a set where a jacobi
+    # step makes one), not a loop of the benchmark's own.
+    from harness.engine.run import recorded_names, simulate
+    from harness.engine.system import System
+    kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
+    run = simulate(kavz, "jacobi", 1e-3, fmu_dir)
+    per_step = {name: {kind: count / run.counters["steps"] for kind, count in kinds.items()}
+                for name, kinds in run.counters["calls_by_kind"].items()}
+    system = System(kavz, fmu_dir, record=recorded_names(kavz))
+    try:
+        system.initialize()
+        before = system.calls_by_kind()
+        for k in range(10):
+            system.floor_step(k * 1e-3, 1e-3)
+        after = system.calls_by_kind()
+    finally:
+        system.free()
+    assert {name: {kind: (after[name][kind] - before[name][kind]) / 10 for kind in kinds}
+            for name, kinds in after.items()} == per_step
+
+
+
+def test_where_the_floors_motion_diverges_it_starts_again_and_never_calls_a_failed_fmu(monkeypatch):
+    # Bare jacobi steps of 2 ms on the stiff scene run away within a few dozen steps and the
+    # engine refuses the torque it is sent: FMI allows no further step after that error.  The
+    # floor sees the refusal, puts every component back to its initial state and carries on.
+    from harness.engine.component import Component
+    from harness.engine.system import System
+    refused, restored, states = [], [], []
+    fail, restore, free = Component.fail, Component.restore_state, System.free
+
+    def noting_failure(component, call, status):
+        refused.append(call)
+        fail(component, call, status)
+
+    def noting_restore(component, state, time):
+        restored.append(component.name)
+        restore(component, state, time)
+
+    def noting(system):
+        states.extend(c.state for c in system.components.values())
+        free(system)
+
+    monkeypatch.setattr(Component, "fail", noting_failure)
+    monkeypatch.setattr(Component, "restore_state", noting_restore)
+    monkeypatch.setattr(System, "free", noting)
+    stiff = scene.load("kavz685_stiff")
+    assert bench.call_floor(stiff, n_steps=400, step=2e-3) > 0
+    assert refused, "the bare steps were expected to diverge at this step"
+    assert len(restored) == 3 * len(refused) and set(states) == {"stepping"}
+    # the call prices go through the same step and start again alike
+    refused.clear()
+    assert all(price > 0 for price in bench.call_prices(stiff, n_steps=400, step=2e-3)["engine"].values())
+    assert refused

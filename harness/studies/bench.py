@@ -27,7 +27,7 @@ import json
 import math
 import statistics as stats
 import time as clock
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +42,8 @@ from harness.studies.cases import FAILED, CaseLog, case_key
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
 from harness.engine.run import RunResult, recorded_names, simulate
-from harness.engine.system import System
+from harness.engine.component import FmuCallError
+from harness.engine.system import FloorPlan, System
 
 
 @dataclass
@@ -233,46 +234,73 @@ def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
     return case
 
 
+def _initial_states(system: System) -> list | None:
+    """Every component's state as initialised, for the floor's motion to start again from
+    (None when a component cannot give its state)."""
+    components = list(system.components.values())
+    if not all(c.description.coSimulation.canGetAndSetFMUstate for c in components):
+        return None
+    return [(c, c.save_state()) for c in components]
+
+
+def _start_again(system: System, states: list | None, start: float, error: FmuCallError):
+    """The floor's motion failed at a step (an FMU refused a call: bare steps at this step
+    diverge, as an explicit master's would, and FMI allows no further step after an error):
+    every component back to its initial state, the buffers refilled.  Without states, or
+    when the first step fails, there is nothing to time: the error stands."""
+    if states is None:
+        raise error
+    for component, state in states:
+        component.restore_state(state, start)
+    system.propagate()
+
+
+def _free_states(states: list | None):
+    for component, state in states or []:
+        try:
+            component.free_state(state)
+        except FmuCallError:
+            pass            # an instance that fails here is freed next: the first error stands
+
+
 def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS, step: float | None = None) -> float:
-    """Seconds per communication step of the FMI calls alone: every component steps once,
-    its outputs are read once and every target's inputs set once (the system's compiled
-    propagation), straight through ctypes, in a bare loop (no master, no recording), and
-    recorded outputs that depend on inputs (a shaft's acceleration) are read again after
-    the writes.  What any master must pay at the least.  Steps of ``step`` (default the
-    scene's): a shaft's fmi2DoStep costs more the longer the step."""
+    """Seconds per communication step of the FMI calls alone: ``System.floor_step``, the
+    engine's own step of every component, one propagation (every output read once, every
+    target's inputs set once, the copies carrying the values so that the models run the
+    scene's motion: a shaft's substeps may depend on its speed) and the re-reads of
+    recorded outputs that depend on inputs, in a bare loop (no master, no recording).  What
+    any master must pay at the least.  Steps of ``step`` (default the scene's): a shaft's
+    fmi2DoStep costs more the longer the step.  Where the motion diverges at this step it
+    starts again from the initial states (``_start_again``); only completed steps are timed."""
     system = System(scene, fmu_dir, record=recorded_names(scene))
+    states = None
     try:
         system.initialize()
-        order = [system.components[n] for n in system.order]
-        stepping = [(c.raw.do_step, c.raw.handle) for c in order]
-        # the propagation's reads, copies and sets as the system compiled them (one set per
-        # target): the copies carry the values, so the models run the scene's motion (a
-        # shaft's substeps may depend on its speed)
-        moves = [(get_real, handle, vrs, n, values, copies,
-                  [(set_real, target, t_vrs, t_n, t_values) for _, set_real, target, t_vrs, t_n, t_values in sends])
-                 for _, get_real, handle, vrs, n, values, copies, sends in system.propagation_plan]
-        rereads = [(get_real, handle, vrs, n, values)
-                   for _, get_real, handle, vrs, n, values, _, _ in system.dependent_reads]
+        states = _initial_states(system)
+        plan = system.floor_plan()
+        floor_step = system.floor_step
+        timer = clock.perf_counter
         h = step or scene.experiment.step
-        t = scene.experiment.start
-        started = clock.perf_counter()
-        for _ in range(n_steps):
-            for do_step, handle in stepping:
-                do_step(handle, t, h, 1)
-            for get_real, handle, vrs, n, values, copies, writes in moves:
-                if get_real is not None:
-                    get_real(handle, vrs, n, values)
-                for t_values, pairs in copies:
-                    for k, i in pairs:
-                        t_values[k] = values[i]
-                for set_real, target, t_vrs, t_n, t_values in writes:
-                    set_real(target, t_vrs, t_n, t_values)
-            for get_real, handle, vrs, n, values in rereads:
-                get_real(handle, vrs, n, values)
+        start = t = scene.experiment.start
+        spent, done = 0.0, 0
+        last = timer()
+        while done < n_steps:
+            try:
+                floor_step(t, h, plan)
+            except FmuCallError as error:
+                _start_again(system, states if t != start else None, start, error)
+                t = start
+                last = timer()
+                continue
+            now = timer()
+            spent += now - last
+            last = now
+            done += 1
             t += h
         interrupt.check()
-        return (clock.perf_counter() - started) / n_steps
+        return spent / n_steps
     finally:
+        _free_states(states)
         system.free()
 
 
@@ -282,60 +310,70 @@ CALL_KINDS = ("get", "set", "step", "state")
 
 def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
                 step: float | None = None) -> dict[str, dict[str, float]]:
-    """Seconds per FMI call, by component and kind: the floor's loop (``call_floor``) with
-    every call timed on its own, so that each is priced where it falls in a step (a read
-    after a step pays for the outputs the step left to compute), less the timer's own
-    cost; and ``state``, fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate in turn (a
-    third of the three), for the stateful components that can roll back.  Summed over one
-    step's calls, the prices are the floor.  Steps of ``step`` (default the scene's): a
-    shaft's fmi2DoStep costs more the longer the step (it sub-steps its load)."""
+    """Seconds per FMI call, by component and kind: the floor's step (``call_floor``) with
+    every raw call wrapped in a timer of its own, so that each is priced where it falls in
+    a step (a read after a step pays for the outputs the step left to compute), less the
+    timer's own cost; and ``state``, fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate
+    in turn (a third of the three), for the stateful components that can roll back.  Summed
+    over one step's calls, the prices are the floor.  Steps of ``step`` (default the
+    scene's): a shaft's fmi2DoStep costs more the longer the step (it sub-steps its load)."""
     timer = clock.perf_counter
     system = System(scene, fmu_dir, record=recorded_names(scene))
+    states = None
     try:
         system.initialize()
+        states = _initial_states(system)
         spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
-        made = {name: {"get": 0, "set": 0, "step": 0} for name in system.order}
-        stepping = [(spent[c.name], c.raw.do_step, c.raw.handle) for c in (system.components[n] for n in system.order)]
-        moves = [(spent[c.name] if get_real is not None else None, get_real, handle, vrs, n, values, copies,
-                  [(spent[target.name], set_real, t_handle, t_vrs, t_n, t_values)
-                   for target, set_real, t_handle, t_vrs, t_n, t_values in sends])
-                 for c, get_real, handle, vrs, n, values, copies, sends in
-                 system.propagation_plan + system.dependent_reads]
-        for c, get_real, *_, sends in system.propagation_plan + system.dependent_reads:
-            made[c.name]["get"] += get_real is not None
-            for target, *_ in sends:
-                made[target.name]["set"] += 1
-        for name in made:
-            made[name]["step"] = 1
-        h = step or scene.experiment.step
-        t = scene.experiment.start
-        for _ in range(n_steps):
-            for account, do_step, handle in stepping:
+
+        def timed(call, account: dict, kind: str):
+            # the interval holds the raw call alone, as the floor's loop makes it
+            def timed_call(handle, a, b, c):
                 started = timer()
-                do_step(handle, t, h, 1)
-                account["step"] += timer() - started
-            for account, get_real, handle, vrs, n, values, copies, sends in moves:
-                if account is not None:
-                    started = timer()
-                    get_real(handle, vrs, n, values)
-                    account["get"] += timer() - started
-                for t_values, pairs in copies:        # untimed: the master's, not a call's
-                    for k, i in pairs:
-                        t_values[k] = values[i]
-                for target_account, set_real, t_handle, t_vrs, t_n, t_values in sends:
-                    started = timer()
-                    set_real(t_handle, t_vrs, t_n, t_values)
-                    target_account["set"] += timer() - started
+                status = call(handle, a, b, c)
+                account[kind] += timer() - started
+                return status
+            return timed_call
+
+        def timed_visit(visit):
+            return replace(visit, get_real=None if visit.get_real is None else
+                           timed(visit.get_real, spent[visit.component.name], "get"),
+                           sends=tuple(replace(send, set_real=timed(send.set_real, spent[send.component.name], "set"))
+                                       for send in visit.sends))
+
+        plan = system.floor_plan()
+        plan = FloorPlan(tuple(replace(call, do_step=timed(call.do_step, spent[call.component.name], "step"))
+                               for call in plan.steps),
+                         [timed_visit(v) for v in plan.propagation], [timed_visit(v) for v in plan.rereads])
+        counted = system.calls_by_kind
+        made = {name: dict.fromkeys(spent[name], 0) for name in spent}
+        h = step or scene.experiment.step
+        start = t = scene.experiment.start
+        done = 0
+        while done < n_steps:
+            before = counted()
+            kept = {name: dict(kinds) for name, kinds in spent.items()}
+            try:
+                system.floor_step(t, h, plan)
+            except FmuCallError as error:
+                # the failed step's calls are not priced (see call_floor)
+                _start_again(system, states if t != start else None, start, error)
+                for name in spent:
+                    spent[name].update(kept[name])
+                t = start
+                continue
+            after = counted()
+            for name in made:
+                for kind in made[name]:
+                    made[name][kind] += after[name][kind] - before[name][kind]
+            done += 1
             t += h
-        for c in system.components.values():
-            c.time = t
         # the timer's own share of an interval, taken from every timed call
         empty = 0.0
         for _ in range(n_steps):
             started = timer()
             empty += timer() - started
         own = empty / n_steps
-        prices = {name: {kind: max(0.0, spent[name][kind] / (n_steps * made[name][kind]) - own)
+        prices = {name: {kind: max(0.0, spent[name][kind] / made[name][kind] - own)
                          for kind in spent[name] if made[name][kind]} for name in spent}
         for name in system.stateful:
             c = system.components[name]
@@ -348,6 +386,7 @@ def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
                 prices[name]["state"] = (timer() - started) / (3 * n_steps)
         return prices
     finally:
+        _free_states(states)
         system.free()
 
 
