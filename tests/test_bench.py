@@ -149,9 +149,9 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     def broken(*args, **kwargs):
         raise FloatingPointError("the monolithic solver blew up")
 
-    monkeypatch.setattr(bench, "run_monolithic", broken)
+    monkeypatch.setattr(bench.timing, "run_monolithic", broken)
     floor = bench.call_floor
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+    monkeypatch.setattr(bench.floors, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     first = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path)
     by_engine = {c.engine: c for c in first["cases"]}
@@ -163,10 +163,10 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     assert "FloatingPointError" in (tmp_path / "bench.md").read_text()
 
     calls = []
-    monkeypatch.setattr(bench, "simulate", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "call_floor", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "call_prices", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "run_monolithic", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.timing, "simulate", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.floors, "call_floor", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.floors, "call_prices", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.timing, "run_monolithic", lambda *a, **k: calls.append(a))
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
@@ -178,7 +178,7 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.
     monkeypatch.undo()
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+    monkeypatch.setattr(bench.floors, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
     spec.bench["monolithic_rtol"] = []
@@ -190,14 +190,14 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
 def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir):
     from fmpy import read_model_description, simulate_fmu
 
-    from harness.studies import hollow
+    from harness.studies.bench import do_nothing_twins
 
-    shaft = hollow.build_twin(fmu_dir / "LoadShaft.fmu", tmp_path / "LoadShaft.fmu")
+    shaft = do_nothing_twins.build_twin(fmu_dir / "LoadShaft.fmu", tmp_path / "LoadShaft.fmu")
     ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LoadShaft.fmu", shaft))
     # the derivative attributes too: an extrapolating master sends a twin what it sends ours
     assert {v.name: v.derivative.name for v in theirs.modelVariables if v.derivative is not None} == \
            {v.name: v.derivative.name for v in ours.modelVariables if v.derivative is not None} != {}
-    twin = hollow.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
+    twin = do_nothing_twins.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
     ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LeverCoupling.fmu", twin))
     same = ("name", "valueReference", "type", "causality", "variability")
     assert [[getattr(v, a) for a in same] for v in theirs.modelVariables] == \
