@@ -372,10 +372,11 @@ class System:
         """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
         for visit in plan:
             values = visit.values
-            if visit.get_real is not None:
+            get_real = visit.get_real
+            if get_real is not None:
                 component = visit.component
                 component.gets += 1
-                status = visit.get_real(visit.handle, visit.vrs, visit.n, values)
+                status = get_real(visit.handle, visit.vrs, visit.n, values)
                 if status > 1:
                     component.fail("fmi2GetReal", status)
             for copy in visit.copies:
