@@ -149,9 +149,9 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     def broken(*args, **kwargs):
         raise FloatingPointError("the monolithic solver blew up")
 
-    monkeypatch.setattr(bench, "run_monolithic", broken)
+    monkeypatch.setattr(bench.timing, "run_monolithic", broken)
     floor = bench.call_floor
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+    monkeypatch.setattr(bench.floors, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     first = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path)
     by_engine = {c.engine: c for c in first["cases"]}
@@ -163,10 +163,10 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     assert "FloatingPointError" in (tmp_path / "bench.md").read_text()
 
     calls = []
-    monkeypatch.setattr(bench, "simulate", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "call_floor", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "call_prices", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(bench, "run_monolithic", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.timing, "simulate", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.floors, "call_floor", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.floors, "call_prices", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench.timing, "run_monolithic", lambda *a, **k: calls.append(a))
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
@@ -178,7 +178,7 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.
     monkeypatch.undo()
-    monkeypatch.setattr(bench, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
+    monkeypatch.setattr(bench.floors, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
     spec.bench["monolithic_rtol"] = []
@@ -190,14 +190,14 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
 def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir):
     from fmpy import read_model_description, simulate_fmu
 
-    from harness.studies import hollow
+    from harness.studies.bench import do_nothing_twins
 
-    shaft = hollow.build_twin(fmu_dir / "LoadShaft.fmu", tmp_path / "LoadShaft.fmu")
+    shaft = do_nothing_twins.build_twin(fmu_dir / "LoadShaft.fmu", tmp_path / "LoadShaft.fmu")
     ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LoadShaft.fmu", shaft))
     # the derivative attributes too: an extrapolating master sends a twin what it sends ours
     assert {v.name: v.derivative.name for v in theirs.modelVariables if v.derivative is not None} == \
            {v.name: v.derivative.name for v in ours.modelVariables if v.derivative is not None} != {}
-    twin = hollow.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
+    twin = do_nothing_twins.build_twin(fmu_dir / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu")
     ours, theirs = (read_model_description(str(p)) for p in (fmu_dir / "LeverCoupling.fmu", twin))
     same = ("name", "valueReference", "type", "causality", "variability")
     assert [[getattr(v, a) for a in same] for v in theirs.modelVariables] == \
@@ -236,3 +236,61 @@ def test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion(mo
         bench.call_prices(kavz, n_steps=3000)
     # after 3 s the driveline turns at its steady 36-38 rad/s (the scene's run: 36.66 mean)
     assert 35.0 < seen["engine"] < 39.0 and 35.0 < seen["load"] < 39.0, seen
+
+
+def test_the_floor_step_makes_the_calls_of_a_jacobi_step(fmu_dir):
+    # The floor is what a master that does nothing else pays: the engine's own step of the
+    # calls, the very calls a jacobi step makes (a step, a read and a set where a jacobi
+    # step makes one), not a loop of the benchmark's own.
+    from harness.engine.run import recorded_names, simulate
+    from harness.engine.system import System
+    kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
+    run = simulate(kavz, "jacobi", 1e-3, fmu_dir)
+    per_step = {name: {kind: count / run.counters["steps"] for kind, count in kinds.items()}
+                for name, kinds in run.counters["calls_by_kind"].items()}
+    system = System(kavz, fmu_dir, record=recorded_names(kavz))
+    try:
+        system.initialize()
+        before = system.calls_by_kind()
+        for k in range(10):
+            system.floor_step(k * 1e-3, 1e-3)
+        after = system.calls_by_kind()
+    finally:
+        system.free()
+    assert {name: {kind: (after[name][kind] - before[name][kind]) / 10 for kind in kinds}
+            for name, kinds in after.items()} == per_step
+
+
+
+def test_where_the_floors_motion_diverges_it_starts_again_and_never_calls_a_failed_fmu(monkeypatch):
+    # Bare jacobi steps of 2 ms on the stiff scene run away within a few dozen steps and the
+    # engine refuses the torque it is sent: FMI allows no further step after that error.  The
+    # floor sees the refusal, puts every component back to its initial state and carries on.
+    from harness.engine.component import Component
+    from harness.engine.system import System
+    refused, restored, states = [], [], []
+    fail, restore, free = Component.fail, Component.restore_state, System.free
+
+    def noting_failure(component, call, status):
+        refused.append(call)
+        fail(component, call, status)
+
+    def noting_restore(component, state, time):
+        restored.append(component.name)
+        restore(component, state, time)
+
+    def noting(system):
+        states.extend(c.state for c in system.components.values())
+        free(system)
+
+    monkeypatch.setattr(Component, "fail", noting_failure)
+    monkeypatch.setattr(Component, "restore_state", noting_restore)
+    monkeypatch.setattr(System, "free", noting)
+    stiff = scene.load("kavz685_stiff")
+    assert bench.call_floor(stiff, n_steps=400, step=2e-3) > 0
+    assert refused, "the bare steps were expected to diverge at this step"
+    assert len(restored) == 3 * len(refused) and set(states) == {"stepping"}
+    # the call prices go through the same step and start again alike
+    refused.clear()
+    assert all(price > 0 for price in bench.call_prices(stiff, n_steps=400, step=2e-3)["engine"].values())
+    assert refused

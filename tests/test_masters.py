@@ -115,7 +115,7 @@ def test_extrapolating_masters_send_the_polynomial_ahead_in_the_calls_of_jacobi(
 
 def test_a_refused_dostep_in_a_step_plan_is_named_as_component_do_step_names_it():
     from harness.engine.component import step_call
-    from harness.engine.system import System
+    from harness.engine.system import StepCall, System
     failures = []
 
     class Refusing:
@@ -125,6 +125,6 @@ def test_a_refused_dostep_in_a_step_plan_is_named_as_component_do_step_names_it(
             failures.append((call, status))
 
     component = Refusing()
-    System.step_with(((component, lambda handle, t, h, flag: 3, None),), 0.25, 1e-3)
+    System.step_with((StepCall(component, lambda handle, t, h, flag: 3, None),), 0.25, 1e-3)
     assert failures == [("fmi2DoStep(t = 0.25, h = 0.001)", 3)] == [(step_call(0.25, 1e-3), 3)]
     assert component.steps == 1

@@ -14,7 +14,9 @@ or recorded are ever read.
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Callable
 
 from fmpy import read_model_description
 
@@ -22,6 +24,85 @@ from harness.description import scene as scenes
 from harness.engine.component import Component, step_call
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS
+
+
+# -- the compiled records a propagation runs ---------------------------------------------------------
+# Read by name, a field found by what it is rather than where it sits; slotted, as a slot is
+# the quickest attribute Python reads (a named tuple's field takes about twice as long).
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """Inputs of ``component``: their value references ``vrs`` and ``values``, ctypes
+    arrays (a whole input buffer or a view into part of it)."""
+    component: Component
+    vrs: Any
+    values: Any
+
+
+@dataclass(frozen=True, slots=True)
+class Share:
+    """A source's share of ``component``'s input buffer: the inputs at ``vrs`` whose
+    ``values`` come from the source's exposed outputs at ``positions`` (indices into the
+    source's output buffer, in the order of the inputs)."""
+    component: Component
+    vrs: Any
+    values: Any
+    positions: list[int]
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    """One fmi2SetReal of a propagation: ``n`` inputs of ``component`` at ``vrs`` set to
+    ``values`` (views into its input buffer), the raw call and handle looked up once."""
+    component: Component
+    set_real: Callable
+    handle: Any
+    vrs: Any
+    n: Any
+    values: Any
+
+
+@dataclass(frozen=True, slots=True)
+class Copy:
+    """Outputs copied into a target's input buffer ``values``: ``values[k] = outputs[i]``
+    for each ``(k, i)`` of ``pairs``."""
+    values: Any
+    pairs: tuple[tuple[int, int], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Visit:
+    """A component's part of a compiled propagation plan: its outputs read in one call
+    (``get_real`` None where it has none to read; ``n`` as the raw call takes it) into
+    ``values``, copied into its targets' input buffers, then the ``sends`` it completes
+    (where it is the last of a target's sources in the plan).  ``component`` None in a
+    plan that only sends."""
+    component: Component | None
+    get_real: Callable | None
+    handle: Any
+    vrs: Any
+    n: Any
+    values: Any
+    copies: tuple[Copy, ...]
+    sends: tuple[Send, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class StepCall:
+    """A component's fmi2DoStep, the raw call and handle looked up once (``step_plan``)."""
+    component: Component
+    do_step: Callable
+    handle: Any
+
+
+@dataclass(frozen=True, slots=True)
+class FloorPlan:
+    """The FMI calls of one communication step and nothing else (``System.floor_step``):
+    each component's fmi2DoStep (a ``step_plan``), one full propagation, and the re-reads
+    of the outputs that depend on inputs."""
+    steps: tuple[StepCall, ...]
+    propagation: list[Visit]
+    rereads: list[Visit]
 
 
 class SceneInvalid(ValueError):
@@ -173,8 +254,8 @@ class System:
                     first, count = ranges[name]
                     vrs, values = self._views(target, first, count)
                     conns = incoming[target][first:first + count]
-                    writes.append((self.components[target], vrs, values,
-                                   [self.index[(name, c.output)] for c in conns]))
+                    writes.append(Share(self.components[target], vrs, values,
+                                        [self.index[(name, c.output)] for c in conns]))
             self.writes[name] = writes
         # Components downstream of each one (itself included), in propagation order.
         self.downstream = {}
@@ -194,10 +275,10 @@ class System:
         return ((ctypes.c_uint * count).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)),
                 (ctypes.c_double * count).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)))
 
-    def input_spans(self, target: str, sources) -> list:
-        """``[(value references, values)]`` covering the inputs of ``target`` that come
-        from ``sources``, as few adjacent runs of its buffer as there are (one where the
-        sources' shares adjoin): what one fmi2SetReal each sends."""
+    def input_spans(self, target: str, sources) -> list[Inputs]:
+        """``Inputs`` covering the inputs of ``target`` that come from ``sources``, as few
+        adjacent runs of its buffer as there are (one where the sources' shares adjoin):
+        what one fmi2SetReal each sends."""
         ranges = self._input_ranges[target]
         spans = sorted(ranges[s] for s in sources if s in ranges)
         runs = []
@@ -206,35 +287,32 @@ class System:
                 runs[-1][1] += count
             else:
                 runs.append([first, count])
-        return [self._views(target, first, count) for first, count in runs]
+        return [Inputs(self.components[target], *self._views(target, first, count)) for first, count in runs]
 
     def _compile_plan(self, names, held=frozenset()):
         """A propagation over the components ``names`` (in propagation order), flattened into
-        tuples of raw calls, one per component: ``(component, get_real, handle, vrs, n,
-        values, copies, sends)`` - its outputs read in one call (``get_real`` None where it
-        has none to read; ``n`` as the raw calls take it), copied into its targets' input
-        buffers, and then, where it is the last of a target's sources in the plan, that
-        target's inputs from the plan's sources set in one call (targets in ``held`` are
-        filled but not sent: see held_plan).  Every Python attribute lookup here would
-        show in the harness's overhead."""
+        raw calls, one ``Visit`` per component: its outputs read in one call, copied into its
+        targets' input buffers, and then, where it is the last of a target's sources in the
+        plan, that target's inputs from the plan's sources set in one call (targets in
+        ``held`` are filled but not sent: see held_plan).  Every Python attribute lookup
+        left for run time would show in the harness's overhead."""
         names = list(names)
         position = {n: k for k, n in enumerate(names)}
         plan = []
         for name in names:
             component = self.components[name]
             vrs, values = self.buffers[name]
-            copies = tuple((t_values, tuple(enumerate(positions)))
-                           for _, _, t_values, positions in self.writes[name])
+            copies = tuple(Copy(share.values, tuple(enumerate(share.positions))) for share in self.writes[name])
             sends = []
             for target, ranges in self._input_ranges.items():
                 mine = [s for s in ranges if s in position]
                 if target in held or name not in mine or max(position[s] for s in mine) != position[name]:
                     continue
                 t = self.components[target]
-                sends += [(t, t.raw.set_real, t.raw.handle, t_vrs, t.raw.count(len(t_vrs)), t_values)
-                          for t_vrs, t_values in self.input_spans(target, mine)]
-            plan.append((component, component.raw.get_real if len(vrs) else None, component.raw.handle, vrs,
-                         component.raw.count(len(vrs)), values, copies, tuple(sends)))
+                sends += [Send(t, t.raw.set_real, t.raw.handle, span.vrs, t.raw.count(len(span.vrs)), span.values)
+                          for span in self.input_spans(target, mine)]
+            plan.append(Visit(component, component.raw.get_real if len(vrs) else None, component.raw.handle, vrs,
+                              component.raw.count(len(vrs)), values, copies, tuple(sends)))
         return plan
 
     def _compile(self):
@@ -252,33 +330,35 @@ class System:
             n = len(self.input_dependent[name])
             first = len(vrs) - n
             self.dependent_reads.append(
-                (component, component.raw.get_real, component.raw.handle,
-                 (ctypes.c_uint * n).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)), component.raw.count(n),
-                 (ctypes.c_double * n).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)), (), ()))
+                Visit(component, component.raw.get_real, component.raw.handle,
+                      (ctypes.c_uint * n).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)),
+                      component.raw.count(n),
+                      (ctypes.c_double * n).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)), (), ()))
         # For masters whose last propagation only filled the buffers: first send the
         # connected inputs of those components from their buffers.
-        self._dependent_sends = self.send_plan([(self.components[name], *self.inputs[name])
+        self._dependent_sends = self.send_plan([Inputs(self.components[name], *self.inputs[name])
                                                 for name in dependent if name in self.inputs])
         self.has_dependent_outputs = bool(dependent)
 
-    def send_plan(self, writes) -> list:
-        """A plan for ``propagate_with`` that reads nothing and sends each ``(component,
-        vrs, values)`` of ``writes`` in one fmi2SetReal (empty when there is nothing to send)."""
-        sends = tuple((component, component.raw.set_real, component.raw.handle, vrs,
-                       component.raw.count(len(vrs)), values) for component, vrs, values in writes)
-        return [(None, None, None, None, 0, None, (), sends)] if sends else []
+    def send_plan(self, writes: list[Inputs]) -> list[Visit]:
+        """A plan for ``propagate_with`` that reads nothing and sends each ``Inputs`` of
+        ``writes`` in one fmi2SetReal (empty when there is nothing to send)."""
+        sends = tuple(Send(w.component, w.component.raw.set_real, w.component.raw.handle, w.vrs,
+                           w.component.raw.count(len(w.vrs)), w.values) for w in writes)
+        return [Visit(None, None, None, None, 0, None, (), sends)] if sends else []
 
-    def step_plan(self, names) -> tuple:
+    def step_plan(self, names) -> tuple[StepCall, ...]:
         """The doStep calls of the components ``names``, compiled for ``step_with``."""
-        return tuple((c, c.raw.do_step, c.raw.handle) for c in (self.components[n] for n in names))
+        return tuple(StepCall(c, c.raw.do_step, c.raw.handle) for c in (self.components[n] for n in names))
 
     @staticmethod
     def step_with(plan, t: float, h: float):
         """fmi2DoStep(t, h) on each component of a ``step_plan``, in its order; what
         ``Component.do_step`` does, without its per-call lookups."""
-        for component, do_step, handle in plan:
+        for call in plan:
+            component = call.component
             component.steps += 1
-            status = do_step(handle, t, h, 1)
+            status = call.do_step(call.handle, t, h, 1)
             if status > 1:
                 component.fail(step_call(t, h), status)
             component.time = t + h
@@ -296,20 +376,42 @@ class System:
 
     def propagate_with(self, plan):
         """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
-        for component, get_real, handle, vrs, n, values, copies, sends in plan:
+        for visit in plan:
+            values = visit.values
+            get_real = visit.get_real
             if get_real is not None:
+                component = visit.component
                 component.gets += 1
-                status = get_real(handle, vrs, n, values)
+                status = get_real(visit.handle, visit.vrs, visit.n, values)
                 if status > 1:
                     component.fail("fmi2GetReal", status)
-            for t_values, pairs in copies:
-                for k, i in pairs:
-                    t_values[k] = values[i]
-            for target, set_real, target_handle, t_vrs, t_n, t_values in sends:
+            for copy in visit.copies:
+                target_values = copy.values
+                for k, i in copy.pairs:
+                    target_values[k] = values[i]
+            for send in visit.sends:
+                target = send.component
                 target.sets += 1
-                status = set_real(target_handle, t_vrs, t_n, t_values)
+                status = send.set_real(send.handle, send.vrs, send.n, send.values)
                 if status > 1:
                     target.fail("fmi2SetReal", status)
+
+    def floor_plan(self) -> FloorPlan:
+        """The calls ``floor_step`` makes, compiled (components in propagation order)."""
+        return FloorPlan(self.step_plan(self.order), self._full_plan, self.dependent_reads)
+
+    def floor_step(self, t: float, h: float, plan: FloorPlan | None = None):
+        """One communication step of FMI calls and nothing else, made by the code every
+        master's step runs: each component's fmi2DoStep, one full propagation (the
+        copies carry the values, so the models run the scene's motion), and the re-reads of
+        recorded outputs that depend on inputs.  What a master that does nothing else pays
+        a step: the benchmark's FMU-call floor.  ``plan`` (default ``floor_plan()``) may
+        carry raw calls wrapped, e.g. in timers."""
+        if plan is None:
+            plan = self.floor_plan()
+        self.step_with(plan.steps, t, h)
+        self.propagate_with(plan.propagation)
+        self.propagate_with(plan.rereads)
 
     def refresh_dependent(self, send: bool = False):
         """Read again the outputs that depend on inputs written since they were read (see

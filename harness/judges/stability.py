@@ -443,7 +443,7 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
     driver = _analysed_master(master, system, step)
     slots = _history_slots(driver)
     inputs = driver.coupled_inputs if slots else []
-    width = sum(len(values) for _, _, values in inputs)       # torques per communication point
+    width = sum(len(each.values) for each in inputs)       # torques per communication point
     # Outputs of the shafts a master reads from the last propagation besides their states
     # (jacobi-midpoint's accelerations): propagation reads them before it writes the new
     # torques, so they carry the torque of the step before - state of the map, too.
@@ -451,8 +451,8 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
                 for name in system.stateful for var in system.exposed[name] if var not in ("phi", "w")]
     core = ["phi1", "w1", "phi2", "w2"] + (["M1"] if system.lagged else [])   # M1: the lagged engine torque
     names = (core + [label for _, _, label in buffered]
-             + [f"{target.name}.{vr}@t-{k + 1}h" for k in range(slots) for target, vrs, _ in inputs
-                for vr in range(len(vrs))])
+             + [f"{each.component.name}.{vr}@t-{k + 1}h" for k in range(slots) for each in inputs
+                for vr in range(len(each.vrs))])
     first = len(core) + len(buffered)         # where the torque history starts in z
     n = first + slots * width
 
@@ -464,9 +464,9 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
             points = []
             for k in reversed(range(slots)):       # oldest first, as the master keeps them
                 flat, values = list(z[first + k * width:first + (k + 1) * width]), []
-                for _, _, buffer in inputs:
-                    values.append(flat[:len(buffer)])
-                    flat = flat[len(buffer):]
+                for each in inputs:
+                    values.append(flat[:len(each.values)])
+                    flat = flat[len(each.values):]
                 points.append((-(k + 1) * step, values))
             driver.history = deque(points, maxlen=slots)
         driver.t = 0.0

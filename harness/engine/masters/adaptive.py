@@ -202,7 +202,8 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         component's exposed output in rad/s, if it has one."""
         system = self.system
         speeds = []
-        for target, _, _ in self.coupled_inputs:
+        for inputs in self.coupled_inputs:
+            target = inputs.component
             candidates = [v for v in system.exposed[target.name] if _unit(target, v) == "rad/s"]
             index = system.index[(target.name, candidates[0])] if candidates else None
             speeds.append((system.buffers[target.name][1], index))
@@ -215,7 +216,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
 
     def _step_impl(self, t, h):
-        start = [list(values) for _, _, values in self.coupled_inputs]
+        start = [list(inputs.values) for inputs in self.coupled_inputs]
         speeds = self._read_speeds()
         points = list(self.history) + [(t, start)]
         fraction = self.MEAN_FRACTION[len(points) - 1]
@@ -224,7 +225,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             predicted = self._hold(t, h, points)
             self._step_stateful(t, h)
             self.system.propagate()
-            end = [list(values) for _, _, values in self.coupled_inputs]
+            end = [list(inputs.values) for inputs in self.coupled_inputs]
             self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
             difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
             return fraction * difference / (self.tolerance * (self._scale or 1.0)), end
@@ -236,7 +237,8 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
                                 f"{self.tolerance:g}; the coupling torque changes too fast for this tolerance")
         # ECCO's power-bond residual: work given (held means) against work accounted for.
         end_speeds = self._read_speeds()
-        for (_, _, values, n, ramped), ss, es, w0, w1 in zip(self._held, start, end, speeds, end_speeds):
+        for held, ss, es, w0, w1 in zip(self._held, start, end, speeds, end_speeds):
+            values, n, ramped = held.values, held.n, held.ramped
             for i in range(n):
                 mean = values[i] + (0.5 * values[n + i] * h if ramped else 0.0)
                 self.bond_energy_residual += h * (mean - 0.5 * (ss[i] + es[i])) * 0.5 * (w0 + w1)

@@ -32,7 +32,7 @@ rollback), the adaptive ones (``adaptive``: error-controlled steps), and the reg
 from __future__ import annotations
 
 from harness.description.scene import step_problem
-from harness.engine.system import System
+from harness.engine.system import Inputs, System
 
 
 class MasterFailure(RuntimeError):
@@ -45,8 +45,8 @@ class Master:
     What the linear stability analysis (``harness.judges.stability``) replays a master's
     step through, public for that reason and kept stable: ``save_states()`` /
     ``restore_states(states, t)`` (the stateful FMUs' full states); and, where a family has
-    them, ``coupled_inputs`` (the ``(component, vrs, values)`` buffers of the inputs it
-    predicts), ``history`` (the past communication points ``(t, values)`` its predictor
+    them, ``coupled_inputs`` (the ``Inputs`` buffers, component, value references and
+    values, of the inputs it predicts), ``history`` (the past communication points ``(t, values)`` its predictor
     uses, oldest first), ``current_inputs()`` and ``evaluate(...)`` (an iterative master's
     fixed-point map ``u -> G(u)``)."""
 
@@ -114,10 +114,10 @@ class Master:
     # -- shared helpers ------------------------------------------------------------------------
     def _coupled_inputs(self):
         """The input buffers of stateful components that propagation fills (the coupling
-        torques), as the last propagation left them: ``[(component, vrs, values)]``."""
+        torques), as the last propagation left them: ``[Inputs]``."""
         system = self.system
-        return [(target, vrs, values) for writes in system.writes.values()
-                for target, vrs, values, _ in writes if target.name in system.stateful]
+        return [Inputs(share.component, share.vrs, share.values) for shares in system.writes.values()
+                for share in shares if share.component.name in system.stateful]
 
     # Full FMU states of the stateful components, for masters that roll back.
     def save_states(self) -> list:

@@ -5,9 +5,24 @@ from __future__ import annotations
 import ctypes
 import math
 from collections import deque
+from dataclasses import dataclass
+from typing import Any
 
 from harness.engine.masters.base import Master
-from harness.engine.system import System
+from harness.engine.component import Component
+from harness.engine.system import Inputs, System
+
+
+@dataclass(frozen=True, slots=True)
+class HeldInputs:
+    """A component's coupled inputs as an extrapolating master writes them over a step:
+    ``values`` at ``vrs``, the ``n`` inputs first and, where ``ramped``, their declared
+    time derivatives after them (rate, then higher ones)."""
+    component: Component
+    vrs: Any
+    values: Any
+    n: int
+    ramped: bool
 
 
 class JacobiMaster(Master):
@@ -119,13 +134,14 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         # One write per component: the inputs and, after them, their derivatives (the
         # hold gives rates and sets any higher ones to 0).
         self._held = []
-        for (target, vrs, values), chain in zip(self.coupled_inputs, chains):
-            n = len(values)
+        for inputs, chain in zip(self.coupled_inputs, chains):
+            n = len(inputs.values)
             if not chain:
-                self._held.append((target, vrs, (ctypes.c_double * n)(), n, False))
+                self._held.append(HeldInputs(inputs.component, inputs.vrs, (ctypes.c_double * n)(), n, False))
             else:
-                every = (ctypes.c_uint * (n * (1 + len(chain))))(*vrs, *(vr for vrs_k in chain for vr in vrs_k))
-                self._held.append((target, every, (ctypes.c_double * len(every))(), n, True))
+                every = (ctypes.c_uint * (n * (1 + len(chain))))(*inputs.vrs,
+                                                                 *(vr for vrs_k in chain for vr in vrs_k))
+                self._held.append(HeldInputs(inputs.component, every, (ctypes.c_double * len(every))(), n, True))
         # The components whose inputs get the polynomial whole at the end of each step (see
         # the class); the others (a foreign FMU without the derivative inputs) the hold.
         ahead = [k for k, chain in enumerate(chains) if len(chain) >= self.degree]
@@ -138,24 +154,24 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._weights_cache: dict = {}
         self._can_roll_back = all(system.components[n].description.coSimulation.canGetAndSetFMUstate
                                   for n in system.stateful)
-        self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
+        self._held_plan = system.held_plan({inputs.component.name for inputs in self.coupled_inputs})
         # The held inputs' writes compiled once, as propagations that read nothing: all of
         # them, those sent ahead, the rest.
-        writes = [(target, vrs, values) for target, vrs, values, _, _ in self._held]
+        writes = [Inputs(held.component, held.vrs, held.values) for held in self._held]
         self._sends = system.send_plan(writes)
         self._sends_ahead = system.send_plan([writes[k] for k in self._ahead])
         self._sends_rest = system.send_plan([writes[k] for k in self._rest])
 
     def _derivative_inputs(self, inputs) -> list[list]:
-        """For each ``(component, vrs, values)`` of ``inputs``: the value references of
-        their declared time derivatives (FMI ``derivative``), first, second, ... as far as
-        every input of the component has one (``[]`` where one has none)."""
+        """For each ``Inputs`` of ``inputs``: the value references of their declared time
+        derivatives (FMI ``derivative``), first, second, ... as far as every input of the
+        component has one (``[]`` where one has none)."""
         out = []
-        for target, vrs, _ in inputs:
+        for each in inputs:
             rate_of = {v.derivative.valueReference: v.valueReference
-                       for v in target.description.modelVariables
+                       for v in each.component.description.modelVariables
                        if v.derivative is not None and v.causality == "input"}
-            chain, current = [], list(vrs)
+            chain, current = [], list(each.vrs)
             while all(vr in rate_of for vr in current) and len(chain) < 3:
                 current = [rate_of[vr] for vr in current]
                 chain.append(current)
@@ -171,7 +187,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         ends = [] if predict else None
         held = self._held
         for k in (self._rest if rest_only else range(len(held))):
-            _, _, values, n, ramped = held[k]
+            values, n, ramped = held[k].values, held[k].n, held[k].ramped
             column = [p[1][k] for p in points]       # this component's inputs at each point
             component_ends = []
             for i in range(n):
@@ -203,8 +219,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         scale = t_end - times[-2]
         first, second = self._derivatives(times, scale)
         for k in self._ahead:
-            _, _, values, n, _ = self._held[k]
-            now = self.coupled_inputs[k][2]
+            values, n = self._held[k].values, self._held[k].n
+            now = self.coupled_inputs[k].values
             column = [p[1][k] for p in history] + [now]
             higher = len(values) > 2 * n
             for i in range(n):
@@ -250,7 +266,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         return len(self.history) < self.degree and self._can_roll_back
 
     def _step_impl(self, t, h):
-        start = [list(values) for _, _, values in self.coupled_inputs]
+        start = [list(inputs.values) for inputs in self.coupled_inputs]
         history = self.history
         if self._starting():
             self._start_step(t, h, [*history, (t, start)])
@@ -285,7 +301,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 self._hold(t, h, through)
                 self._step_stateful(t, h)
                 self.system.propagate()
-                through = points + [(t + h, [list(values) for _, _, values in self.coupled_inputs])]
+                through = points + [(t + h, [list(inputs.values) for inputs in self.coupled_inputs])]
         finally:
             self._free_states(states)
         self._step_feedthrough(t, h)
@@ -336,15 +352,15 @@ class MidpointPredictionMaster(JacobiMaster):
         for source in system.stateful:
             values = system.buffers[source][1]
             names = system.exposed[source]
-            for target, vrs, target_values, positions in system.writes[source]:
-                if target.name not in system.feedthrough:
+            for share in system.writes[source]:
+                if share.component.name not in system.feedthrough:
                     continue
-                terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in positions]
-                self._predictions.append((values, target_values, terms))
-                predicted.setdefault(target, []).append(source)
+                terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in share.positions]
+                self._predictions.append((values, share.values, terms))
+                predicted.setdefault(share.component, []).append(source)
         # Each feedthrough target's predicted inputs sent in one call (its buffer's runs)
-        self._sends = [(target, vrs, target_values) for target, sources in predicted.items()
-                       for vrs, target_values in system.input_spans(target.name, sources)]
+        self._sends = [span for target, sources in predicted.items()
+                       for span in system.input_spans(target.name, sources)]
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
@@ -353,8 +369,8 @@ class MidpointPredictionMaster(JacobiMaster):
         for values, target_values, terms in self._predictions:
             for k, indices in enumerate(terms):
                 target_values[k] = sum(f * values[i] for f, i in zip(factors, indices))
-        for target, vrs, target_values in self._sends:
-            target.write(vrs, target_values)
+        for span in self._sends:
+            span.component.write(span.vrs, span.values)
         self.system.propagate(self._feedthrough)
 
     def _step_impl(self, t, h):

@@ -125,7 +125,7 @@ class IterativeMaster(Master):
         self.n_jacobians = 0
         # Evaluations write the held torques themselves: propagation only fills the
         # buffers; the converged end-of-step torques are sent once per step.
-        self._held_plan = system.held_plan({target.name for target, _, _ in self.coupled_inputs})
+        self._held_plan = system.held_plan({inputs.component.name for inputs in self.coupled_inputs})
 
     def counters(self) -> dict:
         return {**super().counters(), "jacobians": self.n_jacobians}
@@ -133,7 +133,7 @@ class IterativeMaster(Master):
     # u is a flat list over the coupled inputs, in the order of self.coupled_inputs (plain
     # lists: see _solve_linear)
     def current_inputs(self) -> list[float]:
-        return [v for _, _, values in self.coupled_inputs for v in values]
+        return [v for inputs in self.coupled_inputs for v in inputs.values]
 
     def evaluate(self, u, t, h, states, start, rolled):
         """Step the stateful components from their saved ``states`` holding ``u`` and
@@ -141,11 +141,12 @@ class IterativeMaster(Master):
         if rolled:
             self.restore_states(states, t)
         k = 0
-        for target, vrs, values in self.coupled_inputs:
+        for inputs in self.coupled_inputs:
+            values = inputs.values
             for i in range(len(values)):
                 values[i] = u[k]
                 k += 1
-            target.write(vrs, values)
+            inputs.component.write(inputs.vrs, values)
         self._step_stateful(t, h)
         self.system.propagate_with(self._held_plan)     # the inputs' buffers now hold tau(t + h)
         end = self.current_inputs()
@@ -154,8 +155,8 @@ class IterativeMaster(Master):
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
         at the end of the step (the evaluations left the held ones in place)."""
-        for target, vrs, values in self.coupled_inputs:
-            target.write(vrs, values)
+        for inputs in self.coupled_inputs:
+            inputs.component.write(inputs.vrs, inputs.values)
 
     def _guess(self, t, h, start):
         if len(self.history) < 2:

@@ -1,0 +1,45 @@
+"""The work-precision benchmark: error against run time for every way the harness can
+step a scene, next to other co-simulation engines on the same FMUs, the monolithic
+solution and the FMU-call floor (``lever bench [SCENE]``).
+
+Each case runs ``repeats`` times; the run time quoted is the median [min-max] of the
+stepping loops (instantiation left out, for every engine alike).  What is divided by what
+(a master and its baseline, a master and DOP853, a step and the do-nothing floor) is measured
+side by side: the cases a headline ratio divides run again in turn, round after round
+(``measure_rounds``), and the ratio is the median of the rounds' ratios with their range.  A
+master's FMU-call floor is timed just before each of its runs and its call prices just before
+and after them.  A figure that cannot be (a share below zero, a floor above the step it bounds,
+a figure from fewer runs than asked) is flagged with the machine's load and the spread, not
+shown (``harness.studies.trust``).  Errors are measured once
+(runs are deterministic) against the tight monolithic reference on the run's own
+communication grid: time-averaged RMS and max of ``tau1, tau2, w1, w2`` relative to the
+mean torque and speed, over the whole run and after the scene's start-up transient, and
+the energy residual.
+
+The plan comes from the scene's ``[bench]`` table (steps per master, tolerances for
+adaptive ones, peers, monolithic tolerances, the target error); masters it does not
+name are left out.
+
+The package, one module a job: ``schedule`` (the plan, the Case, the case log), ``timing``
+(running and timing the cases, the side-by-side rounds), ``floors`` (the FMU-call floor and
+call prices, the time split), ``do_nothing_twins`` (the FMUs' do-nothing twins the floor and
+the split are also timed on), ``headlines`` (the claims and what is no result), ``report``
+(tables, bench.md/bench.json/bench.csv, the plot) and ``study`` (the whole benchmark in
+order).  What other modules use is named here.
+"""
+from harness.studies.bench.floors import CALL_KINDS, call_floor, call_prices, time_split
+from harness.studies.bench.headlines import (bracket, case_noise, case_problems, claims, eigenfrequency,
+                                             headline_cases, interpolate, overhead_above_floor, split_case,
+                                             time_at_error)
+from harness.studies.bench.report import (COLUMNS, default_out, faster_text, machine_text, markdown, plot,
+                                          summary_lines, table_row, write)
+from harness.studies.bench.schedule import Case, fingerprint, plan
+from harness.studies.bench.study import bench
+from harness.studies.bench.timing import measure_rounds, run_master, run_monolithic, run_peer
+from harness.studies.cases import case_key
+
+__all__ = ["CALL_KINDS", "COLUMNS", "Case", "bench", "bracket", "call_floor", "call_prices", "case_key",
+           "case_noise", "case_problems", "claims", "default_out", "eigenfrequency", "faster_text", "fingerprint",
+           "headline_cases", "interpolate", "machine_text", "markdown", "measure_rounds", "overhead_above_floor",
+           "plan", "plot", "run_master", "run_monolithic", "run_peer", "split_case", "summary_lines", "table_row",
+           "time_at_error", "time_split", "write"]

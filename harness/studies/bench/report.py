@@ -1,0 +1,304 @@
+"""The benchmark's report: a row per case (bench.csv and the tables), bench.json, bench.md
+in words, the work-precision plot, and the few lines ``lever bench`` prints at the end."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from harness.description import scene as scenes
+from harness.paths import RESULTS
+from harness.studies import trust
+from harness.studies.bench.headlines import case_noise, case_problems, overhead_above_floor
+from harness.studies.bench.schedule import Case
+
+
+def progress_line(case: Case) -> str:
+    """A finished case in one line of ``lever bench``'s progress."""
+    if case.failure:
+        return f"  {case.label:34s} FAILED: {case.failure[:150]}"
+    return (f"  {case.label:34s} {case.wall:8.3f} s  tau rms {100 * case.errors.get('tau_rms', math.nan):9.4f} %"
+            f"  ({case.steps} steps)")
+
+
+COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
+           "load_min", "load_max", "unreliable", "steps", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
+           "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
+           "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "split_unreliable", "failure"]
+
+
+def table_row(case: Case) -> dict:
+    """A case as a row of the benchmark's tables (CSV and report).  A case whose run time
+    is no result (``case_problems``) says why in ``unreliable``; a split that cannot be
+    (``split_case``) is left out, the reason in ``split_unreliable``."""
+    problems = case_problems(case)
+    overhead = overhead_above_floor(case) if case.floor_time and case.stable and not problems else None
+    spread = trust.spread(case.wall_times)
+    loads = [x for x in case.load if x is not None]
+    split = None if case.split_unreliable or problems else case.split      # a split of no result is none
+    return {"engine": case.engine, "kind": case.kind, "step": case.step, "tolerance": case.tolerance,
+            "wall_median_s": case.wall, "wall_min_s": spread["min"], "wall_max_s": spread["max"],
+            "repeats": len(case.wall_times), "asked": case.asked or None,
+            "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
+            "unreliable": ("; ".join(problems) + f": {case_noise(case, problems)}") if problems else None,
+            "steps": case.steps, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
+            "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
+                                                 ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
+                                                  "w_rms_after_transient")},
+            "energy_residual": case.energy_residual,
+            "calls_per_step": (sum(sum(k.values()) for k in case.calls_by_kind.values()) / case.steps
+                               if case.calls_by_kind and case.steps else None),
+            **{f"{part}_s": (split or {}).get(part) for part in ("crossing", "slave", "master")},
+            "split_unreliable": case.split_unreliable, "failure": case.failure}
+
+
+def write(out: Path, result: dict) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [table_row(c) for c in result["cases"]]
+    with open(out / "bench.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    payload = {k: v for k, v in result.items() if k != "cases"}
+    payload["cases"] = rows
+    (out / "bench.json").write_text(json.dumps(payload, indent=2, default=_json))
+    (out / "bench.md").write_text(markdown(result, rows))
+    paths = [out / "bench.csv", out / "bench.json", out / "bench.md"]
+    paths.append(plot(out / "work_precision.png", result))
+    return paths
+
+
+def _json(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, Case):
+        return asdict(x)
+    raise TypeError(type(x))
+
+
+def _pct(x):
+    return "" if x is None or not math.isfinite(x) else f"{100 * x:.4g} %"
+
+
+def machine_text(machine: dict | None) -> str:
+    """The machine's load during a study, in words."""
+    if not machine or machine.get("load_max") is None:
+        return "Machine load not known (no load average on this system)."
+    return (f"Machine: {machine['cpus']} CPUs, one-minute load average {machine['load_min']:.2f}-"
+            f"{machine['load_max']:.2f} during the run (median {machine['load_median']:.2f}, "
+            f"{machine['samples']} samples).")
+
+
+def faster_text(r: dict | None) -> str:
+    """``2.1x faster [1.9-2.3x, 3 pairs]`` or ``0.6x`` said as ``1.7x slower``."""
+    if not r or r.get("median") is None:
+        return "not measured"
+    if r["median"] >= 1.0:
+        return f"{trust.ratio_text(r, 1)} faster"
+    inverse = {**r, "median": 1 / r["median"],
+               "min": 1 / r["max"] if r.get("max") else None, "max": 1 / r["min"] if r.get("min") else None}
+    return f"{trust.ratio_text(inverse, 1)} slower"
+
+
+def _ratio(r: dict | None, digits: int = 2) -> str:
+    return trust.ratio_text(r, digits)
+
+
+def markdown(result: dict, rows: list[dict]) -> str:
+    c = result["claims"]
+    floor = result.get("floor_spread") or trust.spread([result["floor_per_step_s"]])
+    hollow_floor = result.get("hollow_floor_spread")
+    lines = [f"# Work-precision benchmark: {result['scene']}", "",
+             f"Median [min-max] of up to {result['repeats']} repeats of the stepping loop; errors against the "
+             f"monolithic reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
+             f"FMU-call floor: {trust.spread_text(floor)} per communication step"
+             + (f"; the same calls into do-nothing FMUs: {trust.spread_text(hollow_floor)}"
+                if hollow_floor and hollow_floor.get("n") else "") + ".", "",
+             machine_text(result.get("machine") or c.get("machine")), ""]
+    if result.get("eigenfrequency_rad_s"):
+        lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
+    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above floor | tau RMS | tau max | w RMS | "
+              "tau RMS after transient | energy residual | note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
+        if r.get("unreliable"):
+            wall = "unreliable"
+        elif r.get("wall_min_s") is not None and r["repeats"] > 1:
+            wall = f"{r['wall_median_s']:.3f} s [{r['wall_min_s']:.3f}-{r['wall_max_s']:.3f}]"
+        else:
+            wall = f"{r['wall_median_s']:.3f} s"
+        note = "; ".join(x for x in ((r["failure"] or "")[:90], r.get("unreliable") or "") if x)
+        runs = f"{r['repeats']}" + (f" of {r['asked']}" if r.get("asked") and r["asked"] != r["repeats"] else "")
+        lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {r['steps']} | "
+                     f"{_pct(r['overhead_above_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
+                     f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
+                     f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
+    lines += ["", f"## At an RMS torque error of {_pct(c['target_error'])}", "",
+              "| engine | run time (interpolated) | in the rounds side by side: median [min-max] |", "|---|---|---|"]
+    side = c.get("time_at_target_side_by_side", {})
+    for name, t in sorted(c["time_at_target_s"].items(), key=lambda kv: (kv[1] is None, kv[1] or 0)):
+        lines.append(f"| {name} | {'not reached' if t is None else f'{t:.3f} s'} | "
+                     f"{trust.spread_text(side[name]) if name in side else ''} |")
+    ratios = c.get("ratios", {})
+    if c.get("best_master"):
+        speedup = ratios.get("speedup_over_baseline")
+        lines += ["", f"Best master: **{c['best_master']}**, "
+                  + (f"{faster_text(speedup)} than {c['baseline']}." if speedup else
+                     f"({c['baseline']} does not reach the target).")]
+        if ratios.get("best_master_over_monolithic"):
+            lines[-1] += (f"  It takes {_ratio(ratios['best_master_over_monolithic'])} the time of the monolithic "
+                          "solution (scipy DOP853 on the unsplit equations) at this error.")
+        if c.get("ratios") is not None:
+            lines += ["", "Each ratio is the median of the ratios of runs made side by side (the cases it divides "
+                      "run in turn, round after round), with their range; the run times above are the cases' own "
+                      "repeats, made one case after another."]
+    split_rows = [r for r in rows if r.get("crossing_s") is not None or r.get("split_unreliable")
+                  or (r["kind"] == "master" and r.get("unreliable") and r.get("calls_per_step"))]
+    if split_rows:
+        lines += ["", "## Where the time goes", "",
+                  "Each master's run time split by the calls it made, priced call by call (component and kind: "
+                  "get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
+                  "the scene's for adaptive masters - just before and just after the case's runs, their mean): "
+                  "*crossing* the calls priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
+                  "*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
+                  "FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
+                  "Python, recording).  A split that cannot be (a share below zero, priced calls above the run "
+                  "time: the prices and the runs saw different machines) is not shown.", "",
+                  "| engine | step / tol | run time | FMI calls per step | crossing | slave | master |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in split_rows:
+            setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
+            wall = r["wall_median_s"]
+            calls = "" if r["calls_per_step"] is None else f"{r['calls_per_step']:.1f}"
+            if r.get("split_unreliable"):
+                parts = f"unreliable: {r['split_unreliable']} | | "
+            elif r.get("unreliable"):
+                parts = "unreliable: its run time is (above) | | "
+            else:
+                parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
+                                   for part in ("crossing", "slave", "master"))
+            shown = "unreliable" if r.get("unreliable") else f"{wall:.3f} s"
+            lines.append(f"| {r['engine']} | {setting} | {shown} | {calls} | {parts} |")
+    if c.get("baseline_step"):
+        b = c["baseline_step"]
+        if b.get("unreliable"):
+            lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s against the do-nothing FMUs' floor: "
+                      f"unreliable ({b['unreliable']})."]
+        else:
+            lines += ["", f"One {c['baseline']} step at h = {b['step']:g} s: {b['per_step_s'] * 1e6:.1f} us, "
+                      f"{_ratio(b['ratio'])} the do-nothing FMUs' floor for the same calls "
+                      f"({b['hollow_floor_per_step_s'] * 1e6:.1f} us, timed in each round beside the step)."]
+            if "bound_without_master" in b:
+                lines[-1] += (f" Our slaves' own work behind those calls (the FMI glue and the physics) takes "
+                              f"{b['slave_per_step_s'] * 1e6:.1f} us a step, so even a master that cost nothing "
+                              f"would take {b['bound_without_master']:.2f}x the floor.")
+            elif b.get("bound_unreliable"):
+                lines[-1] += f" The bound without a master is not shown: its split is unreliable."
+    if c.get("overhead_above_floor"):
+        lines += ["", "Harness overhead above the FMU-call floor (each run over the floor timed just before it, "
+                  "at the case's step; median over steps; masters that make more FMI calls per step than the "
+                  "floor's one step and one propagation show those calls here too): "
+                  + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_floor"].items()) + "."]
+    if c.get("largest_stable_baseline_step"):
+        s = c["largest_stable_baseline_step"]
+        side = s.get("wall_spread_side_by_side")
+        short = s.get("asked") and s["runs"] < s["asked"]
+        lines += ["", f"Largest stable {c['baseline']} step: {s['step']:g} s (h*omega_n = {s['h_omega']:.3g}), "
+                  + (f"run time unreliable (from {s['runs']} of {s['asked']} runs)" if short
+                     else f"run time {s['wall_s']:.3f} s")
+                  + (f"; side by side with the masters below: {trust.spread_text(side)}" if side else "") + "."]
+        faster = s.get("faster", {})
+        for name, fraction in sorted(s.get("time_fraction_at_target", {}).items(), key=lambda kv: kv[1]):
+            lines.append(f"- {name} reaches {_pct(c['target_error'])} RMS torque error in {fraction:.3f} of that "
+                         f"run time ({faster_text(faster.get(name)) if faster.get(name) else ''}).")
+    if c.get("at_h_omega_5_or_more"):
+        lines += ["", "At h*omega_n >= 5 (adaptive runs: their longest step):"]
+        for name, runs in c["at_h_omega_5_or_more"].items():
+            for r in runs:
+                setting = f"h = {r['step']:g} s" if r.get("tolerance") is None else \
+                    f"tol {r['tolerance']:g}, longest step {r['step']:.3g} s"
+                lines.append(f"- {name} {setting} (h*omega_n = {r['h_omega']:.2f}): "
+                             + (f"stable, energy residual {r['energy_residual']:.2e}, tau RMS {_pct(r['tau_rms'])}"
+                                if r["stable"] else "failed"))
+    return "\n".join(lines) + "\n"
+
+
+def summary_lines(result: dict) -> list[str]:
+    """The benchmark's outcome in a few lines (what ``lever bench`` prints at the end)."""
+    claims = result["claims"]
+    lines, target = [], claims["target_error"]
+    for name, t in claims["time_at_target_s"].items():
+        lines.append(f"  at {100 * target:g} % RMS torque error: {name:26s} "
+                     + ("not reached" if t is None else f"{t:.3f} s"))
+    ratios = claims.get("ratios", {})
+    if claims.get("best_master"):
+        speedup = ratios.get("speedup_over_baseline")
+        over = ratios.get("best_master_over_monolithic")
+        lines.append(f"  best master: {claims['best_master']}"
+                     + (f", {faster_text(speedup)} than {claims['baseline']}" if speedup else "")
+                     + (f"; {_ratio(over)} the monolithic solution's time" if over else ""))
+    if claims.get("baseline_step"):
+        b = claims["baseline_step"]
+        if b.get("unreliable"):
+            lines.append(f"  one {claims['baseline']} step against the do-nothing floor: unreliable ({b['unreliable']})")
+        else:
+            lines.append(f"  one {claims['baseline']} step: {b['per_step_s'] * 1e6:.1f} us, {_ratio(b['ratio'])} "
+                         f"the do-nothing FMUs' floor ({b['hollow_floor_per_step_s'] * 1e6:.1f} us, same calls)")
+            if "bound_without_master" in b:
+                lines.append(f"    our slaves' own work in it: {b['slave_per_step_s'] * 1e6:.1f} us; a master that "
+                             f"cost nothing would take {b['bound_without_master']:.2f}x the floor")
+    for case in result["cases"]:
+        if case.split and case_problems(case):
+            lines.append(f"  {case.label:34s} split unreliable: its run time is ({'; '.join(case_problems(case))})")
+        elif case.split_unreliable:
+            lines.append(f"  {case.label:34s} split unreliable: {case.split_unreliable}")
+        elif case.split:
+            lines.append(f"  {case.label:34s} " + ", ".join(
+                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master")))
+    if claims.get("overhead_above_floor"):
+        lines.append("  above the FMU-call floor: " + ", ".join(
+            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    lines.append("  " + machine_text(result.get("machine")))
+    return lines
+
+
+def plot(path: Path, result: dict) -> Path:
+    from harness.formats import plotting
+
+    plt = plotting.pyplot()
+    fig, ax = plt.subplots(figsize=(11, 6), layout="constrained")
+    groups: dict[str, list[Case]] = {}
+    for case in result["cases"]:
+        key = case.engine if case.kind != "monolithic" else "monolithic (scipy DOP853)"
+        groups.setdefault(key, []).append(case)
+    for name, group in groups.items():
+        points = sorted((c.wall, c.errors["tau_rms"], c.step) for c in group if c.stable and "tau_rms" in c.errors)
+        if not points:
+            continue
+        kind = group[0].kind
+        style = {"master": "-o", "peer": "--s", "monolithic": ":^"}[kind]
+        line, = ax.loglog([p[0] for p in points], [100 * p[1] for p in points], style, label=name, markersize=4)
+        if kind != "monolithic":       # each point's step, as the report's tables list them
+            for wall, error, step in points:
+                if step:
+                    ax.annotate(f"{1e3 * step:g}", (wall, 100 * error), textcoords="offset points", xytext=(3, 3),
+                                fontsize=6, color=line.get_color())
+    target = result["claims"]["target_error"]
+    ax.axhline(100 * target, color="grey", lw=0.8, ls="--", label=f"target error {100 * target:g} %")
+    ax.set_xlabel("run time of the stepping loop [s] (median)")
+    ax.set_ylabel("RMS torque error [% of mean torque]")
+    ax.set_title(f"Work-precision, scene {result['scene']} (numbers: the communication step in ms)")
+    ax.grid(True, which="both", alpha=0.3)
+    plotting.legend_outside(ax)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def default_out(scene: scenes.Scene) -> Path:
+    return RESULTS / "bench" / scene.name

@@ -1,0 +1,134 @@
+"""What the benchmark runs: the scene's plan (the masters at their steps or tolerances,
+the peers, the monolithic tolerances, the target error, the baseline), the ``Case`` it
+records for each run setting, and the case log a benchmark killed part-way resumes from
+(``harness.studies.cases``), which never mixes in cases of another fingerprint."""
+from __future__ import annotations
+
+import json
+import math
+import statistics as stats
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from harness.description import scene as scenes
+from harness.engine import masters as master_family
+from harness.paths import FMUS
+from harness.studies.cases import FAILED, CaseLog, case_key
+
+
+@dataclass
+class Case:
+    engine: str                 # a master's name, a peer's, or "monolithic"
+    kind: str                   # "master", "peer", "monolithic"
+    step: float | None          # communication step [s] (first step for adaptive runs)
+    tolerance: float | None = None
+    wall_times: list = field(default_factory=list)
+    steps: int = 0
+    fmu_calls: int = 0
+    rollbacks: int = 0
+    errors: dict = field(default_factory=dict)   # rms/max relative, whole run and after transient
+    energy_residual: float | None = None
+    floor_time: float | None = None
+    failure: str | None = None
+    largest_step: float | None = None           # the longest communication step taken [s]
+    #: the stepping loop's FMI calls, component -> kind -> count (a master's run)
+    calls_by_kind: dict = field(default_factory=dict)
+    #: where the run time went (``time_split``): crossing, slave, master [s]
+    split: dict | None = None
+    #: the call prices measured just before and just after the case's runs:
+    #: {"ours"|"hollow": [before, after]}, each component -> kind -> seconds a call
+    prices: dict | None = None
+    #: runs asked for (``repeats``); fewer were made when a run failed or took long
+    asked: int = 0
+    #: the FMU-call floor [s a step] timed just before each run (masters): one per run
+    floor_times: list = field(default_factory=list)
+    #: the machine's one-minute load average before and after the case's runs
+    load: list = field(default_factory=list)
+    #: why the split is not shown (``trust.split_problems``), with the machine's noise
+    split_unreliable: str | None = None
+
+    @property
+    def wall(self) -> float:
+        return stats.median(self.wall_times) if self.wall_times else math.nan
+
+    @property
+    def stable(self) -> bool:
+        return self.failure is None and math.isfinite(self.errors.get("tau_rms", math.nan))
+
+    @property
+    def label(self) -> str:
+        if self.kind == "monolithic":
+            return f"monolithic rtol={self.tolerance:g}"
+        if self.tolerance is not None:
+            return f"{self.engine} tol={self.tolerance:g}"
+        return f"{self.engine} h={self.step:g}"
+
+    @property
+    def key(self) -> str:
+        """The case's key in the case log and in the side-by-side rounds."""
+        return case_key(self.kind, self.engine, self.step, self.tolerance)
+
+
+def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
+    """The scene's benchmark plan, with defaults: every master at the scene's step."""
+    table = dict(scene.bench)
+    steps = {name: [float(h) for h in values] for name, values in table.get("steps", {}).items()}
+    tolerances = {name: [float(x) for x in values] for name, values in table.get("tolerances", {}).items()}
+    if not steps and not tolerances:
+        steps = {name: [scene.experiment.step] for name, m in master_family.MASTERS.items() if not m.adaptive}
+    try:
+        master_family.check(*steps, *tolerances)
+    except master_family.UnknownMaster as error:
+        raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
+    if only:
+        master_family.check(*only)
+        steps = {k: v for k, v in steps.items() if k in only}
+        tolerances = {k: v for k, v in tolerances.items() if k in only}
+    return {
+        "steps": steps,
+        "tolerances": tolerances,
+        "peers": {name: [float(h) for h in values] for name, values in table.get("peers", {}).items()},
+        # ECCO: (first step, tolerance) pairs, its tolerance in joules per step
+        "peer_tolerances": {name: [float(x) for x in values]
+                            for name, values in table.get("peer_tolerances", {}).items()},
+        "monolithic": [float(x) for x in table.get("monolithic_rtol", [1e-4, 1e-6, 1e-8])],
+        "target_error": float(table.get("target_error", 1e-3)),
+        "baseline": table.get("baseline", "jacobi"),
+        "repeats_limit_s": float(table.get("repeats_limit_s", 5.0)),
+    }
+
+
+def fingerprint(scene: scenes.Scene, repeats: int, fmu_dir: Path = FMUS) -> dict:
+    """What a benchmark's results depend on: a case log with another fingerprint is set
+    aside, never mixed in (the scene with its bench plan, the repeats, the FMU build)."""
+    from lever import __version__
+    stamp = Path(fmu_dir) / "build-stamp.json"
+    return {"study": "bench", "scene": asdict(scene), "repeats": repeats, "lever": __version__,
+            "fmus": json.loads(stamp.read_text()).get("hash") if stamp.exists() else None}
+
+
+def logged(log: CaseLog | None, case: Case, measure) -> tuple[Case, bool]:
+    """``measure()`` -> Case, through the case log: a case already in the log is taken
+    from it; a case that raises is recorded as failed with its diagnosis, and the
+    benchmark goes on with the others."""
+    if log is None:
+        try:
+            return measure(), False
+        except Exception as error:  # noqa: BLE001 - one failed case must not cost the others
+            case.failure = f"{type(error).__name__}: {error}"
+            return case, False
+    entry, reused = log.run(case.key, lambda: asdict(measure()))
+    if entry.get("status") == FAILED:
+        case.failure = f"{entry['error']} (at {entry['where']})"
+        return case, reused
+    return Case(**{k: v for k, v in entry.items() if k in Case.__dataclass_fields__}), reused
+
+
+def rounds_logged(log: CaseLog | None, key: str, measure) -> dict:
+    """``measure()`` -> the side-by-side rounds, through the case log under ``key``."""
+    if log is None:
+        return measure()
+    entry, _ = log.run(key, measure)
+    if entry.get("status") == FAILED:
+        return {"failure": f"{entry['error']} (at {entry['where']})"}
+    return entry

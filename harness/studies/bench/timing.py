@@ -1,0 +1,163 @@
+"""Running and timing the cases: each case's repeats (a master's each after the FMU-call
+floor at its step, its call prices just before and after them), its errors judged once
+against the tight monolithic reference (runs are deterministic), and the side-by-side
+rounds of the cases a headline ratio divides."""
+from __future__ import annotations
+
+import statistics as stats
+from pathlib import Path
+
+import numpy as np
+
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.engine import interrupt
+from harness.engine.run import RunResult, simulate
+from harness.judges import metrics
+from harness.judges import monolithic as reference
+from harness.studies import trust
+from harness.studies.bench import floors
+from harness.studies.bench.schedule import Case
+
+
+def _judge(case: Case, scene: scenes.Scene, times, traces):
+    """Errors and energy residual of a finished run against the tight reference."""
+    ref = reference.solve(scene, times)
+    transient = scene.experiment.start + scene.experiment.transient
+    for suffix, after in (("", None), ("_after_transient", transient)):
+        e = metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
+        if len(e) < 4:
+            continue
+        for kind in ("tau", "w"):
+            for measure in ("rms", "max"):
+                case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
+                                                               e[f"{kind}2"][f"{measure}_relative"])
+    if all(n in traces for n in kinds.energy_variables(scene)):
+        case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
+
+
+def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None) -> Case:
+    """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
+    judge the first run (runs are deterministic), stop at a failure or a long run.
+    ``floor()`` (seconds a step of the FMU calls alone) is timed just before each run, so
+    that a run and the floor it is divided by saw the same machine."""
+    case.asked = repeats
+    case.load.append(trust.load_average())
+    for attempt in range(repeats):
+        if floor is not None:
+            case.floor_times.append(floor())
+        result: RunResult = run_once()
+        interrupt.check()          # Ctrl-C during a peer's run: the case is not measured
+        case.wall_times.append(result.wall_time)
+        if attempt == 0:
+            # a master counts its accepted steps; a peer, its communication points
+            case.steps = (int(result.counters.get("steps", 0)) if case.kind == "master"
+                          else max(0, len(result.times) - 1))
+            case.fmu_calls = int(result.counters.get("fmu_calls", 0))
+            case.rollbacks = int(result.counters.get("rollbacks", 0))
+            case.calls_by_kind = result.counters.get("calls_by_kind", {})
+            if len(result.times) > 1:
+                case.largest_step = float(np.max(np.diff(result.times)))
+            if not result.ok:
+                case.failure = result.failure
+                break
+            _judge(case, scene, result.times, result.traces)
+        if result.wall_time > limit_s:     # long runs: one or two repeats say enough
+            break
+    case.load.append(trust.load_average())
+    if case.floor_times and case.steps:
+        case.floor_time = stats.median(case.floor_times) * case.steps
+    return case
+
+
+#: steps of the floor timed before each run of a case (about 0.1 s of calls)
+FLOOR_STEPS = 2000
+
+
+#: steps of each pricing of the calls, before and after a case's runs
+PRICE_STEPS = 1000
+
+
+def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
+    """A master's case: its runs, each after the FMU-call floor at its step (the scene's
+    for an adaptive master), and with ``twins`` (the do-nothing FMUs) the prices of a call
+    into ours and into the twins just before and just after the runs, for its time split."""
+    options = {"tolerance": tolerance} if tolerance is not None else {}
+    at = step if tolerance is None else scene.experiment.step
+    prices = {"ours": [], "hollow": []}
+
+    def price():
+        if twins is not None:
+            prices["ours"].append(floors.call_prices(scene, fmu_dir, n_steps=PRICE_STEPS, step=at))
+            prices["hollow"].append(floors.call_prices(scene, twins, n_steps=PRICE_STEPS, step=at))
+
+    price()
+    case = _measure(Case(name, "master", step, tolerance), scene,
+                    lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s,
+                    floor=lambda: floors.call_floor(scene, n_steps=FLOOR_STEPS, fmu_dir=fmu_dir, step=at))
+    price()
+    if twins is not None:
+        case.prices = prices
+    return case
+
+
+def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Case:
+    from harness import peers
+    case = Case(name, "peer", step, tolerance)
+    reason = peers.available(name)
+    if reason:
+        case.failure = f"not run: {reason}"
+        return case
+    return _measure(case, scene, lambda: peers.simulate_peer(name, scene, step, fmu_dir, tolerance=tolerance),
+                    repeats, limit_s)
+
+
+def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
+    """The unsplit equations with scipy at a looser tolerance: the cost of not
+    co-simulating at all (same physics code, no FMU calls)."""
+    case = Case("monolithic", "monolithic", grid_step, rtol)
+    e = scene.experiment
+    times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / grid_step)) + 1)
+    solution = None
+    case.asked = repeats
+    case.load.append(trust.load_average())
+    for _ in range(repeats):
+        solution = reference.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
+        interrupt.check()
+        case.wall_times.append(solution.wall_time)
+    case.load.append(trust.load_average())
+    case.steps = solution.n_rhs
+    _judge(case, scene, solution.times, solution.traces)
+    return case
+
+
+def measure_rounds(scene: scenes.Scene, chosen: list[Case], repeats: int, fmu_dir: Path,
+                   twins: Path | None) -> dict:
+    """``repeats`` rounds, each running every chosen case once in turn (A B C A B C ...)
+    and the do-nothing floor: the k-th run of each case saw the machine the k-th of the
+    others saw, so ratios are taken round by round."""
+    walls = {c.key: [] for c in chosen}
+    floor_times, loads = [], []
+    for _ in range(repeats):
+        loads.append(trust.load_average())
+        if twins is not None:
+            floor_times.append(floors.call_floor(scene, n_steps=FLOOR_STEPS * 2, fmu_dir=twins))
+        for c in chosen:
+            walls[c.key].append(_rerun(scene, c, fmu_dir))
+    loads.append(trust.load_average())
+    return {"walls": walls, "hollow_floor": floor_times, "load": loads}
+
+
+def _rerun(scene: scenes.Scene, case: Case, fmu_dir: Path) -> float:
+    """The stepping-loop time of one more run of a case (a master's or the monolithic one)."""
+    if case.kind == "monolithic":
+        e = scene.experiment
+        times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / case.step)) + 1)
+        return reference.solve(scene, times, use_cache=False, rtol=case.tolerance,
+                               atol=case.tolerance * 1e-2).wall_time
+    options = {"tolerance": case.tolerance} if case.tolerance is not None else {}
+    result = simulate(scene, case.engine, case.step, fmu_dir, options=options)
+    interrupt.check()
+    if not result.ok:
+        raise RuntimeError(f"{case.label} failed when run again: {result.failure}")
+    return result.wall_time
