@@ -160,15 +160,14 @@ def simulate(scene: scenes.Scene | plans.Plan, master: str | None = None, step: 
     return result
 
 
-def _simulate(plan, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
-    scene = plan.scene if isinstance(plan, plans.Plan) else plan
+def _simulate(subject, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
+    scene = subject.scene if isinstance(subject, plans.Plan) else subject
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
     options = dict(options or {})
-    master_family.check(master)
-    if not isinstance(plan, plans.Plan):
-        plan = plans.check(scene, fmu_dir=fmu_dir)
+    master_family.check(master)     # an unknown master is said before the scene's findings
+    plan = subject if isinstance(subject, plans.Plan) else plans.check(scene, fmu_dir=fmu_dir)
     names = list(plan.recorded)
     system = System(plan, record=names)      # refuses an unsound scene (SceneInvalid) first
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
