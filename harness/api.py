@@ -27,6 +27,7 @@ from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
+from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.paths import BUILD, FMUS
 
@@ -190,7 +191,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     bad input raises InputError before anything runs."""
     from harness.engine import masters as family
     from harness.engine.run import available_memory, simulate, trace_memory
-    from harness.engine.system import SceneInvalid, descriptions_for
+    from harness.engine.system import SceneInvalid
     from harness.formats import outputs, report
     from harness.judges import monolithic as references
     from harness.judges.stability import run_advice
@@ -218,16 +219,16 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     build()
     fmu_dir = spec.fmu_dir or FMUS
     # the scene's names and values first: the stability advisor reads a sound scene only
-    findings = scenes.validate(spec, descriptions_for(spec, fmu_dir))
-    if findings:
-        raise InputError(str(SceneInvalid(spec.name, findings)))
+    plan = plans.check(spec, fmu_dir=fmu_dir)
+    if plan.refusals:
+        raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
     if spec.experiment.transient_note:
         say("note", spec.experiment.transient_note)
     advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
     for warning in advice:
         say("warning", warning)         # before the run, so a long run is not waited for
-    if not stream and not scenes.experiment_findings(spec.experiment):
-        needed, rows = trace_memory(spec, step)
+    if not stream:      # (the experiment's times are sound: no refusal)
+        needed, rows = trace_memory(plan, step)
         free = available_memory()
         if free is not None and needed > 0.8 * free:
             e = spec.experiment
@@ -241,7 +242,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         except outputs.OutputError as error:
             raise InputError(str(error)) from None
     try:
-        result = simulate(spec, master, step, fmu_dir=fmu_dir, progress=progress, options=options,
+        result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
                           observer=observer)
     except SceneInvalid as error:
@@ -255,7 +256,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     try:
         if "reference" in spec.features and reference and not stream and result.ok:
             try:
-                solution = references.solve(spec, result.times)
+                solution = references.solve(plan, result.times)
             except references.ReferenceUnavailable as error:
                 say("note", f"no reference for this scene: {error}")
     except KeyboardInterrupt:

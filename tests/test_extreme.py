@@ -16,6 +16,7 @@ from harness.engine import guard as divergence
 from harness.judges import metrics
 from harness.judges import monolithic as reference
 from harness.engine import run
+from harness.description import plan as plans
 from harness.description import scene
 from lever.physics import catalogue
 
@@ -61,7 +62,7 @@ def assert_diagnosed(result, master: str, step: float):
     if d["kind"] == "bound":
         name = f"{d['component']}.{d['variable']}"
         assert not abs(result.traces[name][-1]) <= d["bound"]
-        for b in divergence.bounds(result.scene):
+        for b in divergence.bounds(plans.check(result.scene)):
             assert np.all(np.abs(result.traces[b.variable][:-1]) <= b.limit), b.variable
     return d
 
@@ -73,7 +74,7 @@ def assert_diagnosed(result, master: str, step: float):
 
 def test_bounds_follow_the_stated_rule():
     spec = scene.load("kavz685")
-    found = {b.variable: b.limit for b in divergence.bounds(spec)}
+    found = {b.variable: b.limit for b in divergence.bounds(plans.check(spec))}
     speed = 10 * 623.0 / 14.06                   # the no-load speed of the engine line is the largest
     assert found["engine.w"] == pytest.approx(speed) and found["load.w"] == pytest.approx(speed)
     coupling = catalogue.coupling_from({"misalignment": math.radians(15)})
@@ -82,12 +83,12 @@ def test_bounds_follow_the_stated_rule():
     torque = ratio * (elastic + 6.35 * (1 + ratio) * speed)
     assert found["coupling.tau1"] == pytest.approx(torque) and found["coupling.tau2"] == pytest.approx(torque)
     # a load above the stall torque: the reversed steady speed counts, and the margin is the scene's
-    stalled = {b.variable: b.limit for b in divergence.bounds(load("kavz685_stall", "limits.margin=4"))}
+    stalled = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685_stall", "limits.margin=4")))}
     assert stalled["engine.w"] == pytest.approx(4 * 623.0 / 14.06)
     # K1 = 0: no steady speed, the free acceleration over the run bounds it
-    free = {b.variable: b.limit for b in divergence.bounds(load("kavz685", "engine.torque_slope=0"))}
+    free = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685", "engine.torque_slope=0")))}
     assert free["engine.w"] == pytest.approx(10 * (623.0 + 116.3) * 10.0 / (0.128 + 0.161))
-    set_ = {b.variable: b.limit for b in divergence.bounds(load("kavz685", "limits.speed=100", "limits.torque=inf"))}
+    set_ = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685", "limits.speed=100", "limits.torque=inf")))}
     assert set_["load.w"] == 100.0 and set_["coupling.tau2"] == math.inf
 
 

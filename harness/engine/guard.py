@@ -30,15 +30,13 @@ import math
 from dataclasses import dataclass
 
 
-from lever.physics import catalogue
 from lever.physics.elastic import LinearElasticLaw
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
 from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, SpectrumLoad, TabulatedLoad
 from lever.physics.parameters import ParameterError
 
-from harness.description import kinds
-from harness.description import scene as scenes
+from harness.description import plan as plans
 
 #: default factor between the plausible speeds of a scene and its speed bound
 MARGIN = 10.0
@@ -83,11 +81,11 @@ def load_range(load) -> tuple[float, float]:
     raise TypeError(f"unknown load model {type(load).__name__}")
 
 
-def plausible_speed(scene: scenes.Scene, physics: kinds.DrivelinePhysics) -> tuple[float, str]:
-    """The largest speed the scene's parameters make plausible, and how it was found."""
-    e, l = kinds.parameters(scene, physics.roles.engine), kinds.parameters(scene, physics.roles.load)
+def plausible_speed(plan: plans.Plan) -> tuple[float, str]:
+    """The largest speed a driveline scene's parameters make plausible, and how it was found."""
+    physics = plan.driveline.physics.get()
     engine, load = physics.engine, physics.load
-    starts = [abs(catalogue.start_state(e, catalogue.ENGINE)[1]), abs(catalogue.start_state(l, catalogue.LOAD)[1])]
+    starts = [abs(w) for _, w in plan.driveline.start.get()]
     low, high = load_range(load.external)
     char = engine.external
     candidates = {"start speed": max(starts)}
@@ -99,7 +97,7 @@ def plausible_speed(scene: scenes.Scene, physics: kinds.DrivelinePhysics) -> tup
             candidates["speeds of the engine table"] = max(abs(w) for w in char.speeds)
         else:
             torques = [abs(char.stall_torque)]
-        span = scene.experiment.stop - scene.experiment.start
+        span = plan.experiment.stop - plan.experiment.start
         candidates["free acceleration over the run"] = (max(torques) + max(abs(low), abs(high))) * span / (
             engine.inertia + load.inertia)
     which = max(candidates, key=candidates.get)
@@ -120,17 +118,17 @@ def _deflection_at_energy(law, energy: float) -> float:
     return high
 
 
-def bounds(scene: scenes.Scene) -> list[Bound]:
-    """The bounds a run of ``scene`` is held to (see the module docstring): speeds and
-    coupling torques of the driveline, when the scene has one; nothing otherwise."""
-    if not kinds.is_driveline(scene):
+def bounds(plan: plans.Plan) -> list[Bound]:
+    """The bounds a run of a checked scene is held to (see the module docstring): speeds
+    and coupling torques of the driveline, when the scene has one; nothing otherwise."""
+    if plan.driveline is None:
         return []
-    limits = {k: float(scenes.quantity(v, f"limits.{k}")) for k, v in scene.limits.items()}
+    limits = dict(plan.limits.get())
     margin = limits.get("margin", MARGIN)
     out = []
     try:
-        built = kinds.physics(scene)
-        plausible, which = plausible_speed(scene, built)
+        built = plan.driveline.physics.get()
+        plausible, which = plausible_speed(plan)
     except ParameterError:
         return []    # the FMUs will refuse the parameters with the proper message
     engine, load, coupling = built.engine, built.load, built.coupling
@@ -160,9 +158,10 @@ class Guard:
     with a diagnosis: which component (and FMU), which variable, its value and bound,
     the time, the master, its step size and the step's number."""
 
-    def __init__(self, system, scene: scenes.Scene, master: str, step: float):
+    def __init__(self, system, master: str, step: float):
         self.master, self.step = master, step
-        limited = {b.variable: b for b in bounds(scene)}
+        scene = system.scene
+        limited = {b.variable: b for b in bounds(system.plan)}
         missing = [v for v in limited if (v.partition(".")[0], v.partition(".")[2]) not in system.index]
         if missing:
             system.expose(missing)

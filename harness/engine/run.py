@@ -11,9 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.description import kinds
-from harness.engine import masters as master_family
+from harness.description import plan as plans
 from harness.description import scene as scenes
+from harness.description.plan import recorded_names  # noqa: F401 - what the peers and studies record too
+from harness.engine import masters as master_family
 from harness.engine.component import FmuCallError
 from harness.engine.guard import Diverged, Guard
 from harness.engine import interrupt
@@ -42,7 +43,7 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)
     #: a streamed run (``simulate(stream=...)``): what it wrote and kept (harness.engine.traces)
     stream: dict | None = None
-    #: inputs no connection drives and the scene gives no value (``scenes.unconnected_inputs``):
+    #: inputs no connection drives and the scene gives no value (``Plan.unconnected``):
     #: held at their start values; named in the run's output and report
     unconnected_inputs: list[str] = field(default_factory=list)
 
@@ -134,19 +135,13 @@ class Recorder:
         return self.times[:n].copy(), {name: self.rows[:n, self._columns[name]].copy() for name in self.names}
 
 
-def recorded_names(scene: scenes.Scene) -> list[str]:
-    """What a run records: the scene's list, plus what its features need."""
-    names = list(scene.record)
-    if "energy_balance" in scene.features:
-        names += [n for n in kinds.energy_variables(scene) if n not in names]
-    return names
-
-
-def simulate(scene: scenes.Scene, master: str | None = None, step: float | None = None,
+def simulate(scene: scenes.Scene | plans.Plan, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
              stream: Path | None = None, keep_partial: bool = False, observer=None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master.  The stability
+    (for an adaptive master: its first step); ``options`` go to the master.  ``scene`` is
+    a checked ``harness.description.plan.Plan`` (its FMUs where it found them) or a scene,
+    checked here once with its FMUs in ``fmu_dir``.  The stability
     advice is not computed here: whoever shows it (``lever run``) asks
     ``harness.judges.stability.run_advice`` and may keep it in ``RunResult.warnings``.  ``stream``: a trace CSV
     written while the run goes, the result keeping every k-th row (harness.engine.traces).
@@ -165,25 +160,25 @@ def simulate(scene: scenes.Scene, master: str | None = None, step: float | None 
     return result
 
 
-def _simulate(scene, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
+def _simulate(subject, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
+    scene = subject.scene if isinstance(subject, plans.Plan) else subject
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
     options = dict(options or {})
-    master_family.check(master)
-    names = recorded_names(scene)
-    system = System(scene, fmu_dir, record=names)      # refuses an unsound scene (SceneInvalid) first
-    unconnected = scenes.unconnected_inputs(scene, {scene.components[n].fmu: c.description
-                                                    for n, c in system.components.items()})
+    master_family.check(master)     # an unknown master is said before the scene's findings
+    plan = subject if isinstance(subject, plans.Plan) else plans.check(scene, fmu_dir=fmu_dir)
+    names = list(plan.recorded)
+    system = System(plan, record=names)      # refuses an unsound scene (SceneInvalid) first
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     failure = stage = diagnosis = None
     recorder = driver = bar = calls_before = None
     started = stepping = clock.perf_counter()
     try:
         system.initialize()
-        guard = Guard(system, scene, master, step)     # before the master: it may expose outputs
+        guard = Guard(system, master, step)     # before the master: it may expose outputs
         driver = master_family.make(master, system, step, **options)
-        recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, scene, names, n_steps + 1))
+        recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, plan, names, n_steps + 1))
         recorder.record(e.start)
         interrupt.check(e.start)
         bar = _progress(e.stop - e.start, scene.name, master) if progress else None
@@ -255,7 +250,7 @@ def _simulate(scene, master, step, fmu_dir, progress, options, stream, observer=
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     [], recorder.stream.report() if recorder and recorder.stream else None, unconnected)
+                     [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected))
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:
@@ -277,11 +272,11 @@ def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, 
     return out
 
 
-def _stream(path: Path | None, scene: scenes.Scene, names: list[str], rows: int):
+def _stream(path: Path | None, plan: plans.Plan, names: list[str], rows: int):
     if path is None:
         return None
     from harness.engine.traces import TraceStream, integrals_for
-    return TraceStream(path, names, rows, integrate=integrals_for(scene))
+    return TraceStream(path, names, rows, integrate=integrals_for(plan))
 
 
 def _progress(span: float, scene: str, master: str):
@@ -290,14 +285,14 @@ def _progress(span: float, scene: str, master: str):
                 mininterval=0.5, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")
 
 
-def trace_memory(scene: scenes.Scene, step: float | None = None) -> tuple[int, int]:
+def trace_memory(plan: plans.Plan, step: float | None = None) -> tuple[int, int]:
     """``(bytes, rows)``: what holding a run's traces in memory takes, estimated before it
     runs: the recorder's rows (every connected and recorded output, and the time), the
     recorded traces copied out of them, and the block the trace file is written from."""
-    e = scene.experiment
+    e = plan.experiment
     rows = max(1, math.ceil((e.stop - e.start) / float(step or e.step) - 1e-9)) + 1
-    names = recorded_names(scene)
-    columns = len(set(names) | {f"{c.source}.{c.output}" for c in scene.connections})
+    names = plan.recorded
+    columns = len(set(names) | {f"{c.source}.{c.output}" for c in plan.connections})
     return 8 * rows * (columns + 2 * len(names) + 2), rows
 
 

@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from fmpy import read_model_description
-
+from harness.description import plan as plans
 from harness.description import scene as scenes
+# the formats layer (SSP, OSP, the container, the peers) finds these here too
+from harness.description.plan import converted, descriptions_for, fmu_path  # noqa: F401
 from harness.engine.component import Component, step_call
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS
@@ -111,20 +112,6 @@ class SceneInvalid(ValueError):
         super().__init__(f"scene '{scene_name}' is not valid:\n  - " + "\n  - ".join(findings))
 
 
-def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
-    """The file of a component's ``fmu``: a path as given (``X.fmu``), a name in ``fmu_dir``."""
-    return Path(fmu) if scenes.is_fmu_path(fmu) else Path(fmu_dir) / f"{fmu}.fmu"
-
-
-def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
-    out = {}
-    for spec in scene.components.values():
-        path = fmu_path(spec.fmu, fmu_dir)
-        if spec.fmu not in out and path.exists():
-            out[spec.fmu] = read_model_description(str(path))
-    return out
-
-
 def feedthrough_components(scene: scenes.Scene, descriptions: dict) -> set[str]:
     """Components (name -> model description) with direct feedthrough that matters: a
     *connected* output depends on inputs (a shaft's acceleration depends on its torque,
@@ -157,27 +144,22 @@ def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
     return order
 
 
-def converted(var, value, label: str):
-    """A scene's ``value`` for the model variable ``var`` as the FMU takes it: a number with
-    a unit converted to the variable's unit (``scenes.validate`` has checked its dimension),
-    a harmonics or samples table to its text; other values as they are."""
-    if var.type == "Real" or isinstance(value, dict):
-        return scenes.quantity(value, label, (var.unit or "") if var.type == "Real" else None)
-    return value
-
-
 class System:
-    def __init__(self, scene: scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
+    def __init__(self, plan: plans.Plan | scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
                  record: list[str] | None = None):
-        self.scene = scene
+        """The system of a checked scene (``harness.description.plan``; a scene is checked
+        here, its FMUs in ``fmu_dir``); ``SceneInvalid`` when the plan has refusals."""
+        if not isinstance(plan, plans.Plan):
+            plan = plans.check(plan, fmu_dir=fmu_dir)
+        self.plan = plan
+        self.scene = scene = plan.scene
         self.record = list(scene.record if record is None else record)
-        findings = scenes.validate(scene, descriptions_for(scene, fmu_dir))
-        if findings:
-            raise SceneInvalid(scene.name, findings)
+        if plan.refusals:
+            raise SceneInvalid(scene.name, list(plan.refusals))
         self.components: dict[str, CoSimComponent] = {}
         try:
-            for name, spec in scene.components.items():
-                self.components[name] = Component(name, fmu_path(spec.fmu, fmu_dir), logging_on)
+            for name in scene.components:
+                self.components[name] = Component(name, plan.paths[name], logging_on)
         except Exception:
             self.free()
             raise
@@ -445,10 +427,8 @@ class System:
     # -- life cycle ------------------------------------------------------------------------------
     def initialize(self):
         e = self.scene.experiment
-        for name, spec in self.scene.components.items():
-            params = {k: converted(self.components[name].variable(k), v, f"{name}.{k}")
-                      for k, v in spec.parameters.items()}
-            self.components[name].set_parameters(params)
+        for name, values in self.plan.start_values.items():
+            self.components[name].set_parameters(dict(values))
         for c in self.components.values():
             c.initialize(e.start, e.stop)
         self.propagate()

@@ -19,18 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.description import kinds
-
 #: rows a chunk holds: ~4 s of a 1 ms run, ~0.5 MB of CSV
 CHUNK = 4096
 
 
-def integrals_for(scene) -> dict[str, str]:
-    """Running integrals a stream must keep for the scene's features: the coupling's
-    dissipated power -> its dissipated energy (the name the reference uses too)."""
-    if "energy_balance" not in scene.features:
+def integrals_for(plan) -> dict[str, str]:
+    """Running integrals a stream must keep for a checked scene's features
+    (harness.description.plan): the coupling's dissipated power -> its dissipated energy
+    (the name the reference uses too)."""
+    if "energy_balance" not in plan.scene.features:
         return {}
-    coupling = kinds.roles(scene)[1]
+    coupling = plan.roles[1]
     return {f"{coupling}.dissipated_power": f"{coupling}.dissipated_energy"} if coupling else {}
 
 

@@ -1,5 +1,6 @@
 """The monolithic reference: the scene's equations solved unsplit with scipy at tight
-tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue``).
+tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue``), built
+where the scene is checked (``harness.description.plan``).
 
 For the driveline (engine shaft - lever coupling - load shaft) the state is
 ``[phi1, w1, phi2, w2]``, augmented with the engine's work, the load's work and the
@@ -15,12 +16,12 @@ import time as clock
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from lever.physics import catalogue
 from lever.physics.driveline import HELD, Driveline
 from lever.physics.shaft import LaggedShaft
 
-from harness.description import kinds
+from harness.description import plan as plans
 from harness.description import scene as scenes
+from harness.paths import FMUS
 from harness.engine import interrupt
 from harness.judges import cvode, rectifier
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
@@ -29,23 +30,30 @@ RTOL = 1e-10
 ATOL = 1e-10
 
 
-def _roles(scene: scenes.Scene):
-    problem = kinds.driveline_problem(scene)
-    if problem:
-        raise ReferenceUnavailable(f"{problem}: the monolithic reference has no solver for it")
-    names = kinds.driveline(scene)
-    return names.engine, names.coupling, names.load
+def planned(scene: scenes.Scene | plans.Plan) -> plans.Plan:
+    """The checked scene a solver takes: ``scene`` itself, or a scene checked once here."""
+    if isinstance(scene, plans.Plan):
+        return scene
+    return plans.check(scene, fmu_dir=scene.fmu_dir or FMUS)
 
 
-def _misalignment_source(scene: scenes.Scene, coupling_name: str):
-    """alpha(t) when a source drives the coupling's misalignment input, else None."""
-    driver = next((c for c in scene.connections if c.target == coupling_name and c.input == "misalignment"), None)
+def _driveline(plan: plans.Plan) -> plans.DrivelinePlan:
+    if plan.driveline_problem:
+        raise ReferenceUnavailable(f"{plan.driveline_problem}: the monolithic reference has no solver for it")
+    return plan.driveline
+
+
+def _misalignment_source(plan: plans.Plan):
+    """``(alpha(t), the coupling at alpha)`` when a source drives the coupling's
+    misalignment input, else None."""
+    driver = plan.driveline.misalignment_driver
     if driver is None:
         return None
-    if scenes.fmu_name(scene.components[driver.source].fmu) != "MisalignmentSource" or driver.output != "misalignment":
-        raise ReferenceUnavailable(f"scene '{scene.name}': the reference knows the misalignment only from a "
+    built = plan.driveline.misalignment.get()
+    if built is None:
+        raise ReferenceUnavailable(f"scene '{plan.name}': the reference knows the misalignment only from a "
                                    f"MisalignmentSource, not from {driver}")
-    return catalogue.misalignment_source_from(kinds.parameters(scene, driver.source))
+    return built
 
 
 def _shaft_rates(shaft, t, phi, w, tau):
@@ -61,35 +69,38 @@ def _shaft_rates(shaft, t, phi, w, tau):
     return np.array(a), np.array(external)
 
 
-def solve(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+def solve(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
           atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
-    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...).
+    """Reference traces at ``times`` (named like the scene's records: ``engine.w`` ...) of a
+    checked scene (harness.description.plan) or a scene, checked here.
     Looser ``rtol``/``atol`` (or another scipy ``method``) give the monolithic solution a
     benchmark compares the masters with."""
     interrupt.phase("reference")
-    solver = SOLVERS.get(kinds.kind_of(scene), solve_driveline)
-    return solver(scene, times, use_cache, rtol, atol, method)
+    plan = planned(scene)
+    solver = SOLVERS.get(plan.kind, solve_driveline)
+    return solver(plan, times, use_cache, rtol, atol, method)
 
 
-def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
-                    atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
+def solve_driveline(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cache: bool = True,
+                    rtol: float = RTOL, atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
     """``solve`` for a driveline scene (engine - coupling - load, a misalignment source perhaps)."""
-    engine_name, coupling_name, load_name = _roles(scene)
+    plan = planned(scene)
+    scene = plan.scene
+    roles = _driveline(plan).roles
+    engine_name, coupling_name, load_name = roles.engine, roles.coupling, roles.load
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
 
-    built = kinds.physics(scene)
+    built = plan.driveline.physics.get()
     engine, load, coupling = built.engine, built.load, built.coupling
-    coupling_params = kinds.parameters(scene, coupling_name)
-    misalignment = _misalignment_source(scene, coupling_name)
-    phi1, w1 = catalogue.start_state(kinds.parameters(scene, engine_name), catalogue.ENGINE)
-    phi2, w2 = catalogue.start_state(kinds.parameters(scene, load_name), catalogue.LOAD)
+    misalignment = _misalignment_source(plan)
+    (phi1, w1), (phi2, w2) = plan.driveline.start.get()
 
     if misalignment is not None:
         # the coupling at alpha(t), exactly as the coupling FMU evaluates it (CouplingFamily)
-        family = catalogue.coupling_family_from(coupling_params)
-        alpha_at = misalignment.value
+        source, family = misalignment
+        alpha_at = source.value
 
         def coupling_at(t):
             return family.at(alpha_at(t))
@@ -152,9 +163,9 @@ def solve_driveline(scene: scenes.Scene, times: np.ndarray, use_cache: bool = Tr
         f"{c}.dissipated_power": np.asarray(r.dissipation), f"{c}.dissipated_energy": dissipated,
     }
     if misalignment is not None:        # the source's outputs: known functions of time
-        source = next(c.source for c in scene.connections if c.target == coupling_name and c.input == "misalignment")
-        traces[f"{source}.misalignment"] = np.array([misalignment.value(x) for x in t])
-        traces[f"{source}.misalignment_rate"] = np.array([misalignment.rate(x) for x in t])
+        name = plan.driveline.misalignment_driver.source
+        traces[f"{name}.misalignment"] = np.array([source.value(x) for x in t])
+        traces[f"{name}.misalignment_rate"] = np.array([source.rate(x) for x in t])
     reference = MonolithicSolution(t, traces, wall, nfev, f"{method} rtol={rtol:g} atol={atol:g}")
     if use_cache:
         store(path, reference)

@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 from lever.physics.freewheel import EVENTS, N_EDGES
 
 from harness.description import kinds
+from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
 
@@ -28,16 +29,18 @@ ATOL = 1e-12
 
 # -- the monolithic reference --------------------------------------------------------------------
 
-def solve_reference(scene: scenes.Scene, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
+def solve_reference(plan: plans.Plan, times: np.ndarray, use_cache: bool = True, rtol: float = RTOL,
                     atol: float = ATOL, method: str = "DOP853"):
-    name = kinds.rectifier(scene)
-    if len(scene.components) != 1 or scene.connections or any(v != 0 for v in kinds.rectifier_inputs(scene).values()):
+    """The rectifier's reference at ``times`` from a checked scene (harness.description.plan)."""
+    scene = plan.scene
+    name = plan.rectifier.name
+    if len(scene.components) != 1 or scene.connections or any(v != 0 for v in plan.rectifier.inputs.get().values()):
         raise ReferenceUnavailable(f"scene '{scene.name}': the rectifier's reference covers the rectifier alone "
                                    "(its port unconnected, tau = 0)")
     path = cache_path(scene, times, rtol, atol, method)
     if use_cache and (cached := load_cached(path)) is not None:
         return cached
-    model = kinds.rectifier_model(scene)
+    model = plan.rectifier.model.get()
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
     wall = clock.perf_counter() - started

@@ -1,0 +1,188 @@
+"""A scene checked once: what the engine runs and the reference solves.
+
+``check`` turns a loaded scene (and ``--set`` overrides) into a ``Plan``: every finding
+made (``refusals``: the scene cannot run; ``unconnected``: inputs held at their start
+values), the FMU files and their model descriptions, the start values converted to the
+FMUs' units, what a run records, the ``[limits]`` in SI units, the scene's kind, and the
+physics objects its reference and divergence bounds are derived from.  The engine and
+the monolithic reference take the plan and do not come back to the scene's checks.
+
+A plan is made whether or not the scene is sound: a scene with refusals has no start
+values, and the physics that could not be built holds the error its building raised
+(``Built``), raised again where the physics is used, as it was raised there before the
+plan.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+from fmpy import read_model_description
+
+from lever.physics import catalogue
+
+from harness.description import kinds
+from harness.description import scene as scenes
+from harness.paths import FMUS
+
+
+@dataclass(frozen=True)
+class Built:
+    """A value built from a scene's values, or the error building it raised (``get``
+    raises it again: where the value is used, not where the plan is made)."""
+    value: Any = None
+    error: Exception | None = None
+
+    def get(self):
+        if self.error is not None:
+            raise self.error
+        return self.value
+
+
+def _build(make: Callable[[], Any]) -> Built:
+    try:
+        return Built(make())
+    except Exception as error:  # noqa: BLE001 - kept and raised where the value is used
+        return Built(error=error)
+
+
+@dataclass(frozen=True)
+class DrivelinePlan:
+    """A driveline's physics as its FMUs build them (lever.physics.catalogue), for the
+    monolithic reference and the divergence guard."""
+    roles: kinds.Driveline
+    #: ``kinds.DrivelinePhysics`` (engine shaft, coupling, load shaft)
+    physics: Built
+    #: ``((phi1, w1), (phi2, w2))``: the engine's and the load's start angle and speed
+    start: Built
+    #: the connection driving the coupling's misalignment input, if one does
+    misalignment_driver: scenes.Connection | None
+    #: ``(MisalignmentSource, CouplingFamily)`` when a MisalignmentSource's ``misalignment``
+    #: drives the coupling, else None
+    misalignment: Built
+
+
+@dataclass(frozen=True)
+class RectifierPlan:
+    """The freewheel rectifier of a scene: its component, its physics object and the values
+    the scene holds its inputs at (``kinds.rectifier_model``, ``kinds.rectifier_inputs``)."""
+    name: str
+    model: Built
+    inputs: Built
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A checked scene (see the module docstring); made by ``check`` only."""
+    scene: scenes.Scene
+    name: str
+    #: the scene's experiment (times in s, the master)
+    experiment: scenes.Experiment
+    fmu_dir: Path
+    #: component -> its FMU file
+    paths: Mapping[str, Path]
+    #: FMU (as the scene names it) -> its fmpy model description, for the files that exist
+    descriptions: Mapping[str, Any]
+    #: component -> {variable: value in the FMU's unit}, in the scene's order (empty when refused)
+    start_values: Mapping[str, Mapping[str, Any]]
+    connections: tuple[scenes.Connection, ...]
+    #: what a run records: the scene's list and what its features need
+    recorded: tuple[str, ...]
+    #: findings that refuse the run (``scenes.validate``); empty when the scene can run
+    refusals: tuple[str, ...]
+    #: inputs no connection drives and the scene gives no value (a warning)
+    unconnected: tuple[str, ...]
+    #: the ``[limits]`` in rad/s, N*m and 1 (``Built``: a dict)
+    limits: Built
+    #: ``kinds.kind_of``: "driveline", "rectifier" or None
+    kind: str | None
+    #: the engine shaft, coupling and load shaft names (None: missing)
+    roles: tuple[str | None, str | None, str | None]
+    #: the driveline's physics, when the scene has the engine - coupling - load chain
+    driveline: DrivelinePlan | None
+    #: why the standard driveline's reference and energy balance do not describe the scene
+    #: (``kinds.driveline_problem``; None: they do, and ``driveline`` is set)
+    driveline_problem: str | None
+    #: the freewheel rectifier, when the scene has one
+    rectifier: RectifierPlan | None
+
+
+
+def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
+    """The file of a component's ``fmu``: a path as given (``X.fmu``), a name in ``fmu_dir``."""
+    return Path(fmu) if scenes.is_fmu_path(fmu) else Path(fmu_dir) / f"{fmu}.fmu"
+
+
+def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
+    """The model descriptions of the scene's FMUs (by FMU as the scene names it) whose files exist."""
+    out = {}
+    for spec in scene.components.values():
+        path = fmu_path(spec.fmu, fmu_dir)
+        if spec.fmu not in out and path.exists():
+            out[spec.fmu] = read_model_description(str(path))
+    return out
+
+
+def converted(var, value, label: str):
+    """A scene's ``value`` for the model variable ``var`` as the FMU takes it: a number with
+    a unit converted to the variable's unit (``scenes.validate`` has checked its dimension),
+    a harmonics or samples table to its text; other values as they are."""
+    if var.type == "Real" or isinstance(value, dict):
+        return scenes.quantity(value, label, (var.unit or "") if var.type == "Real" else None)
+    return value
+
+
+def recorded_names(scene: scenes.Scene) -> list[str]:
+    """What a run records: the scene's list, plus what its features need."""
+    names = list(scene.record)
+    if "energy_balance" in scene.features:
+        names += [n for n in kinds.energy_variables(scene) if n not in names]
+    return names
+
+
+def check(scene: scenes.Scene, overrides=(), fmu_dir: Path = FMUS) -> Plan:
+    """The ``Plan`` of ``scene`` with the ``--set`` ``overrides`` applied (``SceneError``
+    for an override that names nothing), its FMUs in ``fmu_dir`` (or at their paths)."""
+    if overrides:
+        scene = scene.with_overrides(list(overrides))
+    descriptions = descriptions_for(scene, fmu_dir)
+    refusals = tuple(scenes.validate(scene, descriptions))
+    start_values = {}
+    if not refusals:
+        for name, spec in scene.components.items():
+            variables = {v.name: v for v in descriptions[spec.fmu].modelVariables}
+            start_values[name] = MappingProxyType(
+                {k: converted(variables[k], v, f"{name}.{k}") for k, v in spec.parameters.items()})
+    rectifier = kinds.rectifier(scene)
+    return Plan(scene=scene, name=scene.name, experiment=scene.experiment, fmu_dir=Path(fmu_dir),
+                paths=MappingProxyType({n: fmu_path(c.fmu, fmu_dir) for n, c in scene.components.items()}),
+                descriptions=MappingProxyType(descriptions), start_values=MappingProxyType(start_values),
+                connections=tuple(scene.connections), recorded=tuple(recorded_names(scene)), refusals=refusals,
+                unconnected=tuple(scenes.unconnected_inputs(scene, descriptions)),
+                limits=_build(lambda: MappingProxyType({k: float(scenes.quantity(v, f"limits.{k}"))
+                                                        for k, v in scene.limits.items()})), kind=kinds.kind_of(scene), roles=kinds.roles(scene),
+                driveline=_driveline(scene) if kinds.is_driveline(scene) else None,
+                driveline_problem=kinds.driveline_problem(scene),
+                rectifier=RectifierPlan(rectifier, _build(lambda: kinds.rectifier_model(scene)),
+                                        _build(lambda: kinds.rectifier_inputs(scene))) if rectifier else None)
+
+
+def _driveline(scene: scenes.Scene) -> DrivelinePlan:
+    names = kinds.driveline(scene)
+    driver = next((c for c in scene.connections if c.target == names.coupling and c.input == "misalignment"), None)
+
+    def start():
+        return (catalogue.start_state(kinds.parameters(scene, names.engine), catalogue.ENGINE),
+                catalogue.start_state(kinds.parameters(scene, names.load), catalogue.LOAD))
+
+    def misalignment():
+        if (driver is None or scenes.fmu_name(scene.components[driver.source].fmu) != "MisalignmentSource"
+                or driver.output != "misalignment"):
+            return None
+        return (catalogue.misalignment_source_from(kinds.parameters(scene, driver.source)),
+                catalogue.coupling_family_from(kinds.parameters(scene, names.coupling)))
+
+    return DrivelinePlan(names, _build(lambda: kinds.physics(scene)), _build(start),
+                         driver, _build(misalignment))
