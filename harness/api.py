@@ -121,11 +121,11 @@ def load(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, stop: 
 
 def check_masters(*names: str):
     """InputError when one of ``names`` is not a master."""
-    from harness.engine import masters as family
+    from harness.engine import masters
 
     try:
-        family.check(*names)
-    except family.UnknownMaster as error:
+        masters.check(*names)
+    except masters.UnknownMaster as error:
         raise InputError(str(error)) from None
 
 
@@ -188,11 +188,11 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     ``observer`` is told of every step (``harness.engine.observers``, e.g. the step timer).
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
-    from harness.engine import masters as family
+    from harness.engine import masters
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid, descriptions_for
     from harness.formats import outputs, report
-    from harness.judges import monolithic as references
+    from harness.judges import monolithic
     from harness.judges.stability import run_advice
 
     notes: list[str] = []
@@ -207,9 +207,9 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     _step_problem(step)
     options = {}
     if tolerance is not None:
-        if "tolerance" not in family.MASTERS[chosen].options:
+        if "tolerance" not in masters.MASTERS[chosen].options:
             raise InputError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
-                             + ", ".join(n for n, m in family.MASTERS.items() if "tolerance" in m.options) + ")")
+                             + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
         if not (math.isfinite(tolerance) and 0 < tolerance < 1):
             raise InputError(f"--tolerance {tolerance}: must lie in (0, 1)")
         options["tolerance"] = tolerance
@@ -255,8 +255,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     try:
         if "reference" in spec.features and reference and not stream and result.ok:
             try:
-                solution = references.solve(spec, result.times)
-            except references.ReferenceUnavailable as error:
+                solution = monolithic.solve(spec, result.times)
+            except monolithic.ReferenceUnavailable as error:
                 say("note", f"no reference for this scene: {error}")
     except KeyboardInterrupt:
         say("note", "interrupted while solving the reference: the run's results are written without it")
@@ -341,43 +341,43 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a shorter
     run); ``out``: write validation.json, the result and a plot per failing signal there."""
     from harness.engine.system import SceneInvalid
-    from harness.formats import reference_traces as crosscheck
-    from harness.judges import validation as judge
+    from harness.formats import reference_traces
+    from harness.judges import validation
 
-    known = crosscheck.all_names()
+    known = reference_traces.all_names()
     if name not in known:
         raise InputError(f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
-    if tolerance not in judge.TOLERANCES:
-        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(judge.TOLERANCES)}")
+    if tolerance not in validation.TOLERANCES:
+        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(validation.TOLERANCES)}")
     _step_problem(step)
     if isinstance(window, str):
         window = parse_window(window)
     try:
-        ref = crosscheck.read(name)
-    except crosscheck.TraceFileError as error:
+        ref = reference_traces.read(name)
+    except reference_traces.TraceFileError as error:
         raise InputError(str(error)) from None
     if isinstance(result, (str, Path)):
         try:
-            other = crosscheck.read_csv(Path(result))
-        except crosscheck.TraceFileError as error:
+            other = reference_traces.read_csv(Path(result))
+        except reference_traces.TraceFileError as error:
             raise InputError(str(error)) from None
-        judged = crosscheck.Result(other.times, other.signals, f"from {result}")
+        judged = reference_traces.Result(other.times, other.signals, f"from {result}")
     elif result is not None:
         times, traces = result
-        judged = crosscheck.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
+        judged = reference_traces.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
                                    "given")
     else:
         build()
         if ref.kind == "fmu":
             if master or step:
                 raise InputError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            judged = crosscheck.run_fmu(name, ref, fmu_start_values(name, overrides))
+            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides))
         else:
             spec = load(name, overrides)
             if master:
                 check_masters(master)
             try:
-                judged = crosscheck.run_scene(spec, master, step)
+                judged = reference_traces.run_scene(spec, master, step)
             except SceneInvalid as error:
                 raise InputError(str(error)) from None
     start, stop = ref.opt.start, ref.opt.stop
@@ -389,12 +389,12 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
                              f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
-    findings, bands = judge.compare_span(name, judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
-                                         judge.TOLERANCES[tolerance], start, stop, (ref.opt.start, ref.opt.stop))
+    findings, bands = validation.compare_span(name, judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
+                                         validation.TOLERANCES[tolerance], start, stop, (ref.opt.start, ref.opt.stop))
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
-        crosscheck.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
+        reference_traces.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
     return Validation(name, findings, bands, judged, ref, Path(out) if out is not None else None)
 
 

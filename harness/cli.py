@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import contextlib
-import copy
 import json
 import math
 import os
@@ -772,18 +771,6 @@ def bad_inputs(verbose):
     click.echo(badinputs.summary(outcomes))
     if not all(o.passed for o in outcomes):
         sys.exit(1)
-
-
-def _alias(name: str, command: click.Command):
-    """``lever NAME``: an older name of ``command``, kept so scripts that use it go on working."""
-    alias = copy.copy(command)
-    alias.name = name
-    alias.help = f"The older name of `lever {command.name}`.\n\n" + (command.help or "")
-    alias.short_help = f"older name of `lever {command.name}`"
-    main.add_command(alias, name)
-
-
-_alias("check", compliance_command)
 
 
 def entry():

@@ -1,4 +1,4 @@
-"""Drop-in FMUs: the built FMUs follow the standards (lever check), say what they need,
+"""Drop-in FMUs: the built FMUs follow the standards (lever compliance), say what they need,
 and run in engines that are not ours - libcosim (alone, as a scene, from SSP, from an
 OSP system structure), fmpy.ssp, fmpy's container FMU, and a C host that is no Python
 process - matching the reference."""
@@ -47,7 +47,7 @@ def kavz(extra=()):
     return scene.load("kavz685").with_overrides(SHORT + list(extra))
 
 
-# -- lever check --------------------------------------------------------------------------------
+# -- lever compliance ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("fmu", FMU_NAMES)
 def test_lever_check_finds_nothing_in_a_built_fmu(fmu_dir, fmu):
@@ -85,7 +85,7 @@ def test_lever_check_reports_what_a_careless_fmu_lacks(fmu_dir, tmp_path):
                      "variable 'inertia': no description", "parameter 'inertia': no min",
                      "opposite causality"):
         assert expected in findings, (expected, findings)
-    result = CliRunner().invoke(cli, ["check", str(broken)])
+    result = CliRunner().invoke(cli, ["compliance", str(broken)])
     assert result.exit_code == 1 and "no documentation/_main.html" in result.output
 
 

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness import run, scene, ssp
+from harness.description import scene
+from harness.engine import run
+from harness.formats import ssp
 from harness.studies import hosts
 from harness.cli import main as cli
 

@@ -145,8 +145,8 @@ def test_set_takes_true_as_a_boolean_not_one(fmu_dir):
 # -- honest verdicts ----------------------------------------------------------------------------
 
 def _result_csv(tmp_path, spoil) -> Path:
-    from harness.formats import reference_traces as crosscheck
-    ref = crosscheck.read("kavz685")
+    from harness.formats import reference_traces
+    ref = reference_traces.read("kavz685")
     names = list(ref.outputs.signals)
     rows = np.column_stack([ref.outputs.times] + [ref.outputs.signals[n] for n in names])
     spoil(rows)

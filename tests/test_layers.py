@@ -138,13 +138,12 @@ def test_the_physics_never_imports_the_harness():
     assert offenders == []
 
 
-def test_the_cli_keeps_every_command_and_the_older_names():
+def test_the_cli_has_every_command_and_no_other_name():
     from harness.cli import main
 
-    before_the_layers = {"badinputs", "bench", "build", "check", "engines", "export-container", "export-ssp",
-                         "measured", "reference", "run", "scenes", "stability", "study", "sweep", "validate"}
-    assert before_the_layers <= set(main.commands)
-    assert main.commands["check"].callback is main.commands["compliance"].callback
+    assert set(main.commands) == {"badinputs", "bench", "build", "compliance", "engines", "export-container",
+                                  "export-ssp", "fingerprint", "hosts", "measured", "reference", "run", "scenes",
+                                  "stability", "study", "sweep", "validate"}
 
 
 def test_no_private_name_is_used_outside_its_module():
@@ -165,13 +164,3 @@ def test_no_private_name_is_used_outside_its_module():
                 offenders.append(f"{module} uses {node.value.id}.{node.attr}")
     assert offenders == []
 
-
-def test_the_flat_harness_module_names_still_import():
-    import importlib
-
-    import harness
-
-    for old, new in harness.MOVED.items():
-        assert getattr(harness, old) is importlib.import_module(new)
-    from harness import masters
-    assert {"MASTERS", "make", "MasterFailure", "extrapolation_weights"} <= set(dir(masters))

@@ -1,4 +1,4 @@
-"""Reference traces and validation (harness.crosscheck, harness.validate, `lever reference`,
+"""Reference traces and validation (harness.formats.reference_traces, harness.judges.validation, `lever reference`,
 `lever validate`)."""
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from harness.formats import reference_traces as crosscheck
-from harness.judges import validation as validate
+from harness.formats import reference_traces
+from harness.judges import validation
 from harness.description import scene as scenes
 from harness.cli import main
 
-LEVER = validate.TOLERANCES["lever"]
-CROSS = validate.TOLERANCES["cross-check"]
+LEVER = validation.TOLERANCES["lever"]
+CROSS = validation.TOLERANCES["cross-check"]
 
 
 def _invoke(*args):
@@ -36,11 +36,11 @@ def test_band_is_fmpys_with_the_cross_check_figures(kind):
     t = np.sort(rng.uniform(-0.1, 2.1, 900))
     y = np.interp(t, t_ref, y_ref) + rng.normal(0, 0.3, t.size)
     t_band, y_min, y_max, i_out = validate_signal(t, y, t_ref.copy(), y_ref)
-    ours = validate.band(t_ref, y_ref, CROSS.num, CROSS.dx, CROSS.dy)
+    ours = validation.band(t_ref, y_ref, CROSS.num, CROSS.dx, CROSS.dy)
     np.testing.assert_array_equal(ours.t, t_band)
     np.testing.assert_allclose(ours.low, y_min, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ours.high, y_max, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(validate.outside(t, y, ours), i_out)
+    np.testing.assert_array_equal(validation.outside(t, y, ours), i_out)
 
 
 def test_cross_check_fraction_is_fmpys_validate_result():
@@ -48,9 +48,9 @@ def test_cross_check_fraction_is_fmpys_validate_result():
     reference = {"x": np.sin(20 * t_ref), "v": np.cos(3 * t_ref)}
     t = np.linspace(0, 1, 1001)
     traces = {"x": np.sin(20 * t) * 1.3, "v": np.cos(3 * t)}
-    findings, _ = validate.compare("x", t, traces, t_ref, reference, CROSS)
+    findings, _ = validation.compare("x", t, traces, t_ref, reference, CROSS)
     assert max(s.fraction_outside for s in findings.signals) == pytest.approx(
-        validate.fmpy_max_outside(t, traces, t_ref, reference), abs=1e-12)
+        validation.fmpy_max_outside(t, traces, t_ref, reference), abs=1e-12)
     assert findings.failed_signals == ["x"]
 
 
@@ -65,9 +65,9 @@ def test_lever_tolerance_forgives_one_step_of_lag_not_three():
     t = np.arange(0, 1 + h / 2, h)
     t_ref = t[::10]
     reference = {"y": _signal(t_ref)}
-    exact, _ = validate.compare("y", t, {"y": _signal(t)}, t_ref, reference)
-    late, _ = validate.compare("y", t, {"y": _signal(t - h)}, t_ref, reference)
-    later, _ = validate.compare("y", t, {"y": _signal(t - 3 * h)}, t_ref, reference)
+    exact, _ = validation.compare("y", t, {"y": _signal(t)}, t_ref, reference)
+    late, _ = validation.compare("y", t, {"y": _signal(t - h)}, t_ref, reference)
+    later, _ = validation.compare("y", t, {"y": _signal(t - 3 * h)}, t_ref, reference)
     assert exact.passed and exact.signals[0].max_error < 1e-12
     assert late.passed and late.signals[0].max_error > late.signals[0].band_width   # outside 1 % ...
     assert not later.passed and later.signals[0].fraction_outside > 0.5              # ... but one step
@@ -78,12 +78,12 @@ def test_lever_tolerance_allows_one_percent_of_samples_outside():
     y = 100 * t                  # band +-1, one step 0.1: a sample's neighbours are within the band
     spiky = y.copy()
     spiky[100:700:3] += 30.0     # 200 isolated wrong samples: each is excused by its neighbours
-    findings, _ = validate.compare("y", t, {"y": spiky}, t, {"y": y})
+    findings, _ = validation.compare("y", t, {"y": spiky}, t, {"y": y})
     assert findings.passed and findings.signals[0].fraction_outside == 0
     for run, passes in ((12, True), (13, False)):
         wrong = y.copy()
         wrong[200:200 + run] += 30.0      # a run of wrong samples: all but its two ends are outside
-        findings, _ = validate.compare("y", t, {"y": wrong}, t, {"y": y})
+        findings, _ = validation.compare("y", t, {"y": wrong}, t, {"y": y})
         assert findings.signals[0].fraction_outside == pytest.approx((run - 2) / 1001)
         assert findings.passed == passes
 
@@ -91,19 +91,19 @@ def test_lever_tolerance_allows_one_percent_of_samples_outside():
 def test_structural_problems_fail_the_result():
     t = np.linspace(0, 1, 101)
     reference = {"a": np.sin(t), "b": np.cos(t)}
-    short, _ = validate.compare("r", t[:50], {"a": np.sin(t[:50]), "b": np.cos(t[:50])}, t, reference)
+    short, _ = validation.compare("r", t[:50], {"a": np.sin(t[:50]), "b": np.cos(t[:50])}, t, reference)
     assert not short.passed and any("ends at" in p for p in short.problems)
-    missing, _ = validate.compare("r", t, {"a": np.sin(t), "c": t}, t, reference)
+    missing, _ = validation.compare("r", t, {"a": np.sin(t), "c": t}, t, reference)
     assert not missing.passed and any("'b' is missing" in p for p in missing.problems)
     assert any("c" in n for n in missing.notes)
     nan = np.sin(t)
     nan[40:60] = np.nan
-    broken, _ = validate.compare("r", t, {"a": nan, "b": np.cos(t)}, t, reference)
+    broken, _ = validation.compare("r", t, {"a": nan, "b": np.cos(t)}, t, reference)
     assert broken.failed_signals == ["a"] and broken.signals[0].rms_error == np.inf
 
 
 def test_columns_match_by_name_or_unique_suffix():
-    mapping, missing = validate.match_columns(["tau1", "tau2", "w"], ["coupling.tau1", "tau2", "a.w", "b.w"])
+    mapping, missing = validation.match_columns(["tau1", "tau2", "w"], ["coupling.tau1", "tau2", "a.w", "b.w"])
     assert mapping == {"tau1": "coupling.tau1", "tau2": "tau2"} and missing == ["w"]
 
 
@@ -112,31 +112,31 @@ def test_columns_match_by_name_or_unique_suffix():
 def test_lever_reference_reports_every_committed_trace_current():
     result = _invoke("reference")
     assert result.exit_code == 0, result.output
-    for name in crosscheck.all_names():
+    for name in reference_traces.all_names():
         assert f"{name}: current" in result.output
 
 
 def test_reference_files_are_in_the_cross_check_layout():
     from fmpy.util import read_csv, read_ref_opt_file
 
-    for name in crosscheck.all_names():
-        p = crosscheck.paths(name)
+    for name in reference_traces.all_names():
+        p = reference_traces.paths(name)
         opt = read_ref_opt_file(str(p["opt"]))
         ref = read_csv(str(p["ref"]))
         assert ref.dtype.names[0] == "time" and ref["time"][0] == opt["StartTime"] and ref["time"][-1] == opt["StopTime"]
-        assert p["in"].exists() == (name in crosscheck.FMU_CASES)
+        assert p["in"].exists() == (name in reference_traces.FMU_CASES)
         assert p["ref"].stat().st_size < 400_000      # small enough to commit (the rectifier: 34 signals)
-        if name in crosscheck.FMU_CASES:
+        if name in reference_traces.FMU_CASES:
             assert set(read_csv(str(p["in"])).dtype.names) > {"time"}
 
 
 def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monkeypatch):
     for name in ("LeverCoupling", "EngineShaft"):
-        shutil.copytree(crosscheck.paths(name)["ref"].parent, tmp_path / name)
-    monkeypatch.setattr(crosscheck, "REFERENCE_DIR", tmp_path)
-    ref = crosscheck.read("LeverCoupling")
+        shutil.copytree(reference_traces.paths(name)["ref"].parent, tmp_path / name)
+    monkeypatch.setattr(reference_traces, "REFERENCE_DIR", tmp_path)
+    ref = reference_traces.read("LeverCoupling")
     ref.outputs.signals["tau1"][500] += 2.5
-    crosscheck.write(ref)
+    reference_traces.write(ref)
     checked = _invoke("reference", "LeverCoupling", "EngineShaft")
     assert checked.exit_code == 1
     assert "LeverCoupling: NOT current" in checked.output and "EngineShaft: current" in checked.output
@@ -149,23 +149,23 @@ def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monke
 # -- every FMU and scene validates; perturbed parameters fail where they should -----------------
 
 def _validate(name, assignments=()):
-    ref = crosscheck.read(name)
+    ref = reference_traces.read(name)
     if ref.kind == "fmu":
         from harness.cli import fmu_start_values
-        result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
+        result = reference_traces.run_fmu(name, ref, fmu_start_values(name, assignments))
     else:
-        result = crosscheck.run_scene(scenes.load(name).with_overrides(list(assignments)))
+        result = reference_traces.run_scene(scenes.load(name).with_overrides(list(assignments)))
     assert result.failure is None, result.failure
-    findings, _ = validate.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
+    findings, _ = validation.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
                                    LEVER, ref.opt.start, ref.opt.stop)
     return findings, result
 
 
-@pytest.mark.parametrize("name", crosscheck.all_names())
+@pytest.mark.parametrize("name", reference_traces.all_names())
 def test_every_fmu_and_scene_validates_against_its_reference(fmu_dir, name):
     findings, _ = _validate(name)
     assert findings.passed, (findings.problems, findings.failed_signals)
-    assert [s.name for s in findings.signals] == list(crosscheck.read(name).outputs.signals)
+    assert [s.name for s in findings.signals] == list(reference_traces.read(name).outputs.signals)
 
 
 def test_stiffer_coupling_fails_the_torques_and_energy_not_the_kinematics(fmu_dir):
@@ -181,7 +181,7 @@ def test_heavier_load_shaft_fails_its_motion_not_its_load_torque(fmu_dir):
 
 @pytest.fixture(scope="module")
 def kavz685_run(fmu_dir):
-    return crosscheck.run_scene(scenes.load("kavz685"))
+    return reference_traces.run_scene(scenes.load("kavz685"))
 
 
 def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_path):
@@ -200,7 +200,7 @@ def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_pa
 
 def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp_path):
     good = tmp_path / "other_tool.csv"
-    crosscheck.write_csv(good, crosscheck.Traces(kavz685_run.times, kavz685_run.traces))
+    reference_traces.write_csv(good, reference_traces.Traces(kavz685_run.times, kavz685_run.traces))
     result = _invoke("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
     assert result.exit_code == 0, result.output
     # a tool whose coupling torque lags 10 ms behind (as a 10 ms zero-order hold would)
@@ -208,20 +208,20 @@ def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp
     for name in ("coupling.tau1", "coupling.tau2"):
         traces[name] = np.concatenate([np.full(10, traces[name][0]), traces[name][:-10]])
     bad = tmp_path / "lagging_tool.csv"
-    crosscheck.write_csv(bad, crosscheck.Traces(kavz685_run.times, traces))
+    reference_traces.write_csv(bad, reference_traces.Traces(kavz685_run.times, traces))
     result = _invoke("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
     assert result.exit_code == 1
     assert "FAIL (coupling.tau1, coupling.tau2)" in result.output
 
 
 def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
-    ref = crosscheck.read("EngineShaft")
-    run = crosscheck.run_fmu("EngineShaft", ref)
+    ref = reference_traces.read("EngineShaft")
+    run = reference_traces.run_fmu("EngineShaft", ref)
     path = tmp_path / "engine.csv"
-    crosscheck.write_csv(path, crosscheck.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
+    reference_traces.write_csv(path, reference_traces.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
     assert _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
     # ending early and missing a signal: both fail
-    crosscheck.write_csv(path, crosscheck.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
+    reference_traces.write_csv(path, reference_traces.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
                                                                      if k != "engine_work"}))
     result = _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
     assert result.exit_code == 1
@@ -235,9 +235,9 @@ def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift
     of the failing signals are drawn, validation.json is standard JSON."""
     import json
 
-    ref = crosscheck.read("EngineShaft")      # 0 ... 1 s
+    ref = reference_traces.read("EngineShaft")      # 0 ... 1 s
     path = tmp_path / "shifted.csv"
-    crosscheck.write_csv(path, crosscheck.Traces(ref.outputs.times + shift, ref.outputs.signals))
+    reference_traces.write_csv(path, reference_traces.Traces(ref.outputs.times + shift, ref.outputs.signals))
     out = tmp_path / "out"
     result = CliRunner().invoke(main, ["validate", "--result", str(path), "EngineShaft", "--out", str(out)])
     assert result.exit_code == 1, result.output
@@ -278,18 +278,14 @@ def test_measured_option_checks_a_grade(tmp_path):
 def test_the_cross_check_verdict_says_what_its_band_cannot_see():
     """A ripple faster than the cross-check's window, at the wrong phase, passes its band; the
     verdict says so with the window and the margins, and the lever figures fail it."""
-    import numpy as np
-
-    from harness.judges import validation as judge
-
     t = np.linspace(0.0, 10.0, 10001)
     ref = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t)}
     wrong = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t + 2.0)}
-    crosscheck, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["cross-check"])
-    assert crosscheck.passed
-    (note,) = [n for n in crosscheck.notes if n.startswith("what the cross-check band can see")]
+    cross_check, _ = validation.compare("x", t, wrong, t, ref, validation.TOLERANCES["cross-check"])
+    assert cross_check.passed
+    (note,) = [n for n in cross_check.notes if n.startswith("what the cross-check band can see")]
     assert "window of 0.2 s" in note and "tau2 +-1.2" in note
-    lever, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["lever"])
+    lever, _ = validation.compare("x", t, wrong, t, ref, validation.TOLERANCES["lever"])
     assert not lever.passed and not any(n.startswith("what the") for n in lever.notes)
 
 
@@ -320,5 +316,5 @@ def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir
 
 def test_a_window_with_too_few_reference_samples_fails_with_a_sentence():
     t = np.linspace(0, 1, 11)
-    findings, _ = validate.compare_span("x", t, {"y": t}, t, {"y": t}, LEVER, 0.01, 0.02)
+    findings, _ = validation.compare_span("x", t, {"y": t}, t, {"y": t}, LEVER, 0.01, 0.02)
     assert not findings.passed and "holds 0 of the reference's samples" in findings.problems[0]
