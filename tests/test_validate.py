@@ -8,19 +8,13 @@ import shutil
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from harness.formats import reference_traces
 from harness.judges import validation
 from harness.description import scene as scenes
-from harness.cli import main
 
 LEVER = validation.TOLERANCES["lever"]
 CROSS = validation.TOLERANCES["cross-check"]
-
-
-def _invoke(*args):
-    return CliRunner().invoke(main, list(args), catch_exceptions=False)
 
 
 # -- the band: the cross-check's, as fmpy implements it ----------------------------------------
@@ -109,8 +103,8 @@ def test_columns_match_by_name_or_unique_suffix():
 
 # -- the committed references -------------------------------------------------------------------
 
-def test_lever_reference_reports_every_committed_trace_current():
-    result = _invoke("reference")
+def test_lever_reference_reports_every_committed_trace_current(lever):
+    result = lever("reference")
     assert result.exit_code == 0, result.output
     for name in reference_traces.all_names():
         assert f"{name}: current" in result.output
@@ -130,20 +124,20 @@ def test_reference_files_are_in_the_cross_check_layout():
             assert set(read_csv(str(p["in"])).dtype.names) > {"time"}
 
 
-def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monkeypatch):
+def test_stale_reference_is_reported_and_update_shows_the_change(lever, tmp_path, monkeypatch):
     for name in ("LeverCoupling", "EngineShaft"):
         shutil.copytree(reference_traces.paths(name)["ref"].parent, tmp_path / name)
     monkeypatch.setattr(reference_traces, "REFERENCE_DIR", tmp_path)
     ref = reference_traces.read("LeverCoupling")
     ref.outputs.signals["tau1"][500] += 2.5
     reference_traces.write(ref)
-    checked = _invoke("reference", "LeverCoupling", "EngineShaft")
+    checked = lever("reference", "LeverCoupling", "EngineShaft")
     assert checked.exit_code == 1
     assert "LeverCoupling: NOT current" in checked.output and "EngineShaft: current" in checked.output
     line = next(l for l in checked.output.splitlines() if l.strip().startswith("tau1"))
     assert line.split()[1:4] == ["max", "change", "2.5"] and line.endswith("t = 0.5 s")
-    assert _invoke("reference", "--update", "LeverCoupling").exit_code == 0
-    assert "LeverCoupling: current" in _invoke("reference", "LeverCoupling").output
+    assert lever("reference", "--update", "LeverCoupling").exit_code == 0
+    assert "LeverCoupling: current" in lever("reference", "LeverCoupling").output
 
 
 # -- every FMU and scene validates; perturbed parameters fail where they should -----------------
@@ -151,7 +145,7 @@ def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monke
 def _validate(name, assignments=()):
     ref = reference_traces.read(name)
     if ref.kind == "fmu":
-        from harness.cli import fmu_start_values
+        from harness.api import fmu_start_values
         result = reference_traces.run_fmu(name, ref, fmu_start_values(name, assignments))
     else:
         result = reference_traces.run_scene(scenes.load(name).with_overrides(list(assignments)))
@@ -184,8 +178,8 @@ def kavz685_run(fmu_dir):
     return reference_traces.run_scene(scenes.load("kavz685"))
 
 
-def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_path):
-    result = _invoke("validate", "kavz685", "--set", "coupling.stiffness=800", "--out", str(tmp_path))
+def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(lever, fmu_dir, tmp_path):
+    result = lever("validate", "kavz685", "--set", "coupling.stiffness=800", "--out", str(tmp_path))
     assert result.exit_code == 1
     findings = __import__("json").loads((tmp_path / "validation.json").read_text())
     failed = {n for n, s in findings["signals"].items() if not s["passed"]}
@@ -198,10 +192,10 @@ def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_pa
 
 # -- results produced elsewhere -------------------------------------------------------------------
 
-def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp_path):
+def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(lever, kavz685_run, tmp_path):
     good = tmp_path / "other_tool.csv"
     reference_traces.write_csv(good, reference_traces.Traces(kavz685_run.times, kavz685_run.traces))
-    result = _invoke("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
+    result = lever("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
     assert result.exit_code == 0, result.output
     # a tool whose coupling torque lags 10 ms behind (as a 10 ms zero-order hold would)
     traces = dict(kavz685_run.traces)
@@ -209,27 +203,27 @@ def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp
         traces[name] = np.concatenate([np.full(10, traces[name][0]), traces[name][:-10]])
     bad = tmp_path / "lagging_tool.csv"
     reference_traces.write_csv(bad, reference_traces.Traces(kavz685_run.times, traces))
-    result = _invoke("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
+    result = lever("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
     assert result.exit_code == 1
     assert "FAIL (coupling.tau1, coupling.tau2)" in result.output
 
 
-def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
+def test_external_csv_of_an_fmu_with_prefixed_columns(lever, fmu_dir, tmp_path):
     ref = reference_traces.read("EngineShaft")
     run = reference_traces.run_fmu("EngineShaft", ref)
     path = tmp_path / "engine.csv"
     reference_traces.write_csv(path, reference_traces.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
-    assert _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
+    assert lever("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
     # ending early and missing a signal: both fail
     reference_traces.write_csv(path, reference_traces.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
                                                                      if k != "engine_work"}))
-    result = _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
+    result = lever("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
     assert result.exit_code == 1
     assert "ends at t = 0.499" in result.output and "'engine_work' is missing" in result.output
 
 
 @pytest.mark.parametrize("shift", [20.0, -20.0, 100.0, 0.4, -0.4])
-def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift):
+def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(lever, tmp_path, shift):
     """A result whose times miss the reference's span (a shifted time column) fails,
     saying that the spans do not overlap, or how much of the span it covers; the plots
     of the failing signals are drawn, validation.json is standard JSON."""
@@ -239,7 +233,7 @@ def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift
     path = tmp_path / "shifted.csv"
     reference_traces.write_csv(path, reference_traces.Traces(ref.outputs.times + shift, ref.outputs.signals))
     out = tmp_path / "out"
-    result = CliRunner().invoke(main, ["validate", "--result", str(path), "EngineShaft", "--out", str(out)])
+    result = lever("validate", "--result", str(path), "EngineShaft", "--out", str(out))
     assert result.exit_code == 1, result.output
     assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
     assert "EngineShaft: FAIL" in result.output and "Traceback" not in result.output
@@ -253,25 +247,25 @@ def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift
     assert sorted(p.stem for p in out.glob("*.png")) == sorted(ref.outputs.signals)
 
 
-def test_validate_refuses_bad_input(tmp_path):
-    assert _invoke("validate", "nope").exit_code == 2
-    assert _invoke("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers
-    result = _invoke("validate", "LeverCoupling", "--set", "stiffness=-3")
+def test_validate_refuses_bad_input(lever, tmp_path):
+    assert lever("validate", "nope").exit_code == 2
+    assert lever("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers
+    result = lever("validate", "LeverCoupling", "--set", "stiffness=-3")
     assert result.exit_code == 2 and "allowed range" in result.output
-    result = _invoke("validate", "LeverCoupling", "--set", "stiffnes=3")
+    result = lever("validate", "LeverCoupling", "--set", "stiffnes=3")
     assert result.exit_code == 2 and "no parameter 'stiffnes'" in result.output
 
 
 # -- lever validate --measured: the model-vs-measurement check on given files ----------------
 
-def test_measured_option_checks_a_grade(tmp_path):
+def test_measured_option_checks_a_grade(lever, tmp_path):
     from harness.paths import DATA
     grade = [str(DATA / "monograph" / f"torque_{shaft}_7IRP13-48.csv") for shaft in ("drive", "driven")]
-    result = _invoke("validate", "--measured", *grade, "--out", str(tmp_path))
+    result = lever("validate", "--measured", *grade, "--out", str(tmp_path))
     assert result.exit_code == 0, result.output
     assert "7IRP" in result.output and (tmp_path / "measured.md").exists()
     # a table without its pair is bad input (exit 2), not a grade that misses its target (exit 1)
-    result = CliRunner().invoke(main, ["validate", "--measured", grade[0], "--out", str(tmp_path / "lonely")])
+    result = lever("validate", "--measured", grade[0], "--out", str(tmp_path / "lonely"))
     assert result.exit_code == 2 and "no driven-shaft table to pair with" in result.output
 
 
@@ -289,15 +283,15 @@ def test_the_cross_check_verdict_says_what_its_band_cannot_see():
     assert not lever.passed and not any(n.startswith("what the") for n in lever.notes)
 
 
-def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir, tmp_path):
+def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(lever, fmu_dir, tmp_path):
     """A 1 s run of kavz685 fails against the 10 s reference (it ends early) and passes over
     the window 0 ... 1 s, by the same band; the verdict says which span it judged."""
     run = tmp_path / "run"
-    assert _invoke("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
-    whole = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
+    assert lever("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
+    whole = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
     assert whole.exit_code == 1 and "before the stop time" in whole.output
     assert "FAIL over the reference's whole span, t = 0 ... 10 s" in whole.output
-    part = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:1",
+    part = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:1",
                    "--out", str(tmp_path / "part"))
     assert part.exit_code == 0, part.output
     assert "PASS over t = 0 ... 1 s of the reference's 0 ... 10 s" in part.output
@@ -306,11 +300,11 @@ def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir
     widths = lambda out: {line.split()[0]: line.split()[4] for line in out.splitlines() if " pass" in line}
     assert widths(part.output) == widths(whole.output)          # the same band over the window
     # a window the result does not cover fails, naming the end; a window outside the reference is bad input
-    late = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:2",
+    late = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:2",
                    "--out", str(tmp_path / "late"))
     assert late.exit_code == 1 and "before the stop time (2 s" in late.output
     for bad in ("0:11", "1:1", "x:1", "5"):
-        result = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", bad)
+        result = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", bad)
         assert result.exit_code == 2, (bad, result.output)
 
 
