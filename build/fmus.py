@@ -189,8 +189,8 @@ def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str,
         osp_description_path(paths[model]).write_text(osp_description)
         problems = check_fmu(paths[model])
         if problems:
-            raise RuntimeError(f"{model}.fmu does not pass `lever check`:\n  " + "\n  ".join(problems))
-        log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), lever check: 0 findings")
+            raise RuntimeError(f"{model}.fmu does not pass `lever compliance`:\n  " + "\n  ".join(problems))
+        log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), lever compliance: 0 findings")
     (out_dir / "build-stamp.json").write_text(json.dumps({"hash": digest, "models": list(MODELS)}, indent=1))
 
 

@@ -18,12 +18,13 @@ stability advisor, a shortened run's transient, unconnected inputs) go to ``noti
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -31,7 +32,9 @@ from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.paths import BUILD, FMUS
 
-__all__ = ["InputError", "BuildError", "RunNote", "Run", "Validation", "build", "load", "run", "validate", "bench", "scenes_list"]
+__all__ = ["InputError", "BuildError", "StudyInterrupted", "RunNote", "Run", "Validation", "ReferenceCheck", "build",
+           "load", "run", "validate", "validate_each", "bench", "scenes_list", "stability_map", "sweep", "study",
+           "measured", "engines", "hosts", "export", "compliance", "references", "fingerprints", "bad_inputs"]
 
 
 class InputError(ValueError):
@@ -40,6 +43,31 @@ class InputError(ValueError):
 
 class BuildError(RuntimeError):
     """The FMUs could not be built (no C compiler, a failed compliance check, ...)."""
+
+
+class StudyInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a study that resumes from its case log; the message says what was
+    kept (``lever``: exit status 130)."""
+
+
+@contextlib.contextmanager
+def _resumable(out: Path):
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise StudyInterrupted(f"interrupted: the finished cases are kept in {Path(out) / 'cases.jsonl'} (the ones "
+                               "under way are logged as interrupted); run the same command again to resume") from None
+
+
+#: what to do without a C compiler (the FMUs' native entry is compiled when they are built)
+NO_COMPILER = ("the FMUs' native entry is C, compiled when they are built: install a C compiler "
+               "(Debian/Ubuntu: sudo apt install gcc; Fedora: sudo dnf install gcc; macOS: xcode-select --install) "
+               "or name one with CC (e.g. CC=clang lever build)")
+
+
+def _with_compiler_hint(error: Exception) -> str:
+    """The build's message, with what to do when no C compiler could be run."""
+    return f"{error}; {NO_COMPILER}" if "cannot run" in str(error) and NO_COMPILER not in str(error) else str(error)
 
 
 class RunNote(UserWarning):
@@ -60,14 +88,14 @@ def _build_module():
 def build(force: bool = False, fmu_dir: Path | None = None, log: Callable[[str], None] | None = None) -> Path:
     """Build the FMUs into ``fmu_dir`` (default ``harness.paths.FMUS``) when they are
     missing or older than their sources; return the folder.  BuildError when the build
-    fails (no C compiler, ...)."""
+    fails (no C compiler: the message says what to install)."""
     fmu_dir = Path(fmu_dir or FMUS)
     module = _build_module()
     if force or not module.is_current(fmu_dir):
         try:
             module.build(fmu_dir, force=force, log=log or (lambda *_: None))
         except RuntimeError as error:
-            raise BuildError(str(error)) from None
+            raise BuildError(_with_compiler_hint(error)) from None
     return fmu_dir
 
 
@@ -122,11 +150,11 @@ def load(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, stop: 
 
 def check_masters(*names: str):
     """InputError when one of ``names`` is not a master."""
-    from harness.engine import masters as family
+    from harness.engine import masters
 
     try:
-        family.check(*names)
-    except family.UnknownMaster as error:
+        masters.check(*names)
+    except masters.UnknownMaster as error:
         raise InputError(str(error)) from None
 
 
@@ -140,6 +168,8 @@ class Run:
     out: Path | None = None
     #: the warnings and notes said about this run (also sent to ``notify``)
     notes: list[str] = field(default_factory=list)
+    #: the step latency's summary (``latency=True``; the tables are in ``out``)
+    latency: list[str] | None = None
 
     @property
     def scene(self) -> scenes.Scene:
@@ -161,6 +191,17 @@ class Run:
     def failure(self) -> str | None:
         return self.result.failure
 
+    @property
+    def outcome(self) -> str:
+        """How the run ended: "ok"; "interrupted" (Ctrl-C: what was computed is kept, marked
+        so); "refused" (the FMUs refused the scene's values before the first step: the input
+        is at fault, not the run); "failed" (part-way: the traces before the failure are kept)."""
+        if self.result.interrupted:
+            return "interrupted"
+        if self.result.ok:
+            return "ok"
+        return "refused" if self.result.failure_stage == "initialisation" else "failed"
+
     def array(self, names: Iterable[str] | None = None) -> np.ndarray:
         """The traces as one numpy structured array, ``time`` first (as fmpy's
         ``simulate_fmu`` returns): ``a["time"]``, ``a["coupling.tau2"]``."""
@@ -178,7 +219,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         step: float | None = None, stop: float | None = None, tolerance: float | None = None,
         strict: bool = False, reference: bool = True, out: Path | str | None = None, progress: bool = False,
         stream: bool = False, notify: Callable[[str, str], None] | None = None, claimed: bool = False,
-        observer=None) -> Run:
+        observer=None, latency: bool = False) -> Run:
     """Run a scene as ``lever run`` does and return it (``Run``).
 
     ``overrides``: ``{"coupling.misalignment": "20 deg"}`` or ``["coupling.stiffness=900"]``;
@@ -186,14 +227,15 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     (its error is in the summary); ``out``: write the run's files there (report.md,
     summary.json, traces.csv, plots); ``stream``: write traces.csv while running (needs
     ``out``).  ``notify(kind, message)`` hears the warnings and notes ("warning", "note");
-    ``observer`` is told of every step (``harness.engine.observers``, e.g. the step timer).
+    ``observer`` is told of every step (``harness.engine.observers``); ``latency``: time every
+    step and write latency.md and latency.json to ``out`` (``Run.latency`` summarises them).
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
-    from harness.engine import masters as family
+    from harness.engine import masters
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
     from harness.formats import outputs, report
-    from harness.judges import monolithic as references
+    from harness.judges import monolithic
     from harness.judges.stability import run_advice
 
     notes: list[str] = []
@@ -208,14 +250,21 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     _step_problem(step)
     options = {}
     if tolerance is not None:
-        if "tolerance" not in family.MASTERS[chosen].options:
+        if "tolerance" not in masters.MASTERS[chosen].options:
             raise InputError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
-                             + ", ".join(n for n, m in family.MASTERS.items() if "tolerance" in m.options) + ")")
+                             + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
         if not (math.isfinite(tolerance) and 0 < tolerance < 1):
             raise InputError(f"--tolerance {tolerance}: must lie in (0, 1)")
         options["tolerance"] = tolerance
     if stream and out is None:
         raise InputError("stream: name the output folder (out=...) the traces are streamed to")
+    if latency and out is None:
+        raise InputError("latency: name the output folder (out=...) the latency tables are written to")
+    if latency:
+        from harness.studies import latency as step_latency
+        if observer is not None:
+            raise InputError("latency: it times the steps with its own observer; give no other observer")
+        observer = timer = step_latency.StepTimer()
     build()
     fmu_dir = spec.fmu_dir or FMUS
     # the scene's names and values first: the stability advisor reads a sound scene only
@@ -256,8 +305,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     try:
         if "reference" in spec.features and reference and not stream and result.ok:
             try:
-                solution = references.solve(plan, result.times)
-            except references.ReferenceUnavailable as error:
+                solution = monolithic.solve(plan, result.times)
+            except monolithic.ReferenceUnavailable as error:
                 say("note", f"no reference for this scene: {error}")
     except KeyboardInterrupt:
         say("note", "interrupted while solving the reference: the run's results are written without it")
@@ -267,7 +316,10 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         summary = report.write(Path(out), result, solution)
     else:
         summary = report.summarize(result, solution)
-    return Run(result, solution, summary, Path(out) if out is not None else None, notes)
+    done = Run(result, solution, summary, Path(out) if out is not None else None, notes)
+    if latency:
+        done.latency = step_latency.report(Path(out), timer, result)
+    return done
 
 
 @dataclass
@@ -342,44 +394,44 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a shorter
     run); ``out``: write validation.json, the result and a plot per failing signal there."""
     from harness.engine.system import SceneInvalid
-    from harness.formats import reference_traces as crosscheck
-    from harness.judges import validation as judge
+    from harness.formats import reference_traces
+    from harness.judges import validation
 
-    known = crosscheck.all_names()
+    known = reference_traces.all_names()
     if name not in known:
-        raise InputError(crosscheck.why_no_reference(name)
+        raise InputError(reference_traces.why_no_reference(name)
                          or f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
-    if tolerance not in judge.TOLERANCES:
-        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(judge.TOLERANCES)}")
+    if tolerance not in validation.TOLERANCES:
+        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(validation.TOLERANCES)}")
     _step_problem(step)
     if isinstance(window, str):
         window = parse_window(window)
     try:
-        ref = crosscheck.read(name)
-    except crosscheck.TraceFileError as error:
+        ref = reference_traces.read(name)
+    except reference_traces.TraceFileError as error:
         raise InputError(str(error)) from None
     if isinstance(result, (str, Path)):
         try:
-            other = crosscheck.read_csv(Path(result))
-        except crosscheck.TraceFileError as error:
+            other = reference_traces.read_csv(Path(result))
+        except reference_traces.TraceFileError as error:
             raise InputError(str(error)) from None
-        judged = crosscheck.Result(other.times, other.signals, f"from {result}")
+        judged = reference_traces.Result(other.times, other.signals, f"from {result}")
     elif result is not None:
         times, traces = result
-        judged = crosscheck.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
+        judged = reference_traces.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
                                    "given")
     else:
         build()
         if ref.kind == "fmu":
             if master or step:
                 raise InputError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            judged = crosscheck.run_fmu(name, ref, fmu_start_values(name, overrides))
+            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides))
         else:
             spec = load(name, overrides)
             if master:
                 check_masters(master)
             try:
-                judged = crosscheck.run_scene(spec, master, step)
+                judged = reference_traces.run_scene(spec, master, step)
             except SceneInvalid as error:
                 raise InputError(str(error)) from None
     start, stop = ref.opt.start, ref.opt.stop
@@ -391,13 +443,88 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
                              f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
-    findings, bands = judge.compare_span(name, judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
-                                         judge.TOLERANCES[tolerance], start, stop, (ref.opt.start, ref.opt.stop))
+    findings, bands = validation.compare_span(name, judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
+                                         validation.TOLERANCES[tolerance], start, stop, (ref.opt.start, ref.opt.stop))
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
-        crosscheck.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
+        reference_traces.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
     return Validation(name, findings, bands, judged, ref, Path(out) if out is not None else None)
+
+
+def reference_names(names: Iterable[str] = ()) -> list[str]:
+    """``names`` checked against the committed reference traces (none: all of them)."""
+    from harness.formats import reference_traces
+
+    known = reference_traces.all_names()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        said = "; ".join(filter(None, map(reference_traces.why_no_reference, unknown)))
+        raise InputError(said or f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
+    return list(names) or known
+
+
+def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
+                  result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
+                  out: Path | str | None = None) -> Iterator[Validation]:
+    """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
+    ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
+    and the FMUs built before the first."""
+    from harness.paths import RESULTS
+
+    chosen = reference_names(names)
+    if result is not None and len(chosen) != 1:
+        raise InputError("--result: name exactly one reference the CSV is to be compared with "
+                         "(e.g. lever validate --result run.csv kavz685)")
+    span = parse_window(window)
+    if step is not None and (problem := scenes.step_problem(step, "--step")):
+        raise InputError(problem)
+    if result is None:
+        build()
+    for name in chosen:
+        target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / name
+        yield validate(name, overrides=_assignments(overrides), master=master, step=step, result=result,
+                       tolerance=tolerance, window=span, out=target)
+
+
+@dataclass
+class ReferenceCheck:
+    """One committed reference trace against what the project computes now."""
+    name: str
+    #: "current", "stale" (not current, left), "updated" (not current, rewritten) or
+    #: "unavailable" (no reference can be computed: ``reason``)
+    status: str
+    problems: list[str] = field(default_factory=list)
+    #: per signal: ``signal``, ``max_change``, ``relative``, ``at_time``
+    changes: list = field(default_factory=list)
+    reason: str = ""
+    folder: Path | None = None
+
+
+def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:
+    """``lever reference``: regenerate each reference trace (``names``: FMUs or scenes; none:
+    all) and compare it with the committed one; ``update``: write the stale ones."""
+    from harness.formats import reference_traces
+    from harness.judges.monolithic import ReferenceUnavailable
+
+    for name in reference_names(names):
+        try:
+            fresh = reference_traces.generate(name)
+        except (ReferenceUnavailable, scenes.SceneError) as error:
+            yield ReferenceCheck(name, "unavailable", reason=str(error))
+            continue
+        try:
+            committed = reference_traces.read(name)
+        except reference_traces.TraceFileError:
+            committed = None
+        diff = reference_traces.difference(committed, fresh)
+        if diff.current:
+            yield ReferenceCheck(name, "current")
+            continue
+        if update:
+            reference_traces.write(fresh)
+        yield ReferenceCheck(name, "updated" if update else "stale", list(diff.problems), list(diff.changes),
+                             folder=reference_traces.paths(name)["ref"].parent)
 
 
 def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, only: Iterable[str] = (),
@@ -423,7 +550,274 @@ def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, onl
             out = outputs.claim(out)
         except outputs.OutputError as error:
             raise InputError(str(error)) from None
-    result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
-                             progress=progress or (lambda *_: None), out=out, resume=resume)
-    result["written"] = benchmark.write(out, result)
+    with _resumable(out):
+        result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
+                                 progress=progress or (lambda *_: None), out=out, resume=resume)
+        result["written"] = benchmark.write(out, result)
+    result["summary"] = benchmark.summary_lines(result)
     return result
+
+
+def _claim(out: Path) -> Path:
+    """``out`` made, proven writable and locked for this process (InputError when it cannot
+    be, or another lever is writing there)."""
+    from harness.formats import outputs
+
+    try:
+        return outputs.claim(Path(out))
+    except outputs.OutputError as error:
+        raise InputError(str(error)) from None
+
+
+def stability_map(scene: str | Path | scenes.Scene = "kavz685", *, stiffnesses: Iterable[float] = (),
+                  dampings: Iterable[float] = (), h_omegas: Iterable[float] = (), masters: Iterable[str] = (),
+                  dense: bool = False, min_steps: int = 500, refine: bool = True, jobs: int = 1,
+                  resume: bool = True, out: Path | str | None = None,
+                  progress: Callable[[str], None] | None = None) -> dict:
+    """``lever stability``: every case of the map classified against the edges the linear
+    analysis predicts (empty sequences: the default plan's, ``dense``: denser); writes
+    stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
+    results/stability/<scene>), resuming from the case log unless ``resume`` is false.
+    Returns ``result``, ``agreement`` and ``written``."""
+    from harness.description import kinds
+    from harness.studies import stabilitymap
+
+    try:
+        spec = load(scene)
+        plan = stabilitymap.default_plan(spec, dense)
+    except (scenes.SceneError, kinds.NotADriveline, ValueError) as error:
+        raise InputError(str(error)) from None
+    stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
+    unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
+    if unknown:
+        raise InputError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "
+                         f"{', '.join(stabilitymap.FIXED_STEP_MASTERS)})")
+    for name, values, low in (("--stiffness", stiffnesses, 0.0), ("--h-omega", h_omegas, 0.0)):
+        if any(not (math.isfinite(v) and v > low) for v in values):
+            raise InputError(f"{name}: values must be finite and > {low:g}")
+    if any(not (math.isfinite(v) and v >= 0) for v in dampings):
+        raise InputError("--damping: values must be finite and >= 0")
+    plan.stiffnesses = sorted(set(stiffnesses)) or plan.stiffnesses
+    plan.dampings = sorted(set(dampings), reverse=True) or plan.dampings
+    plan.h_omegas = sorted(set(h_omegas)) or plan.h_omegas
+    plan.masters = list(dict.fromkeys(masters)) or plan.masters
+    plan.min_steps = min_steps
+    plan.refine = refine
+    build()
+    out = _claim(out or stabilitymap.default_out(spec))
+    with _resumable(out):
+        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
+    written = stabilitymap.write(out, result)
+    return {"result": result, "agreement": stabilitymap.agreement(result), "written": written}
+
+
+def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, stop: float | None = None,
+          thin: int = 1, workers: int | None = None, dask: str | None = None, resume: bool = True,
+          out: Path | str | None = None, progress: bool = False) -> dict:
+    """``lever sweep``: the monograph's parameter studies on ``axes`` (none: all; ``thin``:
+    every n-th value), each case run for ``stop`` seconds (default: the scene's), locally
+    (``workers`` processes) or on the Dask cluster at ``dask``; writes sweep.md, sweep.json
+    and a plot an axis to ``out`` (default results/sweep), resuming from its case log.
+    Returns the report (``cases``, ``trends``).  OSError when the cases cannot be run
+    (e.g. no Dask scheduler at the address)."""
+    from harness.paths import RESULTS
+    from harness.studies import sweep as sweeps
+
+    extra = _assignments(overrides)
+    try:
+        chosen = sweeps.thin(sweeps.select(list(axes)), thin)
+        load(scene).with_overrides(extra)
+    except (ValueError, scenes.SceneError) as error:
+        raise InputError(str(error)) from None
+    if stop is not None and not (math.isfinite(stop) and stop > 0):
+        raise InputError(f"--stop {stop}: must be > 0 s")
+    try:
+        sweeps.check(chosen, scene, stop, extra)
+    except scenes.SceneError as error:
+        raise InputError(str(error)) from None
+    build()
+    out = Path(out or RESULTS / "sweep")
+    _claim(out)
+    try:
+        with _resumable(out):
+            return sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers, dask=dask,
+                                progress=progress, resume=resume)
+    except scenes.SceneError as error:
+        raise InputError(str(error)) from None
+
+
+def sweep_verdict(trend: dict) -> str:
+    """A trend's verdict as ``lever sweep`` prints it."""
+    from harness.studies.sweep import NOT_JUDGED
+
+    return {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced", NOT_JUDGED: NOT_JUDGED}[trend["reproduced"]]
+
+
+def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) -> tuple[str, Path]:
+    """``lever study NAME``: the numbers behind a documented decision ("transfer-modes") or
+    statement ("runup"; ``lags``: scan these engine torque lags [s]); returns the table and
+    the file it was written to in ``out`` (default results/studies)."""
+    from harness.paths import RESULTS
+
+    out = Path(out or RESULTS / "studies")
+    lags = list(lags)
+    if name == "runup":
+        from harness.studies import runup
+
+        for lag in lags:
+            if not (math.isfinite(lag) and 0.0 <= lag <= 100.0):
+                raise InputError(f"--scan {lag}: engine.torque_lag must be in [0, 100] s")
+        text = runup.scan(lags) if lags else runup.markdown(runup.table())
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "runup.md").write_text(text + "\n")
+        return text, out / "runup.md"
+    if name != "transfer-modes":
+        raise InputError(f"no study '{name}' (known: transfer-modes, runup)")
+    if lags:
+        raise InputError("--scan applies to the runup study only")
+    from harness.studies import decisions
+
+    build()
+    return decisions.transfer_modes(out), out / "transfer_modes.md"
+
+
+def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, stiffness: float | None = None,
+             cycles: bool = True) -> dict:
+    """``lever measured``: the model against measured torque tables (``files``: tables or
+    folders; none: the monograph's data), written to ``out`` (default results/measured).
+    Returns ``grades`` (per grade: conditions, errors, amplitudes, ``within_target``),
+    ``findings`` (empty: every grade within the monograph's stated difference) and ``report``."""
+    import json
+
+    from harness.paths import RESULTS
+    from harness.studies import measured as measurement
+
+    out = Path(out or RESULTS / "measured")
+    if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
+        raise InputError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+    files = list(files) or measurement.default_files()
+    _, unusable = measurement.pair_tables(files)
+    if unusable:       # the files are at fault, not the model: bad input
+        raise InputError("the measurement files cannot be used:\n  - " + "\n  - ".join(unusable))
+    build()
+    findings = measurement.validate_measured(files, out, stiffness=stiffness, cycles=cycles)
+    grades = json.loads((out / "measured.json").read_text())["grades"]
+    return {"grades": grades, "findings": findings, "report": out / "measured.md"}
+
+
+def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, engines: Iterable[str] = (),
+            step: float | None = None, repeats: int = 3, out: Path | str | None = None,
+            progress: Callable[[str], None] | None = None) -> list[Path]:
+    """``lever engines``: the scene in every engine that runs our FMUs (``engines``: these),
+    error against the monolithic reference and run time; writes engines.md and engines.json
+    to ``out`` (default results/engines/<scene>) and returns their paths."""
+    from harness.studies import engines as comparison
+
+    spec = load(scene, overrides)
+    chosen = list(engines) or list(comparison.ENGINES)
+    unknown = [n for n in chosen if n not in comparison.ENGINES]
+    if unknown:
+        raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
+    build()
+    rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
+    return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
+
+
+def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts: Iterable[str] = (),
+          step: float = 1e-3, repeats: int = 3, fmu_dir: Path | None = None, native_env: str = "bare",
+          out: Path | str | None = None, log: Callable[[str], None] | None = None) -> dict:
+    """``lever hosts``: the scene in hosts we did not write and in our harness at one fixed
+    step (``hosts``: these; ``fmu_dir``: time these FMUs instead of the built ones;
+    ``native_env`` "set-up": ecos and the C importer get this Python's environment); writes
+    hosts.md and hosts.json to ``out`` (default results/hosts/<scene>).  Returns ``report``,
+    ``table`` (the markdown) and ``written``."""
+    import json
+
+    from harness.studies import hosts as comparison
+
+    spec = load(scene, overrides)
+    chosen = tuple(hosts) or comparison.HOSTS
+    unknown = [n for n in chosen if n not in comparison.HOSTS]
+    if unknown:
+        raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
+    if native_env not in ("bare", "set-up"):
+        raise InputError(f"native_env {native_env!r}: bare or set-up")
+    if fmu_dir is None:
+        build()
+    environment = comparison.set_up_environment() if native_env == "set-up" else None
+    report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
+                                   log=log or (lambda *_: None))
+    folder = Path(out) if out else comparison.default_out(spec)
+    folder.mkdir(parents=True, exist_ok=True)
+    table = comparison.table(report)
+    (folder / "hosts.json").write_text(json.dumps(report, indent=1))
+    (folder / "hosts.md").write_text(table)
+    return {"report": report, "table": table, "written": [folder / "hosts.md", folder / "hosts.json"]}
+
+
+def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overrides=None, *,
+           out: Path | str | None = None) -> tuple[Path, dict[str, str]]:
+    """``lever export-ssp`` (``to="ssp"``: an SSP archive) and ``lever export-container``
+    (``to="container"``: one FMU holding the scene's FMUs): the scene with ``overrides``
+    written to ``out`` (default results/<to>/<scene>.<suffix>).  Returns the file and what
+    each engine needs to run it with its values (engine -> how)."""
+    from harness.engine.system import SceneInvalid
+    from harness.paths import RESULTS
+
+    if to == "ssp":
+        from harness.formats import ssp
+        write, suffix, how_to_run = ssp.export, "ssp", ssp.HOW_TO_RUN
+    elif to == "container":
+        from harness.formats import container
+        write, suffix, how_to_run = container.build_container, "fmu", {}
+    else:
+        raise InputError(f"export to {to!r}: ssp or container")
+    spec = load(scene, overrides)
+    build()
+    out = Path(out) if out else RESULTS / to / f"{spec.name}.{suffix}"
+    try:
+        path = write(spec, out, spec.fmu_dir or FMUS)
+    except SceneInvalid as error:
+        raise InputError(str(error)) from None
+    return path, {engine: how.replace("ARCHIVE", str(path)) for engine, how in how_to_run.items()}
+
+
+def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:
+    """``lever compliance``: fmpy's validation and ours on each FMU file (none: the built
+    ones, built first); ``(file, findings)`` one file at a time (empty: none)."""
+    from harness.compliance import check_fmu
+
+    fmus = [Path(f) for f in fmus]
+    if not fmus:
+        fmus = sorted(build().glob("*.fmu"))
+    for path in fmus:
+        yield path, check_fmu(path)
+
+
+def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: float | None = 0.2
+                 ) -> Iterator[tuple[str, str, int, str]]:
+    """``lever fingerprint``: ``(scene, master, rows, SHA-256 of the traces)`` for every
+    committed scene (or ``names``) and master (or ``masters``), each run for at most
+    ``stop`` seconds (0 or None: its own length)."""
+    from harness.studies import fingerprint
+
+    masters = list(masters)
+    check_masters(*masters)
+    if stop is not None and not (math.isfinite(stop) and stop >= 0):
+        raise InputError(f"--stop {stop}: must be >= 0 s (0: each scene's own length)")
+    build()
+    try:
+        yield from fingerprint.fingerprints(list(names) or None, masters or None, stop or None)
+    except scenes.SceneError as error:
+        raise InputError(str(error)) from None
+
+
+def bad_inputs() -> tuple[list, str]:
+    """``lever badinputs``: the bad-input corpus through fmpy's FMU2Slave on the built FMUs;
+    the outcomes (``passed``, ``case.name``, ``messages``) and their summary."""
+    from harness.formats import badinputs
+
+    build()
+    outcomes = badinputs.run()
+    return outcomes, badinputs.summary(outcomes)
+

@@ -1,4 +1,4 @@
-"""``lever check FMU``: does an FMU file follow the standards and the practice of
+"""``lever compliance FMU``: does an FMU file follow the standards and the practice of
 modelica/Reference-FMUs?  fmpy's validation plus our own checks, each a pure function
 returning findings (empty: nothing to report), fmpy style.
 

@@ -97,3 +97,53 @@ def pytest_unconfigure(config):
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(status)
+
+
+# ======================================================================================
+# The command line: one way to run `lever` in a test
+# ======================================================================================
+# `lever` in-process for every test that runs a command; `lever_process` only where the
+# test needs a process of its own (Ctrl-C sent to it, a lock another process holds, the
+# environment it starts with, how it ends).
+
+
+@pytest.fixture(scope="session")
+def lever():
+    """``lever("run", "kavz685", "--out", path)``: the command run in this process by
+    click's CliRunner (arguments made strings); click's Result: ``exit_code``, ``output``
+    (stdout and stderr as a terminal shows them), ``stdout``, ``stderr``.  An exception that
+    escapes a command fails the test with its traceback, as a user would have seen it."""
+    from click.testing import CliRunner
+
+    from harness.cli import main
+
+    def invoke(*args, **options):
+        return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False, **options)
+    return invoke
+
+
+class LeverProcess:
+    """``lever`` as a process of its own: the console entry under this Python (the code
+    under test, whichever environment runs pytest)."""
+
+    command = [sys.executable, "-c", "from harness.cli import entry; entry()"]
+
+    def run(self, *args, timeout: float = 300, **options) -> "subprocess.CompletedProcess":
+        """Run to the end: output captured as text."""
+        import subprocess
+
+        return subprocess.run([*self.command, *map(str, args)], capture_output=True, text=True, timeout=timeout,
+                              **options)
+
+    def start(self, *args, **options) -> "subprocess.Popen":
+        """Start and return at once: stdout and stderr are pipes (text) unless ``options`` say
+        otherwise."""
+        import subprocess
+
+        options = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True, **options}
+        return subprocess.Popen([*self.command, *map(str, args)], **options)
+
+
+@pytest.fixture(scope="session")
+def lever_process() -> LeverProcess:
+    return LeverProcess()

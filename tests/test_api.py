@@ -8,10 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from harness import api
-from harness.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -57,7 +55,7 @@ def test_validate_judges_given_traces_over_a_window(fmu_dir):
     assert part.findings.describe_span() == "t = 0 ... 0.5 s of the reference's 0 ... 10 s"
 
 
-def test_the_command_line_goes_through_the_api(fmu_dir, tmp_path, monkeypatch):
+def test_the_command_line_goes_through_the_api(lever, fmu_dir, tmp_path, monkeypatch):
     calls = []
 
     def spy(name):
@@ -70,21 +68,31 @@ def test_the_command_line_goes_through_the_api(fmu_dir, tmp_path, monkeypatch):
 
     for name in ("run", "validate"):
         spy(name)
+    refused = lever("bench", "kavz685", "--only", "nonsense", "--out", tmp_path / "n")
+    assert refused.exit_code == 2 and "nonsense" in refused.output     # refused before anything runs
+    assert not (tmp_path / "n").exists()
 
     def bench_stops_at_once(*args, **kwargs):          # the routing is the point, not a benchmark
         calls.append("bench")
         raise api.InputError("stopped by the test")
     monkeypatch.setattr(api, "bench", bench_stops_at_once)
-    runner = CliRunner()
-    assert runner.invoke(main, ["run", "kavz685", "--stop", "0.2", "--no-reference", "--out", str(tmp_path / "r")]
-                         ).exit_code == 0
-    assert runner.invoke(main, ["validate", "--result", str(tmp_path / "r" / "traces.csv"), "kavz685",
-                                "--window", "0:0.2", "--out", str(tmp_path / "v")]).exit_code == 0
-    bench = runner.invoke(main, ["bench", "kavz685", "--only", "nonsense"])
-    assert bench.exit_code == 2                              # refused before anything runs
+    assert lever("run", "kavz685", "--stop", "0.2", "--no-reference", "--out", tmp_path / "r").exit_code == 0
+    assert lever("validate", "--result", tmp_path / "r" / "traces.csv", "kavz685", "--window", "0:0.2",
+                 "--out", tmp_path / "v").exit_code == 0
     assert calls == ["run", "validate"]
-    benched = runner.invoke(main, ["bench", "kavz685", "--only", "jacobi", "--out", str(tmp_path / "b")])
+    benched = lever("bench", "kavz685", "--only", "jacobi", "--out", str(tmp_path / "b"))
     assert calls[-1] == "bench" and "stopped by the test" in benched.output, benched.output
+
+
+def test_a_run_says_how_it_ended(fmu_dir):
+    """What ``lever run``'s exit status is made of: ok (0), refused by the FMUs before the
+    first step (bad input, 2), failed part-way (1); interrupted (130) is tests/test_interrupts.py's."""
+    quiet = {"reference": False, "notify": lambda kind, message: None}
+    assert api.run("kavz685", stop=0.05, **quiet).outcome == "ok"
+    failed = api.run("kavz685", {"coupling.stiffness": 1e9, "experiment.transient": 0}, step=0.01, stop=1, **quiet)
+    assert failed.outcome == "failed" and not failed.ok and " t = " in failed.failure
+    refused = api.run("kavz685_misalignment_edge", {"coupling.misalignment": "44 deg"}, stop=0.05, **quiet)
+    assert refused.outcome == "refused" and "misalignment" in refused.failure
 
 
 def test_the_example_script_runs(fmu_dir, tmp_path, capsys):

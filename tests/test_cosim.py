@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,8 +14,6 @@ from harness.judges import solution
 from harness.engine import run
 from harness.description import scene
 
-REPO = Path(__file__).resolve().parents[1]
-LEVER = REPO / ".venv" / "bin" / "lever"
 
 # Short, smooth runs: constant load, no start-up transient excluded from statistics.
 SHORT = ["experiment.stop=1", "experiment.transient=0"]
@@ -211,14 +207,10 @@ def test_kavz685_default_scene_meets_its_accuracy_targets():
 # --------------------------------------------------------------------------------------
 
 
-def lever(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([str(LEVER), *args], capture_output=True, text=True, timeout=timeout, cwd=REPO)
-
-
-def test_cli_bad_parameter_exits_2_with_a_message(tmp_path):
+def test_cli_bad_parameter_exits_2_with_a_message(lever, tmp_path):
     out = tmp_path / "out"
     proc = lever("run", "--set", "engine.inertia=-1", "--no-reference", "--out", str(out))
-    assert proc.returncode == 2, proc.stderr
+    assert proc.exit_code == 2, proc.stderr
     text = proc.stdout + proc.stderr
     assert "inertia" in text
     assert "Traceback" not in text
@@ -228,9 +220,9 @@ def test_cli_bad_parameter_exits_2_with_a_message(tmp_path):
 @pytest.mark.parametrize("args", [["--master", "newton"], ["--step", "-0.001"], ["--set", "nonsense"],
                                   ["--set", "gearbox.ratio=3"], ["--set", "coupling.no_such_parameter=1"],
                                   ["no_such_scene"]])
-def test_cli_user_errors_exit_2_without_traceback(tmp_path, args):
+def test_cli_user_errors_exit_2_without_traceback(lever, tmp_path, args):
     proc = lever("run", *args, "--no-reference", "--out", str(tmp_path / "out"))
-    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert proc.exit_code == 2, (proc.stdout, proc.stderr)
     assert "Traceback" not in proc.stdout + proc.stderr
     assert proc.stderr.strip()
     if args[0] == "--master":
@@ -238,17 +230,17 @@ def test_cli_user_errors_exit_2_without_traceback(tmp_path, args):
 
 
 @pytest.mark.parametrize("assignment", ["experiment.master=newton", "experiment.stop=abc"])
-def test_cli_bad_experiment_override_exits_2(tmp_path, assignment):
+def test_cli_bad_experiment_override_exits_2(lever, tmp_path, assignment):
     proc = lever("run", "--set", assignment, "--no-reference", "--out", str(tmp_path / "out"))
     assert "Traceback" not in proc.stdout + proc.stderr
-    assert proc.returncode == 2
+    assert proc.exit_code == 2
 
 
-def test_cli_failing_run_exits_1_and_keeps_the_rows_before_the_failure(tmp_path):
+def test_cli_failing_run_exits_1_and_keeps_the_rows_before_the_failure(lever, tmp_path):
     out = tmp_path / "out"
     proc = lever("run", "--set", "coupling.stiffness=1e9", "--set", "experiment.stop=1",
                  "--set", "experiment.transient=0", "--step", "0.01", "--out", str(out))
-    assert proc.returncode == 1, (proc.stdout, proc.stderr)
+    assert proc.exit_code == 1, (proc.stdout, proc.stderr)
     assert "Traceback" not in proc.stdout + proc.stderr
     assert "error:" in proc.stderr
     assert " t = " in proc.stderr   # says when it failed
@@ -267,15 +259,11 @@ def test_cli_failing_run_exits_1_and_keeps_the_rows_before_the_failure(tmp_path)
     assert "failed" in (out / "report.md").read_text()
 
 
-def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
-    from click.testing import CliRunner
-
-    from harness import cli
-
+def test_cli_short_run_writes_the_results(lever, tmp_path, monkeypatch):
     monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")   # keep the repository clean
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli.main, ["run", "--set", "experiment.stop=0.5", "--set", "experiment.transient=0.1",
-                                           "--out", str(out), "--no-progress"])
+    result = lever("run", "--set", "experiment.stop=0.5", "--set", "experiment.transient=0.1", "--out", out,
+                   "--no-progress")
     assert result.exit_code == 0, result.output
     for name in ("report.md", "summary.json", "traces.csv", "reference.csv", "speeds.png", "torques.png",
                  "accelerations.png", "u12_over_angle.png", "spectrum.png", "vs_reference.png", "revolution.png",
@@ -295,11 +283,11 @@ def test_cli_short_run_writes_the_results(tmp_path, monkeypatch):
     assert "kavz685" in report and "Energy balance" in report
 
 
-def test_cli_no_reference_run(tmp_path):
+def test_cli_no_reference_run(lever, tmp_path):
     out = tmp_path / "out"
     proc = lever("run", "--set", "experiment.stop=0.2", "--set", "experiment.transient=0", "--master", "gauss-seidel",
                  "--step", "1e-3", "--no-reference", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
+    assert proc.exit_code == 0, proc.stderr
     assert {"report.md", "summary.json", "traces.csv", "speeds.png"} <= {p.name for p in out.iterdir()}
     assert not (out / "reference.csv").exists()
     summary = json.loads((out / "summary.json").read_text())

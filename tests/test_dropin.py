@@ -1,4 +1,4 @@
-"""Drop-in FMUs: the built FMUs follow the standards (lever check), say what they need,
+"""Drop-in FMUs: the built FMUs follow the standards (lever compliance), say what they need,
 and run in engines that are not ours - libcosim (alone, as a scene, from SSP, from an
 OSP system structure), fmpy.ssp, fmpy's container FMU, and a C host that is no Python
 process - matching the reference."""
@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from fmpy import read_model_description
 
 from harness import compliance
@@ -29,7 +28,6 @@ from harness.engine import run
 from harness.description import scene
 from harness.formats import ssp
 from harness.studies import hosts
-from harness.cli import main as cli
 from harness.engine.component import Component
 from lever.fmus.registry import NAMES as FMU_NAMES
 from lever.physics import catalogue
@@ -47,7 +45,7 @@ def kavz(extra=()):
     return scene.load("kavz685").with_overrides(SHORT + list(extra))
 
 
-# -- lever check --------------------------------------------------------------------------------
+# -- lever compliance ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("fmu", FMU_NAMES)
 def test_lever_check_finds_nothing_in_a_built_fmu(fmu_dir, fmu):
@@ -63,7 +61,7 @@ def _rewrite(src: Path, dest: Path, edit):
                 b.writestr(info, data)
 
 
-def test_lever_check_reports_what_a_careless_fmu_lacks(fmu_dir, tmp_path):
+def test_lever_check_reports_what_a_careless_fmu_lacks(lever, fmu_dir, tmp_path):
     def edit(name, data):
         if name in ("documentation/_main.html", "resources/requirements.txt"):
             return None
@@ -85,7 +83,7 @@ def test_lever_check_reports_what_a_careless_fmu_lacks(fmu_dir, tmp_path):
                      "variable 'inertia': no description", "parameter 'inertia': no min",
                      "opposite causality"):
         assert expected in findings, (expected, findings)
-    result = CliRunner().invoke(cli, ["check", str(broken)])
+    result = lever("compliance", str(broken))
     assert result.exit_code == 1 and "no documentation/_main.html" in result.output
 
 
@@ -232,12 +230,11 @@ def test_ssp_export_loads_back_as_the_same_scene_and_validates_in_fmpy(fmu_dir, 
     assert np.array_equal(a.traces["coupling.tau2"], b.traces["coupling.tau2"])
 
 
-def test_lever_run_and_export_on_the_command_line(tmp_path):
+def test_lever_run_and_export_on_the_command_line(lever, tmp_path):
     archive = tmp_path / "k.ssp"
-    result = CliRunner().invoke(cli, ["export-ssp", "kavz685", "--out", str(archive)] + [
-        f"--set={s}" for s in SHORT])
+    result = lever("export-ssp", "kavz685", "--out", archive, *[f"--set={s}" for s in SHORT])
     assert result.exit_code == 0, result.output
-    result = CliRunner().invoke(cli, ["run", str(archive), "--out", str(tmp_path / "run"), "--no-progress"])
+    result = lever("run", str(archive), "--out", str(tmp_path / "run"), "--no-progress")
     assert result.exit_code == 0, result.output
     assert "error vs reference" in result.output and (tmp_path / "run" / "traces.csv").exists()
 
@@ -292,9 +289,9 @@ def test_the_container_fmu_is_the_driveline_as_one_block(fmu_dir, tmp_path):
     assert validate_fmu(str(build_container(spec, tmp_path / "k.fmu", fmu_dir))) == []
 
 
-def test_lever_engines_writes_the_table(tmp_path):
-    result = CliRunner().invoke(cli, ["engines", "--engine", "lever", "--engine", "libcosim-ssp", "--repeats", "1",
-                                      "--out", str(tmp_path)] + [f"--set={s}" for s in SHORT])
+def test_lever_engines_writes_the_table(lever, tmp_path):
+    result = lever("engines", "--engine", "lever", "--engine", "libcosim-ssp", "--repeats", "1", "--out", tmp_path,
+                   *[f"--set={s}" for s in SHORT])
     assert result.exit_code == 0, result.output
     table = (tmp_path / "engines.md").read_text()
     assert "| `lever` |" in table and "| `libcosim-ssp` |" in table
@@ -523,7 +520,7 @@ def test_a_wrong_guid_gives_null_and_a_message(fmu_dir, c_host, tmp_path):
     assert "is not this FMU's GUID" in done.stderr
 
 
-def test_kavz_run_in_libcosim_passes_lever_validate(fmu_dir, tmp_path):
+def test_kavz_run_in_libcosim_passes_lever_validate(lever, fmu_dir, tmp_path):
     """The KAVZ-685 scene assembled by libcosim from our SSP archive, its traces written
     as another tool would, judged by `lever validate --result` against our reference."""
     spec = scene.load("kavz685")
@@ -533,13 +530,13 @@ def test_kavz_run_in_libcosim_passes_lever_validate(fmu_dir, tmp_path):
     table = np.column_stack([result.times] + [result.traces[n] for n in names])
     csv_path = tmp_path / "libcosim.csv"
     np.savetxt(csv_path, table, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
-    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v")])
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v"))
     assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
     # and a torque shifted by 10 ms (what a master lagging ten steps would give) fails
     shifted = table.copy()
     shifted[10:, 1 + names.index("coupling.tau1")] = table[:-10, 1 + names.index("coupling.tau1")]
     np.savetxt(csv_path, shifted, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
-    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "w")])
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "w"))
     assert outcome.exit_code == 1 and "coupling.tau1" in outcome.output
 
 

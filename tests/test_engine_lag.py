@@ -141,17 +141,13 @@ def test_stand_in_with_a_lag_steps_like_the_real_fmus(name):
     assert np.max(np.abs(real - linear)) < 1e-6 * np.max(np.abs(linear))
 
 
-def test_lever_study_runup_reproduces_the_documented_figures(tmp_path):
+def test_lever_study_runup_reproduces_the_documented_figures(lever, tmp_path):
     """The figures docs/models-and-fmus.md ("Run-up") quotes for the chosen lag (Te = 0.16 s:
     w1 settles in 0.448 s, w2 in 0.510 s, peak 445.8 rpm) come from `lever study runup`;
     a lag outside [0, 100] s is refused naming the parameter."""
-    from click.testing import CliRunner
-
-    from harness import cli
-
-    done = CliRunner().invoke(cli.main, ["study", "runup", "--scan", "0.16", "--out", str(tmp_path)])
+    done = lever("study", "runup", "--scan", "0.16", "--out", str(tmp_path))
     assert done.exit_code == 0, done.output
     assert "| 0.16 | 0.448 | 0.510 | 445.8 |" in done.output
     assert (tmp_path / "runup.md").read_text().startswith("| Te [s] |")
-    refused = CliRunner().invoke(cli.main, ["study", "runup", "--scan", "-1", "--out", str(tmp_path)])
+    refused = lever("study", "runup", "--scan", "-1", "--out", str(tmp_path))
     assert refused.exit_code == 2 and "engine.torque_lag must be in [0, 100] s" in refused.output

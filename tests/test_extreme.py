@@ -6,22 +6,17 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from harness.engine import guard as divergence
+from harness.engine import guard
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.engine import run
 from harness.description import plan as plans
 from harness.description import scene
 from lever.physics import catalogue
-
-REPO = Path(__file__).resolve().parents[1]
-LEVER = REPO / ".venv" / "bin" / "lever"
 
 
 @pytest.fixture(autouse=True)
@@ -38,7 +33,7 @@ def residual(result) -> float:
 
 
 def rms_errors(result) -> dict:
-    ref = reference.solve(result.scene, result.times)
+    ref = monolithic.solve(result.scene, result.times)
     names = metrics.signals(result.scene)
     errs = metrics.errors(result.times, result.traces, ref.times, ref.traces,
                           [names[k] for k in ("w1", "w2", "tau1", "tau2")], metrics.error_scales(result.scene, ref.traces))
@@ -62,7 +57,7 @@ def assert_diagnosed(result, master: str, step: float):
     if d["kind"] == "bound":
         name = f"{d['component']}.{d['variable']}"
         assert not abs(result.traces[name][-1]) <= d["bound"]
-        for b in divergence.bounds(plans.check(result.scene)):
+        for b in guard.bounds(plans.check(result.scene)):
             assert np.all(np.abs(result.traces[b.variable][:-1]) <= b.limit), b.variable
     return d
 
@@ -74,7 +69,7 @@ def assert_diagnosed(result, master: str, step: float):
 
 def test_bounds_follow_the_stated_rule():
     spec = scene.load("kavz685")
-    found = {b.variable: b.limit for b in divergence.bounds(plans.check(spec))}
+    found = {b.variable: b.limit for b in guard.bounds(plans.check(spec))}
     speed = 10 * 623.0 / 14.06                   # the no-load speed of the engine line is the largest
     assert found["engine.w"] == pytest.approx(speed) and found["load.w"] == pytest.approx(speed)
     coupling = catalogue.coupling_from({"misalignment": math.radians(15)})
@@ -83,12 +78,12 @@ def test_bounds_follow_the_stated_rule():
     torque = ratio * (elastic + 6.35 * (1 + ratio) * speed)
     assert found["coupling.tau1"] == pytest.approx(torque) and found["coupling.tau2"] == pytest.approx(torque)
     # a load above the stall torque: the reversed steady speed counts, and the margin is the scene's
-    stalled = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685_stall", "limits.margin=4")))}
+    stalled = {b.variable: b.limit for b in guard.bounds(plans.check(load("kavz685_stall", "limits.margin=4")))}
     assert stalled["engine.w"] == pytest.approx(4 * 623.0 / 14.06)
     # K1 = 0: no steady speed, the free acceleration over the run bounds it
-    free = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685", "engine.torque_slope=0")))}
+    free = {b.variable: b.limit for b in guard.bounds(plans.check(load("kavz685", "engine.torque_slope=0")))}
     assert free["engine.w"] == pytest.approx(10 * (623.0 + 116.3) * 10.0 / (0.128 + 0.161))
-    set_ = {b.variable: b.limit for b in divergence.bounds(plans.check(load("kavz685", "limits.speed=100", "limits.torque=inf")))}
+    set_ = {b.variable: b.limit for b in guard.bounds(plans.check(load("kavz685", "limits.speed=100", "limits.torque=inf")))}
     assert set_["load.w"] == 100.0 and set_["coupling.tau2"] == math.inf
 
 
@@ -117,12 +112,11 @@ def test_an_fmu_refusal_gives_the_same_diagnosis():
     assert "'tau' = " in result.failure and "outside its allowed range [-1e+12, 1e+12] N.m" in result.failure
 
 
-def test_lever_run_exits_nonzero_with_the_diagnosis_and_the_traces(tmp_path):
+def test_lever_run_exits_nonzero_with_the_diagnosis_and_the_traces(lever, tmp_path):
     out = tmp_path / "diverged"
-    done = subprocess.run([str(LEVER), "run", "kavz685_stiff_1e6", "--master", "jacobi", "--step", "1e-4",
-                           "--set", "experiment.stop=0.1", "--set", "experiment.transient=0", "--out", str(out)],
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 1, done.stderr
+    done = lever("run", "kavz685_stiff_1e6", "--master", "jacobi", "--step", "1e-4",
+                 "--set", "experiment.stop=0.1", "--set", "experiment.transient=0", "--out", out)
+    assert done.exit_code == 1, done.stderr
     assert "diverged:" in done.stderr and ("FMU EngineShaft" in done.stderr or "FMU LoadShaft" in done.stderr)
     assert "master jacobi, step 0.0001 s" in done.stderr and "Traceback" not in done.stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -165,13 +159,13 @@ def test_misalignment_at_the_edge_runs_and_matches_the_reference():
     assert max(errs.values()) < 5e-3, errs
 
 
-def test_misalignment_beyond_the_edge_is_refused_by_name(tmp_path):
+def test_misalignment_beyond_the_edge_is_refused_by_name(lever, tmp_path):
     result = run.simulate(load("kavz685_misalignment_edge", "coupling.misalignment=43.3 deg"))
     assert result.failure_stage == "initialisation"
     assert "parameter 'misalignment'" in result.failure and "45 deg" in result.failure
-    done = subprocess.run([str(LEVER), "run", "kavz685_misalignment_edge", "--set", "coupling.misalignment=44 deg",
-                           "--out", str(tmp_path / "refused")], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 2 and "misalignment" in done.stderr and "Traceback" not in done.stderr
+    done = lever("run", "kavz685_misalignment_edge", "--set", "coupling.misalignment=44 deg",
+                 "--out", tmp_path / "refused")
+    assert done.exit_code == 2 and "misalignment" in done.stderr and "Traceback" not in done.stderr
 
 
 def test_time_varying_misalignment_follows_its_source_and_the_reference():

@@ -8,12 +8,12 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from harness import run, scene, ssp
+from harness.description import scene
+from harness.engine import run
+from harness.formats import ssp
 from harness.peers import ecos
 from harness.studies import hosts
-from harness.cli import main as cli
 
 #: what each FMU alone records (its outputs), with its default parameters and inputs
 ALONE = {"EngineShaft": ["w", "phi", "engine_torque"], "LoadShaft": ["w", "phi", "load_torque"],
@@ -50,7 +50,7 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
         assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
 
 
-def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_path):
+def test_the_kavz685_scene_in_ecos_passes_lever_validate(lever, fmu_dir, ecos_bin, tmp_path):
     spec = scene.load("kavz685")
     archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
     result = ecos.run_ecos(archive, spec.experiment.stop, spec.experiment.step, ecos_bin, record=list(spec.record))
@@ -59,7 +59,7 @@ def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmu_dir, ecos_bin, tmp_
     assert sorted(traces) == sorted(spec.record)          # ecos logged what its CSV configuration names
     names = list(spec.record)
     csv_path = hosts.write_result_csv(tmp_path / "ecos.csv", times, traces, names)
-    outcome = CliRunner().invoke(cli, ["validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v")])
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v"))
     assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
 
 
@@ -95,16 +95,16 @@ def test_ecos_says_what_failed(tmp_path, ecos_bin):
         ecos.run_ecos(tmp_path / "missing.ssp", 0.1, 1e-3, ecos_bin)
 
 
-def test_lever_hosts_writes_the_table(tmp_path, fmu_dir):
-    result = CliRunner().invoke(cli, ["hosts", "--repeats", "1", "--set", "experiment.stop=0.05",
-                                      "--set", "experiment.transient=0.01", "--out", str(tmp_path)])
+def test_lever_hosts_writes_the_table(lever, tmp_path, fmu_dir):
+    result = lever("hosts", "--repeats", "1", "--set", "experiment.stop=0.05",
+                                      "--set", "experiment.transient=0.01", "--out", str(tmp_path))
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "hosts.json").read_text())
     assert list(report["hosts"]) == list(hosts.HOSTS)
     assert report["hosts"]["harness-jacobi"]["ratio"] == 1.0
     assert all(row["median_s"] > 0 for row in report["hosts"].values())
     assert "| ecos |" in (tmp_path / "hosts.md").read_text()
-    bad = CliRunner().invoke(cli, ["hosts", "--host", "simulink"])
+    bad = lever("hosts", "--host", "simulink")
     assert bad.exit_code != 0 and "unknown host simulink" in bad.output
 
 

@@ -14,20 +14,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from harness.cli import main
 from harness.description import kinds, units
 from harness.description import scene as scenes
 from harness.judges import validation
 
 SCALE = float(os.environ.get("LEVER_FUZZ_SCALE", "1"))
-
-
-def invoke(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 def assert_user_error(result, *words):
@@ -96,7 +90,7 @@ def test_a_kilo_unit_reaches_the_fmu_and_the_reference_alike(fmu_dir):
     assert findings_for("coupling.stiffness=0.8 kN.m/rad") == []
 
 
-def test_a_connection_between_different_quantities_is_refused(fmu_dir, tmp_path):
+def test_a_connection_between_different_quantities_is_refused(lever, fmu_dir, tmp_path):
     path = tmp_path / "crossed.toml"
     path.write_text('extends = "kavz685"\nconnections = ["engine.phi -> coupling.phi1", "coupling.tau1 -> '
                     'coupling.w1", "load.phi -> coupling.phi2", "load.w -> coupling.w2", '
@@ -106,7 +100,7 @@ def test_a_connection_between_different_quantities_is_refused(fmu_dir, tmp_path)
     findings = scenes.validate(spec, descriptions_for(spec))
     crossed = [f for f in findings if "different quantity" in f]
     assert len(crossed) == 2 and "coupling.tau1 -> coupling.w1" in crossed[0] and "N.m" in crossed[0]
-    assert_user_error(invoke("run", path, "--out", tmp_path / "o"), "different quantity")
+    assert_user_error(lever("run", path, "--out", tmp_path / "o"), "different quantity")
 
 
 # -- strict types -------------------------------------------------------------------------------
@@ -130,11 +124,11 @@ WRONG_TYPE = [   # a scene-file line under [components.X.parameters] or [experim
 
 
 @pytest.mark.parametrize("table,line,name,words", WRONG_TYPE)
-def test_a_value_of_the_wrong_type_in_a_scene_file_is_refused(fmu_dir, tmp_path, table, line, name, words):
+def test_a_value_of_the_wrong_type_in_a_scene_file_is_refused(lever, fmu_dir, tmp_path, table, line, name, words):
     header = "[experiment]" if table == "experiment" else f"[components.{table}.parameters]"
     path = tmp_path / "typed.toml"
     path.write_text(f'extends = "kavz685"\n{header}\n{line}\n')
-    assert_user_error(invoke("run", path, "--out", tmp_path / "o"), name.split(".")[-1], words)
+    assert_user_error(lever("run", path, "--out", tmp_path / "o"), name.split(".")[-1], words)
 
 
 def test_set_takes_true_as_a_boolean_not_one(fmu_dir):
@@ -145,8 +139,8 @@ def test_set_takes_true_as_a_boolean_not_one(fmu_dir):
 # -- honest verdicts ----------------------------------------------------------------------------
 
 def _result_csv(tmp_path, spoil) -> Path:
-    from harness.formats import reference_traces as crosscheck
-    ref = crosscheck.read("kavz685")
+    from harness.formats import reference_traces
+    ref = reference_traces.read("kavz685")
     names = list(ref.outputs.signals)
     rows = np.column_stack([ref.outputs.times] + [ref.outputs.signals[n] for n in names])
     spoil(rows)
@@ -163,10 +157,10 @@ def _result_csv(tmp_path, spoil) -> Path:
     (lambda rows: rows.__setitem__((500, 2), np.inf), "non-finite"),
     (lambda rows: rows.__setitem__((500, 3), 1e300), "beyond"),
 ])
-def test_validate_result_fails_a_trace_with_nan_inf_or_absurd_samples(tmp_path, spoil, words):
-    good = invoke("validate", "--result", _result_csv(tmp_path, lambda rows: None), "kavz685", "--out", tmp_path / "g")
+def test_validate_result_fails_a_trace_with_nan_inf_or_absurd_samples(lever, tmp_path, spoil, words):
+    good = lever("validate", "--result", _result_csv(tmp_path, lambda rows: None), "kavz685", "--out", tmp_path / "g")
     assert good.exit_code == 0, good.output            # the reference itself passes
-    bad = invoke("validate", "--result", _result_csv(tmp_path, spoil), "kavz685", "--out", tmp_path / "b")
+    bad = lever("validate", "--result", _result_csv(tmp_path, spoil), "kavz685", "--out", tmp_path / "b")
     assert bad.exit_code == 1 and words in bad.output and "FAIL" in bad.output, bad.output
 
 
@@ -187,8 +181,8 @@ def _open_scene(tmp_path, strict=False) -> Path:
     return path
 
 
-def test_an_unconnected_input_is_named_in_the_output_and_the_report(fmu_dir, tmp_path):
-    result = invoke("run", _open_scene(tmp_path), "--out", tmp_path / "o", "--no-progress")
+def test_an_unconnected_input_is_named_in_the_output_and_the_report(lever, fmu_dir, tmp_path):
+    result = lever("run", _open_scene(tmp_path), "--out", tmp_path / "o", "--no-progress")
     assert result.exit_code == 0, result.output
     assert "load.tau is connected to nothing" in result.output
     import json
@@ -201,10 +195,10 @@ def test_an_unconnected_input_is_named_in_the_output_and_the_report(fmu_dir, tmp
     assert "no reference for this scene" in result.output
 
 
-def test_an_unconnected_input_is_refused_where_the_scene_is_strict(fmu_dir, tmp_path):
-    assert_user_error(invoke("run", _open_scene(tmp_path, strict=True), "--out", tmp_path / "o"), "load.tau",
+def test_an_unconnected_input_is_refused_where_the_scene_is_strict(lever, fmu_dir, tmp_path):
+    assert_user_error(lever("run", _open_scene(tmp_path, strict=True), "--out", tmp_path / "o"), "load.tau",
                       "strict")
-    assert_user_error(invoke("run", _open_scene(tmp_path), "--strict", "--out", tmp_path / "o"), "load.tau")
+    assert_user_error(lever("run", _open_scene(tmp_path), "--strict", "--out", tmp_path / "o"), "load.tau")
 
 
 def test_committed_driveline_scenes_are_the_driveline_and_others_say_why_not(tmp_path):
@@ -251,33 +245,33 @@ ERROR_PATH = [
 
 
 @pytest.mark.parametrize("args", ERROR_PATH, ids=[" ".join(a[1:]) for a in ERROR_PATH])
-def test_a_bad_set_value_is_exit_2_and_a_sentence(fmu_dir, tmp_path, args):
-    assert_user_error(invoke(*args, "--set", "experiment.transient=0", "--out", tmp_path / "o"))
+def test_a_bad_set_value_is_exit_2_and_a_sentence(lever, fmu_dir, tmp_path, args):
+    assert_user_error(lever(*args, "--set", "experiment.transient=0", "--out", tmp_path / "o"))
 
 
-def test_a_bad_value_in_the_scene_file_is_exit_2(fmu_dir, tmp_path):
+def test_a_bad_value_in_the_scene_file_is_exit_2(lever, fmu_dir, tmp_path):
     for line in ("step = 0.0", "step = nan", "stop = inf", "start = 1e9\nstop = 1000000001.0"):
         path = tmp_path / "bad.toml"
         path.write_text(f'extends = "kavz685"\n[experiment]\ntransient = 0.0\n{line}\n')
-        assert_user_error(invoke("run", path, "--out", tmp_path / "o"), "experiment.")
+        assert_user_error(lever("run", path, "--out", tmp_path / "o"), "experiment.")
 
 
-def test_recording_an_input_is_refused(fmu_dir, tmp_path):
+def test_recording_an_input_is_refused(lever, fmu_dir, tmp_path):
     path = tmp_path / "rec.toml"
     path.write_text('extends = "kavz685"\nrecord = ["engine.w", "engine.tau"]\n')
-    assert_user_error(invoke("run", path, "--out", tmp_path / "o"), "engine.tau", "only outputs")
+    assert_user_error(lever("run", path, "--out", tmp_path / "o"), "engine.tau", "only outputs")
 
 
-def test_a_scene_file_not_in_utf8_or_not_toml_is_refused(tmp_path):
+def test_a_scene_file_not_in_utf8_or_not_toml_is_refused(lever, tmp_path):
     latin = tmp_path / "latin.toml"
     latin.write_bytes('extends = "kavz685"\ndescription = "M\xfcller"\n'.encode("latin-1"))
-    assert_user_error(invoke("run", latin), "UTF-8")
+    assert_user_error(lever("run", latin), "UTF-8")
     broken = tmp_path / "broken.toml"
     broken.write_text("[experiment\nstop = 1\n")
-    assert_user_error(invoke("run", broken), "TOML")
+    assert_user_error(lever("run", broken), "TOML")
     shaped = tmp_path / "shaped.toml"
     shaped.write_text('extends = "kavz685"\nrecord = "engine.w"\n')
-    assert_user_error(invoke("run", shaped), "record", "list of strings")
+    assert_user_error(lever("run", shaped), "record", "list of strings")
 
 
 def _ssp_with(tmp_path, fmu_dir, edit) -> Path:
@@ -293,7 +287,7 @@ def _ssp_with(tmp_path, fmu_dir, edit) -> Path:
     return edited
 
 
-def test_ssp_units_are_converted_or_refused_never_ignored(fmu_dir, tmp_path):
+def test_ssp_units_are_converted_or_refused_never_ignored(lever, fmu_dir, tmp_path):
     from harness.formats import ssp
     from harness.engine.system import descriptions_for
     kilo = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('value="715.4" unit="N.m/rad"',
@@ -302,11 +296,11 @@ def test_ssp_units_are_converted_or_refused_never_ignored(fmu_dir, tmp_path):
     assert kinds.parameters(spec, "coupling")["stiffness"] == pytest.approx(715.4, rel=1e-15)
     assert scenes.validate(spec, descriptions_for(spec, spec.fmu_dir)) == []
     unknown = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('unit="N.m/rad"', 'unit="kN.blork/rad"'))
-    assert_user_error(invoke("run", unknown, "--out", tmp_path / "o"), "coupling.stiffness", "unknown unit")
+    assert_user_error(lever("run", unknown, "--out", tmp_path / "o"), "coupling.stiffness", "unknown unit")
     wrong = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('unit="N.m/rad"', 'unit="deg"'))
-    assert_user_error(invoke("run", wrong, "--out", tmp_path / "o"), "coupling.stiffness", "[angle]")
+    assert_user_error(lever("run", wrong, "--out", tmp_path / "o"), "coupling.stiffness", "[angle]")
     malformed = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('value="715.4"', 'value="seven"'))
-    assert_user_error(invoke("run", malformed, "--out", tmp_path / "o"), "stiffness", "expected a number")
+    assert_user_error(lever("run", malformed, "--out", tmp_path / "o"), "stiffness", "expected a number")
 
 
 def _measurement(tmp_path, shaft, value, bom=False) -> Path:
@@ -318,21 +312,21 @@ def _measurement(tmp_path, shaft, value, bom=False) -> Path:
 
 
 @pytest.mark.parametrize("value,words", [("0", "zero"), ("1e300", "N*m within"), ("-200", "must be > 0")])
-def test_an_all_zero_or_extreme_measurement_table_is_bad_input(tmp_path, value, words):
+def test_an_all_zero_or_extreme_measurement_table_is_bad_input(lever, tmp_path, value, words):
     files = [_measurement(tmp_path, s, value) for s in ("drive", "driven")]
-    assert_user_error(invoke("measured", *files, "--no-cycles", "--out", tmp_path / "m"), words)
+    assert_user_error(lever("measured", *files, "--no-cycles", "--out", tmp_path / "m"), words)
 
 
-def test_binary_bytes_are_refused_and_a_bom_is_read(fmu_dir, tmp_path):
+def test_binary_bytes_are_refused_and_a_bom_is_read(lever, fmu_dir, tmp_path):
     binary = tmp_path / "torque_drive_B.csv"
     binary.write_bytes(bytes(range(256)))
-    assert_user_error(invoke("measured", binary, "--no-cycles", "--out", tmp_path / "m"), "UTF-8")
+    assert_user_error(lever("measured", binary, "--no-cycles", "--out", tmp_path / "m"), "UTF-8")
     result_bin = tmp_path / "bin.csv"
     result_bin.write_bytes(b"time,x\n\x00\xff\xfe")
-    assert_user_error(invoke("validate", "--result", result_bin, "kavz685", "--out", tmp_path / "v"))
+    assert_user_error(lever("validate", "--result", result_bin, "kavz685", "--out", tmp_path / "v"))
     bom = _result_csv(tmp_path, lambda rows: None)
     bom.write_bytes(b"\xef\xbb\xbf" + bom.read_bytes())
-    assert invoke("validate", "--result", bom, "kavz685", "--out", tmp_path / "v").exit_code == 0
+    assert lever("validate", "--result", bom, "kavz685", "--out", tmp_path / "v").exit_code == 0
 
 
 # -- the CLI fuzz: generated scene files, --set values and CSVs, no traceback --------------------
@@ -397,14 +391,14 @@ def _long_run(pairs) -> bool:
 
 @fuzz(100)
 @given(st.lists(st.tuples(KEYS, VALUES), min_size=1, max_size=3))
-def test_cli_fuzz_set_values(fmu_dir, tmp_path_factory, pairs):
+def test_cli_fuzz_set_values(lever, fmu_dir, tmp_path_factory, pairs):
     assume(not _long_run(pairs))
     out = tmp_path_factory.mktemp("fz")
     args = ["run", "kavz685", "--out", out, "--no-progress", "--no-reference", "--set", "experiment.stop=0.02",
             "--set", "experiment.transient=0"]
     for key, value in pairs:
         args += ["--set", f"{key}={value if isinstance(value, str) else _toml_value(value)}"]
-    _ends_well(invoke(*args))
+    _ends_well(lever(*args))
 
 
 @fuzz(100)
@@ -415,7 +409,7 @@ def test_cli_fuzz_set_values(fmu_dir, tmp_path_factory, pairs):
        st.sampled_from(["", 'record = ["engine.w", "engine.tau"]\n', 'record = "x"\n', "features = [1]\n",
                         'connections = ["a -> b"]\n', 'extends = "kavz685"\n']),
        st.booleans())
-def test_cli_fuzz_scene_files(fmu_dir, tmp_path_factory, table, key, value, top, latin):
+def test_cli_fuzz_scene_files(lever, fmu_dir, tmp_path_factory, table, key, value, top, latin):
     assume(table != "experiment" or not _long_run([(f"experiment.{key}", value)]))
     folder = tmp_path_factory.mktemp("fs")
     text = f'extends = "kavz685"\n{top if not top.startswith("extends") else ""}[{table}]\n{key} = ' \
@@ -424,7 +418,7 @@ def test_cli_fuzz_scene_files(fmu_dir, tmp_path_factory, table, key, value, top,
         text += "[experiment]\nstop = 0.02\ntransient = 0.0\n"
     path = folder / "s.toml"
     path.write_bytes(text.encode("latin-1", "replace") if latin else text.encode("utf-8", "surrogatepass"))
-    _ends_well(invoke("run", path, "--out", folder / "o", "--no-progress", "--no-reference"))
+    _ends_well(lever("run", path, "--out", folder / "o", "--no-progress", "--no-reference"))
 
 
 @fuzz(100)
@@ -434,34 +428,34 @@ def test_cli_fuzz_scene_files(fmu_dir, tmp_path_factory, table, key, value, top,
                                    min_size=1, max_size=4), min_size=0, max_size=6)
                  .map(lambda rows: "\n".join(",".join(r) for r in rows).encode())),
        st.booleans())
-def test_cli_fuzz_csvs(tmp_path_factory, data, bom):
+def test_cli_fuzz_csvs(lever, tmp_path_factory, data, bom):
     folder = tmp_path_factory.mktemp("fc")
     result = folder / "r.csv"
     result.write_bytes((b"\xef\xbb\xbf" if bom else b"") + data)
-    _ends_well(invoke("validate", "--result", result, "kavz685", "--out", folder / "v"))
+    _ends_well(lever("validate", "--result", result, "kavz685", "--out", folder / "v"))
     table = folder / "torque_drive_F.csv"
     table.write_bytes((b"\xef\xbb\xbf" if bom else b"") + data)
-    measured = invoke("measured", table, _measurement(folder, "driven", "200"), "--no-cycles", "--out", folder / "m")
+    measured = lever("measured", table, _measurement(folder, "driven", "200"), "--no-cycles", "--out", folder / "m")
     _ends_well(measured)
     assert measured.exit_code == 2, measured.output     # these tables are never usable
 
 
-def test_an_fmu_run_stand_alone_checks_units_and_types_too(fmu_dir, tmp_path):
-    assert_user_error(invoke("validate", "LeverCoupling", "--set", "stiffness=1000 deg", "--out", tmp_path / "v"),
+def test_an_fmu_run_stand_alone_checks_units_and_types_too(lever, fmu_dir, tmp_path):
+    assert_user_error(lever("validate", "LeverCoupling", "--set", "stiffness=1000 deg", "--out", tmp_path / "v"),
                       "LeverCoupling.stiffness", "N.m/rad")
-    assert_user_error(invoke("validate", "LeverCoupling", "--set", "misalignment=true", "--out", tmp_path / "v"),
+    assert_user_error(lever("validate", "LeverCoupling", "--set", "misalignment=true", "--out", tmp_path / "v"),
                       "boolean true")
 
 
-def test_a_mistyped_name_is_refused_before_the_stability_advisor_with_the_closest_name(fmu_dir, tmp_path):
-    result = invoke("run", "kavz685", "--set", "coupling.stifness=900", "--out", tmp_path / "o")
+def test_a_mistyped_name_is_refused_before_the_stability_advisor_with_the_closest_name(lever, fmu_dir, tmp_path):
+    result = lever("run", "kavz685", "--set", "coupling.stifness=900", "--out", tmp_path / "o")
     assert_user_error(result, "LeverCoupling has no variable 'stifness' (did you mean 'stiffness'?)")
     assert "warning" not in result.output and "stability" not in result.output
     assert not (tmp_path / "o").exists()
-    assert_user_error(invoke("run", "kavz685", "--set", "coupling.stiffness=900", "--set", "experiment.stpo=1"),
+    assert_user_error(lever("run", "kavz685", "--set", "coupling.stiffness=900", "--set", "experiment.stpo=1"),
                       "no field 'stpo' (did you mean 'stop'?)")
-    assert_user_error(invoke("run", "kavz685", "--set", "couplin.stiffness=900"), "did you mean 'coupling'?")
-    assert_user_error(invoke("run", "kavz68"), "no scene 'kavz68' (did you mean 'kavz685'?)")
-    assert_user_error(invoke("validate", "LeverCoupling", "--set", "stifness=3"), "did you mean 'stiffness'?")
+    assert_user_error(lever("run", "kavz685", "--set", "couplin.stiffness=900"), "did you mean 'coupling'?")
+    assert_user_error(lever("run", "kavz68"), "no scene 'kavz68' (did you mean 'kavz685'?)")
+    assert_user_error(lever("validate", "LeverCoupling", "--set", "stifness=3"), "did you mean 'stiffness'?")
     # nothing close: no guess
-    assert "did you mean" not in invoke("run", "kavz685", "--set", "coupling.zzzz=1").output
+    assert "did you mean" not in lever("run", "kavz685", "--set", "coupling.zzzz=1").output

@@ -18,13 +18,9 @@ from harness.engine import interrupt
 from harness.engine import traces as trace_files
 from harness.studies.cases import INTERRUPTED, CaseLog
 
-LEVER = [sys.executable, "-c", "from harness.cli import entry; entry()"]
-
-
-def _start(*args) -> subprocess.Popen:
+def _start(lever_process, *args) -> subprocess.Popen:
     # Its own session, as a terminal's foreground job: SIGINT goes to the whole group.
-    return subprocess.Popen([*LEVER, *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    return lever_process.start(*args, start_new_session=True)
 
 
 def _wait_for(condition, process: subprocess.Popen, timeout: float = 120.0):
@@ -46,10 +42,10 @@ def _interrupt(process: subprocess.Popen, group: bool = True) -> tuple[str, str,
     return out, err, time.monotonic() - sent
 
 
-def test_run_interrupted_keeps_the_computed_part(tmp_path, fmu_dir):
+def test_run_interrupted_keeps_the_computed_part(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "run"
     # 600 s simulated: minutes of stepping, so the SIGINT lands in the stepping loop
-    process = _start("run", "kavz685", "--set", "experiment.stop=600", "--no-progress", "--out", out)
+    process = _start(lever_process, "run", "kavz685", "--set", "experiment.stop=600", "--no-progress", "--out", out)
     _wait_for(lambda: (out / ".lever.lock").exists(), process)
     time.sleep(1.5)
     _, err, took = _interrupt(process)
@@ -70,9 +66,10 @@ def test_run_interrupted_keeps_the_computed_part(tmp_path, fmu_dir):
     assert took < 10.0
 
 
-def test_run_interrupted_while_streaming_keeps_valid_traces(tmp_path, fmu_dir):
+def test_run_interrupted_while_streaming_keeps_valid_traces(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "stream"
-    process = _start("run", "kavz685", "--set", "experiment.stop=600", "--stream", "--no-progress", "--out", out)
+    process = _start(lever_process, "run", "kavz685", "--set", "experiment.stop=600", "--stream", "--no-progress",
+                     "--out", out)
     _wait_for(lambda: (out / "traces.csv").exists() and (out / "traces.csv").stat().st_size > 100_000, process)
     _, err, _ = _interrupt(process)
     assert process.returncode == 130, err
@@ -90,9 +87,9 @@ def _bench_scene(tmp_path) -> Path:
     return scene
 
 
-def test_bench_interrupted_logs_the_case_and_resumes(tmp_path, fmu_dir):
+def test_bench_interrupted_logs_the_case_and_resumes(lever_process, tmp_path, fmu_dir):
     scene, out = _bench_scene(tmp_path), tmp_path / "bench"
-    process = _start("bench", scene, "--repeats", "1", "--no-peers", "--out", out)
+    process = _start(lever_process, "bench", scene, "--repeats", "1", "--no-peers", "--out", out)
     log = out / "cases.jsonl"
     # interrupt while the first master case runs (after the floor cases are logged: ours and
     # the do-nothing twins')
@@ -108,8 +105,7 @@ def test_bench_interrupted_logs_the_case_and_resumes(tmp_path, fmu_dir):
     assert len(interrupted) == 1 and interrupted[0]["key"].startswith("master|jacobi")
     assert not (out / "bench.md").exists()            # no report of half a benchmark
     # the re-run takes the floor from the log and redoes the interrupted case
-    done = subprocess.run([*LEVER, "bench", str(scene), "--repeats", "1", "--no-peers", "--out", str(out)],
-                          capture_output=True, text=True, timeout=300)
+    done = lever_process.run("bench", scene, "--repeats", "1", "--no-peers", "--out", out)
     assert done.returncode == 0, done.stderr
     assert "floor" in done.stdout and "(from the case log)" not in done.stdout.split("FMU-call floor")[1]
     cases = {e["key"]: e["result"] for e in _case_lines(log)}
@@ -122,9 +118,9 @@ def _stability_args(out):
             "--out", out]
 
 
-def test_stability_interrupted_stops_its_workers_and_resumes(tmp_path, fmu_dir):
+def test_stability_interrupted_stops_its_workers_and_resumes(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "stability"
-    process = _start(*_stability_args(out))
+    process = _start(lever_process, *_stability_args(out))
     log = out / "cases.jsonl"
     _wait_for(lambda: log.exists() and len(log.read_text().splitlines()) >= 2, process)
     workers = subprocess.run(["pgrep", "-P", str(process.pid)], capture_output=True, text=True).stdout.split()
@@ -139,16 +135,16 @@ def test_stability_interrupted_stops_its_workers_and_resumes(tmp_path, fmu_dir):
     done = [e for e in entries if e["result"].get("status") == "ok"]
     interrupted = [e for e in entries if e["result"].get("status") == INTERRUPTED]
     assert done and 1 <= len(interrupted) <= 2 and len(done) + len(interrupted) <= 4
-    again = subprocess.run([*LEVER, *_stability_args(out)], capture_output=True, text=True, timeout=300)
+    again = lever_process.run(*_stability_args(out))
     assert again.returncode == 0, again.stderr
     assert f"4 cases ({len(done)} already done)" in again.stdout
 
 
-def test_sweep_interrupted_keeps_finished_cases(tmp_path, fmu_dir):
+def test_sweep_interrupted_keeps_finished_cases(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "sweep"
     args = ["sweep", "--axis", "stiffness", "--thin", "3", "--stop", "30", "--set", "experiment.transient=0.2",
             "--workers", "2", "--no-progress", "--out", out]
-    process = _start(*args)
+    process = _start(lever_process, *args)
     _wait_for(lambda: (out / "cases.jsonl").exists(), process)
     time.sleep(2.0)
     _, err, took = _interrupt(process)

@@ -5,9 +5,7 @@ from __future__ import annotations
 import gc
 
 import pytest
-from click.testing import CliRunner
 
-from harness.cli import main as cli
 from harness.description import scene
 from harness.engine.observers import StepTimer
 from harness.engine.run import simulate
@@ -61,10 +59,10 @@ def test_the_slowest_steps_are_explained_from_what_was_seen_in_them():
     assert report["max_s"] == 5e-3 and report["median_s"] == 1e-4
 
 
-def test_lever_run_latency_writes_the_table(fmu_dir, tmp_path):
-    outcome = CliRunner().invoke(cli, ["run", "kavz685", "--set", "experiment.stop=0.05", "--set",
+def test_lever_run_latency_writes_the_table(lever, fmu_dir, tmp_path):
+    outcome = lever("run", "kavz685", "--set", "experiment.stop=0.05", "--set",
                                        "experiment.transient=0.01", "--no-reference", "--latency",
-                                       "--out", str(tmp_path)])
+                                       "--out", str(tmp_path))
     assert outcome.exit_code == 0, outcome.output
     assert "step latency: median" in outcome.output and "start-up steps:" in outcome.output
     assert (tmp_path / "latency.md").read_text().startswith("# Step latency: kavz685, master jacobi-quadratic")

@@ -7,7 +7,7 @@ import pytest
 
 from harness.engine import masters
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.engine import run
 from harness.description import scene
 
@@ -44,7 +44,7 @@ def test_master_converges_at_its_promised_order(name):
     for h in (2e-3, 1e-3, 5e-4):
         result = run.simulate(spec, master=name, step=h)
         assert result.ok, result.failure
-        ref = reference.solve(spec, result.times)
+        ref = monolithic.solve(spec, result.times)
         scales = metrics.error_scales(spec, ref.traces)
         e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"], scales)
         errors.append(e["coupling.tau2"]["rms"])
@@ -60,7 +60,7 @@ def test_linear_extrapolation_beats_zero_order_hold_on_kavz():
     out = {}
     for name in ("jacobi", "jacobi-linear"):
         result = run.simulate(spec, master=name, step=2e-3)
-        ref = reference.solve(spec, result.times)
+        ref = monolithic.solve(spec, result.times)
         e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"],
                            metrics.error_scales(spec, ref.traces))
         out[name] = e["coupling.tau2"]["rms_relative"]

@@ -11,11 +11,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from harness.studies import measured
 from harness.description import scene as scenes
-from harness.cli import main
 from harness.paths import DATA
 from lever.physics.load import fourier_from_samples, read_harmonics
 
@@ -159,8 +157,8 @@ def test_a_new_measurement_is_checked_the_same_way(tmp_path, fmu_dir):
         measured.validate_measured([tmp_path], tmp_path / "bad", reading="gauge")
 
 
-def test_lever_measured_reports_every_grade(tmp_path, fmu_dir):
-    result = CliRunner().invoke(main, ["measured", "--no-cycles", "--out", str(tmp_path)])
+def test_lever_measured_reports_every_grade(lever, tmp_path, fmu_dir):
+    result = lever("measured", "--no-cycles", "--out", str(tmp_path))
     report = json.loads((tmp_path / "measured.json").read_text())
     assert [g["grade"] for g in report["grades"]] == list(GRADES)
     missed = [g["grade"] for g in report["grades"] if not g["within_target"]]

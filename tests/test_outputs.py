@@ -19,43 +19,40 @@ import zipfile
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
-from harness.cli import main as cli
 from harness.description import scene as scenes
 from harness.engine import component
 from harness.formats import outputs, ssp
 
-LEVER = [sys.executable, "-c", "from harness.cli import entry; entry()"]
 SHORT = ["--set", "experiment.stop=0.3", "--set", "experiment.transient=0.1"]
 
 
-def _run(*args):
-    return CliRunner().invoke(cli, ["run", "kavz685", *SHORT, *map(str, args)])
+def _run(lever, *args):
+    return lever("run", "kavz685", *SHORT, *args)
 
 
 # -- the output folder ------------------------------------------------------------------------
 
-def test_out_under_a_file_is_refused_before_the_run(tmp_path, fmu_dir):
+def test_out_under_a_file_is_refused_before_the_run(lever, tmp_path, fmu_dir):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
     started = time.monotonic()
-    result = _run("--out", blocker / "results")
+    result = _run(lever, "--out", blocker / "results")
     assert result.exit_code == 2
     assert f"is under {blocker}, which is a file, not a folder" in result.output and "Traceback" not in result.output
     assert time.monotonic() - started < 5        # said at once, not after the run
-    result = _run("--out", blocker)
+    result = _run(lever, "--out", blocker)
     assert result.exit_code == 2 and "is a file, not a folder" in result.output
 
 
-def test_unwritable_out_is_refused(tmp_path, fmu_dir):
+def test_unwritable_out_is_refused(lever, tmp_path, fmu_dir):
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o500)
     # root writes whatever a folder's mode says; /sys refuses even root
     target = Path("/sys/lever-results") if os.geteuid() == 0 else locked / "results"
     try:
-        result = _run("--out", target)
+        result = _run(lever, "--out", target)
         assert result.exit_code == 2 and "cannot write there (permission denied)" in result.output, result.output
     finally:
         locked.chmod(0o700)
@@ -70,23 +67,21 @@ def test_a_folder_that_refuses_writes_is_refused(tmp_path, monkeypatch):
         outputs.check(tmp_path / "out")
 
 
-def test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder(tmp_path, fmu_dir):
+def test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "busy"
     holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from harness.formats import outputs; "
                                f"outputs.claim({str(out)!r}); print('held', flush=True); time.sleep(60)"],
                               stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
-        second = subprocess.run([*LEVER, "run", "kavz685", *SHORT, "--out", str(out)], capture_output=True, text=True,
-                                timeout=120)
+        second = lever_process.run("run", "kavz685", *SHORT, "--out", out, timeout=120)
         assert second.returncode == 2
         assert "another lever run is writing there" in second.stderr and f"pid {holder.pid}" in second.stderr
         assert not (out / "traces.csv").exists()
     finally:
         holder.kill()                     # a crash: the kernel drops the lock
         holder.wait()
-    again = subprocess.run([*LEVER, "run", "kavz685", *SHORT, "--no-reference", "--out", str(out)],
-                           capture_output=True, text=True, timeout=120)
+    again = lever_process.run("run", "kavz685", *SHORT, "--no-reference", "--out", out, timeout=120)
     assert again.returncode == 0, again.stderr
 
 
@@ -98,12 +93,12 @@ def test_one_process_may_claim_its_folder_twice(tmp_path):
         outputs.release(first)
 
 
-def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists(tmp_path, fmu_dir):
+def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists(lever, tmp_path, fmu_dir):
     out = tmp_path / "run"
-    assert _run("--out", out).exit_code == 0
+    assert _run(lever, "--out", out).exit_code == 0
     assert (out / "reference.csv").exists() and (out / "vs_reference.png").exists()
     (out / "notes.txt").write_text("the user's own file")
-    result = _run("--out", out, "--no-reference")
+    result = _run(lever, "--out", out, "--no-reference")
     assert result.exit_code == 0, result.output
     assert not (out / "reference.csv").exists() and not (out / "vs_reference.png").exists()
     assert (out / "notes.txt").exists()                      # not a run's file: kept
@@ -116,11 +111,11 @@ def test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists
     assert "reference.csv" not in report and "vs_reference.png" not in report
 
 
-def test_a_failed_run_leaves_no_reference_of_an_earlier_one(tmp_path, fmu_dir):
+def test_a_failed_run_leaves_no_reference_of_an_earlier_one(lever, tmp_path, fmu_dir):
     out = tmp_path / "run"
-    assert _run("--out", out).exit_code == 0
+    assert _run(lever, "--out", out).exit_code == 0
     # diverges after 8 steps: traces and plots of those, no reference
-    result = _run("--out", out, "--set", "coupling.stiffness=1e6", "--master", "jacobi")
+    result = _run(lever, "--out", out, "--set", "coupling.stiffness=1e6", "--master", "jacobi")
     assert result.exit_code == 1 and "diverged" in result.output
     assert not (out / "reference.csv").exists() and not (out / "vs_reference.png").exists()
     assert len((out / "traces.csv").read_text().splitlines()) < 20
@@ -128,9 +123,9 @@ def test_a_failed_run_leaves_no_reference_of_an_earlier_one(tmp_path, fmu_dir):
     assert "reference.csv" not in report and "vs_reference.png" not in report and "speeds.png" in report
 
 
-def test_traces_that_would_not_fit_in_memory_are_refused_with_a_pointer_to_stream(tmp_path, fmu_dir):
+def test_traces_that_would_not_fit_in_memory_are_refused_with_a_pointer_to_stream(lever, tmp_path, fmu_dir):
     started = time.monotonic()
-    result = _run("--step", "1e-9", "--set", "experiment.stop=100", "--out", tmp_path / "huge")
+    result = _run(lever, "--step", "1e-9", "--set", "experiment.stop=100", "--out", tmp_path / "huge")
     assert result.exit_code == 2, result.output
     assert "use --stream" in result.output and "GiB" in result.output and "Traceback" not in result.output
     assert time.monotonic() - started < 5
@@ -161,7 +156,7 @@ def test_an_archive_that_unpacks_too_large_is_refused_before_unpacking(exported,
     assert _scratch_folders() == before                             # nothing was unpacked
 
 
-def test_the_default_limit_refuses_a_gigabyte_bomb_on_the_command_line(tmp_path):
+def test_the_default_limit_refuses_a_gigabyte_bomb_on_the_command_line(lever, tmp_path):
     bomb = tmp_path / "gigabyte.ssp"
     # a directory that declares 2 GiB: what unpacking would write (zipfile stops a member at its
     # declared size); written with a stored member of that declared size but no data needed
@@ -172,7 +167,7 @@ def test_the_default_limit_refuses_a_gigabyte_bomb_on_the_command_line(tmp_path)
     central = data.rindex(b"PK\x01\x02")
     data[central + 24:central + 28] = (2 << 30).to_bytes(4, "little")
     bomb.write_bytes(bytes(data))
-    result = CliRunner().invoke(cli, ["run", str(bomb), "--out", str(tmp_path / "out")])
+    result = lever("run", str(bomb), "--out", str(tmp_path / "out"))
     assert result.exit_code == 2, result.output
     assert "would unpack to 2,048 MiB, more than the 1,024 MiB allowed" in result.output
 
@@ -203,10 +198,10 @@ def test_the_unpacked_copy_is_temporary_and_a_broken_one_is_removed_at_once(expo
     assert all(not Path(f).exists() for f in _scratch_folders() - before)
 
 
-def test_a_lever_run_of_an_archive_leaves_no_unpacked_copy(exported, tmp_path):
+def test_a_lever_run_of_an_archive_leaves_no_unpacked_copy(lever_process, exported, tmp_path):
     scratch = tmp_path / "tmp"
     scratch.mkdir()
-    done = subprocess.run([*LEVER, "run", str(exported), *SHORT, "--no-reference", "--out", str(tmp_path / "out")],
-                          capture_output=True, text=True, timeout=120, env={**os.environ, "TMPDIR": str(scratch)})
+    done = lever_process.run("run", exported, *SHORT, "--no-reference", "--out", tmp_path / "out", timeout=120,
+                             env={**os.environ, "TMPDIR": str(scratch)})
     assert done.returncode == 0, done.stderr
     assert list(scratch.iterdir()) == []

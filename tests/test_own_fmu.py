@@ -15,9 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from harness.cli import main as cli
 from harness.description import scene as scenes
 from harness.engine import traces as trace_files
 from harness.engine.run import simulate
@@ -57,7 +55,7 @@ def monitored(monitor_fmu) -> Path:
     return path
 
 
-def test_an_fmu_by_path_relative_or_absolute(monitored, monitor_fmu, tmp_path):
+def test_an_fmu_by_path_relative_or_absolute(lever, monitored, monitor_fmu, tmp_path):
     spec = scenes.load(monitored)
     assert spec.components["monitor"].fmu == str(monitor_fmu.resolve())
     elsewhere = tmp_path / "elsewhere.toml"
@@ -70,7 +68,7 @@ def test_an_fmu_by_path_relative_or_absolute(monitored, monitor_fmu, tmp_path):
     # a missing file is named as such, exit 2
     missing = tmp_path / "missing.toml"
     missing.write_text(_monitored_scene_text("NoSuch.fmu"))
-    result = CliRunner().invoke(cli, ["run", str(missing), "--out", str(tmp_path / "out")])
+    result = lever("run", str(missing), "--out", str(tmp_path / "out"))
     assert result.exit_code == 2 and f"no FMU file {tmp_path / 'NoSuch.fmu'}" in result.output
 
 
@@ -85,9 +83,9 @@ def test_the_default_transient_follows_the_length():
     assert scenes.load("kavz685").with_overrides(["experiment.stop=30"]).experiment.transient == 2.0
 
 
-def test_the_mixed_scene_runs_and_the_driveline_is_untouched(monitored, tmp_path, fmu_dir):
+def test_the_mixed_scene_runs_and_the_driveline_is_untouched(lever, monitored, tmp_path, fmu_dir):
     out = tmp_path / "run"
-    result = CliRunner().invoke(cli, ["run", str(monitored), "--out", str(out)])
+    result = lever("run", str(monitored), "--out", str(out))
     assert result.exit_code == 0, result.output
     import json
     summary = json.loads((out / "summary.json").read_text())
@@ -102,9 +100,9 @@ def test_the_mixed_scene_runs_and_the_driveline_is_untouched(monitored, tmp_path
         assert np.array_equal(traces[name], plain.traces[name]), name
 
 
-def test_export_copies_the_fmu_and_writes_only_connectors_ssp_readers_take(monitored, monitor_fmu, tmp_path):
+def test_export_copies_the_fmu_and_writes_only_connectors_ssp_readers_take(lever, monitored, monitor_fmu, tmp_path):
     archive = tmp_path / "monitored.ssp"
-    result = CliRunner().invoke(cli, ["export-ssp", str(monitored), "--out", str(archive)])
+    result = lever("export-ssp", str(monitored), "--out", str(archive))
     assert result.exit_code == 0, result.output
     with zipfile.ZipFile(archive) as z:
         assert z.read("resources/TorqueMonitor.fmu") == monitor_fmu.read_bytes()
@@ -127,9 +125,9 @@ def archive(monitored, tmp_path_factory, fmu_dir) -> Path:
     return ssp.export(scenes.load(monitored), path, fmu_dir)
 
 
-def test_the_archive_runs_in_lever_run(archive, tmp_path, monitored):
+def test_the_archive_runs_in_lever_run(lever, archive, tmp_path, monitored):
     out = tmp_path / "from_ssp"
-    result = CliRunner().invoke(cli, ["run", str(archive), "--out", str(out), "--no-reference"])
+    result = lever("run", str(archive), "--out", str(out), "--no-reference")
     assert result.exit_code == 0, result.output
     _, from_archive = trace_files.read(out / "traces.csv")
     direct = simulate(scenes.load(monitored))
@@ -215,17 +213,17 @@ def test_a_shortened_run_fits_the_scenes_transient_and_says_so():
     assert scenes.experiment_findings(chosen.experiment) == ["experiment.transient = 2.0 s must be in [0, stop - start)"]
 
 
-def test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged(fmu_dir, tmp_path):
+def test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged(lever, fmu_dir, tmp_path):
     out = tmp_path / "short"
-    result = CliRunner().invoke(cli, ["run", "kavz685", "--stop", "0.5", "--no-reference", "--out", str(out)])
+    result = lever("run", "kavz685", "--stop", "0.5", "--no-reference", "--out", str(out))
     assert result.exit_code == 0, result.output
     import json
     summary = json.loads((out / "summary.json").read_text())
     assert summary["stop_s"] == 0.5 and summary["transient_s"] == pytest.approx(0.1)
     assert "statistics after 0.1 s instead" in result.output
     assert "The run is shorter than its scene" in (out / "report.md").read_text()
-    strict = CliRunner().invoke(cli, ["run", "kavz685", "--stop", "0.5", "--set", "experiment.transient=2",
-                                      "--out", str(tmp_path / "strict")])
+    strict = lever("run", "kavz685", "--stop", "0.5", "--set", "experiment.transient=2",
+                                      "--out", str(tmp_path / "strict"))
     assert strict.exit_code == 2 and "experiment.transient = 2.0 s must be in [0, stop - start)" in strict.output
 
 

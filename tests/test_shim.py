@@ -481,12 +481,8 @@ def test_python_exception_quarantines_the_instance(tmp_path, shim_so):
     assert unusable == ["instance is unusable after a fatal error in fmi2DoStep"] * 3
 
 
-def test_without_a_compiler_lever_build_says_how_to_get_one(tmp_path, monkeypatch):
-    from click.testing import CliRunner
-
-    from harness.cli import main
-
+def test_without_a_compiler_lever_build_says_how_to_get_one(lever, tmp_path, monkeypatch):
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
-    result = CliRunner().invoke(main, ["build", "--force", "--out", str(tmp_path / "fmus")])
+    result = lever("build", "--force", "--out", str(tmp_path / "fmus"))
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert "cannot run" in result.output and "apt install gcc" in result.output and "CC=" in result.output

@@ -6,9 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from harness.cli import main as cli
 from harness.description import scene
 from harness import peers
 from harness.formats import reference_traces, ssp
@@ -19,22 +17,21 @@ ENGINES = ["lever", "libcosim", "ecos", "fmpy.ssp"]
 
 
 @pytest.fixture(scope="module")
-def archive(tmp_path_factory, fmu_dir):
+def archive(lever, tmp_path_factory, fmu_dir):
     path = tmp_path_factory.mktemp("ssp") / "kavz685.ssp"
-    result = CliRunner().invoke(cli, ["export-ssp", "kavz685", "--out", str(path)])
+    result = lever("export-ssp", "kavz685", "--out", path)
     assert result.exit_code == 0, result.output
     for engine in ENGINES:           # the command says how each engine it names runs the archive
         assert f"  {engine}:" in result.output
     return path
 
 
-def _run(engine: str, archive, tmp_path, fmu_dir):
+def _run(lever, engine: str, archive, tmp_path, fmu_dir):
     """(times, traces) of the archive run in ``engine`` as ``ssp.HOW_TO_RUN`` says."""
     spec = scene.load("kavz685")
     e = spec.experiment
     if engine == "lever":
-        result = CliRunner().invoke(cli, ["run", str(archive), "--out", str(tmp_path / "run"), "--no-reference",
-                                          "--no-progress"])
+        result = lever("run", archive, "--out", tmp_path / "run", "--no-reference", "--no-progress")
         assert result.exit_code == 0, result.output
         table = reference_traces.read_csv(tmp_path / "run" / "traces.csv")
         return table.times, table.signals
@@ -57,8 +54,9 @@ def _run(engine: str, archive, tmp_path, fmu_dir):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_the_exported_archive_runs_with_its_values_in_every_engine_we_name(engine, archive, tmp_path, fmu_dir):
-    times, traces = _run(engine, archive, tmp_path, fmu_dir)
+def test_the_exported_archive_runs_with_its_values_in_every_engine_we_name(lever, engine, archive, tmp_path,
+                                                                           fmu_dir):
+    times, traces = _run(lever, engine, archive, tmp_path, fmu_dir)
     ref = reference_traces.read("kavz685")
     # fmpy.ssp records no row at the start (its first is after the first step): judged from there
     start = max(ref.opt.start, float(times[0]))

@@ -8,7 +8,6 @@ import re
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from harness.studies import cases
 from harness.engine import masters
@@ -16,7 +15,6 @@ from harness.engine import run
 from harness.description import scene
 from harness.judges import stability
 from harness.studies import stabilitymap
-from harness.cli import main
 
 KAVZ = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35)
 UNDAMPED = stability.TwoInertia(0.128, 0.161, 0.0, 1e5, 0.0)     # zeta = 0 exactly
@@ -243,10 +241,10 @@ def test_the_run_advice_warns_and_simulate_leaves_it_to_its_caller():
     assert result.ok and result.warnings == []
 
 
-def test_lever_run_prints_the_advice(tmp_path):
-    outcome = CliRunner().invoke(main, ["run", "kavz685_stiff", "--master", "jacobi", "--step", "1e-4", "--set",
+def test_lever_run_prints_the_advice(lever, tmp_path):
+    outcome = lever("run", "kavz685_stiff", "--master", "jacobi", "--step", "1e-4", "--set",
                                         "experiment.stop=0.005", "--set", "experiment.transient=0",
-                                        "--no-reference", "--out", str(tmp_path)])
+                                        "--no-reference", "--out", str(tmp_path))
     assert outcome.exit_code == 0, outcome.output
     assert re.search(r"warning: stability: jacobi at h = 0\.0001 s .* Predicted stable: ", outcome.output)
 
@@ -257,9 +255,8 @@ ARGS = ["stability", "kavz685", "--stiffness", "1e5", "--damping", "0", "--maste
         "--master", "trapezoidal-newton", "--min-steps", "200", "--no-refine"]
 
 
-def test_lever_stability_runs_and_resumes(tmp_path):
-    runner = CliRunner()
-    first = runner.invoke(main, ARGS + ["--h-omega", "0.05", "--h-omega", "0.5", "--jobs", "1", "--out", str(tmp_path)])
+def test_lever_stability_runs_and_resumes(lever, tmp_path):
+    first = lever(*ARGS, "--h-omega", "0.05", "--h-omega", "0.5", "--jobs", "1", "--out", tmp_path)
     assert first.exit_code == 0, first.output
     assert "4 cases (0 already done)" in first.output
     png = (tmp_path / "stability_map.png").read_bytes()
@@ -271,13 +268,12 @@ def test_lever_stability_runs_and_resumes(tmp_path):
     assert classes == {"jacobi@0.05": "stable", "jacobi@0.5": "divergent",
                        "trapezoidal-newton@0.05": "stable", "trapezoidal-newton@0.5": "stable"}
     # A denser re-run keeps the finished cases and runs only the new ones (in worker processes).
-    second = runner.invoke(main, ARGS + ["--h-omega", "0.05", "--h-omega", "0.5", "--h-omega", "0.2", "--jobs", "2",
-                                         "--out", str(tmp_path)])
+    second = lever(*ARGS, "--h-omega", "0.05", "--h-omega", "0.5", "--h-omega", "0.2", "--jobs", "2", "--out", tmp_path)
     assert second.exit_code == 0, second.output
     assert "6 cases (4 already done)" in second.output
     assert len((tmp_path / "cases.jsonl").read_text().splitlines()) == 1 + 6
-    quiet = runner.invoke(main, ARGS + ["--h-omega", "0.05", "--h-omega", "0.5", "--h-omega", "0.2", "--no-progress",
-                                        "--out", str(tmp_path)])
+    quiet = lever(*ARGS, "--h-omega", "0.05", "--h-omega", "0.5", "--h-omega", "0.2", "--no-progress",
+                  "--out", tmp_path)
     assert quiet.exit_code == 0, quiet.output
     assert "already done" not in quiet.output and "written:" in quiet.output
     text = (tmp_path / "stability.md").read_text()

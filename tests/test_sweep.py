@@ -6,10 +6,8 @@ from __future__ import annotations
 import json
 
 import pytest
-from click.testing import CliRunner
 
 from harness.studies import sweep as sweeps
-from harness.cli import main
 
 # Short runs: 0.6 s simulated, amplitudes after 0.2 s.
 SHORT = ["experiment.transient=0.2"]
@@ -162,14 +160,14 @@ def test_a_failed_cases_multi_line_error_stays_in_its_table_cell(tmp_path):
     assert "not judged: 0 of 4 cases ran" in text and "move by 0" not in text
 
 
-def test_lever_sweep_refuses_a_stop_within_the_transient(tmp_path):
-    result = CliRunner().invoke(main, ["sweep", "--axis", "inertia", "--stop", "0.5", "--out", str(tmp_path / "s")])
+def test_lever_sweep_refuses_a_stop_within_the_transient(lever, tmp_path):
+    result = lever("sweep", "--axis", "inertia", "--stop", "0.5", "--out", str(tmp_path / "s"))
     assert result.exit_code == 2, result.output
     assert "--stop 0.5 s" in result.output and "experiment.transient = 2 s" in result.output
     assert "allowed: --stop > 2 s" in result.output
     assert not (tmp_path / "s").exists()         # refused before the output folder is claimed
 
 
-def test_lever_sweep_refuses_an_unknown_axis():
-    result = CliRunner().invoke(main, ["sweep", "--axis", "colour"])
+def test_lever_sweep_refuses_an_unknown_axis(lever):
+    result = lever("sweep", "--axis", "colour")
     assert result.exit_code == 2 and "unknown sweep axis colour" in result.output

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -71,11 +70,10 @@ def test_streamed_run_equals_the_ordinary_run(tmp_path, fmu_dir):
     assert b["residual_J"] == pytest.approx(a["residual_J"], rel=1e-9, abs=1e-12)
 
 
-def test_a_run_killed_part_way_leaves_valid_traces(tmp_path, fmu_dir):
+def test_a_run_killed_part_way_leaves_valid_traces(lever_process, tmp_path, fmu_dir):
     out = tmp_path / "killed"
-    child = subprocess.Popen([sys.executable, "-c", "from harness.cli import entry; entry()", "run", "kavz685",
-                              "--set", "experiment.stop=600", "--stream", "--no-progress", "--out", str(out)],
-                             cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    child = lever_process.start("run", "kavz685", "--set", "experiment.stop=600", "--stream", "--no-progress",
+                                "--out", out, cwd=REPO, stdout=subprocess.DEVNULL, text=False)
     path = out / "traces.csv"
     deadline = time.monotonic() + 60
     try:

@@ -1,4 +1,4 @@
-"""Reference traces and validation (harness.crosscheck, harness.validate, `lever reference`,
+"""Reference traces and validation (harness.formats.reference_traces, harness.judges.validation, `lever reference`,
 `lever validate`)."""
 from __future__ import annotations
 
@@ -8,19 +8,13 @@ import shutil
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from harness.formats import reference_traces as crosscheck
-from harness.judges import validation as validate
+from harness.formats import reference_traces
+from harness.judges import validation
 from harness.description import scene as scenes
-from harness.cli import main
 
-LEVER = validate.TOLERANCES["lever"]
-CROSS = validate.TOLERANCES["cross-check"]
-
-
-def _invoke(*args):
-    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+LEVER = validation.TOLERANCES["lever"]
+CROSS = validation.TOLERANCES["cross-check"]
 
 
 # -- the band: the cross-check's, as fmpy implements it ----------------------------------------
@@ -36,11 +30,11 @@ def test_band_is_fmpys_with_the_cross_check_figures(kind):
     t = np.sort(rng.uniform(-0.1, 2.1, 900))
     y = np.interp(t, t_ref, y_ref) + rng.normal(0, 0.3, t.size)
     t_band, y_min, y_max, i_out = validate_signal(t, y, t_ref.copy(), y_ref)
-    ours = validate.band(t_ref, y_ref, CROSS.num, CROSS.dx, CROSS.dy)
+    ours = validation.band(t_ref, y_ref, CROSS.num, CROSS.dx, CROSS.dy)
     np.testing.assert_array_equal(ours.t, t_band)
     np.testing.assert_allclose(ours.low, y_min, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ours.high, y_max, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(validate.outside(t, y, ours), i_out)
+    np.testing.assert_array_equal(validation.outside(t, y, ours), i_out)
 
 
 def test_cross_check_fraction_is_fmpys_validate_result():
@@ -48,9 +42,9 @@ def test_cross_check_fraction_is_fmpys_validate_result():
     reference = {"x": np.sin(20 * t_ref), "v": np.cos(3 * t_ref)}
     t = np.linspace(0, 1, 1001)
     traces = {"x": np.sin(20 * t) * 1.3, "v": np.cos(3 * t)}
-    findings, _ = validate.compare("x", t, traces, t_ref, reference, CROSS)
+    findings, _ = validation.compare("x", t, traces, t_ref, reference, CROSS)
     assert max(s.fraction_outside for s in findings.signals) == pytest.approx(
-        validate.fmpy_max_outside(t, traces, t_ref, reference), abs=1e-12)
+        validation.fmpy_max_outside(t, traces, t_ref, reference), abs=1e-12)
     assert findings.failed_signals == ["x"]
 
 
@@ -65,9 +59,9 @@ def test_lever_tolerance_forgives_one_step_of_lag_not_three():
     t = np.arange(0, 1 + h / 2, h)
     t_ref = t[::10]
     reference = {"y": _signal(t_ref)}
-    exact, _ = validate.compare("y", t, {"y": _signal(t)}, t_ref, reference)
-    late, _ = validate.compare("y", t, {"y": _signal(t - h)}, t_ref, reference)
-    later, _ = validate.compare("y", t, {"y": _signal(t - 3 * h)}, t_ref, reference)
+    exact, _ = validation.compare("y", t, {"y": _signal(t)}, t_ref, reference)
+    late, _ = validation.compare("y", t, {"y": _signal(t - h)}, t_ref, reference)
+    later, _ = validation.compare("y", t, {"y": _signal(t - 3 * h)}, t_ref, reference)
     assert exact.passed and exact.signals[0].max_error < 1e-12
     assert late.passed and late.signals[0].max_error > late.signals[0].band_width   # outside 1 % ...
     assert not later.passed and later.signals[0].fraction_outside > 0.5              # ... but one step
@@ -78,12 +72,12 @@ def test_lever_tolerance_allows_one_percent_of_samples_outside():
     y = 100 * t                  # band +-1, one step 0.1: a sample's neighbours are within the band
     spiky = y.copy()
     spiky[100:700:3] += 30.0     # 200 isolated wrong samples: each is excused by its neighbours
-    findings, _ = validate.compare("y", t, {"y": spiky}, t, {"y": y})
+    findings, _ = validation.compare("y", t, {"y": spiky}, t, {"y": y})
     assert findings.passed and findings.signals[0].fraction_outside == 0
     for run, passes in ((12, True), (13, False)):
         wrong = y.copy()
         wrong[200:200 + run] += 30.0      # a run of wrong samples: all but its two ends are outside
-        findings, _ = validate.compare("y", t, {"y": wrong}, t, {"y": y})
+        findings, _ = validation.compare("y", t, {"y": wrong}, t, {"y": y})
         assert findings.signals[0].fraction_outside == pytest.approx((run - 2) / 1001)
         assert findings.passed == passes
 
@@ -91,40 +85,40 @@ def test_lever_tolerance_allows_one_percent_of_samples_outside():
 def test_structural_problems_fail_the_result():
     t = np.linspace(0, 1, 101)
     reference = {"a": np.sin(t), "b": np.cos(t)}
-    short, _ = validate.compare("r", t[:50], {"a": np.sin(t[:50]), "b": np.cos(t[:50])}, t, reference)
+    short, _ = validation.compare("r", t[:50], {"a": np.sin(t[:50]), "b": np.cos(t[:50])}, t, reference)
     assert not short.passed and any("ends at" in p for p in short.problems)
-    missing, _ = validate.compare("r", t, {"a": np.sin(t), "c": t}, t, reference)
+    missing, _ = validation.compare("r", t, {"a": np.sin(t), "c": t}, t, reference)
     assert not missing.passed and any("'b' is missing" in p for p in missing.problems)
     assert any("c" in n for n in missing.notes)
     nan = np.sin(t)
     nan[40:60] = np.nan
-    broken, _ = validate.compare("r", t, {"a": nan, "b": np.cos(t)}, t, reference)
+    broken, _ = validation.compare("r", t, {"a": nan, "b": np.cos(t)}, t, reference)
     assert broken.failed_signals == ["a"] and broken.signals[0].rms_error == np.inf
 
 
 def test_columns_match_by_name_or_unique_suffix():
-    mapping, missing = validate.match_columns(["tau1", "tau2", "w"], ["coupling.tau1", "tau2", "a.w", "b.w"])
+    mapping, missing = validation.match_columns(["tau1", "tau2", "w"], ["coupling.tau1", "tau2", "a.w", "b.w"])
     assert mapping == {"tau1": "coupling.tau1", "tau2": "tau2"} and missing == ["w"]
 
 
 # -- the committed references -------------------------------------------------------------------
 
-def test_lever_reference_reports_every_committed_trace_current():
-    result = _invoke("reference")
+def test_lever_reference_reports_every_committed_trace_current(lever):
+    result = lever("reference")
     assert result.exit_code == 0, result.output
-    for name in crosscheck.all_names():
+    for name in reference_traces.all_names():
         assert f"{name}: current" in result.output
 
 
 def test_reference_files_are_in_the_cross_check_layout():
     from fmpy.util import read_csv, read_ref_opt_file
 
-    for name in crosscheck.all_names():
-        p = crosscheck.paths(name)
+    for name in reference_traces.all_names():
+        p = reference_traces.paths(name)
         opt = read_ref_opt_file(str(p["opt"]))
         ref = read_csv(str(p["ref"]))
         assert ref.dtype.names[0] == "time" and ref["time"][0] == opt["StartTime"] and ref["time"][-1] == opt["StopTime"]
-        driven = name in crosscheck.FMU_CASES and crosscheck.FMU_CASES[name].inputs is not None
+        driven = name in reference_traces.FMU_CASES and reference_traces.FMU_CASES[name].inputs is not None
         assert p["in"].exists() == driven
         assert p["ref"].stat().st_size < 400_000      # small enough to commit (the rectifier: 34 signals)
         if driven:
@@ -138,54 +132,54 @@ def test_every_fmu_has_a_stand_alone_reference_or_says_why_not():
 
     for model in registry.MODELS:
         if not model.no_reference:
-            assert crosscheck.read(model.name).kind == "fmu", model.name
+            assert reference_traces.read(model.name).kind == "fmu", model.name
     # a case written for a name the registry does not have, or says has none, is never run
-    assert set(crosscheck._CASES) == set(crosscheck.FMU_CASES)
+    assert set(reference_traces._CASES) == set(reference_traces.FMU_CASES)
 
 
-def test_validating_an_fmu_without_a_stand_alone_reference_says_why_and_what_instead():
-    result = CliRunner().invoke(main, ["validate", "FreewheelRectifier"])
+def test_validating_an_fmu_without_a_stand_alone_reference_says_why_and_what_instead(lever):
+    result = lever("validate", "FreewheelRectifier")
     assert result.exit_code == 2
     assert "FreewheelRectifier has no stand-alone reference" in result.output
     assert "lever validate freewheel_rectifier" in result.output
 
 
-def test_stale_reference_is_reported_and_update_shows_the_change(tmp_path, monkeypatch):
+def test_stale_reference_is_reported_and_update_shows_the_change(lever, tmp_path, monkeypatch):
     for name in ("LeverCoupling", "EngineShaft"):
-        shutil.copytree(crosscheck.paths(name)["ref"].parent, tmp_path / name)
-    monkeypatch.setattr(crosscheck, "REFERENCE_DIR", tmp_path)
-    ref = crosscheck.read("LeverCoupling")
+        shutil.copytree(reference_traces.paths(name)["ref"].parent, tmp_path / name)
+    monkeypatch.setattr(reference_traces, "REFERENCE_DIR", tmp_path)
+    ref = reference_traces.read("LeverCoupling")
     ref.outputs.signals["tau1"][500] += 2.5
-    crosscheck.write(ref)
-    checked = _invoke("reference", "LeverCoupling", "EngineShaft")
+    reference_traces.write(ref)
+    checked = lever("reference", "LeverCoupling", "EngineShaft")
     assert checked.exit_code == 1
     assert "LeverCoupling: NOT current" in checked.output and "EngineShaft: current" in checked.output
     line = next(l for l in checked.output.splitlines() if l.strip().startswith("tau1"))
     assert line.split()[1:4] == ["max", "change", "2.5"] and line.endswith("t = 0.5 s")
-    assert _invoke("reference", "--update", "LeverCoupling").exit_code == 0
-    assert "LeverCoupling: current" in _invoke("reference", "LeverCoupling").output
+    assert lever("reference", "--update", "LeverCoupling").exit_code == 0
+    assert "LeverCoupling: current" in lever("reference", "LeverCoupling").output
 
 
 # -- every FMU and scene validates; perturbed parameters fail where they should -----------------
 
 def _validate(name, assignments=()):
-    ref = crosscheck.read(name)
+    ref = reference_traces.read(name)
     if ref.kind == "fmu":
-        from harness.cli import fmu_start_values
-        result = crosscheck.run_fmu(name, ref, fmu_start_values(name, assignments))
+        from harness.api import fmu_start_values
+        result = reference_traces.run_fmu(name, ref, fmu_start_values(name, assignments))
     else:
-        result = crosscheck.run_scene(scenes.load(name).with_overrides(list(assignments)))
+        result = reference_traces.run_scene(scenes.load(name).with_overrides(list(assignments)))
     assert result.failure is None, result.failure
-    findings, _ = validate.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
+    findings, _ = validation.compare(name, result.times, result.traces, ref.outputs.times, ref.outputs.signals,
                                    LEVER, ref.opt.start, ref.opt.stop)
     return findings, result
 
 
-@pytest.mark.parametrize("name", crosscheck.all_names())
+@pytest.mark.parametrize("name", reference_traces.all_names())
 def test_every_fmu_and_scene_validates_against_its_reference(fmu_dir, name):
     findings, _ = _validate(name)
     assert findings.passed, (findings.problems, findings.failed_signals)
-    assert [s.name for s in findings.signals] == list(crosscheck.read(name).outputs.signals)
+    assert [s.name for s in findings.signals] == list(reference_traces.read(name).outputs.signals)
 
 
 def test_stiffer_coupling_fails_the_torques_and_energy_not_the_kinematics(fmu_dir):
@@ -201,11 +195,11 @@ def test_heavier_load_shaft_fails_its_motion_not_its_load_torque(fmu_dir):
 
 @pytest.fixture(scope="module")
 def kavz685_run(fmu_dir):
-    return crosscheck.run_scene(scenes.load("kavz685"))
+    return reference_traces.run_scene(scenes.load("kavz685"))
 
 
-def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_path):
-    result = _invoke("validate", "kavz685", "--set", "coupling.stiffness=800", "--out", str(tmp_path))
+def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(lever, fmu_dir, tmp_path):
+    result = lever("validate", "kavz685", "--set", "coupling.stiffness=800", "--out", str(tmp_path))
     assert result.exit_code == 1
     findings = __import__("json").loads((tmp_path / "validation.json").read_text())
     failed = {n for n, s in findings["signals"].items() if not s["passed"]}
@@ -218,48 +212,48 @@ def test_stiffer_coupling_in_the_scene_fails_the_deflection_only(fmu_dir, tmp_pa
 
 # -- results produced elsewhere -------------------------------------------------------------------
 
-def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(kavz685_run, tmp_path):
+def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(lever, kavz685_run, tmp_path):
     good = tmp_path / "other_tool.csv"
-    crosscheck.write_csv(good, crosscheck.Traces(kavz685_run.times, kavz685_run.traces))
-    result = _invoke("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
+    reference_traces.write_csv(good, reference_traces.Traces(kavz685_run.times, kavz685_run.traces))
+    result = lever("validate", "--result", str(good), "kavz685", "--out", str(tmp_path / "good"))
     assert result.exit_code == 0, result.output
     # a tool whose coupling torque lags 10 ms behind (as a 10 ms zero-order hold would)
     traces = dict(kavz685_run.traces)
     for name in ("coupling.tau1", "coupling.tau2"):
         traces[name] = np.concatenate([np.full(10, traces[name][0]), traces[name][:-10]])
     bad = tmp_path / "lagging_tool.csv"
-    crosscheck.write_csv(bad, crosscheck.Traces(kavz685_run.times, traces))
-    result = _invoke("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
+    reference_traces.write_csv(bad, reference_traces.Traces(kavz685_run.times, traces))
+    result = lever("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
     assert result.exit_code == 1
     assert "FAIL (coupling.tau1, coupling.tau2)" in result.output
 
 
-def test_external_csv_of_an_fmu_with_prefixed_columns(fmu_dir, tmp_path):
-    ref = crosscheck.read("EngineShaft")
-    run = crosscheck.run_fmu("EngineShaft", ref)
+def test_external_csv_of_an_fmu_with_prefixed_columns(lever, fmu_dir, tmp_path):
+    ref = reference_traces.read("EngineShaft")
+    run = reference_traces.run_fmu("EngineShaft", ref)
     path = tmp_path / "engine.csv"
-    crosscheck.write_csv(path, crosscheck.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
-    assert _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
+    reference_traces.write_csv(path, reference_traces.Traces(run.times, {f"engine.{k}": v for k, v in run.traces.items()}))
+    assert lever("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "a")).exit_code == 0
     # ending early and missing a signal: both fail
-    crosscheck.write_csv(path, crosscheck.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
+    reference_traces.write_csv(path, reference_traces.Traces(run.times[:500], {k: v[:500] for k, v in run.traces.items()
                                                                      if k != "engine_work"}))
-    result = _invoke("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
+    result = lever("validate", "--result", str(path), "EngineShaft", "--out", str(tmp_path / "b"))
     assert result.exit_code == 1
     assert "ends at t = 0.499" in result.output and "'engine_work' is missing" in result.output
 
 
 @pytest.mark.parametrize("shift", [20.0, -20.0, 100.0, 0.4, -0.4])
-def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift):
+def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(lever, tmp_path, shift):
     """A result whose times miss the reference's span (a shifted time column) fails,
     saying that the spans do not overlap, or how much of the span it covers; the plots
     of the failing signals are drawn, validation.json is standard JSON."""
     import json
 
-    ref = crosscheck.read("EngineShaft")      # 0 ... 1 s
+    ref = reference_traces.read("EngineShaft")      # 0 ... 1 s
     path = tmp_path / "shifted.csv"
-    crosscheck.write_csv(path, crosscheck.Traces(ref.outputs.times + shift, ref.outputs.signals))
+    reference_traces.write_csv(path, reference_traces.Traces(ref.outputs.times + shift, ref.outputs.signals))
     out = tmp_path / "out"
-    result = CliRunner().invoke(main, ["validate", "--result", str(path), "EngineShaft", "--out", str(out)])
+    result = lever("validate", "--result", str(path), "EngineShaft", "--out", str(out))
     assert result.exit_code == 1, result.output
     assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
     assert "EngineShaft: FAIL" in result.output and "Traceback" not in result.output
@@ -273,55 +267,51 @@ def test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback(tmp_path, shift
     assert sorted(p.stem for p in out.glob("*.png")) == sorted(ref.outputs.signals)
 
 
-def test_validate_refuses_bad_input(tmp_path):
-    assert _invoke("validate", "nope").exit_code == 2
-    assert _invoke("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers
-    result = _invoke("validate", "LeverCoupling", "--set", "stiffness=-3")
+def test_validate_refuses_bad_input(lever, tmp_path):
+    assert lever("validate", "nope").exit_code == 2
+    assert lever("validate", "--result", __file__, "kavz685").exit_code == 2      # not a CSV of numbers
+    result = lever("validate", "LeverCoupling", "--set", "stiffness=-3")
     assert result.exit_code == 2 and "allowed range" in result.output
-    result = _invoke("validate", "LeverCoupling", "--set", "stiffnes=3")
+    result = lever("validate", "LeverCoupling", "--set", "stiffnes=3")
     assert result.exit_code == 2 and "no parameter 'stiffnes'" in result.output
 
 
 # -- lever validate --measured: the model-vs-measurement check on given files ----------------
 
-def test_measured_option_checks_a_grade(tmp_path):
+def test_measured_option_checks_a_grade(lever, tmp_path):
     from harness.paths import DATA
     grade = [str(DATA / "monograph" / f"torque_{shaft}_7IRP13-48.csv") for shaft in ("drive", "driven")]
-    result = _invoke("validate", "--measured", *grade, "--out", str(tmp_path))
+    result = lever("validate", "--measured", *grade, "--out", str(tmp_path))
     assert result.exit_code == 0, result.output
     assert "7IRP" in result.output and (tmp_path / "measured.md").exists()
     # a table without its pair is bad input (exit 2), not a grade that misses its target (exit 1)
-    result = CliRunner().invoke(main, ["validate", "--measured", grade[0], "--out", str(tmp_path / "lonely")])
+    result = lever("validate", "--measured", grade[0], "--out", str(tmp_path / "lonely"))
     assert result.exit_code == 2 and "no driven-shaft table to pair with" in result.output
 
 
 def test_the_cross_check_verdict_says_what_its_band_cannot_see():
     """A ripple faster than the cross-check's window, at the wrong phase, passes its band; the
     verdict says so with the window and the margins, and the lever figures fail it."""
-    import numpy as np
-
-    from harness.judges import validation as judge
-
     t = np.linspace(0.0, 10.0, 10001)
     ref = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t)}
     wrong = {"tau2": 107.5 + 6.0 * np.sin(420.0 * t + 2.0)}
-    crosscheck, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["cross-check"])
-    assert crosscheck.passed
-    (note,) = [n for n in crosscheck.notes if n.startswith("what the cross-check band can see")]
+    cross_check, _ = validation.compare("x", t, wrong, t, ref, validation.TOLERANCES["cross-check"])
+    assert cross_check.passed
+    (note,) = [n for n in cross_check.notes if n.startswith("what the cross-check band can see")]
     assert "window of 0.2 s" in note and "tau2 +-1.2" in note
-    lever, _ = judge.compare("x", t, wrong, t, ref, judge.TOLERANCES["lever"])
+    lever, _ = validation.compare("x", t, wrong, t, ref, validation.TOLERANCES["lever"])
     assert not lever.passed and not any(n.startswith("what the") for n in lever.notes)
 
 
-def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir, tmp_path):
+def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(lever, fmu_dir, tmp_path):
     """A 1 s run of kavz685 fails against the 10 s reference (it ends early) and passes over
     the window 0 ... 1 s, by the same band; the verdict says which span it judged."""
     run = tmp_path / "run"
-    assert _invoke("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
-    whole = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
+    assert lever("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
+    whole = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
     assert whole.exit_code == 1 and "before the stop time" in whole.output
     assert "FAIL over the reference's whole span, t = 0 ... 10 s" in whole.output
-    part = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:1",
+    part = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:1",
                    "--out", str(tmp_path / "part"))
     assert part.exit_code == 0, part.output
     assert "PASS over t = 0 ... 1 s of the reference's 0 ... 10 s" in part.output
@@ -330,15 +320,15 @@ def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(fmu_dir
     widths = lambda out: {line.split()[0]: line.split()[4] for line in out.splitlines() if " pass" in line}
     assert widths(part.output) == widths(whole.output)          # the same band over the window
     # a window the result does not cover fails, naming the end; a window outside the reference is bad input
-    late = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:2",
+    late = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", "0:2",
                    "--out", str(tmp_path / "late"))
     assert late.exit_code == 1 and "before the stop time (2 s" in late.output
     for bad in ("0:11", "1:1", "x:1", "5"):
-        result = _invoke("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", bad)
+        result = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--window", bad)
         assert result.exit_code == 2, (bad, result.output)
 
 
 def test_a_window_with_too_few_reference_samples_fails_with_a_sentence():
     t = np.linspace(0, 1, 11)
-    findings, _ = validate.compare_span("x", t, {"y": t}, t, {"y": t}, LEVER, 0.01, 0.02)
+    findings, _ = validation.compare_span("x", t, {"y": t}, t, {"y": t}, LEVER, 0.01, 0.02)
     assert not findings.passed and "holds 0 of the reference's samples" in findings.problems[0]

@@ -191,7 +191,7 @@ int main(int argc, char **argv) {
     /* Leave without running the libraries' exit-time destructors: pythonfmu 0.7
      * finalises its embedded interpreter in a static destructor, which corrupts the
      * heap at process exit (seen with numpy loaded: "free(): corrupted unsorted
-     * chunks").  Our Python tools leave the same way (harness/cli.py, tests/conftest.py).
+     * chunks").  Our Python tools leave the same way (harness/cli/, tests/conftest.py).
      * The library is not unloaded either: an embedded interpreter cannot be. */
     fflush(stdout);
     fflush(stderr);

@@ -1,0 +1,36 @@
+"""What the command groups share: bad input as exit status 2 with its sentence, Ctrl-C as
+exit status 130, the FMUs built before a command uses them."""
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import click
+
+from harness import api
+from harness.paths import FMUS
+
+#: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
+INTERRUPTED_EXIT = 130
+
+
+class UserError(click.ClickException):
+    """A problem with the user's input: shown as a message, exit code 2, no traceback."""
+
+    exit_code = 2
+
+
+@contextlib.contextmanager
+def user_errors():
+    """``api.InputError`` ends the command with exit code 2 and its message."""
+    try:
+        yield
+    except api.InputError as error:
+        raise UserError(str(error)) from None
+
+
+def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):
+    """Build the FMUs when they are missing or older than their sources (``api.BuildError``,
+    a RuntimeError, says why they could not be)."""
+    api.build(force, fmu_dir, log=None if quiet else click.echo)
+

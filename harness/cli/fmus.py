@@ -1,0 +1,58 @@
+"""``lever build``, ``lever compliance``, ``lever badinputs``: the FMUs built and checked."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from harness import api
+from harness.cli.common import ensure_fmus
+from harness.paths import FMUS
+
+
+@click.command("build")
+@click.option("--force", is_flag=True, help="Rebuild even when the sources did not change.")
+@click.option("--out", type=click.Path(path_type=Path), default=FMUS, show_default=True,
+              help="Where the FMUs go: build/fmus in a checkout; for a package installed with pip, the user's "
+                   "cache folder; LEVER_FMU_DIR chooses another.")
+def build(force, out):
+    """Build the FMUs (LeverCoupling, EngineShaft, LoadShaft, FreewheelRectifier,
+    MisalignmentSource)."""
+    try:
+        ensure_fmus(out, force)
+    except RuntimeError as error:
+        raise click.ClickException(str(error)) from None
+
+
+@click.command("compliance")
+@click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
+def compliance(fmus):
+    """Compliance checks on FMU files (default: the built ones): fmpy's validation plus
+    ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
+    when there are findings."""
+    total = 0
+    for path, findings in api.compliance(fmus):
+        total += len(findings)
+        click.echo(f"{path}: {len(findings)} finding{'' if len(findings) == 1 else 's'}")
+        for finding in findings:
+            click.echo(f"  - {finding}")
+    if total:
+        sys.exit(1)
+
+
+@click.command("badinputs")
+@click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
+def bad_inputs(verbose):
+    """Run the bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave on the built
+    FMUs: every case must be refused with an FMI error naming the variable and its range."""
+    outcomes, summary = api.bad_inputs()
+    if verbose:
+        for o in outcomes:
+            click.echo(f"{'ok  ' if o.passed else 'FAIL'} {o.case.name}: {' | '.join(o.messages)}")
+    click.echo(summary)
+    if not all(o.passed for o in outcomes):
+        sys.exit(1)
+
+
+COMMANDS = (build, compliance, bad_inputs)

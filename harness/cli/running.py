@@ -1,0 +1,201 @@
+"""``lever scenes``, ``lever run``, ``lever validate``, ``lever reference``: a scene run and
+judged against its reference."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from harness import api
+from harness.cli.common import INTERRUPTED_EXIT, UserError, user_errors
+from harness.cli.studies import print_measured
+from harness.paths import RESULTS
+
+
+@click.command("scenes")
+def list_scenes():
+    """List the committed scenes (resources/scenes)."""
+    for name, description in api.scenes_list().items():
+        click.echo(f"{name:24s} {description}")
+
+
+@click.command("run")
+@click.argument("scene", default="kavz685")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Override a parameter: component.parameter=value (e.g. coupling.stiffness=900, "
+                   "coupling.misalignment='20 deg') or experiment.stop=5.")
+@click.option("--master", type=str, default=None, help="Co-simulation master (default: the scene's).")
+@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--stop", type=float, default=None,
+              help="Stop time [s] (as --set experiment.stop=S); a scene's start-up transient that does not fit the "
+                   "shorter run takes the same share of it (said before the run).")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/<scene>).")
+@click.option("--tolerance", type=float, default=None,
+              help="Tolerance of an adaptive master (relative torque error per step) or of an iterative "
+                   "master's coupling iteration.")
+@click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
+@click.option("--strict", is_flag=True, help="Refuse the scene when an input is connected to nothing and not set "
+              "(as experiment.strict = true); without it such an input is named and held at its start value.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
+@click.option("--stream", is_flag=True, help="For long runs: write traces.csv while running (synced chunks: a "
+              "run killed part-way leaves valid traces), keep every k-th row in memory for the report, skip "
+              "the reference (the energy balance, integrated over every row, judges the run).")
+@click.option("--latency", is_flag=True, help="Time every step for real-time use: median, p99, p99.9 and maximum "
+              "step time, the start-up steps and why the slowest were slow (latency.md, latency.json).")
+def run(scene, assignments, master, step, stop, tolerance, out, no_reference, strict, progress, stream, latency):
+    """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
+    write traces, plots, summary.json and report.md."""
+    with user_errors():
+        spec = api.load(scene, list(assignments), stop=stop, strict=strict)
+    show_progress = sys.stderr.isatty() if progress is None else progress
+    try:
+        done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference,
+                       out=out or RESULTS / spec.name, progress=show_progress, stream=stream, latency=latency,
+                       notify=lambda kind, message: click.echo(f"{kind}: {message}", err=True))
+    except api.InputError as error:
+        raise UserError(str(error)) from None
+    except api.BuildError as error:
+        raise click.ClickException(f"building the FMUs failed: {error}") from None
+    result, out = done.result, done.out
+    _print_summary(done.summary, out)
+    for line in done.latency or ():
+        click.echo(line)
+    if done.outcome == "interrupted":
+        click.echo(f"{result.failure}; what was computed is in {out}/ (marked interrupted)", err=True)
+        sys.exit(INTERRUPTED_EXIT)
+    if done.outcome != "ok":
+        click.echo(f"error: {result.failure}", err=True)
+        if done.outcome == "refused":
+            sys.exit(UserError.exit_code)
+        click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
+        sys.exit(1)
+
+
+def _print_summary(summary: dict, out: Path):
+    click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
+               f"wall time {summary['wall_time_s']:.2f} s")
+    stats = summary.get("statistics") or {}
+    if stats and not any(stats.values()):
+        click.echo(f"  no statistics: the run ended before the start-up transient did (t < {summary['transient_s']:g} s)")
+    for short in ("w1", "w2", "tau1", "tau2"):
+        s = stats.get(short)
+        if s:
+            extra = f", unevenness {s['unevenness']:.4f}" if "unevenness" in s else ""
+            click.echo(f"  {short:5s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
+    errs = summary.get("error_vs_reference") or {}
+    if errs:
+        click.echo("  error vs reference (RMS, relative): " + ", ".join(
+            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
+    eb = summary.get("energy_balance")
+    if eb:
+        click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("energy_balance_unavailable"):
+        click.echo(f"  energy balance: not computed: {summary['energy_balance_unavailable']}")
+    if summary.get("stream"):
+        s = summary["stream"]
+        click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "
+                   f"report); resident memory {s.get('resident_MB_after_first_chunk', 0):.0f} MB after the first "
+                   f"chunk, {s.get('resident_MB_at_end', 0):.0f} MB at the end, peak {s['peak_resident_MB']:.0f} MB")
+    click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
+
+
+@click.command("reference")
+@click.argument("names", nargs=-1, metavar="[NAMES]...")
+@click.option("--update", is_flag=True, help="Regenerate the traces (all, or NAMES) and write them.")
+def reference(names, update):
+    """Check that the committed reference traces (resources/reference/) are what the project
+    computes now; with --update, regenerate them and show what changed (per signal: max change).
+
+    NAMES are FMUs (LeverCoupling, EngineShaft, LoadShaft) or scenes; default: all.
+    Exit code without --update: 0 when every trace is current, 1 otherwise."""
+    stale = []
+    with user_errors():
+        for check in api.references(names, update):
+            if check.status == "unavailable":
+                click.echo(f"{check.name}: no reference ({check.reason})")
+                continue
+            if check.status == "current":
+                click.echo(f"{check.name}: current")
+                continue
+            stale.append(check.name)
+            if check.status == "updated":
+                click.echo(f"{check.name}: updated ({check.folder})")
+            else:
+                click.echo(f"{check.name}: NOT current (`lever reference --update {check.name}` regenerates it)")
+            for problem in check.problems:
+                click.echo(f"  {problem}")
+            for change in check.changes:
+                click.echo(f"  {change.signal:24s} max change {change.max_change:11.4g} "
+                           f"({100 * change.relative:.3g} % of its largest magnitude) at t = {change.at_time:.6g} s")
+    if stale and not update:
+        sys.exit(1)
+
+
+@click.command("validate")
+@click.argument("names", nargs=-1, metavar="[NAMES]...")
+@click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
+              help="Change a parameter of the run under test, not of the reference: component.parameter=value "
+                   "for a scene, parameter=value for an FMU (e.g. --set coupling.stiffness=800).")
+@click.option("--master", type=str, default=None, help="Master for a scene (default: the scene's).")
+@click.option("--step", type=float, default=None, help="Communication step for a scene [s] (default: the scene's).")
+@click.option("--result", "result_csv", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Validate this CSV from another tool's run of NAME instead of running it: a 'time' column and "
+                   "columns named like the reference's signals (component.variable for a scene, the FMU's "
+                   "variable names for an FMU; 'anything.variable' also matches an FMU's variable).")
+@click.option("--tolerance", type=click.Choice(["lever", "cross-check"]), default="lever", show_default=True,
+              help="The band's figures: 'lever' (1 % of each signal's range, one result step, at most 1 % of the "
+                   "samples outside) or the FMI cross-check's (10 %, 2 % of the span, at most 10 % outside).")
+@click.option("--measured", is_flag=True,
+              help="Model vs measurement instead (lever validate --measured GRADE_FILES...): NAMES are "
+                   "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
+                   "the model-vs-measurement check (as lever measured; default: the monograph's grades).")
+@click.option("--window", default=None, metavar="START:STOP",
+              help="Judge only this span of the reference [s] (e.g. 0:1 for a 1 s result, 2:10 for the steady "
+                   "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default results/validate/<NAME>).")
+def validate(names, assignments, master, step, result_csv, tolerance, window, measured, out):
+    """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
+    or a scene, with its master) and compare every recorded output with its committed
+    reference trace: RMS and max error, fraction of samples outside the tolerance band,
+    pass/fail per signal; a plot per failing signal.  NAMES default: every reference.
+
+    Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
+    2 on bad input."""
+    if measured:
+        print_measured([Path(n) for n in names], out or RESULTS / "validate" / "measured")
+        return
+    all_passed = True
+    try:
+        with user_errors():
+            for verdict in api.validate_each(names, overrides=list(assignments), master=master, step=step,
+                                             result=result_csv, tolerance=tolerance, window=window, out=out):
+                _print_validation(verdict.name, verdict.findings, verdict.result, verdict.out)
+                all_passed &= verdict.passed
+    except api.BuildError as error:
+        raise click.ClickException(f"building the FMUs failed: {error}") from None
+    sys.exit(0 if all_passed else 1)
+
+
+def _print_validation(name, findings, result, out: Path):
+    click.echo(f"{name}: {result.how}; tolerance {findings.tolerance.describe()}")
+    if findings.span:
+        click.echo(f"  judged: {findings.describe_span()}")
+    click.echo(f"  {'signal':24s} {'RMS error':>11s} {'max error':>11s} {'at t [s]':>9s} {'band +-':>10s} "
+               f"{'outside':>8s}  verdict")
+    for s in findings.signals:
+        click.echo(f"  {s.name:24s} {s.rms_error:11.4g} {s.max_error:11.4g} {s.max_error_time:9.4g} "
+                   f"{s.band_width:10.4g} {100 * s.fraction_outside:7.3g}%  {'pass' if s.passed else 'FAIL'}")
+    for problem in findings.problems:
+        click.echo(f"  problem: {problem}")
+    for note in findings.notes:
+        click.echo(f"  note: {note}")
+    verdict = "PASS" if findings.passed else "FAIL" + (
+        f" ({', '.join(findings.failed_signals)})" if findings.failed_signals else "")
+    span = f" over {findings.describe_span()}" if findings.span else ""
+    click.echo(f"  {name}: {verdict}{span}; written to {out}/")
+
+
+COMMANDS = (list_scenes, run, reference, validate)
