@@ -249,7 +249,8 @@ def masters_page() -> str:
     explained = {}
     for name, cls in MASTERS.items():
         doc = inspect.getdoc(cls) or ""
-        out.append(f"## {name}\n\n{cls.description}. Order {cls.order}"
+        summary = cls.description[:1].upper() + cls.description[1:]
+        out.append(f"## {name}\n\n{summary}. Order {cls.order}"
                    f"{', adaptive' if cls.adaptive else ''}; family {cls.__module__.rsplit('.', 1)[-1]} "
                    f"(`{cls.__module__}.{cls.__qualname__}`).\n\n")
         if cls.options:
