@@ -70,7 +70,7 @@ CHANGELOG = "docs/changelog.md"
 def test_the_issue_pattern_sees_each_spelling():
     for line in ["(iss" + "ue 17)", "Iss" + "ue #3 found", "iss" + "ue12"]:
         assert ISSUE_NUMBER.search(line), line
-    for line in ["an issue with the load", "tissue 17", "issues show"]:
+    for line in ["an issue with the load", "tiss" + "ue 17", "issues show"]:
         assert not ISSUE_NUMBER.search(line), line
 
 
