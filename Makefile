@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt 2>/dev/null | cksum | cut -d' ' -f1)
 
-.PHONY: run test fmus bench fuzz mutants clean distclean
+.PHONY: run test fmus docs bench fuzz mutants clean distclean
 
 # Quiet set-up: pip's -qq prints errors only (not setuptools' notes on how the editable
 # install works); a failed install still stops here with pip's error message.
@@ -23,6 +23,11 @@ fmus: $(STAMP)
 
 run: $(STAMP)
 	@$(BIN)/lever run
+
+# The reference pages (docs/reference/) regenerated from the code: the FMUs' model
+# descriptions, the click commands, the master registry, the scene format (build/docs.py).
+docs: $(STAMP)
+	$(BIN)/python build/docs.py
 
 # After its prerequisite test-dispatch (below), the oracles first - expected values that do
 # not come from the code under test, so a wrong model fails within minutes - then the rest.

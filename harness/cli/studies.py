@@ -50,8 +50,8 @@ def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
 @click.option("--min-steps", type=click.IntRange(16, 100000), default=500, show_default=True,
               help="Least communication steps per case.")
 @click.option("--no-refine", is_flag=True, help="Do not add cases at 0.9 and 1.1 times each predicted edge.")
-@click.option("--jobs", type=click.IntRange(1, 64), default=min(2, os.cpu_count() or 1), show_default=True,
-              help="Cases run in parallel (processes).")
+@click.option("--jobs", type=click.IntRange(1, 64), default=min(2, os.cpu_count() or 1),
+              show_default="2; 1 on a one-core machine", help="Cases run in parallel (processes).")
 @click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the case log.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/stability/<scene>).")
