@@ -85,11 +85,14 @@ def fmus_page(fmu_dir: Path) -> str:
         md = read_model_description(str(fmu))
         cs = md.coSimulation
         out.append(f"## {md.modelName}\n\n{md.description or ''}\n\n")
-        out.append(f"FMI {md.fmiVersion} co-simulation, model identifier `{cs.modelIdentifier}`; "
+        me = md.modelExchange
+        interfaces = "co-simulation" + (" and model exchange" if me else "")
+        out.append(f"FMI {md.fmiVersion} {interfaces}, model identifier `{cs.modelIdentifier}`; "
                    f"gets and sets its state: {'yes' if cs.canGetAndSetFMUstate else 'no'}, "
                    f"serializes it: {'yes' if cs.canSerializeFMUstate else 'no'}; "
-                   f"variable communication steps: {'yes' if cs.canHandleVariableCommunicationStepSize else 'no'}."
-                   "\n\n")
+                   f"variable communication steps: {'yes' if cs.canHandleVariableCommunicationStepSize else 'no'}; "
+                   f"directional derivatives: {'yes' if cs.providesDirectionalDerivative else 'no'}"
+                   + (f"; model exchange: {len(md.derivatives)} continuous states" if me else "") + ".\n\n")
         rows = []
         for v in md.modelVariables:
             rows.append([f"`{v.name}`", v.causality, v.variability, v.type, v.unit or "",
