@@ -43,11 +43,11 @@ bench: $(STAMP)
 	$(BIN)/lever bench kavz685
 	$(BIN)/lever bench kavz685_stiff
 
-# A longer, randomised property-based fuzz run (20x the CI examples; see tests/test_fuzz.py),
-# the physics and FMUs' fuzz and the command line's (tests/test_input_safety.py).
+# A longer, randomised property-based fuzz run (20x the CI examples; see tests/physics/test_fuzz.py),
+# the physics and FMUs' fuzz and the command line's (tests/cli/test_input_safety.py).
 fuzz: $(STAMP)
 	$(BIN)/lever build
-	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py tests/test_input_safety.py -k fuzz --hypothesis-show-statistics
+	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/physics/test_fuzz.py tests/cli/test_input_safety.py -k fuzz --hypothesis-show-statistics
 
 # Mutation testing (mutmut) of the physics and the masters with the tests that cover them:
 # tens of minutes, outside CI's budget and not part of `make test` (docs/testing.md).

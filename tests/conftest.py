@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
 FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 
 
@@ -18,21 +19,21 @@ FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource")
 #: marker ``numerics``; `make test` runs them again with numpy's dispatch limited to each
 #: lower level this CPU has (tests/numpy_dispatch.py, docs/testing.md).
 NUMERICS = (
-    "test_loads_and_shafts.py::test_random_load_draws_are_numpys_default_rng_bit_for_bit",
-    "test_loads_and_shafts.py::test_random_load_scalar_resistance_is_the_multisine",
-    "test_loads_and_shafts.py::test_random_load_stays_within_its_bound",
-    "test_kinematics.py::test_pairwise_sum_is_numpys_sum_bit_for_bit",
-    "test_kinematics.py::test_the_standard_library_fft_agrees_with_numpy_to_rounding",
-    "test_kinematics.py::test_standard_library_real_ffts_agree_with_numpy",
-    "test_kinematics.py::test_position_derivative_is_the_transfer_function",
-    "test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
-    "test_kinematics.py::test_the_reported_amplitude_fit_agrees_with_scipy",
-    "test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
-    "test_oracle_physics.py::test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables",
-    "test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
-    "test_validate.py::test_band_is_fmpys_with_the_cross_check_figures",
-    "test_validate.py::test_cross_check_fraction_is_fmpys_validate_result",
-    "test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+    "physics/test_loads_and_shafts.py::test_random_load_draws_are_numpys_default_rng_bit_for_bit",
+    "physics/test_loads_and_shafts.py::test_random_load_scalar_resistance_is_the_multisine",
+    "physics/test_loads_and_shafts.py::test_random_load_stays_within_its_bound",
+    "physics/test_kinematics.py::test_pairwise_sum_is_numpys_sum_bit_for_bit",
+    "physics/test_kinematics.py::test_the_standard_library_fft_agrees_with_numpy_to_rounding",
+    "physics/test_kinematics.py::test_standard_library_real_ffts_agree_with_numpy",
+    "physics/test_kinematics.py::test_position_derivative_is_the_transfer_function",
+    "physics/test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
+    "physics/test_kinematics.py::test_the_reported_amplitude_fit_agrees_with_scipy",
+    "physics/test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
+    "oracle/test_oracle_physics.py::test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables",
+    "oracle/test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
+    "judges/test_validate.py::test_band_is_fmpys_with_the_cross_check_figures",
+    "judges/test_validate.py::test_cross_check_fraction_is_fmpys_validate_result",
+    "judges/test_validate.py::test_lever_reference_reports_every_committed_trace_current",
 )
 
 
@@ -48,7 +49,7 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if f"{item.path.name}::{item.originalname}" in NUMERICS:
+        if f"{item.path.relative_to(TESTS).as_posix()}::{item.originalname}" in NUMERICS:
             item.add_marker(pytest.mark.numerics)
 
 

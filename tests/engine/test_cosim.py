@@ -16,7 +16,7 @@ from harness.judges import solution
 from harness.engine import run
 from harness.description import scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LEVER = REPO / ".venv" / "bin" / "lever"
 
 # Short, smooth runs: constant load, no start-up transient excluded from statistics.

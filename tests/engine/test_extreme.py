@@ -19,7 +19,7 @@ from harness.engine import run
 from harness.description import scene
 from lever.physics import catalogue
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LEVER = REPO / ".venv" / "bin" / "lever"
 
 

@@ -33,7 +33,7 @@ from harness.cli import main as cli
 from harness.engine.component import Component
 from lever.physics import catalogue
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 
