@@ -36,6 +36,21 @@ NUMERICS = (
     "judges/test_validate.py::test_lever_reference_reports_every_committed_trace_current",
 )
 
+#: Test files whose tests run the built FMUs from where the harness looks for them
+#: (harness.paths.FMUS) without asking for ``fmu_dir``: the FMUs are built, or found current,
+#: before each of their tests (``_built_fmus``).
+RUN_BUILT_FMUS = (
+    "engine/test_cosim.py",
+    "engine/test_extreme.py",
+    "engine/test_iteration_and_adaptive.py",
+    "engine/test_masters.py",
+    "fmus/test_dropin.py",
+    "formats/test_peers.py",
+    "judges/test_stability.py",
+    "oracle/test_oracle_closed_forms.py",
+    "studies/test_bench.py",
+)
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
@@ -76,6 +91,12 @@ def fmu_dir() -> Path:
     for name in FMU_NAMES:
         assert (FMUS / f"{name}.fmu").exists(), name
     return FMUS
+
+
+@pytest.fixture(autouse=True)
+def _built_fmus(request):
+    if request.path.relative_to(TESTS).as_posix() in RUN_BUILT_FMUS:
+        request.getfixturevalue("fmu_dir")
 
 
 # pythonfmu 0.7's native library can corrupt the heap while the process tears down

@@ -23,11 +23,6 @@ REPO = Path(__file__).resolve().parents[2]
 LEVER = REPO / ".venv" / "bin" / "lever"
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def load(name: str, *overrides: str) -> scene.Scene:
     return scene.load(name).with_overrides(list(overrides))
 

@@ -38,11 +38,6 @@ FMU_NAMES = ("LeverCoupling", "EngineShaft", "LoadShaft")
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def kavz(extra=()):
     return scene.load("kavz685").with_overrides(SHORT + list(extra))
 

@@ -24,11 +24,6 @@ I1, I2 = 0.128, 0.161            # the KAVZ-685 inertias (docs/physics.md#kavz-6
 I_RED = I1 * I2 / (I1 + I2)
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def kavz(*overrides: str) -> scene.Scene:
     return scene.load("kavz685").with_overrides(list(overrides))
 
