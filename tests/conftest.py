@@ -78,7 +78,7 @@ def pytest_report_header(config):
 
 def pytest_addoption(parser):
     parser.addoption("--accuracy-report", action="store_true", default=False,
-                     help="print each master's measured errors (tests/test_oracle_accuracy.py), to re-measure")
+                     help="print each master's measured errors (tests/oracle/test_oracle_accuracy.py), to re-measure")
 
 
 @pytest.fixture(scope="session")
