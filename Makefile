@@ -31,6 +31,12 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q -x -m oracle
 	$(BIN)/python -m pytest -q -m "not oracle"
 
+# The fast subset for the edit-test loop: every test not marked slow (tests/conftest.py
+# SLOW), tests of every folder among them; `make test` still runs everything.
+.PHONY: test-fast
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
+
 # The numerics-sensitive tests again with numpy's SIMD dispatch limited to each lower level
 # this CPU has, so that a test that holds at one dispatch level only fails here too
 # (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.

@@ -51,6 +51,14 @@ RUN_BUILT_FMUS = (
     "studies/test_bench.py",
 )
 
+#: What ``make test-fast`` (``pytest -m "not slow"``) leaves out: a test file, or a test of one
+#: (all its parameters), that took about a second or more in a whole run with ``--durations=0``
+#: on the shared two-core machine (docs/testing.md).  The rest keeps tests of every folder
+#: (tests/project/test_suite_lists.py).
+SLOW = (
+
+)
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
@@ -64,8 +72,11 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if f"{item.path.relative_to(TESTS).as_posix()}::{item.originalname}" in NUMERICS:
+        file = item.path.relative_to(TESTS).as_posix()
+        if f"{file}::{item.originalname}" in NUMERICS:
             item.add_marker(pytest.mark.numerics)
+        if file in SLOW or f"{file}::{item.originalname}" in SLOW:
+            item.add_marker(pytest.mark.slow)
 
 
 def pytest_report_header(config):
