@@ -51,10 +51,10 @@ RUN_BUILT_FMUS = (
     "studies/test_bench.py",
 )
 
-#: What ``make test-fast`` (``pytest -m "not slow"``) leaves out: a test file, or a test of one
-#: (all its parameters), that took about a second or more in a whole run with ``--durations=0``
-#: on the shared two-core machine (docs/testing.md).  The rest keeps tests of every folder
-#: (tests/project/test_suite_lists.py).
+#: What ``make test-fast`` (``pytest -m "not slow"``) leaves out: a test file, or a test of one,
+#: that took 0.5 s or more in total (all its parameters, set-up included) in a whole run with
+#: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
+#: every folder (tests/project/test_suite_lists.py).
 SLOW = (
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
