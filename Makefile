@@ -36,6 +36,12 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q -x -m oracle
 	$(BIN)/python -m pytest -q -m "not oracle"
 
+# The fast subset for the edit-test loop: every test not marked slow (tests/conftest.py
+# SLOW), tests of every folder among them; `make test` still runs everything.
+.PHONY: test-fast
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
+
 # The numerics-sensitive tests again with numpy's SIMD dispatch limited to each lower level
 # this CPU has, so that a test that holds at one dispatch level only fails here too
 # (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.
@@ -48,11 +54,11 @@ bench: $(STAMP)
 	$(BIN)/lever bench kavz685
 	$(BIN)/lever bench kavz685_stiff
 
-# A longer, randomised property-based fuzz run (20x the CI examples; see tests/test_fuzz.py),
-# the physics and FMUs' fuzz and the command line's (tests/test_input_safety.py).
+# A longer, randomised property-based fuzz run (20x the CI examples; see tests/physics/test_fuzz.py),
+# the physics and FMUs' fuzz and the command line's (tests/cli/test_input_safety.py).
 fuzz: $(STAMP)
 	$(BIN)/lever build
-	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/test_fuzz.py tests/test_input_safety.py -k fuzz --hypothesis-show-statistics
+	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/physics/test_fuzz.py tests/cli/test_input_safety.py -k fuzz --hypothesis-show-statistics
 
 # Mutation testing (mutmut) of the physics and the masters with the tests that cover them:
 # tens of minutes, outside CI's budget and not part of `make test` (docs/testing.md).

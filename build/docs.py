@@ -12,7 +12,7 @@ declares rather than written by hand:
   ``harness.description.scene``.
 
 The output depends on the code only (no time, no machine path, no version of a tool), so
-``tests/test_docs.py`` regenerates the pages into a temporary folder and fails when a
+``tests/project/test_docs.py`` regenerates the pages into a temporary folder and fails when a
 committed page differs.  ``--out`` writes elsewhere (default docs/reference).
 """
 from __future__ import annotations
@@ -355,7 +355,7 @@ PAGES = {"fmus.md": "the FMUs' variables", "cli.md": "the `lever` command line",
 
 def index_page() -> str:
     return (HEADER.format(source="build/docs.py") + "# Reference\n\nGenerated from the code by `make docs` "
-            "(`python build/docs.py`); `tests/test_docs.py` fails when a page here is stale.\n\n"
+            "(`python build/docs.py`); `tests/project/test_docs.py` fails when a page here is stale.\n\n"
             + table(["page", "what it lists"], [[f"[{name}]({name})", what] for name, what in PAGES.items()]))
 
 

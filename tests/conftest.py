@@ -10,7 +10,8 @@ import pytest
 
 from lever.fmus.registry import NAMES as FMU_NAMES
 
-REPO = Path(__file__).resolve().parents[1]
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
 
 
 #: Tests whose outcome could move with numpy's SIMD dispatch: they compare what went through
@@ -19,21 +20,213 @@ REPO = Path(__file__).resolve().parents[1]
 #: marker ``numerics``; `make test` runs them again with numpy's dispatch limited to each
 #: lower level this CPU has (tests/numpy_dispatch.py, docs/testing.md).
 NUMERICS = (
-    "test_loads_and_shafts.py::test_random_load_draws_are_numpys_default_rng_bit_for_bit",
-    "test_loads_and_shafts.py::test_random_load_scalar_resistance_is_the_multisine",
-    "test_loads_and_shafts.py::test_random_load_stays_within_its_bound",
-    "test_kinematics.py::test_pairwise_sum_is_numpys_sum_bit_for_bit",
-    "test_kinematics.py::test_the_standard_library_fft_agrees_with_numpy_to_rounding",
-    "test_kinematics.py::test_standard_library_real_ffts_agree_with_numpy",
-    "test_kinematics.py::test_position_derivative_is_the_transfer_function",
-    "test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
-    "test_kinematics.py::test_the_reported_amplitude_fit_agrees_with_scipy",
-    "test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
-    "test_oracle_physics.py::test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables",
-    "test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
-    "test_validate.py::test_band_is_fmpys_with_the_cross_check_figures",
-    "test_validate.py::test_cross_check_fraction_is_fmpys_validate_result",
-    "test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+    "physics/test_loads_and_shafts.py::test_random_load_draws_are_numpys_default_rng_bit_for_bit",
+    "physics/test_loads_and_shafts.py::test_random_load_scalar_resistance_is_the_multisine",
+    "physics/test_loads_and_shafts.py::test_random_load_stays_within_its_bound",
+    "physics/test_kinematics.py::test_pairwise_sum_is_numpys_sum_bit_for_bit",
+    "physics/test_kinematics.py::test_the_standard_library_fft_agrees_with_numpy_to_rounding",
+    "physics/test_kinematics.py::test_standard_library_real_ffts_agree_with_numpy",
+    "physics/test_kinematics.py::test_position_derivative_is_the_transfer_function",
+    "physics/test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
+    "physics/test_kinematics.py::test_the_reported_amplitude_fit_agrees_with_scipy",
+    "physics/test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
+    "oracle/test_oracle_physics.py::test_monotone_cubic_slopes_are_scipys_pchip_on_uneven_tables",
+    "oracle/test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
+    "judges/test_validate.py::test_band_is_fmpys_with_the_cross_check_figures",
+    "judges/test_validate.py::test_cross_check_fraction_is_fmpys_validate_result",
+    "judges/test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+)
+
+#: Test files whose tests run the built FMUs from where the harness looks for them
+#: (harness.paths.FMUS) without asking for ``fmu_dir``: the FMUs are built, or found current,
+#: before each of their tests (``_built_fmus``).
+RUN_BUILT_FMUS = (
+    "engine/test_cosim.py",
+    "engine/test_extreme.py",
+    "engine/test_iteration_and_adaptive.py",
+    "engine/test_masters.py",
+    "fmus/test_dropin.py",
+    "formats/test_peers.py",
+    "judges/test_stability.py",
+    "oracle/test_oracle_closed_forms.py",
+    "studies/test_bench.py",
+)
+
+#: What ``make test-fast`` (``pytest -m "not slow"``) leaves out: a test file, or a test of one,
+#: that took 0.5 s or more in total (all its parameters, set-up included) in a whole run with
+#: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
+#: every folder (tests/project/test_suite_lists.py).
+SLOW = (
+    "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
+    "cli/test_api.py::test_the_command_line_goes_through_the_api",
+    "cli/test_api.py::test_the_example_script_runs",
+    "cli/test_api.py::test_validate_judges_given_traces_over_a_window",
+    "cli/test_input_safety.py::test_a_bad_set_value_is_exit_2_and_a_sentence",
+    "cli/test_input_safety.py::test_a_value_of_the_wrong_type_in_a_scene_file_is_refused",
+    "cli/test_input_safety.py::test_an_unconnected_input_is_named_in_the_output_and_the_report",
+    "cli/test_input_safety.py::test_cli_fuzz_csvs",
+    "cli/test_input_safety.py::test_cli_fuzz_scene_files",
+    "cli/test_input_safety.py::test_cli_fuzz_set_values",
+    "cli/test_input_safety.py::test_ssp_units_are_converted_or_refused_never_ignored",
+    "cli/test_input_safety.py::test_validate_result_fails_a_trace_with_nan_inf_or_absurd_samples",
+    "engine/test_cosim.py::test_cli_bad_experiment_override_exits_2",
+    "engine/test_cosim.py::test_cli_bad_parameter_exits_2_with_a_message",
+    "engine/test_cosim.py::test_cli_failing_run_exits_1_and_keeps_the_rows_before_the_failure",
+    "engine/test_cosim.py::test_cli_no_reference_run",
+    "engine/test_cosim.py::test_cli_short_run_writes_the_results",
+    "engine/test_cosim.py::test_cli_user_errors_exit_2_without_traceback",
+    "engine/test_cosim.py::test_kavz685_default_scene_meets_its_accuracy_targets",
+    "engine/test_cosim.py::test_masters_converge_to_the_reference_at_first_order",
+    "engine/test_cosim.py::test_masters_step_the_same_system_differently",
+    "engine/test_cosim.py::test_reference_cache_returns_what_was_solved",
+    "engine/test_cosim.py::test_reference_energy_balance_is_exact",
+    "engine/test_cosim.py::test_reference_handles_a_tabulated_engine_characteristic",
+    "engine/test_cosim.py::test_same_seed_same_traces_other_seed_other_traces",
+    "engine/test_cosim.py::test_synchronous_steady_state_is_the_analytic_one",
+    "engine/test_determinism.py::test_same_scene_seed_and_master_give_identical_traces",
+    "engine/test_determinism.py::test_serialised_state_restored_mid_run_continues_bit_identically",
+    "engine/test_extreme.py::test_lever_run_exits_nonzero_with_the_diagnosis_and_the_traces",
+    "engine/test_extreme.py::test_load_above_stall_torque_reverses_the_drive_without_nan",
+    "engine/test_extreme.py::test_misalignment_at_the_edge_runs_and_matches_the_reference",
+    "engine/test_extreme.py::test_misalignment_beyond_the_edge_is_refused_by_name",
+    "engine/test_extreme.py::test_plateau_law_is_the_papers_and_the_run_crosses_both_plateaus",
+    "engine/test_extreme.py::test_step_load_on_a_tiny_inertia",
+    "engine/test_extreme.py::test_stiff_undamped_coupling_is_stable_with_the_trapezoidal_master",
+    "engine/test_extreme.py::test_time_varying_misalignment_follows_its_source_and_the_reference",
+    "engine/test_extreme.py::test_time_varying_misalignment_past_the_edge_stops_with_the_couplings_refusal",
+    "engine/test_interrupts.py::test_a_second_ctrl_c_while_writing_stops_and_names_what_is_missing",
+    "engine/test_interrupts.py::test_bench_interrupted_logs_the_case_and_resumes",
+    "engine/test_interrupts.py::test_ctrl_c_while_plotting_keeps_the_plots_drawn",
+    "engine/test_interrupts.py::test_ctrl_c_while_solving_the_reference_writes_the_run_without_it",
+    "engine/test_interrupts.py::test_ctrl_c_while_stepping_writes_the_part_computed",
+    "engine/test_interrupts.py::test_ctrl_c_while_writing_a_freewheel_run",
+    "engine/test_interrupts.py::test_ctrl_c_while_writing_the_summary_finishes_every_file",
+    "engine/test_interrupts.py::test_ctrl_c_while_writing_the_traces_finishes_them_and_names_the_plots_not_drawn",
+    "engine/test_interrupts.py::test_dask_sweep_interrupted_logs_the_case_under_way",
+    "engine/test_interrupts.py::test_run_interrupted_keeps_the_computed_part",
+    "engine/test_interrupts.py::test_run_interrupted_while_streaming_keeps_valid_traces",
+    "engine/test_interrupts.py::test_stability_interrupted_stops_its_workers_and_resumes",
+    "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
+    "engine/test_iteration_and_adaptive.py::test_adaptive_master_meets_its_tolerance_on_kavz",
+    "engine/test_iteration_and_adaptive.py::test_adaptive_trapezoidal_keeps_its_step_where_the_stiff_mode_is_unresolved",
+    "engine/test_iteration_and_adaptive.py::test_adaptive_trapezoidal_meets_its_tolerance_on_the_stiff_start",
+    "engine/test_iteration_and_adaptive.py::test_adaptive_trapezoidal_steps_grow_back_after_an_event",
+    "engine/test_iteration_and_adaptive.py::test_iterative_masters_reach_their_tolerance_every_step",
+    "engine/test_iteration_and_adaptive.py::test_trapezoidal_coupling_conserves_the_spring_energy",
+    "engine/test_masters.py::test_extrapolating_masters_send_the_polynomial_ahead_in_the_calls_of_jacobi",
+    "engine/test_masters.py::test_linear_extrapolation_beats_zero_order_hold_on_kavz",
+    "engine/test_masters.py::test_master_converges_at_its_promised_order",
+    "engine/test_own_fmu.py::test_an_fmu_by_path_relative_or_absolute",
+    "engine/test_own_fmu.py::test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged",
+    "engine/test_own_fmu.py::test_the_archive_runs_in_fmpy_ssp",
+    "engine/test_own_fmu.py::test_the_archive_runs_in_lever_run",
+    "engine/test_own_fmu.py::test_the_archive_runs_in_libcosim",
+    "engine/test_own_fmu.py::test_the_mixed_scene_runs_and_the_driveline_is_untouched",
+    "engine/test_traces.py::test_a_run_killed_part_way_leaves_valid_traces",
+    "engine/test_traces.py::test_streamed_run_equals_the_ordinary_run",
+    "fmus/test_badinputs.py::test_bad_input_is_refused_with_a_message",
+    "fmus/test_dropin.py::test_a_c_host_calling_from_several_threads_gets_the_same_numbers",
+    "fmus/test_dropin.py::test_a_c_host_in_a_bare_environment_runs_each_fmu",
+    "fmus/test_dropin.py::test_a_c_host_on_a_bare_system_cpython",
+    "fmus/test_dropin.py::test_a_c_host_on_the_oldest_supported_cpython",
+    "fmus/test_dropin.py::test_each_fmu_alone_in_libcosim_matches_our_harness_and_the_physics",
+    "fmus/test_dropin.py::test_every_file_uri_form_locates_the_resources",
+    "fmus/test_dropin.py::test_kavz_run_in_libcosim_passes_lever_validate",
+    "fmus/test_dropin.py::test_lever_check_finds_nothing_in_a_built_fmu",
+    "fmus/test_dropin.py::test_lever_engines_writes_the_table",
+    "fmus/test_dropin.py::test_lever_run_and_export_on_the_command_line",
+    "fmus/test_dropin.py::test_libcosim_connects_the_osp_ports_as_the_api_connects_the_variables",
+    "fmus/test_dropin.py::test_libcosim_from_ssp_is_libcosim_from_the_api",
+    "fmus/test_dropin.py::test_ssp_export_loads_back_as_the_same_scene_and_validates_in_fmpy",
+    "fmus/test_dropin.py::test_the_container_fmu_is_the_driveline_as_one_block",
+    "fmus/test_dropin.py::test_the_exported_scene_runs_in_another_engine_within_tolerance",
+    "fmus/test_dropin.py::test_the_host_process_ends_without_touching_freed_memory",
+    "fmus/test_dropin.py::test_two_instances_of_each_fmu_in_one_process_do_not_interfere",
+    "fmus/test_fmi_boundary_native.py::test_instantiate_free_cycles_do_not_accumulate_memory",
+    "fmus/test_fmus.py::test_a_serialized_state_continues_exactly_wherever_it_is_restored",
+    "fmus/test_fmus.py::test_every_fmu_validates_without_findings",
+    "fmus/test_fmus.py::test_the_model_runs_on_the_standard_library_alone",
+    "fmus/test_hosts.py::test_ecos_applies_the_exported_parameter_values",
+    "fmus/test_hosts.py::test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi",
+    "fmus/test_hosts.py::test_ecos_runs_each_fmu_alone_in_a_bare_environment",
+    "fmus/test_hosts.py::test_lever_hosts_writes_the_table",
+    "fmus/test_hosts.py::test_the_kavz685_scene_in_ecos_passes_lever_validate",
+    "fmus/test_library_use.py::test_validate_then_run_in_one_process_keeps_the_fmus_messages",
+    "fmus/test_resources.py",
+    "fmus/test_shim.py::test_shim_exports_the_cs_api_only",
+    "fmus/test_step_time.py::test_a_million_steps_of_each_hosts_clock_are_accepted",
+    "fmus/test_step_watchdog.py",
+    "formats/test_outputs.py::test_a_failed_run_leaves_no_reference_of_an_earlier_one",
+    "formats/test_outputs.py::test_a_lever_run_of_an_archive_leaves_no_unpacked_copy",
+    "formats/test_outputs.py::test_a_rerun_removes_what_it_does_not_write_and_the_report_names_what_exists",
+    "formats/test_outputs.py::test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder",
+    "formats/test_peers.py::test_all_peers_are_available",
+    "formats/test_peers.py::test_ecos_runs_the_scene_as_a_peer",
+    "formats/test_peers.py::test_libcosim_reports_a_refused_parameter_instead_of_crashing",
+    "formats/test_peers.py::test_libcosim_runs_our_fmus",
+    "formats/test_ssp_engines.py",
+    "judges/test_revolutions.py::test_the_plot_files_over_the_angle",
+    "judges/test_stability.py::test_advisor_warns_and_proposes_stable_choices",
+    "judges/test_stability.py::test_lever_run_prints_the_advice",
+    "judges/test_stability.py::test_lever_stability_runs_and_resumes",
+    "judges/test_stability.py::test_midpoint_edge_with_the_accelerations_of_the_current_torques",
+    "judges/test_stability.py::test_predicted_growth_rate_matches_the_real_run",
+    "judges/test_stability.py::test_stand_in_steps_like_the_real_fmus",
+    "judges/test_stability.py::test_stand_in_with_a_viscous_load_steps_like_the_real_fmus",
+    "judges/test_validate.py::test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback",
+    "judges/test_validate.py::test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span",
+    "judges/test_validate.py::test_every_fmu_and_scene_validates_against_its_reference",
+    "judges/test_validate.py::test_external_csv_of_a_scene_passes_and_a_lagging_one_fails",
+    "judges/test_validate.py::test_external_csv_of_an_fmu_with_prefixed_columns",
+    "judges/test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+    "judges/test_validate.py::test_measured_option_checks_a_grade",
+    "judges/test_validate.py::test_stiffer_coupling_in_the_scene_fails_the_deflection_only",
+    "oracle/test_oracle_accuracy.py::test_each_master_keeps_its_measured_accuracy_on_the_default_scene",
+    "oracle/test_oracle_closed_forms.py::test_fmu_cosimulation_grows_at_the_hand_derived_zoh_rate",
+    "oracle/test_oracle_closed_forms.py::test_stability_edges_table_of_the_docs",
+    "oracle/test_oracle_closed_forms.py::test_steady_speed_is_m1_minus_mm_over_k1",
+    "oracle/test_oracle_monograph.py::test_kinematic_amplitudes_of_model_md",
+    "oracle/test_oracle_monograph.py::test_scaled_mode_reproduces_the_printed_fig_3_7_amplitudes",
+    "oracle/test_oracle_ranges.py::test_each_bound_is_enforced_by_the_fmu",
+    "oracle/test_oracle_ranges.py::test_every_declared_bound_is_exactly_what_the_fmu_accepts",
+    "oracle/test_oracle_stability_models.py::test_the_advisor_analyses_a_tabulated_engine_with_its_hand_derived_slope",
+    "oracle/test_oracle_states.py",
+    "oracle/test_oracle_stop_time.py::test_a_fixed_step_run_ends_exactly_at_its_stop_time",
+    "oracle/test_oracle_stop_time.py::test_an_adaptive_run_ends_exactly_at_its_stop_time",
+    "physics/test_coupling_physics.py::test_deflection_rate_is_the_time_derivative_of_the_deflection",
+    "physics/test_coupling_physics.py::test_power_balance_along_a_trajectory",
+    "physics/test_coupling_physics.py::test_torques_are_minus_t_and_u12_t",
+    "physics/test_engine_lag.py::test_stand_in_with_a_lag_steps_like_the_real_fmus",
+    "physics/test_engine_lag.py::test_the_line_with_a_lag_steps_exactly_at_any_lag",
+    "physics/test_engine_lag.py::test_the_reference_and_the_fmus_agree_on_a_lagged_run_up",
+    "physics/test_freewheel.py::test_energy_balance_with_the_output_free_and_a_slipping_brake",
+    "physics/test_freewheel.py::test_fmu_validates_and_declares_units_ranges_and_a_shaft_port",
+    "physics/test_freewheel.py::test_scene_reproduces_the_stop_mode_test",
+    "physics/test_fuzz.py",
+    "physics/test_kinematics.py::test_kinematic_mode_is_the_renormalised_half_coupling_ratio",
+    "physics/test_kinematics.py::test_position_derivative_is_the_transfer_function",
+    "physics/test_kinematics.py::test_position_function_periodicity_and_origin",
+    "physics/test_kinematics.py::test_scaled_amplitude_is_the_reported_amplitude",
+    "physics/test_kinematics.py::test_unit_mean_and_periodicity_property",
+    "physics/test_kinematics.py::test_unit_mean_over_a_revolution",
+    "physics/test_loads_and_shafts.py::test_exact_engine_step_matches_fine_rk4_and_solve_ivp",
+    "physics/test_me_physics.py::test_coupling_partials_equal_central_differences",
+    "physics/test_me_physics.py::test_driveline_jacobian_equals_central_differences",
+    "physics/test_me_physics.py::test_me_derivatives_are_the_reference_right_hand_side_bit_for_bit",
+    "physics/test_me_physics.py::test_me_derivatives_with_a_misalignment_source_are_the_reference_right_hand_side",
+    "project/test_install.py",
+    "project/test_layers.py::test_no_import_circle_among_harness_modules",
+    "project/test_layers.py::test_no_private_name_is_used_outside_its_module",
+    "studies/test_bench.py::test_bench_records_failed_cases_goes_on_and_resumes",
+    "studies/test_bench.py::test_small_bench_writes_its_table_plot_and_claims",
+    "studies/test_bench.py::test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion",
+    "studies/test_latency.py::test_lever_run_latency_writes_the_table",
+    "studies/test_measured.py::test_a_new_measurement_is_checked_the_same_way",
+    "studies/test_measured.py::test_brake_reading_tends_to_the_transmitted_one_as_the_gauge_nears_the_coupling",
+    "studies/test_measured.py::test_lever_measured_reports_every_grade",
+    "studies/test_sweep.py::test_a_failed_cases_multi_line_error_stays_in_its_table_cell",
+    "studies/test_sweep.py::test_local_sweep_keeps_failures_and_resumes",
+    "studies/test_sweep.py::test_sweep_on_a_dask_cluster",
 )
 
 
@@ -49,8 +242,11 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if f"{item.path.name}::{item.originalname}" in NUMERICS:
+        file = item.path.relative_to(TESTS).as_posix()
+        if f"{file}::{item.originalname}" in NUMERICS:
             item.add_marker(pytest.mark.numerics)
+        if file in SLOW or f"{file}::{item.originalname}" in SLOW:
+            item.add_marker(pytest.mark.slow)
 
 
 def pytest_report_header(config):
@@ -63,7 +259,7 @@ def pytest_report_header(config):
 
 def pytest_addoption(parser):
     parser.addoption("--accuracy-report", action="store_true", default=False,
-                     help="print each master's measured errors (tests/test_oracle_accuracy.py), to re-measure")
+                     help="print each master's measured errors (tests/oracle/test_oracle_accuracy.py), to re-measure")
 
 
 @pytest.fixture(scope="session")
@@ -76,6 +272,12 @@ def fmu_dir() -> Path:
     for name in FMU_NAMES:
         assert (FMUS / f"{name}.fmu").exists(), name
     return FMUS
+
+
+@pytest.fixture(autouse=True)
+def _built_fmus(request):
+    if request.path.relative_to(TESTS).as_posix() in RUN_BUILT_FMUS:
+        request.getfixturevalue("fmu_dir")
 
 
 # pythonfmu 0.7's native library can corrupt the heap while the process tears down

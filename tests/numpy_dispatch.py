@@ -23,7 +23,8 @@ TESTS = Path(__file__).resolve().parent
 
 
 def numerics_names() -> tuple[str, ...]:
-    """``file::test`` of each numerics-sensitive test, from the one list in conftest.py."""
+    """``folder/file::test`` (relative to tests/) of each numerics-sensitive test, from the one
+    list in conftest.py."""
     spec = importlib.util.spec_from_file_location("lever_tests_conftest", TESTS / "conftest.py")
     conftest = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(conftest)

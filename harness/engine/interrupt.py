@@ -43,7 +43,7 @@ def phase(name: str):
     """The process enters the phase ``name`` of its work ("stepping", "reference",
     "writing traces.csv", "plotting speeds.png", ...).  Nothing happens here: the named
     points are where a test sends SIGINT to check what each phase leaves on disk
-    (``tests/test_interrupts.py`` replaces this function)."""
+    (``tests/engine/test_interrupts.py`` replaces this function)."""
 
 
 def requested() -> bool:

@@ -1,6 +1,6 @@
 """The bad-input corpus: values and call sequences an importer may throw at our FMUs,
 kept as data (a table of cases) and run through the FMI interface of the built FMUs
-with fmpy's ``FMU2Slave`` (``lever badinputs``, ``tests/test_badinputs.py``).
+with fmpy's ``FMU2Slave`` (``lever badinputs``, ``tests/fmus/test_badinputs.py``).
 
 Every case must end the same way: the offending call returns fmi2Error (or fmi2Discard),
 the FMU logs a message that names the variable (or the call) and what is allowed, a

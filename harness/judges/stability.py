@@ -44,7 +44,7 @@ iteration converges; it fails - spectral radius reported as infinite - where the
 contraction of ``u <- G(u)`` is too slow for its own tolerance and iteration limit
 (``fixed_point_limit``).  The map's columns are the images of unit perturbations of the
 augmented state (exact: the stand-in is linear); the common angle of both shafts, which
-nothing depends on (eigenvalue 1 for every master), is removed.  ``tests/test_stability.py``
+nothing depends on (eigenvalue 1 for every master), is removed.  ``tests/judges/test_stability.py``
 checks the stand-in against the masters on the real FMUs, step for step.
 """
 from __future__ import annotations

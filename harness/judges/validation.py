@@ -2,7 +2,7 @@
 
 The tolerance band is the FMI cross-check convention, as ``fmpy.util.validate_signal``
 implements it (reimplemented here, so that the band can be drawn and its figures set;
-``tests/test_validate.py`` checks that with the cross-check's figures it gives exactly
+``tests/judges/test_validate.py`` checks that with the cross-check's figures it gives exactly
 fmpy's band and outliers):
 
 1. the reference is resampled linearly onto ``num`` uniformly spaced points over its span;

@@ -40,21 +40,22 @@ REPO = Path(__file__).resolve().parents[2]
 GROUPS = {
     "physics": (["lever/physics/coupling.py", "lever/physics/elastic.py", "lever/physics/kinematics.py",
                  "lever/physics/engine.py", "lever/physics/shaft.py"], [],
-                ["tests/test_coupling_physics.py", "tests/test_kinematics.py", "tests/test_loads_and_shafts.py",
-                 "tests/test_oracle_monograph.py", "tests/test_oracle_physics.py",
-                 "tests/test_oracle_stability_models.py", "tests/test_oracle_states.py"]),
+                ["tests/physics/test_coupling_physics.py", "tests/physics/test_kinematics.py",
+                 "tests/physics/test_loads_and_shafts.py", "tests/oracle/test_oracle_monograph.py",
+                 "tests/oracle/test_oracle_physics.py", "tests/oracle/test_oracle_stability_models.py",
+                 "tests/oracle/test_oracle_states.py"]),
     "masters": (["harness/engine/masters/explicit.py"], ["harness.engine.masters.explicit.x_extrapolation_weights*",
                                                          "harness.engine.masters.explicit.x_lagrange_weights*"],
-                ["tests/test_masters.py", "tests/test_oracle_physics.py"]),
+                ["tests/engine/test_masters.py", "tests/oracle/test_oracle_physics.py"]),
     # The linear model the stability analysis and the advisor build from a scene (the
     # one-step maps are checked against the real masters by test_stability.py).
     "stability": (["harness/judges/stability.py"], ["harness.judges.stability.x_model_of*",
                                                     "harness.judges.stability.xǁTwoInertiaǁ*"],
-                  ["tests/test_stability.py", "tests/test_oracle_closed_forms.py",
-                   "tests/test_oracle_stability_models.py"]),
+                  ["tests/judges/test_stability.py", "tests/oracle/test_oracle_closed_forms.py",
+                   "tests/oracle/test_oracle_stability_models.py"]),
     # The shaft FMUs' adapter (saved states among it): reached only by tests that run the
     # slave classes in the test process (the built FMUs carry their own copy of the code).
-    "fmus": (["lever/fmus/shafts.py"], [], ["tests/test_oracle_states.py"]),
+    "fmus": (["lever/fmus/shafts.py"], [], ["tests/oracle/test_oracle_states.py"]),
 }
 
 
@@ -78,7 +79,7 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     shutil.copytree(REPO / "resources", target / "resources")
     shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
-    selected = [t for t in tests if (target / t).exists()]
+    selected = [found for t in tests for found in _located(target, t)]
     if not selected:    # an empty selection would make mutmut run the whole suite per mutant
         raise SystemExit(f"none of the group's tests {tests} exists in {tests_from / 'tests'}")
     also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
@@ -91,6 +92,14 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
         'pytest_add_cli_args = ["-p", "no:cacheprovider", "-x", "-q"]\n'
         "\n[tool.pytest.ini_options]\n"
         'testpaths = ["tests"]\n')
+
+
+def _located(target: Path, test: str) -> list[str]:
+    """``test`` (tests/<folder>/test_x.py) in the staged tests: at its path, or by its file name
+    when the tests come from a checkout whose files sit elsewhere (``--tests-from`` an older one)."""
+    if (target / test).exists():
+        return [test]
+    return [str(path.relative_to(target)) for path in sorted((target / "tests").rglob(Path(test).name))]
 
 
 def score(target: Path, names: list[str]) -> str:

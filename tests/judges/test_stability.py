@@ -20,11 +20,6 @@ KAVZ = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35)
 UNDAMPED = stability.TwoInertia(0.128, 0.161, 0.0, 1e5, 0.0)     # zeta = 0 exactly
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 # -- the model ------------------------------------------------------------------------------------
 
 def test_modal_quantities_of_the_two_inertia_model():

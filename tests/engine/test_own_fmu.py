@@ -1,5 +1,5 @@
 """Bring your own FMU: a scene mixes our FMUs with one that is not ours - TorqueMonitor,
-a minimal FMI 2.0 co-simulation FMU in C (tests/foreign_fmu), built here with the
+a minimal FMI 2.0 co-simulation FMU in C (tests/engine/foreign_fmu), built here with the
 machine's C compiler, with a Real input and Real, String and Enumeration outputs - named
 by path.  It runs in `lever run`, exports to SSP (the FMU copied in, a source the archive
 resolves, connectors only for what SSP readers take), and that archive runs in `lever

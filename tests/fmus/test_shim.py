@@ -31,7 +31,7 @@ from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions  # noqa: E402
 from harness.engine.component import add_log_listener, log_callbacks  # noqa: E402
 from pythonfmu.builder import FmuBuilder  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SHIM_DIR = REPO / "build" / "shim"
 
 FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = range(5)

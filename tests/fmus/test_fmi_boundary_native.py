@@ -5,7 +5,7 @@ ctypes prototypes, without fmpy's exception on a non-OK status) and checks that 
 is fmi2Error with a message, reaches nothing, and leaves the instance usable.
 
 The variable-level rules (which variable may be set when, the contents of a state) are the
-Python side's (tests/test_fmus.py, tests/test_badinputs.py)."""
+Python side's (tests/fmus/test_fmus.py, tests/fmus/test_badinputs.py)."""
 from __future__ import annotations
 
 import ctypes
@@ -264,7 +264,7 @@ def test_a_state_that_is_not_ours_is_refused(native):
 def test_a_serialized_state_carries_its_time_and_state_into_a_fresh_instance(native):
     """Instantiate, DeSerialize, SetFMUstate, DoStep - allowed by FMI 2.0 in a fresh instance:
     the native entry restores the communication time and the 'step complete' state with it.
-    (That the model continues exactly is the Python side's, tested in tests/test_fmus.py.)"""
+    (That the model continues exactly is the Python side's, tested in tests/fmus/test_fmus.py.)"""
     a = native("MisalignmentSource").start()
     for k in range(5):
         assert a.step(k * H) == OK

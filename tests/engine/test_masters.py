@@ -14,11 +14,6 @@ from harness.description import scene
 SMOOTH = ["experiment.stop=1", "experiment.transient=0", "load.load_kind=constant"]
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def test_extrapolation_weights_are_adams_bashforth_for_uniform_steps():
     assert np.allclose(masters.extrapolation_weights([0.9, 1.0], 1.0, 0.1)[0], [-0.5, 1.5])
     assert np.allclose(masters.extrapolation_weights([0.8, 0.9, 1.0], 1.0, 0.1)[0], np.array([5, -16, 23]) / 12)

@@ -8,7 +8,7 @@ reference (scipy DOP853 at 1e-10 on the unsplit equations, solved on the run's o
 points).  RMS errors relative to the scale (the mean transmitted torque, the mean speed),
 measured once with this file's computation on the 2-core machine (pinned numpy/scipy):
 
-    .venv/bin/python -m pytest -q tests/test_oracle_accuracy.py --accuracy-report
+    .venv/bin/python -m pytest -q tests/oracle/test_oracle_accuracy.py --accuracy-report
 
 Bounds: measured / 1.25 ... measured * 1.25.  Above: the master lost accuracy (a wrong
 weight, a lost order, a term of the physics changed; jacobi-midpoint's acceleration term

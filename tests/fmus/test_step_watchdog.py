@@ -3,7 +3,7 @@ parameter (the declared min and max, each with the others at their defaults) and
 from 1e-300 to 1e300, starting at t = 0 and at t = 1e6 s: a step too costly is refused by
 name, never ground through while the importer waits.
 
-The steps run in a child process (tests/step_watchdog_child.py) that reports each call
+The steps run in a child process (tests/fmus/step_watchdog_child.py) that reports each call
 before making it; a call that has not returned within ``BOUND`` seconds fails the test
 (the child is killed and resumed after the hanging case, so one run reports them all)."""
 from __future__ import annotations

@@ -19,11 +19,6 @@ from harness.engine.system import System
 STIFF_SHORT = ["experiment.stop=0.5", "experiment.transient=0.2"]
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def _tau_error(spec, result, after=None):
     ref = reference.solve(spec, result.times)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau1", "coupling.tau2"],

@@ -20,7 +20,7 @@ import pytest
 
 from lever.fmus.registry import NAMES as FMU_NAMES
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: what a clone has that a checkout in use adds: left out of the copy the wheel is built from
 GENERATED = {".venv", ".git", "results", ".setuptools-build", ".hypothesis", ".pytest_cache", "__pycache__",

@@ -14,11 +14,6 @@ from harness.description import scene
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def test_all_peers_are_available():
     assert {name: peers.available(name) for name in peers.PEERS} == {name: None for name in peers.PEERS}
 

@@ -5,7 +5,7 @@ one: a step that skips or repeats time is refused, the time stays and the instan
 The hosts' ways of counting time - ``t += h``, ``t0 + k*h`` (fmpy), an integer-nanosecond
 clock (libcosim) - are run over a million steps on the model itself (in this process: a
 native round trip per step would take minutes); the refusals at t = 1e6 s go through the
-built FMU's native entry (tests/test_fmi_boundary_native.py has the helper)."""
+built FMU's native entry (tests/fmus/test_fmi_boundary_native.py has the helper)."""
 from __future__ import annotations
 
 import math

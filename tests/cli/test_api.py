@@ -11,7 +11,7 @@ import pytest
 
 from harness import api
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing(fmu_dir, tmp_path, monkeypatch):

@@ -19,10 +19,6 @@ from harness.description import scene
 from lever.physics import catalogue
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
 
 def load(name: str, *overrides: str) -> scene.Scene:
     return scene.load(name).with_overrides(list(overrides))

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PHYSICS = ROOT / "docs" / "physics.md"
 
 # Written in pieces so that this file does not match itself.

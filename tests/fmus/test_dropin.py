@@ -32,13 +32,8 @@ from harness.engine.component import Component
 from lever.fmus.registry import NAMES as FMU_NAMES
 from lever.physics import catalogue
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
-
-
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
 
 
 def kavz(extra=()):

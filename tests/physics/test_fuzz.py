@@ -5,7 +5,7 @@ included): no exception escapes, outputs are finite, the coupling's energy balan
 The CI run is derandomised (the same examples every time) and takes a few thousand
 examples.  A longer, randomised run:
 
-    LEVER_FUZZ_SCALE=20 .venv/bin/python -m pytest tests/test_fuzz.py     (make fuzz)
+    LEVER_FUZZ_SCALE=20 .venv/bin/python -m pytest tests/physics/test_fuzz.py     (make fuzz)
 
 multiplies every test's example count by 20 and draws fresh examples (hypothesis prints
 the seed and the smallest failing example of any failure).

@@ -1,4 +1,4 @@
-"""Child process of tests/test_step_watchdog.py: steps each built FMU, for the extremes of
+"""Child process of tests/fmus/test_step_watchdog.py: steps each built FMU, for the extremes of
 every admitted real parameter, over step sizes from 1e-300 to 1e300, and prints one line
 before and one after every fmi2DoStep, so that the parent can tell which call hangs.
 

@@ -14,11 +14,6 @@ from harness.studies.bench import Case
 from harness.engine import masters
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 def _case(wall, error, engine="m"):
     c = Case(engine, "master", 1e-3, wall_times=[wall], errors={"tau_rms": error})
     return c

@@ -18,7 +18,7 @@ from lever.physics.numerics import SeededUniform
 from lever.physics.parameters import ParameterError
 from lever.physics.shaft import Shaft
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 HARMONICS = REPO / "resources" / "data" / "monograph" / "harmonics_driven.csv"
 
 STEPS = [(0.0, 1e-6), (0.3, 0.05), (1.7, 0.05), (2.345, 1e-6), (5.0, 1e-3), (2.0, 0.5), (9.99, 0.05)]

@@ -16,7 +16,7 @@ from harness.description import scene
 from harness.engine import traces
 from harness.engine.run import simulate
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def test_stream_keeps_every_kth_row_the_last_one_and_exact_integrals(tmp_path):

@@ -49,7 +49,7 @@ would give 441.38 and zeta 10.034 at 39 rad/s.
 Predicted edges.  With zeta small, zero-order hold (``jacobi``) holds the coupling torque
 c theta over the step while each shaft's own damping (K1 on the drive, b_v on the driven)
 acts continuously: per step the squared modulus of the mode's pair is
-(1 + s^2/2) from the held spring (tests/test_oracle_closed_forms.py, zoh_growth, zeta = 0)
+(1 + s^2/2) from the held spring (tests/oracle/test_oracle_closed_forms.py, zoh_growth, zeta = 0)
 times exp(-2 zeta s) from the damping, s = h omega_n: 1 - 2 zeta s + s^2/2 to first order, so
 the edge is s = 4 zeta (the docs' 0.103 at zeta = 0.0258, 0.0327 at 0.0082).  Stiff couplings
 with b = 0 (s1^2 / (2 sqrt(c I_red)) from above):

@@ -24,11 +24,6 @@ def kavz(*overrides: str) -> scene.Scene:
     return scene.load("kavz685").with_overrides(list(overrides))
 
 
-@pytest.fixture(autouse=True)
-def _fmus(fmu_dir):
-    return fmu_dir
-
-
 # --------------------------------------------------------------------------------------
 # Physics of the whole driveline
 # --------------------------------------------------------------------------------------

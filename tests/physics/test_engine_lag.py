@@ -115,7 +115,7 @@ def test_the_lag_is_a_fourth_state_of_the_linear_model():
 
 @pytest.mark.parametrize("name", ["jacobi", "jacobi-quadratic"])
 def test_stand_in_with_a_lag_steps_like_the_real_fmus(name):
-    """As tests/test_stability.py's test for the engine without lag: two runs of the FMUs
+    """As tests/judges/test_stability.py's test for the engine without lag: two runs of the FMUs
     from different starts differ by what the stand-in (lagged torque in its state) makes
     of the difference, step for step."""
     spec = scene.load("kavz685").with_overrides(
