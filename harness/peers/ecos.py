@@ -107,10 +107,14 @@ def run_ecos(target: Path, stop: float, step: float, cache: Path, env: dict | No
         options += ["--parameterSet", ssp.PARAMETER_SET]
     if record is not None:
         options += ["--csvConfig", str(_csv_config(record, target.with_name(target.stem + "_CsvConfig.xml")))]
-    done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop_given),
-                           "--stepSize", repr(step), "--logLevel", "info", *options],
-                          env=environment, cwd=target.parent,
-                          capture_output=True, text=True, timeout=timeout)
+    # ecos unpacks an SSP archive into the temporary directory and leaves it there (a copy of
+    # every FMU per run): it takes TMPDIR, so it gets a directory of ours, removed afterwards.
+    with tempfile.TemporaryDirectory(prefix="lever-ecos-") as scratch:
+        environment["TMPDIR"] = scratch
+        done = subprocess.run([str(program), "simulate", "--path", str(target), "--stopTime", repr(stop_given),
+                               "--stepSize", repr(step), "--logLevel", "info", *options],
+                              env=environment, cwd=target.parent,
+                              capture_output=True, text=True, timeout=timeout)
     log = done.stdout + done.stderr
     result = target.with_suffix(".csv")
     if done.returncode != 0 or not result.exists() or "[error]" in log:

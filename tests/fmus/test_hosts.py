@@ -90,6 +90,22 @@ def test_ecos_makes_every_step_to_the_stop_time(fmu_dir, ecos_bin, tmp_path):
     assert len(times) == 201 and times[-1] == pytest.approx(0.2, abs=1e-9), (len(times), times[-1])
 
 
+def test_ecos_leaves_nothing_in_the_temporary_directory(fmu_dir, ecos_bin, tmp_path, monkeypatch):
+    """ecos unpacks an SSP archive under TMPDIR and does not remove it: a run gets a
+    directory of ours for that, gone when it ends."""
+    import os
+
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setenv("TMPDIR", str(temporary))
+    monkeypatch.setattr("tempfile.tempdir", None)      # tempfile reads TMPDIR again
+    spec = scene.load("kavz685")
+    archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
+    env = {**ecos.BARE_ENVIRONMENT, "TMPDIR": str(temporary)}
+    ecos.run_ecos(archive, 0.01, 1e-3, ecos_bin, env=env, record=["load.w"])
+    assert os.listdir(temporary) == []
+
+
 def test_ecos_says_what_failed(tmp_path, ecos_bin):
     with pytest.raises(RuntimeError, match="ecos failed"):
         ecos.run_ecos(tmp_path / "missing.ssp", 0.1, 1e-3, ecos_bin)
