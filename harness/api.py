@@ -343,7 +343,7 @@ def fmu_start_values(model: str, assignments, fmu_dir: Path | None = None) -> di
     the ``_in.csv``), checked against the model description; InputError otherwise."""
     from fmpy import read_model_description
 
-    from harness.engine.system import converted
+    from harness.description.plan import converted
 
     variables = {v.name: v for v in read_model_description(str(Path(fmu_dir or FMUS) / f"{model}.fmu")).modelVariables}
     values = {}

@@ -13,7 +13,6 @@ import numpy as np
 
 from harness.description import plan as plans
 from harness.description import scene as scenes
-from harness.description.plan import recorded_names  # noqa: F401 - what the peers and studies record too
 from harness.engine import masters as master_family
 from harness.engine.component import FmuCallError
 from harness.engine.guard import Diverged, Guard

@@ -21,7 +21,6 @@ from typing import Any, Callable
 from harness.description import plan as plans
 from harness.description import scene as scenes
 # the formats layer (SSP, OSP, the container, the peers) finds these here too
-from harness.description.plan import converted, descriptions_for, fmu_path  # noqa: F401
 from harness.engine.component import Component, step_call
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS

@@ -26,8 +26,8 @@ from pathlib import Path
 from harness.description import scene as scenes
 from harness.description import typed_values
 from harness.paths import FMUS
-from harness.engine.system import (SceneInvalid, converted, dependency_order, descriptions_for, feedthrough_components,
-                                   fmu_path)
+from harness.description.plan import converted, descriptions_for, fmu_path
+from harness.engine.system import SceneInvalid, dependency_order, feedthrough_components
 
 
 def container_name(item: str) -> str:

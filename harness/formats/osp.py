@@ -13,7 +13,7 @@ from pathlib import Path
 from harness.description import scene as scenes
 from harness.description import typed_values
 from harness.paths import FMUS
-from harness.engine.system import converted, fmu_path
+from harness.description.plan import converted, fmu_path
 
 SYSTEM_NAMESPACE = "http://opensimulationplatform.com/MSMI/OSPSystemStructure"
 #: OSP-IS bond groups: kind -> (effort group, flow group)
@@ -114,7 +114,7 @@ def system_structure(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str:
     """The scene as an ``OspSystemStructure.xml`` (FMUs by absolute path, so the file may
     be written anywhere): parameters as initial values, connections flange to flange
     where the FMUs declare ports, variable to variable elsewhere."""
-    from harness.engine.system import descriptions_for
+    from harness.description.plan import descriptions_for
 
     descriptions = descriptions_for(scene, fmu_dir)
     root = ET.Element("OspSystemStructure", {"xmlns": SYSTEM_NAMESPACE, "version": "0.1"})

@@ -38,7 +38,8 @@ from harness.description import scene as scenes
 from harness.description import typed_values, units
 from harness.paths import FMUS
 from harness.engine.component import scratch_folder
-from harness.engine.system import SceneInvalid, converted, descriptions_for, fmu_path
+from harness.description.plan import converted, descriptions_for, fmu_path
+from harness.engine.system import SceneInvalid
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"

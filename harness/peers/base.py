@@ -19,7 +19,8 @@ import numpy as np
 
 from harness.description import scene as scenes
 from harness.engine.run import RunResult
-from harness.engine.system import SceneInvalid, dependency_order, descriptions_for, feedthrough_components, fmu_path
+from harness.description.plan import descriptions_for, fmu_path
+from harness.engine.system import SceneInvalid, dependency_order, feedthrough_components
 
 #: The environment of a host that is not a Python process and was set up for nothing: what an
 #: engine run as its own program gets by default (our FMUs find their Python themselves).

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.description.scene import step_problem
-from harness.engine.run import RunResult, recorded_names
+from harness.description.plan import recorded_names
+from harness.engine.run import RunResult
 from harness.paths import FMUS
 from harness.peers.base import Peer, SceneSetup, experiment_problem
 from harness.peers.container_fmu import ContainerFmu

@@ -34,7 +34,7 @@ def assert_user_error(result, *words):
 
 
 def findings_for(*assignments, scene="kavz685"):
-    from harness.engine.system import descriptions_for
+    from harness.description.plan import descriptions_for
     spec = scenes.load(scene).with_overrides(list(assignments))
     return scenes.validate(spec, descriptions_for(spec))
 
@@ -95,7 +95,7 @@ def test_a_connection_between_different_quantities_is_refused(lever, fmu_dir, tm
     path.write_text('extends = "kavz685"\nconnections = ["engine.phi -> coupling.phi1", "coupling.tau1 -> '
                     'coupling.w1", "load.phi -> coupling.phi2", "load.w -> coupling.w2", '
                     '"coupling.tau2 -> load.tau", "engine.w -> engine.tau"]\n')
-    from harness.engine.system import descriptions_for
+    from harness.description.plan import descriptions_for
     spec = scenes.load(path)
     findings = scenes.validate(spec, descriptions_for(spec))
     crossed = [f for f in findings if "different quantity" in f]
@@ -289,7 +289,7 @@ def _ssp_with(tmp_path, fmu_dir, edit) -> Path:
 
 def test_ssp_units_are_converted_or_refused_never_ignored(lever, fmu_dir, tmp_path):
     from harness.formats import ssp
-    from harness.engine.system import descriptions_for
+    from harness.description.plan import descriptions_for
     kilo = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('value="715.4" unit="N.m/rad"',
                                                             'value="0.7154" unit="kN.m/rad"'))
     spec = ssp.read_scene(kilo)

@@ -66,7 +66,7 @@ def test_a_boolean_parameter_is_written_as_xs_boolean_in_the_osp_file(monkeypatc
 
     md = SimpleNamespace(modelVariables=[_var("Boolean", name="enabled", causality="parameter", unit=None),
                                          _var("Enumeration", vr=8, name="mode", causality="parameter", unit=None)])
-    monkeypatch.setattr("harness.engine.system.descriptions_for", lambda scene, fmu_dir: {"Other": md})
+    monkeypatch.setattr("harness.description.plan.descriptions_for", lambda scene, fmu_dir: {"Other": md})
     monkeypatch.setattr(osp, "scene_groups", lambda scene, fmu_dir: {})
     monkeypatch.setattr(osp, "group_connections", lambda scene, groups: ([], []))
     spec = scenes.Scene(name="other", description="", components={"x": scenes.ComponentSpec("Other", {

@@ -8,7 +8,8 @@ import pytest
 
 from harness.engine import masters
 from harness.description import scene
-from harness.engine.run import recorded_names, simulate
+from harness.description.plan import recorded_names
+from harness.engine.run import simulate
 from harness.engine.system import System
 
 SHORT = ["experiment.stop=0.4", "experiment.transient=0.1"]

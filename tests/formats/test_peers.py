@@ -10,6 +10,7 @@ from harness import peers
 from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene
+from harness.description import plan
 
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
 
@@ -48,7 +49,7 @@ def test_ecos_runs_the_scene_as_a_peer(fmu_dir):
     # last one: it adds the step to its time and 0.001 added 299 times passes 0.299)
     assert len(result.times) == 301 and result.times[0] == 0.0 and result.times[-1] == pytest.approx(0.3, abs=1e-9)
     assert result.wall_time > 0.0
-    assert set(result.traces) == set(run.recorded_names(spec))
+    assert set(result.traces) == set(plan.recorded_names(spec))
     ref = reference.solve(spec, result.times)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["engine.w", "coupling.tau2"],
                        metrics.error_scales(spec, ref.traces))
@@ -72,7 +73,7 @@ def test_every_peer_keeps_the_contract(fmu_dir):
         assert result.ok, (name, result.failure)
         assert result.master == name or name.startswith("lever"), (name, result.master)
         assert set(peer.counters) <= set(result.counters), (name, result.counters)
-        assert set(result.traces) == set(run.recorded_names(spec)) and result.wall_time > 0, name
+        assert set(result.traces) == set(plan.recorded_names(spec)) and result.wall_time > 0, name
 
 
 def test_a_new_peer_needs_only_its_class_and_its_name_in_the_registry(monkeypatch, fmu_dir):

@@ -366,7 +366,7 @@ def test_the_committed_scene_leaves_no_input_unconnected_and_keeps_its_reference
     """The output shaft's input is held at 0 in the scene (no downstream element): no
     warning on every run, and the reference (which covers tau = 0) still solves it; a
     held torque other than 0 is no case the reference covers."""
-    from harness.engine.system import descriptions_for
+    from harness.description.plan import descriptions_for
 
     spec = scenes.load("freewheel_rectifier")
     assert scenes.unconnected_inputs(spec, descriptions_for(spec, fmu_dir)) == []

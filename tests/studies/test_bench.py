@@ -237,7 +237,8 @@ def test_the_floor_step_makes_the_calls_of_a_jacobi_step(fmu_dir):
     # The floor is what a master that does nothing else pays: the engine's own step of the
     # calls, the very calls a jacobi step makes (a step, a read and a set where a jacobi
     # step makes one), not a loop of the benchmark's own.
-    from harness.engine.run import recorded_names, simulate
+    from harness.description.plan import recorded_names
+    from harness.engine.run import simulate
     from harness.engine.system import System
     kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
     run = simulate(kavz, "jacobi", 1e-3, fmu_dir)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.engine import interrupt
-from harness.engine.run import recorded_names
+from harness.description.plan import recorded_names
 from harness.engine.component import FmuCallError
 from harness.engine.system import FloorPlan, System
 from harness.paths import FMUS
