@@ -93,7 +93,6 @@ def write_report(path, summary: dict):
                   f"**{eb['residual_relative']:.2g}** at the end and at most {eb['worst_residual_relative']:.2g} "
                   "at any recorded time."]
         lines += ["", "## Kinematics beside the source's description", ""] + _comparison(fw)
-    errs = summary.get("error_vs_reference")
     lines += reference_error_lines(summary, "Against the monolithic reference",
                                    "speeds relative to the rocker's peak speed, torques to the reference's peak torque")
     lines += ["", files_line(summary) + (" (kinematics.png: elements 1-4, as the paper's Figs. 8-11)"

@@ -16,7 +16,7 @@ import numpy as np
 
 from harness import peers
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.description import scene as scenes
 from harness.paths import FMUS, RESULTS
 from harness.engine.run import RunResult
@@ -52,7 +52,7 @@ def reference_errors(scene: scenes.Scene, result: RunResult) -> dict:
     times = result.times
     prepended = len(times) and times[0] > scene.experiment.start + 1e-12
     grid = np.concatenate([[scene.experiment.start], times]) if prepended else times
-    ref = reference.solve(scene, grid)
+    ref = monolithic.solve(scene, grid)
     keep = slice(1, None) if prepended else slice(None)
     ref_traces = {k: v[keep] for k, v in ref.traces.items()}
     return metrics.driveline_errors(scene, times, result.traces, ref.times[keep], ref_traces,

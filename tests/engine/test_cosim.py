@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.judges import solution
 from harness.engine import run
 from harness.description import scene
@@ -48,7 +48,7 @@ def test_synchronous_steady_state_is_the_analytic_one():
     assert traces["coupling.theta"][-1] == pytest.approx(Mm / 715.4, rel=1e-6)
     assert np.all(traces["coupling.U12"] == 1.0)
     # The reference reaches the same state.
-    ref = reference.solve(spec, result.times, use_cache=False)
+    ref = monolithic.solve(spec, result.times, use_cache=False)
     assert ref.traces["engine.w"][-1] == pytest.approx(w, rel=1e-6)
     assert ref.traces["coupling.tau2"][-1] == pytest.approx(Mm, rel=1e-6)
 
@@ -60,7 +60,7 @@ def test_synchronous_steady_state_is_the_analytic_one():
 def test_reference_energy_balance_is_exact(overrides):
     spec = kavz(*overrides)
     times = np.linspace(spec.experiment.start, spec.experiment.stop, 1001)
-    ref = reference.solve(spec, times, use_cache=False)
+    ref = monolithic.solve(spec, times, use_cache=False)
     assert np.array_equal(ref.times, times)
     balance = metrics.energy_balance(spec, ref.times, ref.traces, ref.traces["coupling.dissipated_energy"])
     assert balance["residual_relative"] < 1e-8, balance
@@ -79,7 +79,7 @@ def test_masters_converge_to_the_reference_at_first_order(master):
         result = run.simulate(spec, master=master, step=h)
         assert result.ok, result.failure
         assert result.master == master and result.step == h
-        ref = reference.solve(spec, result.times, use_cache=False)
+        ref = monolithic.solve(spec, result.times, use_cache=False)
         found = metrics.errors(result.times, result.traces, ref.times, ref.traces, names,
                                metrics.error_scales(spec, ref.traces))
         for name in names:
@@ -94,14 +94,14 @@ def test_reference_cache_returns_what_was_solved(tmp_path, monkeypatch):
     monkeypatch.setattr(solution, "CACHE", tmp_path)
     spec = kavz(*SHORT)
     times = np.linspace(0.0, 1.0, 201)
-    fresh = reference.solve(spec, times, use_cache=False)
-    first = reference.solve(spec, times)
-    second = reference.solve(spec, times)
+    fresh = monolithic.solve(spec, times, use_cache=False)
+    first = monolithic.solve(spec, times)
+    second = monolithic.solve(spec, times)
     assert second.info.get("cached") and not first.info.get("cached")
     for name, values in fresh.traces.items():
         assert np.array_equal(first.traces[name], values) and np.array_equal(second.traces[name], values), name
     # another scene, another entry
-    other = reference.solve(spec.with_overrides(["load.mean_torque=150"]), times)
+    other = monolithic.solve(spec.with_overrides(["load.mean_torque=150"]), times)
     assert not other.info.get("cached")
 
 
@@ -110,8 +110,8 @@ def test_reference_cache_distinguishes_time_grids_of_the_same_length(tmp_path, m
     spec = kavz(*SHORT)
     grid_a = np.array([0.0, 0.3, 0.6, 0.9, 1.0])   # what --step 0.3 records
     grid_b = np.linspace(0.0, 1.0, 5)              # what --step 0.25 records
-    reference.solve(spec, grid_a)
-    again = reference.solve(spec, grid_b)
+    monolithic.solve(spec, grid_a)
+    again = monolithic.solve(spec, grid_b)
     assert np.array_equal(again.times, grid_b)
 
 
@@ -165,7 +165,7 @@ def test_kavz685_default_scene_meets_its_accuracy_targets():
     assert result.ok, result.failure
     assert result.master == spec.experiment.master == "jacobi-quadratic"
     assert result.times[-1] == pytest.approx(spec.experiment.stop)
-    ref = reference.solve(spec, result.times, use_cache=False)
+    ref = monolithic.solve(spec, result.times, use_cache=False)
     found = metrics.errors(result.times, result.traces, ref.times, ref.traces, list(KAVZ_MEASURED),
                            metrics.error_scales(spec, ref.traces))
     scale = found["coupling.tau2"]["scale"]
@@ -295,7 +295,7 @@ def test_reference_handles_a_tabulated_engine_characteristic():
     spec = kavz("engine.characteristic=0:700; 30:300; 40:0", *SMOOTH)
     result = run.simulate(spec)
     assert result.ok, result.failure
-    ref = reference.solve(spec, result.times, use_cache=False)
+    ref = monolithic.solve(spec, result.times, use_cache=False)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau2"],
                        metrics.error_scales(spec, ref.traces))
     assert e["coupling.tau2"]["rms_relative"] < 5e-3

@@ -3,24 +3,21 @@ stability and energy behaviour on a stiff undamped coupling, and the adaptive ma
 tolerances."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from harness.engine import masters
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.engine import run
 from harness.description import scene
 from harness.engine.component import Component
-from harness.engine.system import System
 
 STIFF_SHORT = ["experiment.stop=0.5", "experiment.transient=0.2"]
 
 
 def _tau_error(spec, result, after=None):
-    ref = reference.solve(spec, result.times)
+    ref = monolithic.solve(spec, result.times)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["coupling.tau1", "coupling.tau2"],
                        metrics.error_scales(spec, ref.traces), after=after)
     return max(v["rms_relative"] for v in e.values())

@@ -23,7 +23,6 @@ from harness import compliance
 from harness.studies import engines
 from harness.formats import osp
 from harness import peers
-from harness.judges import monolithic as reference
 from harness.engine import run
 from harness.description import scene
 from harness.formats import ssp

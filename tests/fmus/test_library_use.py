@@ -23,19 +23,19 @@ _SCRIPT = textwrap.dedent("""
     import harness.engine.component        # the harness's logger first, as any run imports it
     from fmpy import simulate_fmu
     from harness.description import scene as scenes
-    from harness.formats import reference_traces as crosscheck
+    from harness.formats import reference_traces
     from harness.paths import FMUS
 
     REFUSED, TEXT = {refused!r}, {text!r}
 
     def validate():
-        reference = crosscheck.read("EngineShaft")
-        result = crosscheck.run_fmu("EngineShaft", reference)
+        reference = reference_traces.read("EngineShaft")
+        result = reference_traces.run_fmu("EngineShaft", reference)
         assert result.failure is None and len(result.times) == 1001, result.failure
 
     def run():
         spec = scenes.load("kavz685").with_overrides(REFUSED)
-        result = crosscheck.run_scene(spec)
+        result = reference_traces.run_scene(spec)
         assert result.failure and TEXT in result.failure, result.failure
 
     def fmpy_with_a_logger_of_its_own():

@@ -7,7 +7,7 @@ import pytest
 
 from harness.judges import metrics
 from harness import peers
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.engine import run
 from harness.description import scene
 from harness.description import plan
@@ -35,7 +35,7 @@ def test_libcosim_runs_our_fmus(name, tolerance, fmu_dir):
     result = peers.simulate_peer(name, spec, 5e-4, fmu_dir, tolerance=tolerance)
     assert result.ok, result.failure
     assert result.times[0] == 0.0 and result.times[-1] >= 0.3 - 1e-9
-    ref = reference.solve(spec, result.times)
+    ref = monolithic.solve(spec, result.times)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["engine.w", "coupling.tau2"],
                        metrics.error_scales(spec, ref.traces))
     assert e["engine.w"]["rms_relative"] < 1e-2 and e["coupling.tau2"]["rms_relative"] < 5e-2, e
@@ -50,7 +50,7 @@ def test_ecos_runs_the_scene_as_a_peer(fmu_dir):
     assert len(result.times) == 301 and result.times[0] == 0.0 and result.times[-1] == pytest.approx(0.3, abs=1e-9)
     assert result.wall_time > 0.0
     assert set(result.traces) == set(plan.recorded_names(spec))
-    ref = reference.solve(spec, result.times)
+    ref = monolithic.solve(spec, result.times)
     e = metrics.errors(result.times, result.traces, ref.times, ref.traces, ["engine.w", "coupling.tau2"],
                        metrics.error_scales(spec, ref.traces))
     assert e["engine.w"]["rms_relative"] < 1e-2 and e["coupling.tau2"]["rms_relative"] < 5e-2, e

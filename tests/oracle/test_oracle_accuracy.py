@@ -31,7 +31,7 @@ from harness.description import scene
 from harness.engine import run
 from harness.engine.masters.registry import MASTERS
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 
 pytestmark = pytest.mark.oracle
 
@@ -66,7 +66,7 @@ def references():
     def on(spec, times):
         key = (len(times), float(times[-1]), float(times[len(times) // 2]))
         if key not in solved:
-            solved[key] = reference.solve(spec, times, use_cache=False)
+            solved[key] = monolithic.solve(spec, times, use_cache=False)
         return solved[key]
 
     return on

@@ -13,7 +13,7 @@ import pytest
 from fmpy.validation import validate_fmu
 
 from harness.judges import rectifier as fw_harness
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.description import scene as scenes
 from harness.engine.component import Component, FmuCallError
 from harness.engine.run import simulate
@@ -305,7 +305,7 @@ def test_fmu_port_torque_drives_the_output_shaft(rectifier):
 def short_scene_run(fmu_dir, tmp_path_factory):
     spec = scenes.load("freewheel_rectifier").with_overrides([f"experiment.stop={1.1 * PERIOD}"])
     result = simulate(spec, fmu_dir=fmu_dir)
-    ref = reference.solve(spec, result.times, use_cache=False)
+    ref = monolithic.solve(spec, result.times, use_cache=False)
     return spec, result, ref, tmp_path_factory.mktemp("freewheel")
 
 
@@ -371,6 +371,6 @@ def test_the_committed_scene_leaves_no_input_unconnected_and_keeps_its_reference
     spec = scenes.load("freewheel_rectifier")
     assert scenes.unconnected_inputs(spec, descriptions_for(spec, fmu_dir)) == []
     short = spec.with_overrides(["experiment.stop=0.01"])
-    assert reference.solve(short, np.linspace(0.0, 0.01, 11), use_cache=False).traces
-    with pytest.raises(reference.ReferenceUnavailable, match="tau = 0"):
-        reference.solve(short.with_overrides(["rectifier.tau=5"]), np.linspace(0.0, 0.01, 11), use_cache=False)
+    assert monolithic.solve(short, np.linspace(0.0, 0.01, 11), use_cache=False).traces
+    with pytest.raises(monolithic.ReferenceUnavailable, match="tau = 0"):
+        monolithic.solve(short.with_overrides(["rectifier.tau=5"]), np.linspace(0.0, 0.01, 11), use_cache=False)

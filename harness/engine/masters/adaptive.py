@@ -7,7 +7,7 @@ from collections import deque
 
 from harness.engine.masters.base import MasterFailure
 from harness.engine.masters.explicit import ExtrapolatingJacobiMaster, lagrange_weights
-from harness.engine.masters.iterative import InterfaceJacobian, TrapezoidalNewtonMaster
+from harness.engine.masters.iterative import TrapezoidalNewtonMaster
 from harness.engine.system import System
 
 

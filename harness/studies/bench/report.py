@@ -198,7 +198,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
                               f"{b['slave_per_step_s'] * 1e6:.1f} us a step, so even a master that cost nothing "
                               f"would take {b['bound_without_master']:.2f}x the floor.")
             elif b.get("bound_unreliable"):
-                lines[-1] += f" The bound without a master is not shown: its split is unreliable."
+                lines[-1] += " The bound without a master is not shown: its split is unreliable."
     if c.get("overhead_above_floor"):
         lines += ["", "Harness overhead above the FMU-call floor (each run over the floor timed just before it, "
                   "at the case's step; median over steps; masters that make more FMI calls per step than the "

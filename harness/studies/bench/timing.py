@@ -14,7 +14,7 @@ from harness.description import scene as scenes
 from harness.engine import interrupt
 from harness.engine.run import RunResult, simulate
 from harness.judges import metrics
-from harness.judges import monolithic as reference
+from harness.judges import monolithic
 from harness.studies import trust
 from harness.studies.bench import floors
 from harness.studies.bench.schedule import Case
@@ -22,7 +22,7 @@ from harness.studies.bench.schedule import Case
 
 def _judge(case: Case, scene: scenes.Scene, times, traces):
     """Errors and energy residual of a finished run against the tight reference."""
-    ref = reference.solve(scene, times)
+    ref = monolithic.solve(scene, times)
     transient = scene.experiment.start + scene.experiment.transient
     for suffix, after in (("", None), ("_after_transient", transient)):
         e = metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
@@ -122,7 +122,7 @@ def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
     case.asked = repeats
     case.load.append(trust.load_average())
     for _ in range(repeats):
-        solution = reference.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
+        solution = monolithic.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
         interrupt.check()
         case.wall_times.append(solution.wall_time)
     case.load.append(trust.load_average())
@@ -153,7 +153,7 @@ def _rerun(scene: scenes.Scene, case: Case, fmu_dir: Path) -> float:
     if case.kind == "monolithic":
         e = scene.experiment
         times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / case.step)) + 1)
-        return reference.solve(scene, times, use_cache=False, rtol=case.tolerance,
+        return monolithic.solve(scene, times, use_cache=False, rtol=case.tolerance,
                                atol=case.tolerance * 1e-2).wall_time
     options = {"tolerance": case.tolerance} if case.tolerance is not None else {}
     result = simulate(scene, case.engine, case.step, fmu_dir, options=options)
