@@ -579,13 +579,13 @@ def stability_map(scene: str | Path | scenes.Scene = "kavz685", *, stiffnesses: 
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written``."""
-    from harness.description import kinds
+    from harness.description import scene_kinds
     from harness.studies import stabilitymap
 
     try:
         spec = load(scene)
         plan = stabilitymap.default_plan(spec, dense)
-    except (scenes.SceneError, kinds.NotADriveline, ValueError) as error:
+    except (scenes.SceneError, scene_kinds.NotADriveline, ValueError) as error:
         raise InputError(str(error)) from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]

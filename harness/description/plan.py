@@ -21,9 +21,9 @@ from typing import Any, Callable, Mapping
 
 from fmpy import read_model_description
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.paths import FMUS
 
@@ -50,10 +50,10 @@ def _build(make: Callable[[], Any]) -> Built:
 
 @dataclass(frozen=True)
 class DrivelinePlan:
-    """A driveline's physics as its FMUs build them (lever.physics.catalogue), for the
+    """A driveline's physics as its FMUs build them (lever.physics.component_parameters), for the
     monolithic reference and the divergence guard."""
-    roles: kinds.Driveline
-    #: ``kinds.DrivelinePhysics`` (engine shaft, coupling, load shaft)
+    roles: scene_kinds.Driveline
+    #: ``scene_kinds.DrivelinePhysics`` (engine shaft, coupling, load shaft)
     physics: Built
     #: ``((phi1, w1), (phi2, w2))``: the engine's and the load's start angle and speed
     start: Built
@@ -67,7 +67,7 @@ class DrivelinePlan:
 @dataclass(frozen=True)
 class RectifierPlan:
     """The freewheel rectifier of a scene: its component, its physics object and the values
-    the scene holds its inputs at (``kinds.rectifier_model``, ``kinds.rectifier_inputs``)."""
+    the scene holds its inputs at (``scene_kinds.rectifier_model``, ``scene_kinds.rectifier_inputs``)."""
     name: str
     model: Built
     inputs: Built
@@ -96,14 +96,14 @@ class Plan:
     unconnected: tuple[str, ...]
     #: the ``[limits]`` in rad/s, N*m and 1 (``Built``: a dict)
     limits: Built
-    #: ``kinds.kind_of``: "driveline", "rectifier" or None
+    #: ``scene_kinds.kind_of``: "driveline", "rectifier" or None
     kind: str | None
     #: the engine shaft, coupling and load shaft names (None: missing)
     roles: tuple[str | None, str | None, str | None]
     #: the driveline's physics, when the scene has the engine - coupling - load chain
     driveline: DrivelinePlan | None
     #: why the standard driveline's reference and energy balance do not describe the scene
-    #: (``kinds.driveline_problem``; None: they do, and ``driveline`` is set)
+    #: (``scene_kinds.driveline_problem``; None: they do, and ``driveline`` is set)
     driveline_problem: str | None
     #: the freewheel rectifier, when the scene has one
     rectifier: RectifierPlan | None
@@ -138,7 +138,7 @@ def recorded_names(scene: scenes.Scene) -> list[str]:
     """What a run records: the scene's list, plus what its features need."""
     names = list(scene.record)
     if "energy_balance" in scene.features:
-        names += [n for n in kinds.energy_variables(scene) if n not in names]
+        names += [n for n in scene_kinds.energy_variables(scene) if n not in names]
     return names
 
 
@@ -155,34 +155,34 @@ def check(scene: scenes.Scene, overrides=(), fmu_dir: Path = FMUS) -> Plan:
             variables = {v.name: v for v in descriptions[spec.fmu].modelVariables}
             start_values[name] = MappingProxyType(
                 {k: converted(variables[k], v, f"{name}.{k}") for k, v in spec.parameters.items()})
-    rectifier = kinds.rectifier(scene)
+    rectifier = scene_kinds.rectifier(scene)
     return Plan(scene=scene, name=scene.name, experiment=scene.experiment, fmu_dir=Path(fmu_dir),
                 paths=MappingProxyType({n: fmu_path(c.fmu, fmu_dir) for n, c in scene.components.items()}),
                 descriptions=MappingProxyType(descriptions), start_values=MappingProxyType(start_values),
                 connections=tuple(scene.connections), recorded=tuple(recorded_names(scene)), refusals=refusals,
                 unconnected=tuple(scenes.unconnected_inputs(scene, descriptions)),
                 limits=_build(lambda: MappingProxyType({k: float(scenes.quantity(v, f"limits.{k}"))
-                                                        for k, v in scene.limits.items()})), kind=kinds.kind_of(scene), roles=kinds.roles(scene),
-                driveline=_driveline(scene) if kinds.is_driveline(scene) else None,
-                driveline_problem=kinds.driveline_problem(scene),
-                rectifier=RectifierPlan(rectifier, _build(lambda: kinds.rectifier_model(scene)),
-                                        _build(lambda: kinds.rectifier_inputs(scene))) if rectifier else None)
+                                                        for k, v in scene.limits.items()})), kind=scene_kinds.kind_of(scene), roles=scene_kinds.roles(scene),
+                driveline=_driveline(scene) if scene_kinds.is_driveline(scene) else None,
+                driveline_problem=scene_kinds.driveline_problem(scene),
+                rectifier=RectifierPlan(rectifier, _build(lambda: scene_kinds.rectifier_model(scene)),
+                                        _build(lambda: scene_kinds.rectifier_inputs(scene))) if rectifier else None)
 
 
 def _driveline(scene: scenes.Scene) -> DrivelinePlan:
-    names = kinds.driveline(scene)
+    names = scene_kinds.driveline(scene)
     driver = next((c for c in scene.connections if c.target == names.coupling and c.input == "misalignment"), None)
 
     def start():
-        return (catalogue.start_state(kinds.parameters(scene, names.engine), catalogue.ENGINE),
-                catalogue.start_state(kinds.parameters(scene, names.load), catalogue.LOAD))
+        return (component_parameters.start_state(scene_kinds.parameters(scene, names.engine), component_parameters.ENGINE),
+                component_parameters.start_state(scene_kinds.parameters(scene, names.load), component_parameters.LOAD))
 
     def misalignment():
         if (driver is None or scenes.fmu_name(scene.components[driver.source].fmu) != "MisalignmentSource"
                 or driver.output != "misalignment"):
             return None
-        return (catalogue.misalignment_source_from(kinds.parameters(scene, driver.source)),
-                catalogue.coupling_family_from(kinds.parameters(scene, names.coupling)))
+        return (component_parameters.misalignment_source_from(scene_kinds.parameters(scene, driver.source)),
+                component_parameters.coupling_family_from(scene_kinds.parameters(scene, names.coupling)))
 
-    return DrivelinePlan(names, _build(lambda: kinds.physics(scene)), _build(start),
+    return DrivelinePlan(names, _build(lambda: scene_kinds.physics(scene)), _build(start),
                          driver, _build(misalignment))

@@ -19,7 +19,7 @@ _STIFFNESS = re.compile(r"stiffness[^:\n]*:\s*([0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0
 _NAME = re.compile(r"torque_(drive|driven)_(.+)\.csv$", re.IGNORECASE)
 
 
-#: the largest torque a table may hold [N*m]: the shafts' torque range (lever.physics.catalogue:
+#: the largest torque a table may hold [N*m]: the shafts' torque range (lever.physics.component_parameters:
 #: stall_torque, mean_torque in [-1e6, 1e6] N*m)
 TORQUE_LIMIT = 1e6
 

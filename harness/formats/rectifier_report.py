@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
 from harness.formats.run_files import files_line, reference_error_lines, save_figure, write_run
@@ -176,7 +176,7 @@ def plot(out, result, reference=None):
     plt = plotting.pyplot()
 
     scene = result.scene
-    name = kinds.rectifier(scene)
+    name = scene_kinds.rectifier(scene)
     t = result.times
     tr = {k.split(".", 1)[1]: v for k, v in result.traces.items() if k.startswith(name + ".")}
     title = f"{scene.name} - {result.master}, h = {result.step:g} s"
@@ -195,7 +195,7 @@ def plot(out, result, reference=None):
     fig.suptitle(f"{title}: kinematics of the elements (cf. the paper's Figs. 8-11)")
     save_figure(fig, out / "kinematics.png")
 
-    model = kinds.rectifier_model(scene)
+    model = scene_kinds.rectifier_model(scene)
     fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
     for ax, (var, gap, label) in zip(axes, (("msm_deflection", model.z1, "e = phi1 - phi2 (gap z1)"),
                                             ("torsion_twist", model.z2, "phi3 - phi4 (gap z2)"),

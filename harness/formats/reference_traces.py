@@ -271,13 +271,13 @@ def _held(t):
 def _coupling_exact(t):
     """The coupling has no state: its outputs are its algebraic function of the inputs it
     holds when they are read (``_held``)."""
-    from lever.physics import catalogue
+    from lever.physics import component_parameters
 
     u = _coupling_inputs(_held(t))
     out = {k: np.empty(len(t)) for k in ("tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power")}
     for alpha in _ALPHA:
         rows = u["misalignment"] == alpha
-        coupling = catalogue.coupling_from({}, misalignment=alpha)
+        coupling = component_parameters.coupling_from({}, misalignment=alpha)
         # the physics takes scalars: evaluated row by row
         results = [coupling.evaluate(*row) for row in zip(u["phi1"][rows], u["w1"][rows], u["phi2"][rows],
                                                            u["w2"][rows])]
@@ -306,11 +306,11 @@ def _shaft_exact(kind: str, spec):
     """The shaft's exact response to the continuous torque, with its defaults."""
     def exact(t):
         from scipy.integrate import solve_ivp
-        from lever.physics import catalogue
+        from lever.physics import component_parameters
 
-        declared = catalogue.ENGINE if kind == "engine" else catalogue.LOAD
-        shaft = (catalogue.engine_from if kind == "engine" else catalogue.load_from)({})
-        phi0, w0 = catalogue.start_state({}, declared)
+        declared = component_parameters.ENGINE if kind == "engine" else component_parameters.LOAD
+        shaft = (component_parameters.engine_from if kind == "engine" else component_parameters.load_from)({})
+        phi0, w0 = component_parameters.start_state({}, declared)
         torque = _torque_inputs(spec)
         mean, terms = spec
 
@@ -335,9 +335,9 @@ def _shaft_exact(kind: str, spec):
 # MisalignmentSource: its default table (15 deg held); it has no inputs.
 def _source_exact(t):
     """A time table's value and rate at ``t`` (the table the source is built with)."""
-    from lever.physics import catalogue
+    from lever.physics import component_parameters
 
-    table = catalogue.misalignment_source_from({})
+    table = component_parameters.misalignment_source_from({})
     return {"misalignment": np.array([table.value(x) for x in t]),
             "misalignment_rate": np.array([table.rate(x) for x in t])}
 

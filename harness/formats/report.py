@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
@@ -43,11 +43,11 @@ def summarize(result: RunResult, reference=None) -> dict:
                                                            scene.experiment.transient).get(full)
                                  for short, full in names.items() if full in result.traces}
     if "energy_balance" in scene.features and result.ok:
-        if (problem := kinds.driveline_problem(scene)) is None:
+        if (problem := scene_kinds.driveline_problem(scene)) is None:
             summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
         else:       # the balance books the driveline's works and energies: not this system's
             summary["energy_balance_unavailable"] = f"{problem}: the driveline's energy balance does not apply"
-    load_torque = f"{kinds.roles(scene)[2]}.load_torque"
+    load_torque = f"{scene_kinds.roles(scene)[2]}.load_torque"
     if len(result.times) > 1 and result.ok and names.get("w2") in result.traces:
         summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
                                                           names["w2"], scene.experiment.transient)
@@ -58,7 +58,7 @@ def summarize(result: RunResult, reference=None) -> dict:
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
                                     scene, reference.times, reference.traces,
-                                    reference.traces[f"{kinds.roles(scene)[1]}.dissipated_energy"])}
+                                    reference.traces[f"{scene_kinds.roles(scene)[1]}.dissipated_energy"])}
     return summary
 
 
@@ -138,7 +138,7 @@ def driven_angle(scene, times, traces) -> np.ndarray:
     """The driven shaft's angle [rad] along a run: its recorded ``phi``, else its speed
     integrated by trapezoids from 0 (at 1 ms steps a few 1e-7 rad of the revolution's
     2 pi: invisible in a plot)."""
-    _, _, load = kinds.roles(scene)
+    _, _, load = scene_kinds.roles(scene)
     if f"{load}.phi" in traces:
         return np.asarray(traces[f"{load}.phi"], dtype=float)
     w = np.asarray(traces[f"{load}.w"], dtype=float)
@@ -259,7 +259,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     the transient, the driven shaft's rotation frequency and the oscillograms' 415-425 rad/s
     band marked (docs/physics.md#the-oscillograms-spectrum)."""
     names = metrics.signals(result.scene)
-    load_torque = f"{kinds.roles(result.scene)[2]}.load_torque"
+    load_torque = f"{scene_kinds.roles(result.scene)[2]}.load_torque"
     transient = result.scene.experiment.transient
     t, tr = result.times, result.traces
     keep = t >= t[0] + transient
@@ -289,11 +289,11 @@ def write_driveline(out: Path, result: RunResult, reference=None) -> dict:
     return write_run(out, result, reference, summarize, write_report, plot)
 
 
-#: the run files' writer of each kind of scene (harness.description.kinds)
+#: the run files' writer of each kind of scene (harness.description.scene_kinds)
 WRITERS = {"driveline": write_driveline, "rectifier": rectifier_report.write}
 
 
 def write(out: Path, result: RunResult, reference=None) -> dict:
     """A run's files in ``out`` (see ``harness.formats.run_files.write_run``), written by
     its kind of scene's writer; a scene of no known kind gets the driveline's."""
-    return WRITERS.get(kinds.kind_of(result.scene), write_driveline)(out, result, reference)
+    return WRITERS.get(scene_kinds.kind_of(result.scene), write_driveline)(out, result, reference)

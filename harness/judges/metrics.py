@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.parameters import check_all
 
 from harness.description import scene as scenes
-from harness.description.kinds import parameters, roles
+from harness.description.scene_kinds import parameters, roles
 
 
 def _trapezoid(y, x):
@@ -25,8 +25,8 @@ def signals(scene: scenes.Scene) -> dict[str, str]:
 
 def inertias(scene: scenes.Scene) -> tuple[float, float]:
     engine, _, load = roles(scene)
-    return (check_all(catalogue.ENGINE, parameters(scene, engine))["inertia"],
-            check_all(catalogue.LOAD, parameters(scene, load))["inertia"])
+    return (check_all(component_parameters.ENGINE, parameters(scene, engine))["inertia"],
+            check_all(component_parameters.LOAD, parameters(scene, load))["inertia"])
 
 
 def energy_balance(scene: scenes.Scene, times: np.ndarray, traces: dict, dissipated: np.ndarray | None = None) -> dict:

@@ -1,5 +1,5 @@
 """The monolithic reference: the scene's equations solved unsplit with scipy at tight
-tolerance, from the same physics objects the FMUs use (``lever.physics.catalogue``), built
+tolerance, from the same physics objects the FMUs use (``lever.physics.component_parameters``), built
 where the scene is checked (``harness.description.plan``).
 
 For the driveline (engine shaft - lever coupling - load shaft) the state is
@@ -258,6 +258,6 @@ def _solve_stick_slip(couple, driveline, load, times, y0, method, rtol, atol, fi
     return np.concatenate(t_out), np.concatenate(y_out, axis=1), nfev
 
 
-#: the reference solver of each kind of scene (harness.description.kinds); the rectifier
+#: the reference solver of each kind of scene (harness.description.scene_kinds); the rectifier
 #: scene has its own event-aware one
 SOLVERS = {"driveline": solve_driveline, "rectifier": rectifier.solve_reference}

@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 
 from lever.physics.freewheel import EVENTS, N_EDGES
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_path, load_cached, store
@@ -233,8 +233,8 @@ def _kinematics(tr) -> dict:
 
 def analyse(scene: scenes.Scene, times: np.ndarray, traces: dict) -> dict:
     """Phases, gaps, energy balance and kinematics of a run (co-simulation or reference)."""
-    name = kinds.rectifier(scene)
-    model = kinds.rectifier_model(scene)
+    name = scene_kinds.rectifier(scene)
+    model = scene_kinds.rectifier_model(scene)
 
     def tr(var):
         return np.asarray(traces[f"{name}.{var}"])
@@ -279,7 +279,7 @@ COMPARED = ("half_coupling_speed", "driven_speed", "torsion_end_speed", "torsion
 def errors(scene: scenes.Scene, times, traces, reference) -> dict:
     """RMS and max error of the main signals against the reference, relative to the
     reference's peak magnitude of each (speeds to the rocker's peak speed)."""
-    name = kinds.rectifier(scene)
+    name = scene_kinds.rectifier(scene)
     n = min(len(times), len(reference.times))
     if n == 0 or not np.allclose(times[:n], reference.times[:n], rtol=0, atol=1e-9):
         return {}

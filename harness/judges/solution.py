@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
 from harness.description import scene as scenes
 from harness.engine.traces import replaced
@@ -46,7 +46,7 @@ def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, 
 
 
 def physics_hash() -> str:
-    root = Path(catalogue.__file__).parent
+    root = Path(component_parameters.__file__).parent
     digest = hashlib.sha256()
     for path in sorted(root.glob("*.py")):
         digest.update(path.read_bytes())

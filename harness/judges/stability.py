@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.friction import ResistingLoad
@@ -66,7 +66,7 @@ from lever.physics.load import ConstantLoad
 from lever.physics.parameters import check_all
 from lever.physics.shaft import LaggedShaft, Shaft
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.description import scene as scenes
 from harness.paths import FMUS
@@ -147,10 +147,10 @@ class TwoInertia:
 
 def model_of(scene: scenes.Scene) -> TwoInertia:
     """The two-inertia model of ``scene`` from its parameter values (defaults where the
-    scene sets none); ``kinds.NotADriveline`` for a scene of another kind."""
-    built = kinds.physics(scene)
-    drive = check_all(catalogue.ENGINE, kinds.parameters(scene, built.roles.engine))
-    driven = check_all(catalogue.LOAD, kinds.parameters(scene, built.roles.load))
+    scene sets none); ``scene_kinds.NotADriveline`` for a scene of another kind."""
+    built = scene_kinds.physics(scene)
+    drive = check_all(component_parameters.ENGINE, scene_kinds.parameters(scene, built.roles.engine))
+    driven = check_all(component_parameters.LOAD, scene_kinds.parameters(scene, built.roles.load))
     law = built.coupling
     characteristic = built.engine.external
     if isinstance(characteristic, LinearCharacteristic):
@@ -159,7 +159,7 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
         w, dw = drive["w_start"], max(1e-3, 1e-3 * abs(drive["w_start"]))
         slope = -(characteristic.torque(0.0, 0.0, w + dw) - characteristic.torque(0.0, 0.0, w - dw)) / (2 * dw)
     return TwoInertia(drive["inertia"], driven["inertia"], max(0.0, slope), law.law.nominal_stiffness,
-                      law.damping, engine_lag=drive["torque_lag"] if drive["torque_lag"] >= catalogue.SHORTEST_LAG
+                      law.damping, engine_lag=drive["torque_lag"] if drive["torque_lag"] >= component_parameters.SHORTEST_LAG
                       else 0.0, driven_slope=driven["viscous_damping"])
 
 
@@ -599,7 +599,7 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
         return None
     try:
         model = model_of(scene)
-    except kinds.NotADriveline:
+    except scene_kinds.NotADriveline:
         return None
     rho = spectral_radius(model, master, step, fmu_dir)
     if is_stable(rho):

@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.kinematics import TransferFunction
 from lever.physics.parameters import ParameterError
@@ -178,7 +178,7 @@ class Conditions:
     inertia_driven: float = 0.161
     support_deformation: float = 0.03
     hinge_deformation: float = 0.03
-    transfer_mode: str = catalogue.DEFAULT_TRANSFER_MODE
+    transfer_mode: str = component_parameters.DEFAULT_TRANSFER_MODE
 
     @classmethod
     def of(cls, drive: Table, driven: Table, stiffness: float | None = None) -> "Conditions":

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.description import scene as scenes
@@ -212,7 +212,7 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     """Run one case on the FMUs and classify it (an exception is the caller's to record)."""
     from harness.engine.run import simulate
 
-    coupling = kinds.driveline(scene).coupling
+    coupling = scene_kinds.driveline(scene).coupling
     spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
     model = stability.model_of(spec)
     step = model.step_for(case.h_omega)

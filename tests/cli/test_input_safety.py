@@ -17,7 +17,7 @@ import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from harness.description import kinds, units
+from harness.description import scene_kinds, units
 from harness.description import scene as scenes
 from harness.judges import validation
 
@@ -86,7 +86,7 @@ def test_degrees_convert_bit_for_bit_as_before():
 
 def test_a_kilo_unit_reaches_the_fmu_and_the_reference_alike(fmu_dir):
     spec = scenes.load("kavz685").with_overrides(["coupling.stiffness=0.8 kN.m/rad"])
-    assert kinds.parameters(spec, "coupling")["stiffness"] == 800.0
+    assert scene_kinds.parameters(spec, "coupling")["stiffness"] == 800.0
     assert findings_for("coupling.stiffness=0.8 kN.m/rad") == []
 
 
@@ -203,12 +203,12 @@ def test_an_unconnected_input_is_refused_where_the_scene_is_strict(lever, fmu_di
 
 def test_committed_driveline_scenes_are_the_driveline_and_others_say_why_not(tmp_path):
     for name in ("kavz685", "kavz685_misalignment_ramp", "kavz685_stiff", "measured_3826MVS"):
-        assert kinds.driveline_problem(scenes.load(name)) is None, name
+        assert scene_kinds.driveline_problem(scenes.load(name)) is None, name
     foreign = tmp_path / "foreign.toml"
     foreign.write_text('extends = "kavz685"\nconnections = ["engine.phi -> coupling.phi1", "engine.w -> coupling.w1", '
                        '"load.phi -> coupling.phi2", "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", '
                        '"coupling.tau2 -> gear.tau", "gear.w -> load.tau"]\n[components.gear]\nfmu = "LoadShaft"\n')
-    problem = kinds.driveline_problem(scenes.load(foreign))
+    problem = scene_kinds.driveline_problem(scenes.load(foreign))
     assert "2 LoadShaft components" in problem
     # a foreign FMU's torque in the torque path instead of the coupling's
     other = tmp_path / "other.toml"
@@ -216,10 +216,10 @@ def test_committed_driveline_scenes_are_the_driveline_and_others_say_why_not(tmp
                      '"load.phi -> coupling.phi2", "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", '
                      '"coupling.tau2 -> load.tau", "gear.mesh_torque -> engine.tau_rate"]\n'
                      '[components.gear]\nfmu = "FreewheelRectifier"\n')
-    assert "drives the driveline from FreewheelRectifier" in kinds.driveline_problem(scenes.load(other))
+    assert "drives the driveline from FreewheelRectifier" in scene_kinds.driveline_problem(scenes.load(other))
     # an input held at a value the scene sets (found by the CLI fuzz: the energy balance raised)
     held = scenes.load("kavz685").with_overrides(["engine.tau=0"])
-    assert "sets engine.tau, which the driveline's equations do not take" in kinds.driveline_problem(held)
+    assert "sets engine.tau, which the driveline's equations do not take" in scene_kinds.driveline_problem(held)
     from harness.judges import monolithic
     with pytest.raises(monolithic.ReferenceUnavailable, match="LoadShaft"):
         monolithic.solve(scenes.load(foreign), np.linspace(0, 0.1, 11), use_cache=False)
@@ -293,7 +293,7 @@ def test_ssp_units_are_converted_or_refused_never_ignored(lever, fmu_dir, tmp_pa
     kilo = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('value="715.4" unit="N.m/rad"',
                                                             'value="0.7154" unit="kN.m/rad"'))
     spec = ssp.read_scene(kilo)
-    assert kinds.parameters(spec, "coupling")["stiffness"] == pytest.approx(715.4, rel=1e-15)
+    assert scene_kinds.parameters(spec, "coupling")["stiffness"] == pytest.approx(715.4, rel=1e-15)
     assert scenes.validate(spec, descriptions_for(spec, spec.fmu_dir)) == []
     unknown = _ssp_with(tmp_path, fmu_dir, lambda t: t.replace('unit="N.m/rad"', 'unit="kN.blork/rad"'))
     assert_user_error(lever("run", unknown, "--out", tmp_path / "o"), "coupling.stiffness", "unknown unit")

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.engine.run import simulate
@@ -26,7 +26,7 @@ def test_the_plan_holds_the_findings_the_values_and_the_physics(fmu_dir):
     # "15 deg" in the scene, radians for the coupling FMU; a string parameter as it is
     assert plan.start_values["coupling"]["misalignment"] == pytest.approx(math.radians(15))
     assert plan.start_values["coupling"]["transfer_mode"] == "kinematic"
-    assert set(kinds.energy_variables(plan.scene)) <= set(plan.recorded)
+    assert set(scene_kinds.energy_variables(plan.scene)) <= set(plan.recorded)
     assert plan.driveline.physics.get().coupling.law.stiffness == pytest.approx(715.4)
     (_, w1), (_, w2) = plan.driveline.start.get()
     assert w1 == w2 == pytest.approx(39.0)         # both shafts at 39 rad/s at t = 0
@@ -71,8 +71,8 @@ def test_a_run_and_its_reference_go_from_the_plan_alone(name, fmu_dir, monkeypat
         raise AssertionError("the scene was checked again after its plan was made")
 
     for module, name_ in ((scenes, "validate"), (scenes, "unconnected_inputs"), (scenes, "quantity"),
-                          (kinds, "physics"), (kinds, "parameters"), (kinds, "driveline_problem"),
-                          (kinds, "rectifier_model"), (plans, "check")):
+                          (scene_kinds, "physics"), (scene_kinds, "parameters"), (scene_kinds, "driveline_problem"),
+                          (scene_kinds, "rectifier_model"), (plans, "check")):
         monkeypatch.setattr(module, name_, checked_again)
     result = simulate(plan)
     assert result.ok, result.failure

@@ -16,7 +16,7 @@ from harness.judges import monolithic
 from harness.engine import run
 from harness.description import plan as plans
 from harness.description import scene
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
 
 
@@ -68,7 +68,7 @@ def test_bounds_follow_the_stated_rule():
     found = {b.variable: b.limit for b in guard.bounds(plans.check(spec))}
     speed = 10 * 623.0 / 14.06                   # the no-load speed of the engine line is the largest
     assert found["engine.w"] == pytest.approx(speed) and found["load.w"] == pytest.approx(speed)
-    coupling = catalogue.coupling_from({"misalignment": math.radians(15)})
+    coupling = component_parameters.coupling_from({"misalignment": math.radians(15)})
     ratio = max(coupling.transfer.ratio(2 * math.pi * k / 1024) for k in range(1024))   # the physics takes scalars
     elastic = speed * math.sqrt(715.4 * (0.128 + 0.161))    # V(theta) = kinetic energy at the speed bound
     torque = ratio * (elastic + 6.35 * (1 + ratio) * speed)
@@ -177,7 +177,7 @@ def test_time_varying_misalignment_follows_its_source_and_the_reference():
     assert np.ptp(late) > 1.5 * np.ptp(early)                 # the ripple grows with alpha
     # The balance does not book the work the misalignment drive takes from the coupling,
     # int T_el * dPhi/dalpha * dalpha/dt: the residual is that work.
-    family = catalogue.coupling_family_from({"misalignment": math.radians(15)})
+    family = component_parameters.coupling_family_from({"misalignment": math.radians(15)})
     rate = np.gradient(alpha, t)
     power = [715.4 * theta * rate_ * (family.at(a + 1e-5).transfer.position(phi2)
                                       - family.at(a - 1e-5).transfer.position(phi2)) / 2e-5
@@ -201,10 +201,10 @@ def test_time_varying_misalignment_past_the_edge_stops_with_the_couplings_refusa
 
 
 def test_the_blended_transfer_function_is_exact_at_nodes_and_close_between():
-    family = catalogue.coupling_family_from({"misalignment": math.radians(15)})
+    family = component_parameters.coupling_family_from({"misalignment": math.radians(15)})
     phi = 2 * np.pi * np.arange(512) / 512
     for degrees in (15.0, 20.0, 20.025, 29.99):
-        exact = catalogue.coupling_from({"misalignment": math.radians(degrees)}).transfer
+        exact = component_parameters.coupling_from({"misalignment": math.radians(degrees)}).transfer
         blended = family.at(math.radians(degrees)).transfer
         exact_ratio, exact_position = np.vectorize(exact.ratio)(phi), np.vectorize(exact.position)(phi)
         blended_ratio, blended_position = np.vectorize(blended.ratio)(phi), np.vectorize(blended.position)(phi)
@@ -247,7 +247,7 @@ def test_step_load_on_a_tiny_inertia():
 
 def test_plateau_law_is_the_papers_and_the_run_crosses_both_plateaus():
     spec = scene.load("kavz685_plateaus")
-    law = catalogue.coupling_from({k: scene.quantity(v) for k, v in spec.components["coupling"].parameters.items()}).law
+    law = component_parameters.coupling_from({k: scene.quantity(v) for k, v in spec.components["coupling"].parameters.items()}).law
     theta = np.linspace(-0.5, 0.5, 2001)
     torque = np.vectorize(law.torque)(theta)     # the physics takes scalars
     assert np.all(np.diff(torque) >= 0) and np.allclose(np.vectorize(law.torque)(-theta), -torque)

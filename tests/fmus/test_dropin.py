@@ -29,7 +29,7 @@ from harness.formats import ssp
 from harness.studies import hosts
 from harness.engine.component import Component
 from lever.fmus.registry import NAMES as FMU_NAMES
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = ["experiment.stop=0.3", "experiment.transient=0.1"]
@@ -82,8 +82,8 @@ def test_lever_check_reports_what_a_careless_fmu_lacks(lever, fmu_dir, tmp_path)
 
 
 def test_documentation_is_generated_from_the_declarations(fmu_dir):
-    for fmu, declared in (("EngineShaft", catalogue.ENGINE), ("LoadShaft", catalogue.LOAD),
-                          ("LeverCoupling", catalogue.COUPLING)):
+    for fmu, declared in (("EngineShaft", component_parameters.ENGINE), ("LoadShaft", component_parameters.LOAD),
+                          ("LeverCoupling", component_parameters.COUPLING)):
         with zipfile.ZipFile(fmu_dir / f"{fmu}.fmu") as archive:
             page = archive.read("documentation/_main.html").decode()
             requirements = archive.read("resources/requirements.txt").decode()
@@ -171,16 +171,16 @@ ALONE = {
 def _physics_alone(fmu: str, parameters: dict, times: np.ndarray) -> dict[str, np.ndarray]:
     """Each FMU's outputs from the physics package in closed form."""
     if fmu == "EngineShaft":
-        p = catalogue.check_all(catalogue.ENGINE, {k: v for k, v in parameters.items() if k != "tau"})
+        p = component_parameters.check_all(component_parameters.ENGINE, {k: v for k, v in parameters.items() if k != "tau"})
         i, m1, k1, w0 = p["inertia"], p["stall_torque"], p["torque_slope"], p["w_start"]
         w_end = (m1 + parameters["tau"]) / k1          # I w' = M1 - K1 w + tau
         w = w_end + (w0 - w_end) * np.exp(-k1 * times / i)
         return {"engine.w": w}
     if fmu == "LoadShaft":
-        p = catalogue.check_all(catalogue.LOAD, {k: v for k, v in parameters.items() if k != "tau"})
+        p = component_parameters.check_all(component_parameters.LOAD, {k: v for k, v in parameters.items() if k != "tau"})
         return {"load.w": p["w_start"] + (parameters["tau"] - p["mean_torque"]) * times / p["inertia"]}
     inputs = {k: parameters[k] for k in ("phi1", "w1", "phi2", "w2")}
-    r = catalogue.coupling_from({"misalignment": parameters["misalignment"]}).evaluate(**inputs)
+    r = component_parameters.coupling_from({"misalignment": parameters["misalignment"]}).evaluate(**inputs)
     return {"coupling.tau1": np.full_like(times, r.tau1), "coupling.tau2": np.full_like(times, r.tau2)}
 
 

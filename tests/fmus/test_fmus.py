@@ -12,7 +12,7 @@ from fmpy.validation import validate_fmu
 
 from harness.engine.component import Component, FmuCallError
 from lever.fmus.registry import NAMES as FMU_NAMES
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
 DEG = math.pi / 180.0
 FMI2_ERROR = 3
@@ -95,9 +95,9 @@ def test_specific_units_and_ranges(fmu_dir):
         assert shaft["w"].unit == "rad/s" and shaft["phi"].unit == "rad" and shaft["a"].unit == "rad/s2"
         assert shaft["tau"].unit == "N.m" and shaft["tau"].causality == "input"
     assert engine["engine_work"].unit == "J" and load["load_work"].unit == "J"
-    # start values are the KAVZ-685 defaults of the catalogue
+    # start values are the KAVZ-685 defaults declared in lever.physics.component_parameters
     assert float(engine["inertia"].start) == 0.128 and float(load["inertia"].start) == 0.161
-    assert coupling["transfer_mode"].start == catalogue.DEFAULT_TRANSFER_MODE
+    assert coupling["transfer_mode"].start == component_parameters.DEFAULT_TRANSFER_MODE
 
 
 def test_output_dependencies(fmu_dir):
@@ -363,7 +363,7 @@ OUTPUTS = ["tau1", "tau2", "U12", "theta", "elastic_energy", "dissipated_power"]
 def test_coupling_fmu_outputs_equal_the_physics(components, case):
     params = COUPLING_CASES[case]
     c = start(components("LeverCoupling"), params)
-    physics = catalogue.coupling_from(params)
+    physics = component_parameters.coupling_from(params)
     for k, (phi1, w1, phi2, w2) in enumerate(INPUTS):
         c.set_parameters({"phi1": phi1, "w1": w1, "phi2": phi2, "w2": w2})
         r = physics.evaluate(phi1, w1, phi2, w2)
@@ -375,13 +375,13 @@ def test_coupling_fmu_outputs_equal_the_physics(components, case):
     if params.get("transfer_mode", "kinematic") != "synchronous" and not params.get("elastic_table"):
         alpha = 10 * DEG
         c.set_parameters({"misalignment": alpha})
-        r = catalogue.coupling_from(params, misalignment=alpha).evaluate(*INPUTS[-1])
+        r = component_parameters.coupling_from(params, misalignment=alpha).evaluate(*INPUTS[-1])
         assert c.get(["tau1", "tau2", "U12", "theta"]) == [r.tau1, r.tau2, r.ratio, r.deflection]
 
 
 def test_shaft_fmus_step_like_the_physics(components):
-    for fmu, make, params in (("EngineShaft", catalogue.engine_from, {"stall_torque": 600.0, "w_start": 30.0}),
-                              ("LoadShaft", catalogue.load_from, {"seed": 5, "w_start": 35.0})):
+    for fmu, make, params in (("EngineShaft", component_parameters.engine_from, {"stall_torque": 600.0, "w_start": 30.0}),
+                              ("LoadShaft", component_parameters.load_from, {"seed": 5, "w_start": 35.0})):
         c = start(components(fmu), params)
         shaft = make(params)
         phi, w = 0.0, params["w_start"]
@@ -396,7 +396,7 @@ def test_a_shafts_acceleration_follows_every_torque_written_between_steps(compon
     # from the external torque of this time and state, and equals the physics' exactly.
     params = {"seed": 5, "w_start": 35.0}
     c = start(components("LoadShaft"), params)
-    shaft = catalogue.load_from(params)
+    shaft = component_parameters.load_from(params)
     vrs, values = c.real_buffer(["tau"])
     c.do_step(0.0, 1e-3)
     phi, w = c.get(["phi", "w"])

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.judges import cvode, metrics, monolithic
 from harness.judges.solution import ReferenceUnavailable
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.driveline import Driveline
 
 
@@ -32,9 +32,9 @@ def test_cvode_agrees_with_the_dop853_reference(method):
 
 def stiff_driveline(name):
     scene = scenes.load(name)
-    built, roles = kinds.physics(scene), kinds.driveline(scene)
-    y0 = (list(catalogue.start_state(kinds.parameters(scene, roles.engine), catalogue.ENGINE))
-          + list(catalogue.start_state(kinds.parameters(scene, roles.load), catalogue.LOAD)) + [0.0] * 3)
+    built, roles = scene_kinds.physics(scene), scene_kinds.driveline(scene)
+    y0 = (list(component_parameters.start_state(scene_kinds.parameters(scene, roles.engine), component_parameters.ENGINE))
+          + list(component_parameters.start_state(scene_kinds.parameters(scene, roles.load), component_parameters.LOAD)) + [0.0] * 3)
     return scene, Driveline(built.engine, lambda t: built.coupling, built.load), y0
 
 

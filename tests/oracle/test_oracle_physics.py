@@ -8,7 +8,7 @@ import math
 import pytest
 
 from harness.engine import masters
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.elastic import LinearElasticLaw, TabulatedElasticLaw
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic, engine_characteristic
@@ -169,7 +169,7 @@ def test_coupling_family_is_exact_at_nodes_and_blends_linearly_between():
     at its start alpha the exact coupling of that alpha."""
     node = math.radians(0.05)
     start = math.radians(15.0)
-    family = catalogue.coupling_family_from({"misalignment": start})
+    family = component_parameters.coupling_family_from({"misalignment": start})
     assert family.at(start) is family.start
     phi = [0.0, 0.7, 2.0, 4.4]
 

@@ -1,13 +1,13 @@
 """Every parameter's allowed range, written out by hand, checked THROUGH THE BUILT FMUs.
 
-The table below is typed from the sources, not read from ``lever.physics.catalogue``:
+The table below is typed from the sources, not read from ``lever.physics.component_parameters``:
 the physical bounds (a spring's stiffness > 0, a damping or a load's random bound >= 0,
 a relative deformation >= 0, the misalignment's geometric working range alpha < 75 deg,
 the engine slope K1 >= 0...) from docs/physics.md (section given per row), the
 computability bounds from docs/decisions.md ("Ranges that keep every admitted value
 computable": inertias from 1e-6 kg*m2), and the engineering caps (1e9 N*m/rad...) from the
 FMUs' own documentation (``documentation/_main.html``, generated at build).  The
-bad-input corpus (harness/badinputs.py) is generated from the catalogue it tests, so a
+bad-input corpus (harness/badinputs.py) is generated from the parameter declarations it tests, so a
 range widened there (say, to admit a negative stiffness) widens the corpus with it; this
 table does not move.
 
@@ -297,7 +297,7 @@ def test_a_misalignment_input_is_judged_when_it_is_set(fmu_dir, mode, alpha):
         except FMICallException:
             assert mode == "kinematic", f"{alpha!r} refused in {mode} mode: {_log[instance][-1:]}"
             assert "'misalignment'" in _log[instance][-1] and "45 deg" in _log[instance][-1]
-            assert slave.fmu.getReal([vr])[0] == catalogue_default_misalignment()
+            assert slave.fmu.getReal([vr])[0] == default_misalignment()
         else:
             assert mode == "synchronous", f"{alpha!r} accepted in {mode} mode"
         assert all(math.isfinite(x) for x in slave.fmu.getReal(outputs))
@@ -307,6 +307,6 @@ def test_a_misalignment_input_is_judged_when_it_is_set(fmu_dir, mode, alpha):
         slave.close()
 
 
-def catalogue_default_misalignment() -> float:
-    from lever.physics.catalogue import MISALIGNMENT
+def default_misalignment() -> float:
+    from lever.physics.component_parameters import MISALIGNMENT
     return MISALIGNMENT.default

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, simpson
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.coupling import CouplingResult, LeverCoupling, build_coupling
 from lever.physics.elastic import LinearElasticLaw, TabulatedElasticLaw, elastic_law
 from lever.physics.kinematics import TransferFunction
@@ -138,15 +138,15 @@ def test_linear_law_numbers():
     assert r.dissipation == pytest.approx(5.0 * 4.0, rel=1e-14)
 
 
-def test_catalogue_builds_the_same_coupling():
+def test_component_parameters_build_the_same_coupling():
     values = {"stiffness": 715.4, "damping": 6.35, "support_deformation": 0.03, "hinge_deformation": 0.03,
               "transfer_mode": "kinematic", "misalignment": 15 * DEG}
-    a = catalogue.coupling_from(values)
+    a = component_parameters.coupling_from(values)
     b = build_coupling("kinematic", 15 * DEG, 0.03, 0.03, 715.4, 6.35)
     args = (12.3, 39.5, 12.1, 38.7)
     assert a.evaluate(*args) == b.evaluate(*args)
     # misalignment given separately overrides the value in the dict
-    c = catalogue.coupling_from(values, misalignment=25 * DEG)
+    c = component_parameters.coupling_from(values, misalignment=25 * DEG)
     assert c.transfer.alpha == 25 * DEG
 
 
@@ -247,7 +247,7 @@ def test_missing_origin_is_added_and_explicit_origin_accepted():
 def test_malformed_tables_are_refused_naming_the_parameter(table):
     for make in (lambda: TabulatedElasticLaw.parse(table), lambda: elastic_law(715.4, table),
                  lambda: build_coupling("kinematic", 15 * DEG, 0.03, 0.03, 715.4, 6.35, table),
-                 lambda: catalogue.coupling_from({"elastic_table": table})):
+                 lambda: component_parameters.coupling_from({"elastic_table": table})):
         with pytest.raises(ParameterError) as info:
             make()
         assert info.value.name == "elastic_table"

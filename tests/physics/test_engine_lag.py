@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.engine import NAMED_CHARACTERISTICS, LinearCharacteristic, TabulatedCharacteristic, \
     engine_characteristic
 from lever.physics.parameters import ParameterError
@@ -58,9 +58,9 @@ def test_expm_against_scipy():
 
 
 def test_which_engine_a_parameter_set_builds():
-    assert type(catalogue.engine_from({})) is Shaft                                   # no lag: today's code
-    assert type(catalogue.engine_from({"torque_lag": 0.5e-6})) is Shaft                # below 1 us: none
-    lagged = catalogue.engine_from({"torque_lag": 0.16, "torque_start": 12.0, "characteristic": "kavz685"})
+    assert type(component_parameters.engine_from({})) is Shaft                                   # no lag: today's code
+    assert type(component_parameters.engine_from({"torque_lag": 0.5e-6})) is Shaft                # below 1 us: none
+    lagged = component_parameters.engine_from({"torque_lag": 0.16, "torque_start": 12.0, "characteristic": "kavz685"})
     assert isinstance(lagged, LaggedShaft) and lagged.lag == 0.16 and lagged.torque_start == 12.0
     assert isinstance(lagged.external, TabulatedCharacteristic)
 

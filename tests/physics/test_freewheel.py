@@ -17,7 +17,7 @@ from harness.judges import monolithic
 from harness.description import scene as scenes
 from harness.engine.component import Component, FmuCallError
 from harness.engine.run import simulate
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.freewheel import contact_side
 from lever.physics.parameters import ParameterError
 
@@ -28,7 +28,7 @@ PERIOD = 2.0 * math.pi / 42.41
 
 
 def model(**overrides):
-    return catalogue.freewheel_from({**STOP, **overrides})
+    return component_parameters.freewheel_from({**STOP, **overrides})
 
 
 def run_physics(m, stop, h=1e-3, y=None, disc=None, fly=None):
@@ -54,7 +54,7 @@ def residual(tr):
 # --------------------------------------------------------------------------------------
 
 def test_defaults_are_the_papers_table_1():
-    p = {q.name: q.default for q in catalogue.FREEWHEEL}
+    p = {q.name: q.default for q in component_parameters.FREEWHEEL}
     assert (p["half_coupling_inertia"], p["driven_parts_inertia"], p["torsion_end_inertia"]) == (0.000202, 0.000217,
                                                                                                 0.0014)
     assert p["flywheel_inertia"] == 5.0 and p["input_speed"] == 42.41 and p["rocker_amplitude"] == 0.103
@@ -64,7 +64,7 @@ def test_defaults_are_the_papers_table_1():
     assert [math.degrees(p[k]) for k in ("msm_gap", "torsion_gap", "mesh_gap")] == pytest.approx([1.74, 2.23, 1.1])
     assert (p["msm_stiffness"], p["torsion_stiffness"], p["mesh_stiffness"]) == (10313.0, 3798.0, 25000.0)
     assert p["torsion_damping"] == p["mesh_damping"] == 0.3
-    for q in catalogue.FREEWHEEL:
+    for q in component_parameters.FREEWHEEL:
         assert q.description and (q.kind != "real" or q.unit), q.name
 
 
@@ -95,10 +95,10 @@ def test_gap_edges_and_ramp_torque():
 
 def test_bad_parameter_combination_is_refused_by_name():
     with pytest.raises(ParameterError) as info:
-        catalogue.freewheel_from({"ball_friction": 0.9, "ramp_angle": 1.2})
+        component_parameters.freewheel_from({"ball_friction": 0.9, "ramp_angle": 1.2})
     assert info.value.name == "ball_friction" and "ball_friction" in str(info.value)
     with pytest.raises(ParameterError) as info:
-        catalogue.freewheel_from({"torsion_gap": 2.0})
+        component_parameters.freewheel_from({"torsion_gap": 2.0})
     assert "torsion_gap" in str(info.value) and "[0, 1] rad" in str(info.value)
 
 
@@ -224,7 +224,7 @@ def test_fmu_validates_and_declares_units_ranges_and_a_shaft_port(fmu_dir):
     assert validate_fmu(str(path)) == []
     md = fmpy.read_model_description(str(path))
     variables = {v.name: v for v in md.modelVariables}
-    for q in catalogue.FREEWHEEL:
+    for q in component_parameters.FREEWHEEL:
         v = variables[q.name]
         assert v.causality == "parameter" and v.description
         assert v.min is not None and v.max is not None, q.name

@@ -1,5 +1,5 @@
 """Property-based fuzzing (hypothesis) of the physics and of the built FMUs over the
-whole allowed parameter space (every value the catalogue's ranges admit, the extremes
+whole allowed parameter space (every value the declared parameter ranges admit, the extremes
 included): no exception escapes, outputs are finite, the coupling's energy balance holds.
 
 The CI run is derandomised (the same examples every time) and takes a few thousand
@@ -21,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.parameters import Parameter, ParameterError
 from lever.physics.shaft import LaggedShaft
 
@@ -33,7 +33,7 @@ def fuzz(examples: int):
                     database=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
-# -- strategies: values the catalogue admits ------------------------------------------------------------
+# -- strategies: values the declared ranges admit ------------------------------------------------------------
 
 @st.composite
 def monotone_table(draw, first: float = 0.0, columns_positive=True):
@@ -82,7 +82,7 @@ def build(make, values):
         return built
     except ParameterError as error:
         event(f"refused: {error.name}")
-        assert error.name in {p.name for p in catalogue.COUPLING + catalogue.ENGINE + catalogue.LOAD} | {
+        assert error.name in {p.name for p in component_parameters.COUPLING + component_parameters.ENGINE + component_parameters.LOAD} | {
             "misalignment"}, error
         assert f"'{error.name}'" in str(error)
         return None
@@ -90,15 +90,15 @@ def build(make, values):
 
 angle = st.floats(-1e6, 1e6)
 speed = st.floats(-1e4, 1e4)
-misalignment = allowed(catalogue.MISALIGNMENT)
+misalignment = allowed(component_parameters.MISALIGNMENT)
 
 
 # -- physics -----------------------------------------------------------------------------------------------
 
 @fuzz(600)
-@given(parameters(catalogue.COUPLING), misalignment, angle, speed, angle, speed)
+@given(parameters(component_parameters.COUPLING), misalignment, angle, speed, angle, speed)
 def test_coupling_outputs_are_finite_and_its_power_balances(values, alpha, phi1, w1, phi2, w2):
-    coupling = build(lambda v: catalogue.coupling_from(v, misalignment=alpha), values)
+    coupling = build(lambda v: component_parameters.coupling_from(v, misalignment=alpha), values)
     if coupling is None:
         return
     r = coupling.evaluate(phi1, w1, phi2, w2)
@@ -131,7 +131,7 @@ def gauss(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @fuzz(300)
-@given(parameters(catalogue.COUPLING), misalignment, st.floats(-10, 10), st.floats(-100, 100), st.floats(-10, 10),
+@given(parameters(component_parameters.COUPLING), misalignment, st.floats(-10, 10), st.floats(-100, 100), st.floats(-10, 10),
        st.floats(-100, 100))
 def test_coupling_energy_balance_along_a_motion(values, alpha, a1, w1, a2, w2):
     """Over a motion phi1 = a1 + w1 t, phi2 = a2 + w2 t (t in [0, 0.05] s) the work the
@@ -140,7 +140,7 @@ def test_coupling_energy_balance_along_a_motion(values, alpha, a1, w1, a2, w2):
     to rounding: the position function's derivative is the transfer function
     (Phi' = U12), the potential's is the elastic law (V' = T_el), and along the motion
     work = dV + dissipation (linear law: a smooth integrand)."""
-    coupling = build(lambda v: catalogue.coupling_from(v, misalignment=alpha), values)
+    coupling = build(lambda v: component_parameters.coupling_from(v, misalignment=alpha), values)
     if coupling is None:
         return
     # Phi(phi2(T)) - Phi(phi2(0)) = int U12(phi2(t)) w2 dt
@@ -195,15 +195,15 @@ def _steps_stay_finite(make, values, t, phi, w, moves):
 
 
 @fuzz(800)
-@given(parameters(catalogue.ENGINE), st.floats(0.0, 1e3), angle, speed, st.lists(steps, min_size=1, max_size=3))
+@given(parameters(component_parameters.ENGINE), st.floats(0.0, 1e3), angle, speed, st.lists(steps, min_size=1, max_size=3))
 def test_engine_shaft_steps_stay_finite(values, t, phi, w, moves):
-    _steps_stay_finite(catalogue.engine_from, values, t, phi, w, moves)
+    _steps_stay_finite(component_parameters.engine_from, values, t, phi, w, moves)
 
 
 @fuzz(800)
-@given(parameters(catalogue.LOAD), st.floats(0.0, 1e3), angle, speed, st.lists(steps, min_size=1, max_size=3))
+@given(parameters(component_parameters.LOAD), st.floats(0.0, 1e3), angle, speed, st.lists(steps, min_size=1, max_size=3))
 def test_load_shaft_steps_stay_finite(values, t, phi, w, moves):
-    _steps_stay_finite(catalogue.load_from, values, t, phi, w, moves)
+    _steps_stay_finite(component_parameters.load_from, values, t, phi, w, moves)
 
 
 # -- the FMUs, through FMI -----------------------------------------------------------------------------------
@@ -266,8 +266,8 @@ def _initialised(instance, values) -> bool:
 
 
 @pytest.mark.parametrize("fmu,declared,inputs", [
-    ("EngineShaft", catalogue.ENGINE, ("tau", "tau_rate", "tau_accel")),
-    ("LoadShaft", catalogue.LOAD, ("tau", "tau_rate", "tau_accel")),
+    ("EngineShaft", component_parameters.ENGINE, ("tau", "tau_rate", "tau_accel")),
+    ("LoadShaft", component_parameters.LOAD, ("tau", "tau_rate", "tau_accel")),
 ])
 @fuzz(150)
 @given(data=st.data())
@@ -293,7 +293,7 @@ def test_shaft_fmus_never_fail_fatally_and_report_finite_outputs(instances, fmu,
 
 
 @fuzz(100)
-@given(parameters(catalogue.COUPLING), misalignment,
+@given(parameters(component_parameters.COUPLING), misalignment,
        st.lists(st.tuples(*[st.floats(-1e12, 1e12)] * 4), min_size=1, max_size=3))
 def test_coupling_fmu_never_fails_fatally_and_reports_finite_outputs(instances, values, alpha, inputs):
     instance = instances["LeverCoupling"]

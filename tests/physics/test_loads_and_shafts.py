@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, solve_ivp
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
 from lever.physics.load import (ConstantLoad, FourierLoad, RandomLoad, TabulatedLoad, load_model,
                                 read_harmonics)
@@ -427,20 +427,20 @@ def test_constant_load_work_is_force_times_angle():
     assert work == pytest.approx(-107.5 * (phi1 - 1.0), rel=1e-10)
 
 
-def test_catalogue_shafts_use_the_scene_parameters():
-    engine = catalogue.engine_from({"inertia": 0.2, "stall_torque": 500.0, "torque_slope": 10.0})
+def test_component_parameter_shafts_use_the_scene_parameters():
+    engine = component_parameters.engine_from({"inertia": 0.2, "stall_torque": 500.0, "torque_slope": 10.0})
     assert engine.inertia == 0.2
     assert engine.external.torque(0.0, 0.0, 30.0) == pytest.approx(200.0)
-    load = catalogue.load_from({"load_kind": "constant", "mean_torque": 55.0})
+    load = component_parameters.load_from({"load_kind": "constant", "mean_torque": 55.0})
     assert load.inertia == 0.161 and load.external.torque(0.0, 0.0, 0.0) == -55.0
     with pytest.raises(ParameterError) as info:
-        catalogue.engine_from({"inertia": -1.0})
+        component_parameters.engine_from({"inertia": -1.0})
     assert info.value.name == "inertia"
     with pytest.raises(ParameterError) as info:
-        catalogue.load_from({"load_kind": "sometimes"})
+        component_parameters.load_from({"load_kind": "sometimes"})
     assert info.value.name == "load_kind"
     with pytest.raises(ParameterError):
-        catalogue.load_from({"no_such_parameter": 1.0})
+        component_parameters.load_from({"no_such_parameter": 1.0})
 
 
 # --------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import pytest
 
 from harness.description import scene as scenes
 from harness.judges import monolithic
-from lever.physics import catalogue, driveline
+from lever.physics import component_parameters, driveline
 from lever.physics.driveline import HELD, Driveline
 from lever.physics.engine import NAMED_CHARACTERISTICS, TabulatedCharacteristic
 from lever.physics.freewheel import EVENTS as FREEWHEEL_EVENTS, FREE, STICK
@@ -132,8 +132,8 @@ def flange_draw(rng):
 
 def coupling_models():
     for name, params in COUPLINGS.items():
-        yield name, CouplingME(catalogue.coupling_from(params))
-    yield "family", CouplingME(catalogue.coupling_family_from(COUPLINGS["table-scaled"]))
+        yield name, CouplingME(component_parameters.coupling_from(params))
+    yield "family", CouplingME(component_parameters.coupling_family_from(COUPLINGS["table-scaled"]))
 
 
 def coupling_draw(model, rng, knots=()):
@@ -188,9 +188,9 @@ def me_driveline_derivatives(engine_me, coupling_me, load_me, t, y, alpha=None):
 @pytest.mark.parametrize("load", LOADS)
 def test_me_derivatives_are_the_reference_right_hand_side_bit_for_bit(engine, load):
     rng = random.Random(f"{engine}/{load}")
-    shaft1, shaft2 = catalogue.engine_from(ENGINES[engine]), catalogue.load_from(LOADS[load])
+    shaft1, shaft2 = component_parameters.engine_from(ENGINES[engine]), component_parameters.load_from(LOADS[load])
     for coupling_name, params in COUPLINGS.items():
-        coupling = catalogue.coupling_from(params)
+        coupling = component_parameters.coupling_from(params)
         reference = Driveline(shaft1, lambda t: coupling, shaft2)
         e_me, c_me, l_me = EngineME(shaft1), CouplingME(coupling), LoadME(shaft2)
         for _ in range(20):
@@ -211,9 +211,9 @@ def test_me_derivatives_are_the_reference_right_hand_side_bit_for_bit(engine, lo
 
 
 def test_me_derivatives_with_a_misalignment_source_are_the_reference_right_hand_side():
-    family = catalogue.coupling_family_from(COUPLINGS["linear-scaled"])
-    source = catalogue.misalignment_source_from({"table": "0:0.2; 1:0.3; 2:0.25"})
-    shaft1, shaft2 = catalogue.engine_from({}), catalogue.load_from({})
+    family = component_parameters.coupling_family_from(COUPLINGS["linear-scaled"])
+    source = component_parameters.misalignment_source_from({"table": "0:0.2; 1:0.3; 2:0.25"})
+    shaft1, shaft2 = component_parameters.engine_from({}), component_parameters.load_from({})
     reference = Driveline(shaft1, lambda t: family.at(source.value(t)), shaft2)
     source_me, e_me, c_me, l_me = MisalignmentME(source), EngineME(shaft1), CouplingME(family), LoadME(shaft2)
     rng = random.Random(7)
@@ -243,7 +243,7 @@ def test_the_monolithic_reference_integrates_the_physics_right_hand_side(monkeyp
 
 
 def test_freewheel_me_derivatives_are_the_rectifier_reference_right_hand_side():
-    model = catalogue.freewheel_from({"resistance_torque": 30.0})
+    model = component_parameters.freewheel_from({"resistance_torque": 30.0})
     me = FreewheelME(model)
     y0 = me.start()
     rng = random.Random(3)
@@ -263,14 +263,14 @@ def test_freewheel_me_derivatives_are_the_rectifier_reference_right_hand_side():
 @pytest.mark.parametrize("name,model", list(coupling_models()), ids=lambda v: v if isinstance(v, str) else "")
 def test_coupling_partials_equal_central_differences(name, model):
     rng = random.Random(name)
-    knots = catalogue.coupling_from(COUPLINGS["table-scaled"]).law.points if "table" in name or name == "family" else ()
+    knots = component_parameters.coupling_from(COUPLINGS["table-scaled"]).law.points if "table" in name or name == "family" else ()
     for _ in range(40):
         assert_partials(model, 0.0, [], coupling_draw(model, rng, knots))
 
 
 @pytest.mark.parametrize("name", ENGINES)
 def test_engine_partials_equal_central_differences(name):
-    model = EngineME(catalogue.engine_from(ENGINES[name]))
+    model = EngineME(component_parameters.engine_from(ENGINES[name]))
     rng = random.Random(name)
     for _ in range(40):
         x, u = engine_draw(model, rng)
@@ -279,7 +279,7 @@ def test_engine_partials_equal_central_differences(name):
 
 @pytest.mark.parametrize("name", LOADS)
 def test_load_partials_equal_central_differences(name):
-    model = LoadME(catalogue.load_from(LOADS[name]))
+    model = LoadME(component_parameters.load_from(LOADS[name]))
     rng = random.Random(name)
     for _ in range(40):
         t, x, u = load_draw(model, rng)
@@ -292,7 +292,7 @@ def test_load_partials_equal_central_differences(name):
 
 
 def test_freewheel_partials_equal_central_differences():
-    model = catalogue.freewheel_from({"resistance_torque": 30.0})
+    model = component_parameters.freewheel_from({"resistance_torque": 30.0})
     me = FreewheelME(model)
     y0 = me.start()
     rng = random.Random(11)
@@ -318,9 +318,9 @@ def test_driveline_jacobian_equals_central_differences():
     rng = random.Random(5)
     for engine in ENGINES.values():
         for load in ("constant", "fourier", "spectrum", "viscous", "friction"):
-            shaft1, shaft2 = catalogue.engine_from(engine), catalogue.load_from(LOADS[load])
+            shaft1, shaft2 = component_parameters.engine_from(engine), component_parameters.load_from(LOADS[load])
             for params in COUPLINGS.values():
-                coupling = catalogue.coupling_from(params)
+                coupling = component_parameters.coupling_from(params)
                 system = Driveline(shaft1, lambda t: coupling, shaft2)
                 modes = (1, -1, HELD) if shaft2.resisting else (None,)
                 for mode in modes:
@@ -374,7 +374,7 @@ def test_the_pchip_law_is_differentiable_at_its_points():
     jumps at the points): at every point, and at 0 where the law is mirrored, the analytic
     stiffness is the limit from either side (one-sided differences, Richardson-extrapolated
     to O(h^2): a central difference across the jump errs by O(h))."""
-    law = catalogue.coupling_from({"elastic_table": TABLE}).law
+    law = component_parameters.coupling_from({"elastic_table": TABLE}).law
 
     def one_sided(theta, h):
         def d(step):
@@ -386,7 +386,7 @@ def test_the_pchip_law_is_differentiable_at_its_points():
 
 
 def test_the_family_takes_the_right_hand_blend_at_a_node():
-    family = catalogue.coupling_family_from(COUPLINGS["linear-scaled"])
+    family = component_parameters.coupling_family_from(COUPLINGS["linear-scaled"])
     alpha = 300 * family.NODE
     flanges = (0.1, 35.0, 1.3, 34.0)
     h = 1e-9
@@ -395,7 +395,7 @@ def test_the_family_takes_the_right_hand_blend_at_a_node():
     left = family.alpha_partials(alpha - 0.5 * family.NODE, *flanges)
     assert left != pytest.approx(right, rel=1e-3)         # the blend's slope does jump at a node
     with pytest.raises(ParameterError, match="misalignment"):
-        catalogue.coupling_family_from({"transfer_mode": "kinematic", "misalignment": 0.2,
+        component_parameters.coupling_family_from({"transfer_mode": "kinematic", "misalignment": 0.2,
                                         "support_deformation": 0.03}).alpha_slopes(math.radians(44.99), 0.3)
 
 
@@ -407,18 +407,18 @@ def test_declared_dependencies_contain_what_differences_find():
         for _ in range(5):
             assert_sparsity(model, 0.0, [], coupling_draw(model, rng))
     for params in ENGINES.values():
-        model = EngineME(catalogue.engine_from(params))
+        model = EngineME(component_parameters.engine_from(params))
         for _ in range(5):
             x, u = engine_draw(model, rng)
             assert_sparsity(model, 0.0, x, u)
     for params in LOADS.values():
-        model = LoadME(catalogue.load_from(params))
+        model = LoadME(component_parameters.load_from(params))
         for _ in range(5):
             t, x, u = load_draw(model, rng)
             for mode in ((1, -1, HELD) if model.friction else (None,)):
                 model.mode = mode
                 assert_sparsity(model, t, x, u)
-    freewheel = FreewheelME(catalogue.freewheel_from({"resistance_torque": 30.0}))
+    freewheel = FreewheelME(component_parameters.freewheel_from({"resistance_torque": 30.0}))
     y0 = freewheel.start()
     for disc in (STICK, 1):
         for fly in (STICK, 1, FREE):
@@ -426,18 +426,18 @@ def test_declared_dependencies_contain_what_differences_find():
             y = [v + rng.uniform(0.0, 0.05) for v in y0]
             y[1], y[3], y[5], y[7] = 0.3, -0.2, 0.4, 0.1
             assert_sparsity(freewheel, 0.05, y, [3.0])
-    source = MisalignmentME(catalogue.misalignment_source_from({"table": "0:0.2; 1:0.3"}))
+    source = MisalignmentME(component_parameters.misalignment_source_from({"table": "0:0.2; 1:0.3"}))
     assert source.dependencies == {"misalignment": (), "misalignment_rate": ()}
 
 
 def test_dependencies_follow_the_parameters():
     """A constant load's acceleration does not depend on its angle, a Fourier load's
     does; an undamped coupling's torques do not depend on the speeds."""
-    assert LoadME(catalogue.load_from({})).dependencies[der("w")] == ("tau",)
-    assert LoadME(catalogue.load_from(LOADS["fourier"])).dependencies[der("w")] == ("phi", "tau")
-    undamped = CouplingME(catalogue.coupling_from(COUPLINGS["table-undamped"])).dependencies
+    assert LoadME(component_parameters.load_from({})).dependencies[der("w")] == ("tau",)
+    assert LoadME(component_parameters.load_from(LOADS["fourier"])).dependencies[der("w")] == ("phi", "tau")
+    undamped = CouplingME(component_parameters.coupling_from(COUPLINGS["table-undamped"])).dependencies
     assert undamped["tau1"] == ("phi1", "phi2") and undamped["dissipated_power"] == ()
-    assert EngineME(catalogue.engine_from({"torque_slope": 0.0})).dependencies[der("w")] == ("tau",)
+    assert EngineME(component_parameters.engine_from({"torque_slope": 0.0})).dependencies[der("w")] == ("tau",)
 
 
 # -- (d) event indicators --------------------------------------------------------------------------
@@ -446,7 +446,7 @@ def test_the_load_stops_sticks_and_breaks_away_where_the_indicator_changes_sign(
     """Coulomb friction, constant load, a braking coupling torque: the shaft decelerates
     uniformly, w(t) = w0 - d t, so it stops at t* = w0 / d; the stick condition holds it;
     a torque ramp breaks it away where |net| reaches the breakaway torque."""
-    load = LoadME(catalogue.load_from({"load_kind": "constant", "mean_torque": 50.0, "friction_torque": 20.0, "breakaway_torque": 35.0,
+    load = LoadME(component_parameters.load_from({"load_kind": "constant", "mean_torque": 50.0, "friction_torque": 20.0, "breakaway_torque": 35.0,
                                        "inertia": 2.0}))
     tau = 40.0
     x = [0.0, 3.0, 0.0]
@@ -477,7 +477,7 @@ def test_the_freewheel_engages_where_its_indicator_changes_sign():
     phi1 = phi0 (1 - cos(omega t)) closes the axial gap at phi1 = phi2, i.e. at
     t* = acos(1 - phi2/phi0)/omega, where the engagement indicator (e = phi1 - phi2)
     changes sign and the ramp's torque starts to grow from its springs' T_p."""
-    model = catalogue.freewheel_from({})
+    model = component_parameters.freewheel_from({})
     me = FreewheelME(model)
     y = me.start()
     engaged = math.acos(1.0 - y[0] / model.phi0) / model.omega
@@ -495,7 +495,7 @@ def test_the_freewheel_engages_where_its_indicator_changes_sign():
 def test_the_freewheel_discs_slip_where_their_indicator_changes_sign():
     """Stuck discs (STICK) slip when the torque they pass reaches their capacity: the
     indicator cap - |F| is zero there, and event_update switches to slipping."""
-    model = catalogue.freewheel_from({"resistance_torque": 30.0})
+    model = component_parameters.freewheel_from({"resistance_torque": 30.0})
     me = FreewheelME(model)
     y = me.start()
     me.disc, me.fly = STICK, STICK
@@ -520,23 +520,23 @@ def test_the_freewheel_discs_slip_where_their_indicator_changes_sign():
 
 
 def test_the_engine_table_points_are_event_indicators():
-    model = EngineME(catalogue.engine_from(ENGINES["table"]))
+    model = EngineME(component_parameters.engine_from(ENGINES["table"]))
     speeds = model.characteristic.speeds
     for k, w in enumerate(speeds):
         x = [0.0, w, 0.0]
         assert model.event_indicators(0.0, x, [0.0])[k] == 0.0
         assert model.event_indicators(0.0, [0.0, w - 1e-9, 0.0], [0.0])[k] < 0.0
-    assert EngineME(catalogue.engine_from({})).event_indicators(0.0, [0.0, 30.0, 0.0], [0.0]) == []
+    assert EngineME(component_parameters.engine_from({})).event_indicators(0.0, [0.0, 30.0, 0.0], [0.0]) == []
 
 
 def test_the_misalignment_source_has_time_events_at_its_points():
-    source = MisalignmentME(catalogue.misalignment_source_from({"table": "0:0.2; 1:0.3; 2.5:0.25"}))
+    source = MisalignmentME(component_parameters.misalignment_source_from({"table": "0:0.2; 1:0.3; 2.5:0.25"}))
     assert [source.next_time_event(t) for t in (-1.0, 0.0, 0.5, 1.0, 2.5)] == [0.0, 1.0, 1.0, 2.5, None]
     assert source.outputs(0.5, [], []) == [pytest.approx(0.25), pytest.approx(0.1)]
 
 
 def test_directional_derivatives_are_the_jacobian_times_the_seed():
-    model = CouplingME(catalogue.coupling_from(COUPLINGS["linear-kinematic"]))
+    model = CouplingME(component_parameters.coupling_from(COUPLINGS["linear-kinematic"]))
     u = [0.1, 35.0, 1.3, 34.0]
     seed = [0.0, 0.0, 1.0, 0.0]
     d = model.directional_derivative(0.0, [], u, [], seed)

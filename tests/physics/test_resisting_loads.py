@@ -13,7 +13,7 @@ from harness.description import scene
 from harness.engine import run
 from harness.judges import metrics
 from harness.judges import monolithic
-from lever.physics import catalogue
+from lever.physics import component_parameters
 from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad, RandomLoad, Spectrum, SpectrumLoad
 from lever.physics.parameters import ParameterError
@@ -83,11 +83,11 @@ def test_a_brake_never_drives_and_friction_parameters_are_judged_together():
     negative = braked(brake=-50.0)          # max(Mc, 0): a negative brake torque brakes with 0
     assert negative.rates(0.0, 0.0, 2.0, 0.0) == (0.0, 0.0)
     with pytest.raises(ParameterError) as info:
-        catalogue.load_from({"friction_torque": 5.0, "breakaway_torque": 4.0})
+        component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 4.0})
     assert info.value.name == "breakaway_torque" and "Fs >= Fc" in str(info.value)
-    assert not catalogue.load_from({}).resisting           # the defaults: the old active load
-    assert catalogue.load_from({"friction_torque": 0.1, "breakaway_torque": 0.1}).resisting
-    smooth = catalogue.load_from({"load_kind": "constant", "mean_torque": 107.5,
+    assert not component_parameters.load_from({}).resisting           # the defaults: the old active load
+    assert component_parameters.load_from({"friction_torque": 0.1, "breakaway_torque": 0.1}).resisting
+    smooth = component_parameters.load_from({"load_kind": "constant", "mean_torque": 107.5,
                                   "viscous_damping": 0.1})                          # viscous only: no sticking
     assert not smooth.resisting and smooth.rates(0.0, 0.0, 2.0, 0.0)[1] == -107.5 - 0.2
 

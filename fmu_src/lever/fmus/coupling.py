@@ -2,8 +2,8 @@
 (Modelica's GenerationOfFMUs causality), with direct feedthrough and no state."""
 from __future__ import annotations
 
-from ..physics import catalogue
-from ..physics.catalogue import COUPLING, MISALIGNMENT
+from ..physics import component_parameters
+from ..physics.component_parameters import COUPLING, MISALIGNMENT
 from ..physics.me_coupling import CouplingME
 from ..physics.parameters import Parameter, ParameterError
 from .base import LeverSlave
@@ -53,7 +53,7 @@ class LeverCoupling(ModelExchangeSlave):
 
     def _build(self):
         # exact at the misalignment the model is built with; blended elsewhere (CouplingFamily)
-        self._family = catalogue.coupling_family_from(self._values() | {"misalignment": self.misalignment})
+        self._family = component_parameters.coupling_family_from(self._values() | {"misalignment": self.misalignment})
 
     @guarded()
     def set_real(self, vrs, values):
@@ -111,4 +111,4 @@ class LeverCoupling(ModelExchangeSlave):
     def _restore_internal_state(self, state: dict):
         alpha = state["start_misalignment"]
         if alpha is not None and (self._family is None or self._family.start_alpha != alpha):
-            self._family = catalogue.coupling_family_from(self._values() | {"misalignment": alpha})
+            self._family = component_parameters.coupling_family_from(self._values() | {"misalignment": alpha})

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from ..physics import catalogue
+from ..physics import component_parameters
 from ..physics.freewheel import EVENTS, FREE, STATE, STICK
 from ..physics.me_freewheel import FreewheelME
 from ..physics.parameters import Parameter, ParameterError
@@ -26,7 +26,7 @@ _SPEEDS = ("half_coupling_speed", "driven_speed", "torsion_end_speed", "w")
 class FreewheelRectifier(ModelExchangeSlave):
     DESCRIPTION = ("Axial freewheel vibration rectifier (rocker phi0 (1 - cos(omega t)), ball ramps with gap z1, "
                    "friction discs with stick/slip, torsion shaft with gap z2, gear mesh with gap z3, flywheel J5)")
-    PARAMETERS = catalogue.FREEWHEEL
+    PARAMETERS = component_parameters.FREEWHEEL
     INPUTS = (
         Parameter("tau", 0.0, "N.m", "torque a downstream element applies to the output shaft (flywheel)",
                   -1e9, 1e9, fixed=False),
@@ -114,7 +114,7 @@ class FreewheelRectifier(ModelExchangeSlave):
         self._events = 0
 
     def _build(self):
-        self._model = catalogue.freewheel_from(self._values())
+        self._model = component_parameters.freewheel_from(self._values())
 
     def _reset_state(self):
         self._y, self._disc, self._fly = self._model.start()

@@ -7,7 +7,7 @@ from __future__ import annotations
 import bisect
 import math
 
-from ..physics import catalogue
+from ..physics import component_parameters
 from ..physics.me_engine import EngineME
 from ..physics.me_load import LoadME
 from ..physics.parameters import Parameter, ParameterError
@@ -84,7 +84,7 @@ _SHAFT_OUTPUTS = (
 class EngineShaft(_ShaftSlave):
     DESCRIPTION = ("Drive shaft with the engine's static characteristic, optionally lagged: I1*a = M + tau, "
                    "Te*dM/dt = Mg(w) - M (M = Mg(w) when Te = 0)")
-    PARAMETERS = catalogue.ENGINE
+    PARAMETERS = component_parameters.ENGINE
     OUTPUTS = _SHAFT_OUTPUTS + (
         Output("engine_torque", "N.m", "torque M the engine applies to the drive shaft (Mg(w), or its lagged "
                "value when torque_lag > 0)"),
@@ -118,7 +118,7 @@ class EngineShaft(_ShaftSlave):
         self._torque = 0.0      # the lagged engine torque M, a state (torque_lag > 0)
 
     def _make_shaft(self):
-        return catalogue.engine_from(self._values())
+        return component_parameters.engine_from(self._values())
 
     def _me_physics(self):
         return EngineME(self._shaft, self.phi_start, self.w_start)
@@ -190,7 +190,7 @@ class EngineShaft(_ShaftSlave):
 
 class LoadShaft(_ShaftSlave):
     DESCRIPTION = "Driven shaft with the technological load: I2*a = tau - Mc(t, phi, w)"
-    PARAMETERS = catalogue.LOAD
+    PARAMETERS = component_parameters.LOAD
     OUTPUTS = _SHAFT_OUTPUTS + (
         # At rest static friction balances the coupling torque: then the load torque
         # depends on the input directly.
@@ -222,7 +222,7 @@ class LoadShaft(_ShaftSlave):
     )
 
     def _make_shaft(self):
-        return catalogue.load_from(self._values())
+        return component_parameters.load_from(self._values())
 
     def _me_physics(self):
         return LoadME(self._shaft, self.phi_start, self.w_start)

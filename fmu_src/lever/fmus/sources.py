@@ -3,7 +3,7 @@ coupling's ``misalignment`` input (like the angle input of Simscape's universal 
 No inputs; its output depends on time only."""
 from __future__ import annotations
 
-from ..physics import catalogue
+from ..physics import component_parameters
 from ..physics.me_misalignment import MisalignmentME
 from .declarations import Output
 from .model_exchange import ModelExchangeSlave
@@ -11,7 +11,7 @@ from .model_exchange import ModelExchangeSlave
 
 class MisalignmentSource(ModelExchangeSlave):
     DESCRIPTION = "Prescribed misalignment angle alpha(t) from a time table (linear, end values held)"
-    PARAMETERS = catalogue.MISALIGNMENT_SOURCE
+    PARAMETERS = component_parameters.MISALIGNMENT_SOURCE
     OUTPUTS = (
         Output("misalignment", "rad", "misalignment angle alpha(t)"),
         Output("misalignment_rate", "rad/s", "rate of change of the misalignment angle", derivative_of="misalignment"),
@@ -22,7 +22,7 @@ class MisalignmentSource(ModelExchangeSlave):
         self._table = None
 
     def _build(self):
-        self._table = catalogue.misalignment_source_from(self._values())
+        self._table = component_parameters.misalignment_source_from(self._values())
 
     def _me_physics(self):
         return MisalignmentME(self._table)

@@ -105,7 +105,7 @@ def contact_side(d: float, gap: float) -> int:
 
 class FreewheelRectifier:
     """The rectifier's equations.  ``p`` holds checked parameter values by the
-    catalogue's names (``lever.physics.catalogue.FREEWHEEL``)."""
+    declared names (``lever.physics.component_parameters.FREEWHEEL``)."""
 
     def __init__(self, p: dict):
         self.p = dict(p)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import statistics as stats
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.engine import masters as master_family
 from harness.judges import metrics
@@ -64,8 +64,8 @@ def headline_cases(scene: scenes.Scene, cases: list[Case], p: dict) -> list[Case
 def eigenfrequency(scene: scenes.Scene) -> float | None:
     """The coupling mode's eigenfrequency estimate [rad/s]; None for a scene of another kind."""
     try:
-        built = kinds.physics(scene)
-    except kinds.NotADriveline:
+        built = scene_kinds.physics(scene)
+    except scene_kinds.NotADriveline:
         return None
     i1, i2 = metrics.inertias(scene)
     return built.coupling.eigen_estimate(i1, i2)[0]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.description import kinds
+from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.engine import interrupt
 from harness.engine.run import RunResult, simulate
@@ -32,7 +32,7 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
             for measure in ("rms", "max"):
                 case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
                                                                e[f"{kind}2"][f"{measure}_relative"])
-    if all(n in traces for n in kinds.energy_variables(scene)):
+    if all(n in traces for n in scene_kinds.energy_variables(scene)):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lever.physics import catalogue
+from lever.physics import component_parameters
 
 from harness.description import scene as scenes
 
@@ -85,8 +85,8 @@ def driveline_problem(scene: scenes.Scene) -> str | None:
         if len(several) > 1:
             return f"scene '{scene.name}' has {len(several)} {fmu} components ({', '.join(several)}); the driveline has one"
     role = {"engine": names.engine, "coupling": names.coupling, "load": names.load}
-    declared = {names.engine: catalogue.ENGINE, names.coupling: catalogue.COUPLING + (catalogue.MISALIGNMENT,),
-                names.load: catalogue.LOAD}
+    declared = {names.engine: component_parameters.ENGINE, names.coupling: component_parameters.COUPLING + (component_parameters.MISALIGNMENT,),
+                names.load: component_parameters.LOAD}
     for name, known in declared.items():
         extra = sorted(set(scene.components[name].parameters) - {p.name for p in known})
         if extra:      # e.g. an input held at a value: a torque from outside the reference's equations
@@ -111,7 +111,7 @@ def driveline_problem(scene: scenes.Scene) -> str | None:
 
 def parameters(scene: scenes.Scene, name: str) -> dict:
     """The parameter values the scene gives component ``name`` (quantities with units
-    converted; the catalogue's defaults are not filled in)."""
+    converted; the declared defaults are not filled in)."""
     return {k: scenes.quantity(v, f"{name}.{k}") for k, v in scene.components[name].parameters.items()}
 
 
@@ -138,12 +138,12 @@ def rectifier_model(scene: scenes.Scene):
     """The freewheel rectifier's physics object from the scene's values (the scene must
     have one: ``rectifier``); the inputs it holds are not the model's parameters."""
     values = parameters(scene, rectifier(scene))
-    return catalogue.freewheel_from({k: v for k, v in values.items() if k not in RECTIFIER_INPUTS})
+    return component_parameters.freewheel_from({k: v for k, v in values.items() if k not in RECTIFIER_INPUTS})
 
 
 @dataclass(frozen=True)
 class DrivelinePhysics:
-    """A driveline scene's physics objects, as its FMUs build them (lever.physics.catalogue)."""
+    """A driveline scene's physics objects, as its FMUs build them (lever.physics.component_parameters)."""
     roles: Driveline
     engine: object
     coupling: object
@@ -152,9 +152,9 @@ class DrivelinePhysics:
 
 def physics(scene: scenes.Scene) -> DrivelinePhysics:
     """The engine shaft, coupling and load shaft objects of ``scene`` from its parameter
-    values (the catalogue's defaults elsewhere); ``NotADriveline`` for another kind, the
+    values (the declared defaults elsewhere); ``NotADriveline`` for another kind, the
     physics' ``ParameterError`` for a value out of its range."""
     names = driveline(scene)
-    return DrivelinePhysics(names, catalogue.engine_from(parameters(scene, names.engine)),
-                            catalogue.coupling_from(parameters(scene, names.coupling)),
-                            catalogue.load_from(parameters(scene, names.load)))
+    return DrivelinePhysics(names, component_parameters.engine_from(parameters(scene, names.engine)),
+                            component_parameters.coupling_from(parameters(scene, names.coupling)),
+                            component_parameters.load_from(parameters(scene, names.load)))
