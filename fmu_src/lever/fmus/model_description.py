@@ -53,12 +53,7 @@ class ModelDescription:
         used = sorted({spec.unit for spec in self._declared.values() if spec.unit not in ("", "1")})
         units = Element("UnitDefinitions")
         for name in used:
-            exponents, _ = UNITS[name]
-            unit = SubElement(units, "Unit", {"name": name})
-            SubElement(unit, "BaseUnit", {k: str(v) for k, v in exponents.items()})
-            if name in DISPLAY_UNITS:
-                display = DISPLAY_UNITS[name]
-                SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})
+            define_unit(units, name)
         position = list(root).index(root.find("CoSimulation")) + 1
         root.insert(position, units)
         # One type definition per quantity (and per kind of string), as the Reference-FMUs
@@ -118,3 +113,14 @@ class ModelDescription:
             SubElement(outputs, "Unknown", attrs)
             SubElement(initial, "Unknown", dict(attrs))
         return root
+
+
+def define_unit(units: Element, name: str):
+    """``name``'s <Unit> (its SI base-unit exponents, and its display unit if it has one)
+    in ``units``, the <UnitDefinitions> element."""
+    exponents, _ = UNITS[name]
+    unit = SubElement(units, "Unit", {"name": name})
+    SubElement(unit, "BaseUnit", {k: str(v) for k, v in exponents.items()})
+    if name in DISPLAY_UNITS:
+        display = DISPLAY_UNITS[name]
+        SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})

@@ -28,11 +28,11 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Real
 
 from ..physics.me_base import der
-from ..physics.parameters import UNITS, DISPLAY_UNITS
+from ..physics.parameters import DISPLAY_UNITS
 from .base import LeverSlave, _nan_values
 from .declarations import Output
 from .guard import guarded
-from .model_description import declared_type
+from .model_description import declared_type, define_unit
 from .recompute import ALL, CLEAN
 
 CHANNEL = 0x40000000
@@ -485,7 +485,7 @@ class ModelExchangeSlave(LeverSlave):
                     if spec.unit in DISPLAY_UNITS:
                         typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
                     if spec.unit not in defined:
-                        _define_unit(units, spec.unit)
+                        define_unit(units, spec.unit)
                         defined.add(spec.unit)
                     if type_name not in typed_as:
                         SubElement(SubElement(types, "SimpleType", {"name": type_name}), element, attrs)
@@ -523,12 +523,3 @@ class ModelExchangeSlave(LeverSlave):
 
 def _rate_unit(unit: str) -> str:
     return {"rad": "rad/s", "rad/s": "rad/s2", "J": "W", "N.m": "N.m/s"}.get(unit, "")
-
-
-def _define_unit(units: Element, name: str):
-    exponents, _ = UNITS[name]
-    unit = SubElement(units, "Unit", {"name": name})
-    SubElement(unit, "BaseUnit", {k: str(v) for k, v in exponents.items()})
-    if name in DISPLAY_UNITS:
-        display = DISPLAY_UNITS[name]
-        SubElement(unit, "DisplayUnit", {"name": display, "factor": repr(1.0 / UNITS[display][1])})
