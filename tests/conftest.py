@@ -151,6 +151,8 @@ SLOW = (
     "fmus/test_hosts.py::test_ecos_runs_each_fmu_alone_in_a_bare_environment",
     "fmus/test_hosts.py::test_lever_hosts_writes_the_table",
     "fmus/test_hosts.py::test_the_kavz685_scene_in_ecos_passes_lever_validate",
+    "fmus/test_me_hosts.py::test_fmpy_model_exchange_cvode_passes_lever_validate",
+    "fmus/test_me_hosts.py::test_the_c_importers_model_exchange_loop_passes_lever_validate",
     "fmus/test_library_use.py::test_validate_then_run_in_one_process_keeps_the_fmus_messages",
     "fmus/test_resources.py",
     "fmus/test_shim.py::test_shim_exports_the_cs_api_only",

@@ -1195,8 +1195,9 @@ static void shim_refuse_state(Shim *s, const char *function, int allowed)
         return;
     } else if (allowed == 0 && s->me) {
         shim_error(s, "%s is not offered by this FMU's Model Exchange interface (this instance was "
-                      "instantiated as fmi2ModelExchange; the FMU state functions are Co-Simulation's only)",
-                   function);
+                      "instantiated as fmi2ModelExchange; %s)", function,
+                   strstr(function, "FMUstate") ? "the FMU state functions are Co-Simulation's only"
+                                                : "it is a Co-Simulation function");
         return;
     } else if (allowed == 0) {
         appendf(where, sizeof where, "only while an asynchronous step runs, and steps are synchronous");

@@ -76,7 +76,7 @@ def compile_c_importer(dest: Path) -> Path:
         raise RuntimeError("no C compiler (cc) for the C importer")
     dest.parent.mkdir(parents=True, exist_ok=True)
     subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
-                    str(dest), str(C_IMPORTER), "-ldl", "-pthread"], check=True)
+                    str(dest), str(C_IMPORTER), "-ldl", "-pthread", "-lm"], check=True)
     return dest
 
 

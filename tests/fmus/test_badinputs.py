@@ -47,6 +47,28 @@ def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     assert len({c.name for c in CORPUS}) == len(CORPUS) > 800
 
 
+def test_the_corpus_covers_every_model_exchange_call_and_state_for_every_fmu():
+    me = [c for c in CORPUS if c.action[:2] == ("call", "me")]
+    for fmu in FMU_NAMES:
+        nx, _ = badinputs.ME_SIZES[fmu]
+        cases = [c for c in me if c.fmu == fmu]
+        on_me = [c for c in cases if c.interface == "ModelExchange"]
+        # every ME function refused in a state the table does not allow, and on a Co-Simulation instance
+        wrong_state = {c.action[2][0] for c in on_me if c.category == "out-of-order ME call"}
+        assert set(badinputs.ME_FUNCTIONS) | {"fmi2GetDirectionalDerivative"} <= wrong_state, fmu
+        assert {c.phase for c in on_me} == set(badinputs.ME_PHASES), fmu
+        on_cs = {c.action[2][0] for c in cases if c.interface == "CoSimulation"}
+        assert on_cs == set(badinputs.ME_FUNCTIONS), fmu
+        assert {"fmi2DoStep", "fmi2GetFMUstate"} <= wrong_state, fmu
+        # every array of the wrong size (and NULL where the model has states), NaN/inf states
+        sized = {(c.action[2][0], c.action[2][2]) for c in on_me if c.action[2][1:2] == ("size",)}
+        for function, size in badinputs.ME_ARRAYS.items():
+            n = nx if size == "nx" else badinputs.ME_SIZES[fmu][1]
+            assert (function, n + 1) in sized and (not n or (function, n - 1) in sized), (fmu, function)
+        assert sum(c.category == "non-finite ME state" for c in on_me) == (3 if nx else 0) + 3, fmu
+        assert sum(c.category == "bad directional derivative" for c in on_me) >= 6, fmu
+
+
 def test_the_summary_counts_cases_and_names_failures(fmu_dir):
     cases = [c for c in CORPUS if c.category == "bad step"][:2]
     broken = badinputs.Case("EngineShaft", "not refused", "a good inertia", "instantiated",

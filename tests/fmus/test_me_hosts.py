@@ -1,0 +1,83 @@
+"""Each FMU's Model Exchange edition alone in hosts whose integrators we did not borrow
+(harness/studies/me_hosts.py): fmpy's ``simulate_fmu(fmi_type='ModelExchange',
+solver='CVode')`` and our C importer's fixed-step RK4 loop (tests/c_host, ``--me``, in a
+bare environment), driven by the stand-alone reference's inputs; each result written to a
+CSV and judged by ``lever validate --result``.  The freewheel rectifier, which has no
+stand-alone reference, is judged against the scene ``freewheel_rectifier`` (this FMU alone)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness.studies import me_hosts
+from lever.fmus.registry import NAMES as FMU_NAMES
+
+
+@pytest.fixture(scope="module")
+def c_host(tmp_path_factory):
+    return me_hosts.compile_c_importer(tmp_path_factory.mktemp("c_host_me") / "minimal_importer")
+
+
+def _validate(lever, case, times, traces, tmp_path, tolerance="lever"):
+    csv_path = me_hosts.write_result(tmp_path / f"{case.fmu}_me.csv", times, traces)
+    return lever("validate", "--result", str(csv_path), case.reference, "--tolerance", tolerance,
+                 "--out", str(tmp_path / f"validate-{tolerance}"))
+
+
+def _judge(lever, case, times, traces, tmp_path):
+    """Every signal passes the ``lever`` band; an output read with the same time's input that
+    the band cannot judge (``me_hosts.FEEDTHROUGH``) passes the cross-check's and is the
+    exact one."""
+    odd = me_hosts.FEEDTHROUGH.get(case.fmu, ())
+    outcome = _validate(lever, case, times, traces, tmp_path)
+    if not odd:
+        assert outcome.exit_code == 0 and f"{case.reference}: PASS" in outcome.output, outcome.output
+        return
+    assert outcome.exit_code == 1 and f"{case.reference}: FAIL ({', '.join(odd)})" in outcome.output, outcome.output
+    outcome = _validate(lever, case, times, traces, tmp_path, "cross-check")
+    assert outcome.exit_code == 0 and f"{case.reference}: PASS" in outcome.output, outcome.output
+    exact = me_hosts.exact_engine_acceleration(times)
+    scale = np.max(np.abs(exact))
+    # the states are the reference's within 3e-5 relative: so is the acceleration from them
+    assert np.max(np.abs(traces["a"] - exact)) <= 1e-3 * scale
+
+
+def test_every_fmu_has_a_case():
+    assert {me_hosts.alone_case(f).fmu for f in FMU_NAMES} == set(FMU_NAMES)
+    case = me_hosts.alone_case("FreewheelRectifier")
+    assert case.reference == "freewheel_rectifier" and case.start_values["msm_gap"] == pytest.approx(0.0303687, rel=1e-5)
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES)
+def test_fmpy_model_exchange_cvode_passes_lever_validate(fmu, lever, fmu_dir, tmp_path):
+    case = me_hosts.alone_case(fmu)
+    times, traces = me_hosts.run_fmpy(case, fmu_dir)
+    assert times[-1] == pytest.approx(case.opt.stop)
+    _judge(lever, case, times, traces, tmp_path)
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES)
+def test_the_c_importers_model_exchange_loop_passes_lever_validate(fmu, lever, fmu_dir, c_host, tmp_path):
+    """RK4 at a tenth of the output step (the rectifier's a twentieth), bare environment."""
+    case = me_hosts.alone_case(fmu)
+    times, traces, done = me_hosts.run_c_importer_me(c_host, case, tmp_path / "run", fmu_dir)
+    counts = me_hosts.c_counts(done)
+    n_out = round((case.opt.stop - case.opt.start) / case.opt.step)
+    assert len(times) == n_out + 1 and times[-1] == pytest.approx(case.opt.stop)
+    # the loop went through the events its case has
+    if fmu == "LeverCoupling":
+        assert counts["input_events"] == 1            # the misalignment's step at 0.5 s
+    if fmu == "FreewheelRectifier":
+        assert counts["state_events"] > 50            # contacts closing and opening, stick and slip
+    _judge(lever, case, times, traces, tmp_path)
+
+
+def test_the_c_importers_co_simulation_path_still_runs(fmu_dir, c_host, tmp_path):
+    from fmpy import extract
+
+    from harness.peers import BARE_ENVIRONMENT
+    from harness.studies import hosts
+
+    unzipped = extract(str(fmu_dir / "EngineShaft.fmu"), str(tmp_path / "e"))
+    done = hosts.run_c_importer(c_host, tmp_path / "e", "EngineShaft", 3, 1e-3, BARE_ENVIRONMENT)
+    assert done.returncode == 0 and done.stdout.split()[-1] == "freed", (unzipped, done.stderr)
