@@ -42,9 +42,6 @@ ROOT = HERE.parent
 CHECKOUT = (ROOT / "fmu_src" / "lever").is_dir()
 SOURCE = ROOT / "fmu_src" / "lever" if CHECKOUT else Path(importlib.util.find_spec("lever").origin).parent
 OUTPUT = HERE / "fmus"
-#: where the FMI 3.0 editions go: a folder of their own, so that a tool that takes every FMU
-#: of build/fmus gets each model once, and both editions keep the model's name
-OUTPUT3 = HERE / "fmus3"
 STAGING = HERE / "tmp"
 
 #: The packages our model code imports on the importing machine (pythonfmu's Python part
@@ -127,9 +124,12 @@ def _compliance_file() -> Path:
 
 
 def fmi3_dir(out_dir: Path) -> Path:
-    """Where the FMI 3.0 editions of the FMUs in ``out_dir`` go: build/fmus3 for build/fmus,
-    else ``<out_dir>/fmi3``."""
-    return OUTPUT3 if Path(out_dir).resolve() == OUTPUT.resolve() else Path(out_dir) / "fmi3"
+    """Where the FMI 3.0 editions of the FMUs in ``out_dir`` go -- a folder of their own, so
+    that a tool taking every FMU of build/fmus gets each model once and both editions keep
+    the model's name: ``fmus3`` beside a folder named ``fmus`` (build/fmus3 for build/fmus, likewise in the per-user cache), else
+    ``<out_dir>/fmi3``."""
+    out_dir = Path(out_dir).resolve()
+    return out_dir.with_name("fmus3") if out_dir.name == "fmus" else out_dir / "fmi3"
 
 
 def is_current(out_dir: Path = OUTPUT) -> bool:
