@@ -68,7 +68,7 @@ mutants: $(STAMP)
 	$(BIN)/python tests/mutation/run_mutants.py $(MUTANTS_ARGS)
 
 clean:
-	rm -rf results build/fmus build/tmp .setuptools-build
+	rm -rf results build/fmus build/fmus3 build/tmp .setuptools-build
 
 distclean: clean
 	rm -rf $(VENV)

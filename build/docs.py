@@ -100,7 +100,38 @@ def fmus_page(fmu_dir: Path) -> str:
                          v.start if v.start is not None else "", v.description])
         out.append(table(["name", "causality", "variability", "type", "unit", "min", "max", "start",
                           "description"], rows) + "\n")
+    out.append(fmi3_section(fmu_dir))
     return "".join(out).rstrip() + "\n"
+
+
+def fmi3_section(fmu_dir: Path) -> str:
+    """The FMI 3.0 editions (build/fmus3, build/fmi3.py): what they add to the variables above."""
+    from fmpy import read_model_description
+
+    here = Path(fmu_dir).resolve()
+    fmi3_dir = here.parent / "fmus3" if here.name == "fmus" else here / "fmi3"
+    fmus = sorted(fmi3_dir.glob("*.fmu"))
+    if not fmus:
+        raise SystemExit(f"no FMI 3.0 FMUs in {fmi3_dir}: build them first (lever build)")
+    out = ["## FMI 3.0 editions\n\n",
+           "Each FMU also comes as FMI 3.0 (Co-Simulation and Model Exchange in one file, `build/fmus3/`, "
+           "see [fmus.md](../fmus.md#fmi-30-editions)): the same variables with the same value references "
+           "(Real as Float64, Integer as Int32), plus the independent variable `time` and, for Model Exchange, "
+           "one variable per event indicator, which this table lists.\n\n"]
+    rows = []
+    for fmu in fmus:
+        md = read_model_description(str(fmu))
+        cs, me = md.coSimulation, md.modelExchange
+        extra = ", ".join(f"`{v.name}` ({v.valueReference})" for v in md.modelVariables
+                          if v.causality == "independent" or v.name.startswith("event_indicator_"))
+        rows.append([md.modelName, f"FMI {md.fmiVersion}", len(md.derivatives), md.numberOfEventIndicators,
+                     "yes" if cs.canGetAndSetFMUstate and cs.canSerializeFMUstate else "no",
+                     "yes" if me.canGetAndSetFMUstate else "no",
+                     f"{cs.maxOutputDerivativeOrder}", extra])
+    out.append(table(["FMU", "version", "states (ME)", "event indicators (ME)", "CS: get/set/serialize state",
+                      "ME: get/set state", "output derivative order (CS)", "variables of its own (value reference)"],
+                     rows) + "\n")
+    return "".join(out)
 
 
 # -- the command line ----------------------------------------------------------------------------

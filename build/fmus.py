@@ -15,10 +15,13 @@ For each model:
    ``resources/requirements.txt`` inside the FMU, ``<Model>_OspModelDescription.xml``
    next to it (OSP Interface Specification: the mechanical ports);
 6. check the result with ``harness.compliance.check_fmu`` (fmpy's validation and ours):
-   zero findings or the build fails.
+   zero findings or the build fails;
+7. make its FMI 3.0 edition from it (``build/fmi3.py``: the same model, pythonfmu library
+   and FMI 2.0 entry behind the FMI 3.0 entry ``build/shim/lever_fmi3_shim.c``) into
+   ``build/fmus3/<Model>.fmu``, checked the same way.
 
-The FMUs land in ``build/fmus/`` with a stamp of the sources' hash; a build with an
-unchanged hash does nothing (``--force`` rebuilds).
+The FMUs land in ``build/fmus/`` (FMI 2.0) and ``build/fmus3/`` (FMI 3.0) with a stamp of
+the sources' hash; a build with an unchanged hash does nothing (``--force`` rebuilds).
 """
 from __future__ import annotations
 
@@ -106,7 +109,8 @@ def source_hash() -> str:
     named = [(f"fmu_src/lever/{p.relative_to(SOURCE).as_posix()}", p)
              for p in sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)]
     named += [(f"build/{p.relative_to(HERE).as_posix()}", p) for p in
-              sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", Path(__file__).resolve()]]
+              sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", HERE / "fmi3.py",
+                                                      Path(__file__).resolve()]]
     named += [("constraints.txt", ROOT / "constraints.txt"), ("harness/compliance.py", _compliance_file())]
     for name, path in named:
         digest.update(name.encode())
@@ -119,13 +123,23 @@ def _compliance_file() -> Path:
     return checkout if CHECKOUT else Path(importlib.util.find_spec("harness.compliance").origin)
 
 
+def fmi3_dir(out_dir: Path) -> Path:
+    """Where the FMI 3.0 editions of the FMUs in ``out_dir`` go -- a folder of their own, so
+    that a tool taking every FMU of build/fmus gets each model once and both editions keep
+    the model's name: ``fmus3`` beside a folder named ``fmus`` (build/fmus3 for build/fmus, likewise in the per-user cache), else
+    ``<out_dir>/fmi3``."""
+    out_dir = Path(out_dir).resolve()
+    return out_dir.with_name("fmus3") if out_dir.name == "fmus" else out_dir / "fmi3"
+
+
 def is_current(out_dir: Path = OUTPUT) -> bool:
     stamp = out_dir / "build-stamp.json"
     if not stamp.exists():
         return False
     recorded = json.loads(stamp.read_text())
     return recorded.get("hash") == source_hash() and all(
-        (out_dir / f"{m}.fmu").exists() and osp_description_path(out_dir / f"{m}.fmu").exists() for m in MODELS)
+        (out_dir / f"{m}.fmu").exists() and osp_description_path(out_dir / f"{m}.fmu").exists()
+        and (fmi3_dir(out_dir) / f"{m}.fmu").exists() for m in MODELS)
 
 
 def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, Path]:
@@ -152,9 +166,12 @@ def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str,
 
     tag = digest[:10]
     shim = _load(HERE / "shim" / "compile.py", "_lever_build_shim")
+    fmi3 = _load(HERE / "fmi3.py", "_lever_build_fmi3")
     shim_so = staging / "lever_fmi2_shim.so"
+    shim3_so = staging / "lever_fmi3_shim.so"
     staging.mkdir(parents=True, exist_ok=True)
     shim.compile_shim(shim_so)
+    shim.compile_shim(shim3_so, shim.SHIM3_SOURCE)
     requirements = runtime_requirements()
 
     for model, module in MODELS.items():
@@ -191,6 +208,11 @@ def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str,
         if problems:
             raise RuntimeError(f"{model}.fmu does not pass `lever compliance`:\n  " + "\n  ".join(problems))
         log(f"  {paths[model]} ({paths[model].stat().st_size // 1024} KiB), lever compliance: 0 findings")
+        edition3 = fmi3.make_fmu3(paths[model], fmi3_dir(out_dir) / f"{model}.fmu", shim3_so)
+        problems = check_fmu(edition3)
+        if problems:
+            raise RuntimeError(f"{edition3} (FMI 3.0) does not pass `lever compliance`:\n  " + "\n  ".join(problems))
+        log(f"  {edition3} ({edition3.stat().st_size // 1024} KiB, FMI 3.0), lever compliance: 0 findings")
     (out_dir / "build-stamp.json").write_text(json.dumps({"hash": digest, "models": list(MODELS)}, indent=1))
 
 

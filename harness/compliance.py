@@ -12,7 +12,10 @@ Our checks, on the model description:
 * a ``DefaultExperiment`` with start, stop and step; ``LogCategories``;
 * state handling: ``canSerializeFMUstate`` only with ``canGetAndSetFMUstate``;
 
-on the archive: ``documentation/_main.html`` (FMI 2.0's documentation entry point); for a
+FMI 2.0 and 3.0 model descriptions alike (FMI 3.0's ``Float64``/``Int32`` as ``Real``/``Integer``);
+
+on the archive: ``documentation/_main.html`` (FMI 2.0's documentation entry point; FMI 3.0:
+``index.html``); for a
 pythonfmu FMU, ``resources/requirements.txt`` (what the importer's Python needs); a binary
 for each platform it claims;
 
@@ -66,22 +69,54 @@ def fmpy_findings(path: Path) -> list[str]:
     return [f"fmpy: {problem}" for problem in validate_fmu(str(path))]
 
 
+#: FMI 3.0's variable and type elements under the FMI 2.0 names our checks use
+_FMI3_KINDS = {"Float64": "Real", "Float32": "Real", "Int32": "Integer", "Int64": "Integer", "Boolean": "Boolean",
+               "String": "String"}
+
+
+class _Typed:
+    """An FMI 3.0 variable or type element seen as FMI 2.0's type element (tag ``Real``...)."""
+
+    def __init__(self, element: ET.Element):
+        self.element, self.tag = element, _FMI3_KINDS.get(element.tag.removesuffix("Type"), element.tag)
+
+    def get(self, key, default=None):
+        return self.element.get(key, default)
+
+
+def _is_fmi3(root: ET.Element) -> bool:
+    return (root.get("fmiVersion") or "").startswith("3.")
+
+
 def _types(root: ET.Element) -> dict[str, ET.Element]:
     """Type name -> its type element (``Real``, ``Integer``, ...)."""
     types = {}
+    if _is_fmi3(root):
+        return {t.get("name"): _Typed(t) for t in root.iterfind("TypeDefinitions/*")}
     for simple in root.iterfind("TypeDefinitions/SimpleType"):
         if len(simple):
             types[simple.get("name")] = simple[0]
     return types
 
 
+def _variables(root: ET.Element):
+    """(variable element, its type element) of every variable, FMI 2.0 or 3.0 (FMI 3.0's
+    independent variable, which has no type of its own, left out)."""
+    if _is_fmi3(root):
+        for var in root.find("ModelVariables") if root.find("ModelVariables") is not None else ():
+            if var.get("causality") != "independent":
+                yield var, _Typed(var)
+        return
+    for var in root.iterfind("ModelVariables/ScalarVariable"):
+        yield var, var[0] if len(var) else None
+
+
 def variable_findings(root: ET.Element) -> list[str]:
     findings = []
     types = _types(root)
     units = {u.get("name") for u in root.iterfind("UnitDefinitions/Unit")}
-    for var in root.iterfind("ModelVariables/ScalarVariable"):
+    for var, typed in _variables(root):
         name, causality = var.get("name"), var.get("causality", "local")
-        typed = var[0] if len(var) else None
         if typed is None:
             findings.append(f"variable '{name}': no type element")
             continue
@@ -141,17 +176,19 @@ def experiment_findings(root: ET.Element) -> list[str]:
     if not list(root.iterfind("LogCategories/Category")):
         findings.append("no LogCategories")
     cs = root.find("CoSimulation")
+    state = "FMUState" if _is_fmi3(root) else "FMUstate"
     if cs is None:
         findings.append("no CoSimulation element")
-    elif cs.get("canSerializeFMUstate") == "true" and cs.get("canGetAndSetFMUstate") != "true":
-        findings.append("canSerializeFMUstate without canGetAndSetFMUstate")
+    elif cs.get(f"canSerialize{state}") == "true" and cs.get(f"canGetAndSet{state}") != "true":
+        findings.append(f"canSerialize{state} without canGetAndSet{state}")
     return findings
 
 
 def archive_findings(root: ET.Element, names: list[str]) -> list[str]:
     findings = []
-    if "documentation/_main.html" not in names:
-        findings.append("no documentation/_main.html (FMI 2.0's documentation entry point)")
+    entry = "documentation/index.html" if _is_fmi3(root) else "documentation/_main.html"
+    if entry not in names:
+        findings.append(f"no {entry} (FMI {'3.0' if _is_fmi3(root) else '2.0'}'s documentation entry point)")
     cs = root.find("CoSimulation")
     identifier = cs.get("modelIdentifier") if cs is not None else None
     binaries = [n for n in names if n.startswith("binaries/") and not n.endswith("/")]

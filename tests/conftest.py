@@ -57,6 +57,7 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "fmus/test_fmi3.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
     "cli/test_api.py::test_the_example_script_runs",

@@ -24,6 +24,8 @@ import zipfile
 from pathlib import Path
 
 SHIM_SOURCE = Path(__file__).with_name("lever_fmi2_shim.c")
+#: the FMI 3.0 entry: a layer on the FMI 2.0 entry (see that file and build/fmi3.py)
+SHIM3_SOURCE = Path(__file__).with_name("lever_fmi3_shim.c")
 
 # Must match INNER_LIBRARY_NAME and CONFIG_NAME in lever_fmi2_shim.c.
 INNER_LIBRARY_NAME = "pythonfmu-export.so"
@@ -36,8 +38,9 @@ CFLAGS = ["-shared", "-fPIC", "-O2", "-std=c99", "-fvisibility=hidden",
           "-Wall", "-Wextra", "-Werror", "-Wl,-z,nodelete"]
 
 
-def compile_shim(dest: Path) -> Path:
-    """Compile the shim into the shared library ``dest`` and return its path.
+def compile_shim(dest: Path, source: Path = SHIM_SOURCE) -> Path:
+    """Compile the shim (``source``: the FMI 2.0 entry, or ``SHIM3_SOURCE``) into the shared
+    library ``dest`` and return its path.
 
     Uses ``$CC`` (which may carry extra flags, e.g. ``"gcc -m64"``) or ``cc``.
     Raises RuntimeError with the compiler's output if compilation fails.
@@ -45,14 +48,14 @@ def compile_shim(dest: Path) -> Path:
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
     cc = shlex.split(os.environ.get("CC") or "cc")
-    cmd = [*cc, *CFLAGS, "-o", str(dest), str(SHIM_SOURCE), "-ldl", "-lpthread"]
+    cmd = [*cc, *CFLAGS, "-o", str(dest), str(source), "-ldl", "-lpthread", "-lm"]
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True)
     except OSError as exc:  # compiler not installed
         raise RuntimeError(f"cannot run {cc[0]!r}: {exc}") from exc
     if proc.returncode != 0:
         raise RuntimeError(
-            f"compiling {SHIM_SOURCE.name} failed ({shlex.join(cmd)}):\n"
+            f"compiling {Path(source).name} failed ({shlex.join(cmd)}):\n"
             f"{proc.stderr}{proc.stdout}")
     return dest
 

@@ -995,7 +995,7 @@ static const char *state_name(int state)
 #define CHANNEL_SHIFT 20
 #define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
 enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
-       CH_EVENT_INFO };
+       CH_EVENT_INFO, CH_OUTPUT_RATES };
 enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2 };
 enum { SIZE_STATES = 0, SIZE_INDICATORS = 1 };
 #define COMMAND_NEW_DISCRETE_STATES 2.0
@@ -1955,10 +1955,29 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     FORWARD(fmi2SetRealInputDerivatives, c, vr, nvr, order, value);
 }
 
+/* First derivatives only (the model's rates along its own motion, inputs held: the
+ * partials of the directional derivative seeded with the state derivatives).  The FMI 2.0
+ * description does not declare them (maxOutputDerivativeOrder 0, so FMI 2 masters are
+ * unchanged); the FMI 3 entry (lever_fmi3_shim.c) offers them as fmi3GetOutputDerivatives. */
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                         const fmi2Integer order[], fmi2Real value[])
 {
-    FORWARD(fmi2GetRealOutputDerivatives, c, vr, nvr, order, value);
+    BEGIN(fmi2GetRealOutputDerivatives, c);
+    Shim *s = SHIM(c);
+    const char *function = "fmi2GetRealOutputDerivatives";
+    if (nvr > 0 && (!vr || !order || !value)) {
+        return shim_error(s, "%s: an array is NULL (%zu values)", function, nvr);
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] > CHANNEL_INDEX_MAX) {
+            return shim_error(s, "%s: value reference %u is no variable of this FMU", function, vr[i]);
+        }
+        if (order[i] != 1) {
+            return shim_error(s, "%s: order[%zu] = %d (value reference %u): this FMU gives first derivatives "
+                                 "only; nothing was computed", function, i, order[i], vr[i]);
+        }
+    }
+    return nvr ? channel_get(s, function, CH_OUTPUT_RATES, vr, nvr, value) : fmi2OK;
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,

@@ -619,3 +619,31 @@ def test_the_load_shaft_alone_idles_with_its_defaults(fmu_dir):
     result = simulate_fmu(str(fmu_dir / "LoadShaft.fmu"), stop_time=1.0, output_interval=1e-3, output=["w", "phi"])
     assert result["w"][0] == 39.0 and np.all(np.abs(result["w"] - 39.0) <= 1e-9), result["w"][-1]
     assert result["phi"][-1] == pytest.approx(39.0, rel=1e-6)
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_a_deserialized_state_serializes_to_the_same_bytes(fmu_dir, name, tmp_path):
+    """fmi2SerializeFMUstate of a state made by fmi2DeSerializeFMUstate gives the bytes it
+    was made from (it was fatal once: the instance was lost)."""
+    from fmpy.fmi2 import FMU2Slave
+    path = str(Path(fmu_dir) / f"{name}.fmu")
+    md = fmpy.read_model_description(path)
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(path, unzipdir=str(tmp_path)), modelIdentifier=name,
+                    instanceName=name)
+    fmu.instantiate()
+    try:
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(0.0, 1e-3)
+        state = fmu.getFMUstate()
+        blob = fmu.serializeFMUstate(state)
+        again = fmu.deSerializeFMUstate(blob)
+        assert fmu.serializeFMUstate(again) == blob
+        fmu.setFMUstate(again)
+        fmu.doStep(1e-3, 1e-3)
+        for s in (state, again):
+            fmu.freeFMUstate(s)
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()

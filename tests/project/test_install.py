@@ -31,7 +31,7 @@ def _ignore(folder: str, names: list[str]) -> set[str]:
     here = Path(folder).resolve()
     skipped = {n for n in names if n in GENERATED or n.endswith((".egg-info", ".fmu", ".pyc"))}
     if here == REPO / "build":
-        skipped |= {"fmus", "tmp"}
+        skipped |= {"fmus", "fmus3", "tmp"}
     return skipped
 
 
@@ -72,7 +72,8 @@ def test_the_wheel_carries_what_an_installed_lever_needs_and_leaves_the_clones_b
     _, _, _, _, clone, wheel = installed
     names = set(zipfile.ZipFile(wheel).namelist())
     project = "harness/_project/"
-    for needed in ("constraints.txt", "build/fmus.py", "build/shim/compile.py", "build/shim/lever_fmi2_shim.c",
+    for needed in ("constraints.txt", "build/fmus.py", "build/fmi3.py", "build/shim/compile.py",
+                   "build/shim/lever_fmi2_shim.c", "build/shim/lever_fmi3_shim.c",
                    "resources/scenes/kavz685.toml", "resources/reference/kavz685/kavz685_ref.csv",
                    "resources/reference/EngineShaft/EngineShaft_in.csv",
                    "resources/data/monograph/harmonics_driven.csv", "tests/c_host/minimal_importer.c"):
@@ -100,8 +101,9 @@ def test_an_installed_lever_builds_runs_and_validates_from_another_folder(instal
 
     _run([lever, "build"], cwd=work, env=env)
     fmus = Path(env["XDG_CACHE_HOME"]) / "lever-cosim"
-    built = sorted(p.name for p in fmus.rglob("*.fmu"))
-    assert built == sorted(f"{name}.fmu" for name in FMU_NAMES), f"the FMUs are not in the user's cache {fmus}: {built}"
+    built = sorted(str(p.relative_to(fmus)) for p in fmus.rglob("*.fmu"))
+    expected = sorted(f"{edition}/{name}.fmu" for name in FMU_NAMES for edition in ("fmus", "fmus3"))
+    assert [p.split("/", 1)[1] for p in built] == expected, f"the FMUs are not in the user's cache {fmus}: {built}"
 
     ran = _run([lever, "run", "kavz685", "--stop", "0.5", "--no-progress"], cwd=work, env=env)
     assert (work / "results" / "kavz685" / "summary.json").is_file(), ran.stdout + ran.stderr

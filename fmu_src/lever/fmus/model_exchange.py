@@ -39,7 +39,7 @@ CHANNEL = 0x40000000
 KIND_SHIFT = 20
 INDEX_MASK = (1 << KIND_SHIFT) - 1
 # kinds of channel references
-CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO = range(8)
+CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES = range(9)
 # CONTROL set: the interface (1: Model Exchange), the time, a command; get: the sizes
 SET_INTERFACE, SET_TIME, SET_COMMAND = 0, 1, 2
 GET_STATES, GET_INDICATORS = 0, 1
@@ -310,6 +310,8 @@ class ModelExchangeSlave(LeverSlave):
         if kind == DIRECTIONAL:
             seeds, self._seeds = self._seeds, {}
             return self._directional(index, seeds)
+        if kind == OUTPUT_RATES:
+            return self._output_rates(index)
         raise ValueError(f"value references {list(vrs)} are nothing the native entry may read")
 
     def _set_states(self, index, values):
@@ -411,18 +413,70 @@ class ModelExchangeSlave(LeverSlave):
                 out.append(sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()))
         return out
 
-    def _central_difference(self, model, t, x, u, knowns) -> dict:
+    def _output_rates(self, unknowns):
+        """The first time derivatives of the outputs ``unknowns`` (value references) at the
+        current point along the model's own motion with the inputs held: the partials of the
+        directional derivative with the states' derivatives as the seed, plus the explicit
+        time dependence (a load's time series) by central differences in time:
+        dy/dt = dy/dx * dx/dt + dy/dt|x,u."""
+        model = self._me_current()
+        self._cs_modes()
+        rates = self._derivatives()
+        seed = {s.physics: rates[k] for k, s in enumerate(self.ME_STATES) if s.physics in model.STATES}
+        keys = []
+        for vr in unknowns:
+            var = self.vars.get(vr)
+            key = self._unknown_key(vr) if var is not None and var.causality.name == "output" else None
+            if key is None:
+                self._error(f"fmi3GetOutputDerivatives: value reference {vr} is no output of {type(self).__name__}")
+                return _nan_values(self, unknowns)
+            keys.append(key)
+        t, x, u = self._time, self._x_physics(), self._u()
+        partials = model.partials(t, x, u)
+        explicit = self._time_partials(model, t, x, u)
+        out, numerical = [], None
+        for vr, key in zip(unknowns, keys):
+            if isinstance(key, tuple):           # an output that is a state: its derivative
+                out.append(seed.get(key[1], 0.0))
+            elif key == _NUMERICAL:
+                if numerical is None:
+                    numerical = self._central_difference(model, t, x, u, seed, time_rate=1.0)
+                out.append(numerical[self.vars[vr].name])
+            else:
+                out.append(sum(partials.get((key, wrt), 0.0) * rate for wrt, rate in seed.items())
+                           + explicit.get(key, 0.0))
+        bad = [self.vars[vr].name for vr, v in zip(unknowns, out) if not math.isfinite(v)]
+        if bad:
+            self._error(f"fmi3GetOutputDerivatives: the rate of output(s) {', '.join(bad)} is not finite at "
+                        f"t = {self._time!r} s")
+            return _nan_values(self, unknowns)
+        return out
+
+    def _time_partials(self, model, t, x, u) -> dict:
+        """d/dt of the outputs and state derivatives at fixed states and inputs (by central
+        differences; exactly 0 for a model whose laws do not contain the time)."""
+        h = 1e-6 * max(1.0, abs(t))
+        sides = []
+        for when in (t + h, t - h):
+            values = dict(self._me_output_values(model, when, x, u))
+            values.update((der(name), v) for name, v in zip(model.STATES, model.derivatives(when, x, u)))
+            sides.append(values)
+        return {key: (sides[0][key] - sides[1][key]) / (2.0 * h) for key in sides[0]}
+
+    def _central_difference(self, model, t, x, u, knowns, time_rate=0.0) -> dict:
         """The outputs' derivative along the seed by central differences of
         ``_me_output_values``: for the outputs that the physics' model has no partials of
-        (a freewheel's torques and energies; documented as numerical)."""
-        scale = max([1.0] + [abs(v) for v in x] + [abs(v) for v in u])
-        size = max([abs(v) for v in knowns.values()] + [1e-300])
+        (a freewheel's torques and energies; documented as numerical).  ``time_rate``: how
+        far the time moves along the seed (1 for a rate in time, 0 for a derivative at a
+        fixed time)."""
+        scale = max([1.0, abs(t) * time_rate] + [abs(v) for v in x] + [abs(v) for v in u])
+        size = max([abs(v) for v in knowns.values()] + [abs(time_rate), 1e-300])
         h = 1e-6 * scale / size
         sides = []
         for sign in (1.0, -1.0):
             xs = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.STATES, x)]
             us = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.INPUTS, u)]
-            sides.append(self._me_output_values(model, t, xs, us))
+            sides.append(self._me_output_values(model, t + sign * h * time_rate, xs, us))
         return {name: (sides[0][name] - sides[1][name]) / (2.0 * h) for name in sides[0]}
 
     # -- model description ---------------------------------------------------------------------------
