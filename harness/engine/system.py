@@ -187,7 +187,11 @@ class System:
             scene, {name: c.description for name, c in self.components.items()})
         # Stateful components in scene order: the order a Gauss-Seidel master steps them.
         self.stateful = [n for n in scene.components if n not in self.feedthrough]
-        self._plan()
+        try:
+            self._plan()
+        except Exception:          # an algebraic loop refused: the instances go with it
+            self.free()
+            raise
 
     def derivative_chain(self, component: str, output: str) -> list[str]:
         """``[output, d/dt output, d2/dt2 output, ...]`` as far as the component's model

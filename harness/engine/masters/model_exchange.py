@@ -32,7 +32,10 @@ system Jacobian at the start - BDF where a mode decays much faster than anything
 the system moves (stiff), Adams otherwise (BDF damps a lightly damped oscillation
 numerically).  ``lever run`` passes the choice the linear stability analysis makes on the
 scene's driveline (``harness.judges.stability.cvode_method``, the same rule on its
-two-inertia model) and says it in the run's notes; the run's counters say which and why.
+two-inertia model) and says it in the run's notes; the run's counters say which and why (``method``, ``method_reason``), and what it took:
+``rhs`` right-hand sides (the difference quotients' included), ``jacobians`` CVODE formed,
+``directional_jacobians`` assembled from directional derivatives (the method choice's one
+included), ``events`` and ``time_events``.
 """
 from __future__ import annotations
 
@@ -111,6 +114,8 @@ class ModelExchangeCvodeMaster(Master):
         if self.max_step is not None and not (isinstance(self.max_step, (int, float)) and self.max_step > 0):
             raise ValueError(f"option 'max_step' = {self.max_step!r}: a time in seconds > 0")
         self.n_rhs = self.n_jacobians = self.n_events = self.n_time_events = 0
+        # CVODE's own Jacobian count (its statistics restart with it at every event)
+        self._cvode_jacobians = self._cvode_jacobians_now = 0
         components = [system.components[n] for n in system.scene.components]
         self._all = components
         self._with_states = [c for c in components if c.nx]
@@ -262,6 +267,8 @@ class ModelExchangeCvodeMaster(Master):
         """CVODE (re)started at ``(t, y)`` (the start, and after every event)."""
         self._tc = t
         self._y = np.array(y, dtype=float)
+        self._cvode_jacobians += self._cvode_jacobians_now
+        self._cvode_jacobians_now = 0
         if self.nx:
             self._solver.init_step(t, self._y)
 
@@ -275,6 +282,7 @@ class ModelExchangeCvodeMaster(Master):
                 raise MasterFailure(f"{self.name}: CVODE ({self.method}, tolerance {self.tolerance:g}) stopped at "
                                     f"t = {float(result.t):.9g} s: {result.message}")
             now, y = float(result.t), result.y
+            self._cvode_jacobians_now = int(result.njev)
             if result.status == 2:                      # an event indicator's root
                 self.n_events += 1
                 self._event(now, y)
@@ -331,4 +339,6 @@ class ModelExchangeCvodeMaster(Master):
     def counters(self) -> dict:
         return {**super().counters(), "method": self.method, "method_reason": self.method_reason,
                 "jacobian": self.jacobian, "tolerance": self.tolerance, "rhs": self.n_rhs,
-                "jacobians": self.n_jacobians, "events": self.n_events, "time_events": self.n_time_events}
+                "jacobians": self._cvode_jacobians + self._cvode_jacobians_now,
+                "directional_jacobians": self.n_jacobians, "events": self.n_events,
+                "time_events": self.n_time_events}

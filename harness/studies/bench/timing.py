@@ -12,6 +12,7 @@ import numpy as np
 from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.engine import interrupt
+from harness.engine import masters as master_family
 from harness.engine.run import RunResult, simulate
 from harness.judges import metrics
 from harness.judges import monolithic, stability
@@ -86,9 +87,15 @@ MONOLITHIC_CVODE = "monolithic-cvode"
 def master_options(scene, name: str, tolerance: float | None) -> tuple[dict, str | None]:
     """A master's options in the benchmark: its tolerance, and for the Model Exchange
     master the CVODE method the stability analysis chooses (as ``lever run`` passes it),
-    with the note that says which and why."""
+    with which and why (None for a master without a method to choose)."""
     options = {"tolerance": tolerance} if tolerance is not None else {}
-    return options, stability.run_method(scene, name, options)
+    if "method" not in master_family.MASTERS[name].options:
+        return options, None
+    chosen = stability.cvode_method(scene)
+    if chosen is None:
+        return options, "CVODE, Adams or BDF as the master chooses from its Jacobian at the start"
+    options["method"] = chosen[0]
+    return options, f"CVODE-{chosen[0]}: {chosen[1]}"
 
 
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
