@@ -14,7 +14,7 @@ import ctypes
 
 from fmpy.fmi2 import FMU2Model, fmi2EventInfo
 
-from harness.engine.component import Component, _callbacks, _unconverted
+from harness.engine.component import Component, log_callbacks, unconverted
 
 #: the kinds of Model Exchange call counted, as ``System.calls_by_kind`` reports them
 ME_CALL_KINDS = ("time", "states", "derivatives", "indicators", "directional", "event")
@@ -40,15 +40,15 @@ class ModelExchangeComponent(Component):
         self.state_names = [u.variable.derivative.name for u in md.derivatives]
         self.derivative_names = [u.variable.name for u in md.derivatives]
         f = self.fmu._functions
-        self._set_time = _unconverted(f["fmi2SetTime"])
-        self._set_states = _unconverted(f["fmi2SetContinuousStates"])
-        self._get_states = _unconverted(f["fmi2GetContinuousStates"])
-        self._get_derivatives = _unconverted(f["fmi2GetDerivatives"])
-        self._get_indicators = _unconverted(f["fmi2GetEventIndicators"])
-        self._directional = _unconverted(f["fmi2GetDirectionalDerivative"])
-        self._enter_event = _unconverted(f["fmi2EnterEventMode"])
-        self._new_discrete = _unconverted(f["fmi2NewDiscreteStates"])
-        self._enter_continuous = _unconverted(f["fmi2EnterContinuousTimeMode"])
+        self._set_time = unconverted(f["fmi2SetTime"])
+        self._set_states = unconverted(f["fmi2SetContinuousStates"])
+        self._get_states = unconverted(f["fmi2GetContinuousStates"])
+        self._get_derivatives = unconverted(f["fmi2GetDerivatives"])
+        self._get_indicators = unconverted(f["fmi2GetEventIndicators"])
+        self._directional = unconverted(f["fmi2GetDirectionalDerivative"])
+        self._enter_event = unconverted(f["fmi2EnterEventMode"])
+        self._new_discrete = unconverted(f["fmi2NewDiscreteStates"])
+        self._enter_continuous = unconverted(f["fmi2EnterContinuousTimeMode"])
         self._nx = ctypes.c_size_t(self.nx)
         self._nz = ctypes.c_size_t(self.nz)
         #: buffers the calls fill or read (ctypes arrays; numpy views share them)
@@ -64,7 +64,7 @@ class ModelExchangeComponent(Component):
                                   "no Model Exchange interface")
         fmu = FMU2Model(guid=self.description.guid, unzipDirectory=self._unzipped, modelIdentifier=me.modelIdentifier,
                         instanceName=self.instance_name)
-        fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
+        fmu.instantiate(callbacks=log_callbacks(), loggingOn=logging_on)
         return fmu
 
     def _do_step_function(self):

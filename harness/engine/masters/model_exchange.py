@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 
 import numpy as np
 
@@ -250,6 +251,12 @@ class ModelExchangeCvodeMaster(Master):
     # -- CVODE ------------------------------------------------------------------------------------
     def _make_solver(self):
         from sksundae.cvode import CVODE
+
+        # SUNDIALS prints its warnings (e.g. a root function still zero just after an event,
+        # which CVODE then leaves out for a step) to stdout, into what a command prints as
+        # its result (``lever fingerprint``): to stderr, unless the user sent them elsewhere.
+        # Read when the solver's context is made, below.
+        os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", "stderr")
 
         options = dict(method=self.method, rtol=float(self.tolerance), atol=ATOL_SHARE * float(self.tolerance),
                        max_num_steps=MAX_STEPS, max_step=float(self.max_step or 0.0))

@@ -97,8 +97,9 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
                             for name, values in table.get("peer_tolerances", {}).items()},
         "monolithic": [float(x) for x in table.get("monolithic_rtol", [1e-4, 1e-6, 1e-8])],
         # the same unsplit equations under CVODE (BDF or Adams, as the stability analysis
-        # chooses for the Model Exchange master): the strongly coupled master's own peer
-        "monolithic_cvode": [float(x) for x in table.get("monolithic_cvode_rtol", [1e-4, 1e-6, 1e-8])],
+        # chooses for the Model Exchange master): the strongly coupled master's own peer,
+        # where the scene's plan names its tolerances
+        "monolithic_cvode": [float(x) for x in table.get("monolithic_cvode_rtol", [])],
         # the output grid [s] of a master's tolerance runs where it records on a grid (the
         # Model Exchange master; default the scene's step), e.g. the grid the masters it is
         # compared with record on
