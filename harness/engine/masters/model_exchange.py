@@ -18,8 +18,8 @@ states ``x`` and connected inputs ``u`` (one call per state and input), assemble
 or, with ``jacobian="difference-quotients"``, CVODE's own difference quotients of the
 right-hand side (one evaluation per state each time it forms a Jacobian).  A scene with an
 algebraic loop between direct-feedthrough FMUs is refused before it runs
-(``harness.engine.system.dependency_order`` names the loop): ``I - dg/du`` is then nilpotent
-and the propagation order exact.
+(``harness.engine.system.dependency_order`` names the loop); without one ``dg/du`` is
+nilpotent, so ``I - dg/du`` is invertible and one propagation in dependency order exact.
 
 Events: the FMUs' event indicators are CVODE's root functions; at a root, and at a time
 event an FMU announces (``nextEventTime``), every FMU enters event mode, the discrete states
