@@ -232,11 +232,12 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
     from harness.engine import masters
+    from harness.engine.me_component import NoModelExchange
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
     from harness.formats import outputs, report
     from harness.judges import monolithic
-    from harness.judges.stability import run_advice
+    from harness.judges.stability import run_advice, run_method
 
     notes: list[str] = []
 
@@ -276,6 +277,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
     for warning in advice:
         say("warning", warning)         # before the run, so a long run is not waited for
+    if (method_note := run_method(spec, chosen, options)) is not None:
+        say("note", method_note)
     if not stream:      # (the experiment's times are sound: no refusal)
         needed, rows = trace_memory(plan, step)
         free = available_memory()
@@ -294,10 +297,11 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
                           observer=observer)
-    except SceneInvalid as error:
+    except (SceneInvalid, NoModelExchange) as error:
         if out is not None:
             outputs.abandon(Path(out))           # refused before the run: no empty folder left
-        raise InputError(str(error)) from None
+        raise InputError(f"{error}: run it with a co-simulation master (e.g. jacobi-quadratic)"
+                         if isinstance(error, NoModelExchange) else str(error)) from None
     result.warnings = advice
     if result.unconnected_inputs:
         say("warning", scenes.unconnected_message(result.unconnected_inputs))
@@ -393,6 +397,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     ``result`` instead - a CSV another tool wrote, or ``(times, {signal: values})``.
     ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a shorter
     run); ``out``: write validation.json, the result and a plot per failing signal there."""
+    from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
     from harness.judges import validation
@@ -432,7 +437,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
                 check_masters(master)
             try:
                 judged = reference_traces.run_scene(spec, master, step)
-            except SceneInvalid as error:
+            except (SceneInvalid, NoModelExchange) as error:
                 raise InputError(str(error)) from None
     start, stop = ref.opt.start, ref.opt.stop
     if window is not None:

@@ -33,8 +33,8 @@ def list_scenes():
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/<scene>).")
 @click.option("--tolerance", type=float, default=None,
-              help="Tolerance of an adaptive master (relative torque error per step) or of an iterative "
-                   "master's coupling iteration.")
+              help="Tolerance of an adaptive master (relative torque error per step), of an iterative "
+                   "master's coupling iteration, or me-cvode's CVODE relative tolerance (default 1e-6).")
 @click.option("--no-reference", is_flag=True, help="Skip the monolithic reference solution.")
 @click.option("--strict", is_flag=True, help="Refuse the scene when an input is connected to nothing and not set "
               "(as experiment.strict = true); without it such an input is named and held at its start value.")

@@ -151,7 +151,7 @@ def _count(n: int):
     return _COUNTS[n] if n < 33 else ctypes.c_size_t(n)
 
 
-def _unconverted(function):
+def unconverted(function):
     """``function`` (a ctypes function with ``argtypes``) as a function pointer without
     them: its arguments must be ctypes objects of the right types, passed as they are.
     ctypes' conversion through ``argtypes`` cost about a third of an fmi2GetReal into a
@@ -200,18 +200,27 @@ class Component:
         self.instance_name = f"{name}#{next(_instances)}"
         _routes[self.instance_name] = self.messages
         _pin_logger()
-        self.fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
-                             modelIdentifier=self.description.coSimulation.modelIdentifier,
-                             instanceName=self.instance_name)
-        self.fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
+        self.fmu = self._instantiate(logging_on)
         self.state = INSTANTIATED
         functions = self.fmu._functions
-        self.raw = RawCalls(ctypes.c_void_p(self.fmu.component), _unconverted(functions["fmi2GetReal"]),
-                            _unconverted(functions["fmi2SetReal"]), functions["fmi2DoStep"], ctypes.c_size_t)
+        self.raw = RawCalls(ctypes.c_void_p(self.fmu.component), unconverted(functions["fmi2GetReal"]),
+                            unconverted(functions["fmi2SetReal"]), self._do_step_function(), ctypes.c_size_t)
         self._get_state = self.fmu._functions["fmi2GetFMUstate"]
         self._set_state = self.fmu._functions["fmi2SetFMUstate"]
         self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
         self._freed = False
+
+    def _instantiate(self, logging_on: bool):
+        """The FMU instance, its co-simulation interface (see ``harness.engine.me_component``
+        for Model Exchange)."""
+        fmu = FMU2Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
+                        modelIdentifier=self.description.coSimulation.modelIdentifier,
+                        instanceName=self.instance_name)
+        fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
+        return fmu
+
+    def _do_step_function(self):
+        return self.fmu._functions["fmi2DoStep"]
 
     @property
     def unzipped_dir(self) -> str:

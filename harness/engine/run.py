@@ -168,7 +168,9 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
     master_family.check(master)     # an unknown master is said before the scene's findings
     plan = subject if isinstance(subject, plans.Plan) else plans.check(scene, fmu_dir=fmu_dir)
     names = list(plan.recorded)
-    system = System(plan, record=names)      # refuses an unsound scene (SceneInvalid) first
+    # refuses an unsound scene (SceneInvalid) first, and for a Model Exchange master an FMU
+    # without that interface (NoModelExchange), before any FMU is instantiated
+    system = System(plan, record=names, interface=master_family.master_class(master).interface)
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     failure = stage = diagnosis = None
     recorder = driver = bar = calls_before = None

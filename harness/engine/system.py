@@ -105,6 +105,10 @@ class FloorPlan:
     rereads: list[Visit]
 
 
+#: the FMI interface a system instantiates its FMUs in (``System(interface=...)``)
+CO_SIMULATION, MODEL_EXCHANGE = "co-simulation", "model exchange"
+
+
 class SceneInvalid(ValueError):
     def __init__(self, scene_name: str, findings: list[str]):
         self.findings = findings
@@ -145,9 +149,12 @@ def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
 
 class System:
     def __init__(self, plan: plans.Plan | scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
-                 record: list[str] | None = None):
+                 record: list[str] | None = None, interface: str = CO_SIMULATION):
         """The system of a checked scene (``harness.description.plan``; a scene is checked
-        here, its FMUs in ``fmu_dir``); ``SceneInvalid`` when the plan has refusals."""
+        here, its FMUs in ``fmu_dir``); ``SceneInvalid`` when the plan has refusals.
+        ``interface``: the FMUs instantiated for co-simulation (the default) or for Model
+        Exchange (``harness.engine.me_component``; ``NoModelExchange`` for an FMU without
+        it, before any is instantiated)."""
         if not isinstance(plan, plans.Plan):
             plan = plans.check(plan, fmu_dir=fmu_dir)
         self.plan = plan
@@ -155,10 +162,24 @@ class System:
         self.record = list(scene.record if record is None else record)
         if plan.refusals:
             raise SceneInvalid(scene.name, list(plan.refusals))
+        self.interface = interface
+        kind = Component
+        if interface == MODEL_EXCHANGE:
+            from harness.engine.me_component import ModelExchangeComponent, NoModelExchange
+            lacking = [name for name, spec in scene.components.items()
+                       if plan.descriptions[spec.fmu].modelExchange is None]
+            if lacking:
+                raise NoModelExchange(
+                    f"scene '{scene.name}': " + "; ".join(
+                        f"component '{n}' (FMU {scene.components[n].fmu}) offers co-simulation only" for n in lacking)
+                    + " - Model Exchange is needed to integrate the FMUs' equations together")
+            kind = ModelExchangeComponent
+        elif interface != CO_SIMULATION:
+            raise ValueError(f"interface {interface!r}: one of {CO_SIMULATION!r}, {MODEL_EXCHANGE!r}")
         self.components: dict[str, CoSimComponent] = {}
         try:
             for name in scene.components:
-                self.components[name] = Component(name, plan.paths[name], logging_on)
+                self.components[name] = kind(name, plan.paths[name], logging_on)
         except Exception:
             self.free()
             raise
@@ -166,7 +187,11 @@ class System:
             scene, {name: c.description for name, c in self.components.items()})
         # Stateful components in scene order: the order a Gauss-Seidel master steps them.
         self.stateful = [n for n in scene.components if n not in self.feedthrough]
-        self._plan()
+        try:
+            self._plan()
+        except Exception:          # an algebraic loop refused: the instances go with it
+            self.free()
+            raise
 
     def derivative_chain(self, component: str, output: str) -> list[str]:
         """``[output, d/dt output, d2/dt2 output, ...]`` as far as the component's model
@@ -436,8 +461,10 @@ class System:
         self.propagate()
 
     def calls_by_kind(self) -> dict[str, dict[str, int]]:
-        """FMI calls made on the hot path so far, by component and kind (get, set, step, state)."""
-        return {name: {"get": c.gets, "set": c.sets, "step": c.steps, "state": c.state_calls}
+        """FMI calls made on the hot path so far, by component and kind (get, set, step, state;
+        in Model Exchange also the kinds of ``harness.engine.me_component.ME_CALL_KINDS``)."""
+        return {name: {"get": c.gets, "set": c.sets, "step": c.steps, "state": c.state_calls,
+                       **getattr(c, "model_exchange_calls", {})}
                 for name, c in self.components.items()}
 
     @property

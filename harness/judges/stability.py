@@ -71,7 +71,7 @@ from harness.engine import masters as master_family
 from harness.description import scene as scenes
 from harness.paths import FMUS
 from harness.engine.interface import RawCalls
-from harness.engine.system import System, feedthrough_components
+from harness.engine.system import CO_SIMULATION, System, feedthrough_components
 
 #: A spectral radius above 1 + this is unstable (rounding of the map stays far below).
 RHO_TOLERANCE = 1e-7
@@ -592,10 +592,13 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
            fmu_dir: Path = FMUS) -> Assessment | None:
     """The linear analysis of ``master`` at ``step`` (defaults: the scene's) on the
     scene's driveline, with stable alternatives when it is unstable; None when the scene
-    has no driveline to linearise or the master chooses its own steps (adaptive)."""
+    has no driveline to linearise, the master chooses its own steps (adaptive) or
+    splits no coupling into communication steps (Model Exchange: its integrator is chosen
+    by ``cvode_method``)."""
     master = master or scene.experiment.master
     step = float(step or scene.experiment.step)
-    if master not in master_family.MASTERS or master_family.MASTERS[master].adaptive:
+    if (master not in master_family.MASTERS or master_family.MASTERS[master].adaptive
+            or master_family.MASTERS[master].interface != CO_SIMULATION):
         return None
     try:
         model = model_of(scene)
@@ -638,3 +641,38 @@ def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FM
         return advise(scene, master, step, fmu_dir)
     except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
         return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
+
+
+# -- the integrator of the Model Exchange master ----------------------------------------------------
+
+def cvode_method(scene: scenes.Scene) -> tuple[str, str] | None:
+    """``(method, why)``: CVODE's Adams or BDF for the Model Exchange master on ``scene``,
+    from the continuous eigenvalues of its linearised driveline (``TwoInertia``) by the
+    master's own rule (``harness.engine.masters.model_exchange.choose_method``); None for a
+    scene without an engine - coupling - load chain (the master then applies the rule to
+    its system Jacobian at the start)."""
+    try:
+        model = model_of(scene)
+    except scene_kinds.NotADriveline:
+        return None
+    method, why = master_family.choose_method(model.continuous_eigenvalues(),
+                                              f"the linearised driveline of scene '{scene.name}'")
+    return method, why
+
+
+def run_method(scene: scenes.Scene, master: str, options: dict) -> str | None:
+    """For a run of the Model Exchange master that leaves ``method`` to the master: set
+    ``options["method"]`` from ``cvode_method`` and return the note that says which and
+    why (None: another master, a method given, or no driveline to analyse).  Like the
+    advice, it never stops a run: a scene the analysis cannot read is left to the master."""
+    cls = master_family.MASTERS.get(master)
+    if cls is None or "method" not in cls.options or options.get("method", "auto") != "auto":
+        return None
+    try:
+        chosen = cvode_method(scene)
+    except Exception:  # noqa: BLE001 - the master chooses from its own Jacobian then
+        return None
+    if chosen is None:
+        return None
+    options["method"] = chosen[0]
+    return f"{master}: CVODE {chosen[0]} - {chosen[1]} (harness.judges.stability.cvode_method)"

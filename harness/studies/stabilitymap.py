@@ -43,6 +43,7 @@ from harness.judges import metrics
 from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
+from harness.engine.system import CO_SIMULATION
 from harness.studies.cases import FAILED, CaseLog, case_key, collect
 from harness.paths import FMUS, RESULTS
 
@@ -51,8 +52,10 @@ GROWTH_DRIFT = 1.25
 ENERGY_DRIFT = 1e-2
 STATUSES = ("stable", "energy-drifting", "divergent")
 
-#: Masters with a fixed communication step (the adaptive ones choose theirs).
-FIXED_STEP_MASTERS = [name for name, cls in master_family.MASTERS.items() if not cls.adaptive]
+#: Masters with a fixed communication step (the adaptive ones choose theirs; the Model
+#: Exchange one splits no coupling into steps).
+FIXED_STEP_MASTERS = [name for name, cls in master_family.MASTERS.items()
+                      if not cls.adaptive and cls.interface == CO_SIMULATION]
 #: The explicit masters: no iteration, a stability edge to compare.
 EXPLICIT = [name for name in FIXED_STEP_MASTERS
             if not issubclass(master_family.MASTERS[name], master_family.IterativeMaster)]

@@ -1,6 +1,6 @@
 """Co-simulation masters, a family in the manner of scipy's ``integrate._ivp``: the
 contract every master keeps (``base``), the explicit masters, the iterative ones, the
-adaptive ones, and the registry - the one place a master's name is checked.  See
+adaptive ones, the Model Exchange one, and the registry - the one place a master's name is checked.  See
 ``harness.engine.masters.base`` for the contract."""
 from harness.engine.masters.adaptive import AdaptiveMaster, AdaptiveTrapezoidalMaster, StepControl
 from harness.engine.masters.base import Master, MasterFailure
@@ -10,6 +10,7 @@ from harness.engine.masters.explicit import (ExtrapolatingJacobiMaster, GaussSei
                                              lagrange_weights)
 from harness.engine.masters.iterative import (ImplicitFixedPointMaster, ImplicitNewtonMaster, InterfaceJacobian,
                                               IterativeMaster, TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster)
+from harness.engine.masters.model_exchange import ModelExchangeCvodeMaster, choose_method
 from harness.engine.masters.registry import MASTERS, UnknownMaster, check, make, master_class
 
 __all__ = ["AdaptiveMaster", "AdaptiveTrapezoidalMaster", "StepControl", "Master", "MasterFailure",
@@ -17,5 +18,5 @@ __all__ = ["AdaptiveMaster", "AdaptiveTrapezoidalMaster", "StepControl", "Master
            "MidpointPredictionMaster", "QuadraticExtrapolationMaster", "derivative_weights", "extrapolation_weights",
            "lagrange_weights",
            "ImplicitFixedPointMaster", "ImplicitNewtonMaster", "InterfaceJacobian", "IterativeMaster",
-           "TrapezoidalFixedPointMaster", "TrapezoidalNewtonMaster", "MASTERS", "UnknownMaster", "check", "make",
+           "TrapezoidalFixedPointMaster", "TrapezoidalNewtonMaster", "ModelExchangeCvodeMaster", "choose_method", "MASTERS", "UnknownMaster", "check", "make",
            "master_class"]

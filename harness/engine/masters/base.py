@@ -26,13 +26,15 @@ feedthrough, stepped in scene order) and its propagation; the components offer t
 The family: this contract (``base``), the explicit masters (``explicit``: zero-order
 hold, Gauss-Seidel, extrapolation, mid-step prediction), the iterative ones
 (``iterative``: implicit and trapezoidal coupling, fixed point or Newton, with
-rollback), the adaptive ones (``adaptive``: error-controlled steps), and the registry
-(``registry``), the one place a master's name is looked up and checked.
+rollback), the adaptive ones (``adaptive``: error-controlled steps), the strongly coupled
+one (``model_exchange``: the FMUs in Model Exchange, integrated together by CVODE; its
+``interface`` says the system instantiates them so), and the registry (``registry``), the
+one place a master's name is looked up and checked.
 """
 from __future__ import annotations
 
 from harness.description.scene import step_problem
-from harness.engine.system import Inputs, System
+from harness.engine.system import CO_SIMULATION, Inputs, System
 
 
 class MasterFailure(RuntimeError):
@@ -54,6 +56,8 @@ class Master:
     order = 0
     description = ""
     adaptive = False
+    #: the FMI interface the master's system instantiates the FMUs in
+    interface = CO_SIMULATION
     #: options ``make`` accepts for this master, with their defaults
     options: dict = {}
 

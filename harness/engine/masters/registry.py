@@ -8,13 +8,14 @@ from harness.engine.masters.explicit import (GaussSeidelMaster, JacobiMaster, Li
                                              MidpointPredictionMaster, QuadraticExtrapolationMaster)
 from harness.engine.masters.iterative import (ImplicitFixedPointMaster, ImplicitNewtonMaster, IterativeMaster,
                                               TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster)
+from harness.engine.masters.model_exchange import ModelExchangeCvodeMaster
 from harness.engine.system import System
 
 MASTERS = {cls.name: cls for cls in (JacobiMaster, GaussSeidelMaster, LinearExtrapolationMaster,
                                      QuadraticExtrapolationMaster, MidpointPredictionMaster,
                                      ImplicitFixedPointMaster, ImplicitNewtonMaster,
                                      TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster, AdaptiveMaster,
-                                     AdaptiveTrapezoidalMaster)}
+                                     AdaptiveTrapezoidalMaster, ModelExchangeCvodeMaster)}
 
 
 class UnknownMaster(ValueError):

@@ -17,8 +17,10 @@ mean torque and speed, over the whole run and after the scene's start-up transie
 the energy residual.
 
 The plan comes from the scene's ``[bench]`` table (steps per master, tolerances for
-adaptive ones, peers, monolithic tolerances, the target error); masters it does not
-name are left out.
+adaptive ones and the Model Exchange master, the output grid of a tolerance run where the
+master records on a grid (``output_steps``), peers, the monolithic tolerances - scipy's
+DOP853 (``monolithic_rtol``) and CVODE (``monolithic_cvode_rtol``) on the unsplit equations -,
+the target error); masters it does not name are left out.
 
 The package, one module a job: ``schedule`` (the plan, the Case, the case log), ``timing``
 (running and timing the cases, the side-by-side rounds), ``floors`` (the FMU-call floor and

@@ -17,6 +17,9 @@ from harness.studies import trust
 from harness.studies.bench import floors
 from harness.studies.bench.schedule import Case
 
+#: the monolithic engines (``timing.run_monolithic``): scipy's DOP853 and CVODE
+MONOLITHIC = ("monolithic", "monolithic-cvode")
+
 
 def case_noise(case: Case, problems: list[str] | None = None) -> str:
     """The machine's noise around a case, in words (its load and the spread of its runs);
@@ -47,7 +50,7 @@ def headline_cases(scene: scenes.Scene, cases: list[Case], p: dict) -> list[Case
     target, baseline = p["target_error"], p["baseline"]
     chosen: dict[str, Case] = {}
     for name, group in _by_engine(cases).items():
-        if name in master_family.MASTERS or name == "monolithic":
+        if name in master_family.MASTERS or name in MONOLITHIC:
             for c in bracket(group, target):
                 chosen[c.key] = c
     stable_base = [c for c in cases if c.engine == baseline and c.kind == "master" and c.stable
@@ -109,7 +112,7 @@ def time_at_error(cases: list[Case], target: float, key: str = "tau_rms") -> flo
 def _by_engine(cases: list[Case]) -> dict[str, list[Case]]:
     by_engine: dict[str, list[Case]] = {}
     for case in cases:
-        by_engine.setdefault(case.engine if case.kind != "monolithic" else "monolithic", []).append(case)
+        by_engine.setdefault(case.engine, []).append(case)
     return by_engine
 
 
@@ -167,6 +170,10 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
             r = ratio(best, "monolithic", best_time, at_target["monolithic"])
             out["best_master_over_monolithic"] = r["median"]
             out["ratios"]["best_master_over_monolithic"] = r
+        if at_target.get("monolithic-cvode"):
+            r = ratio(best, "monolithic-cvode", best_time, at_target["monolithic-cvode"])
+            out["best_master_over_monolithic_cvode"] = r["median"]
+            out["ratios"]["best_master_over_monolithic_cvode"] = r
     # One baseline step at the scene's step against the same calls into do-nothing FMUs,
     # taken round by round (the floor is timed in each round beside the step).
     hollow_rounds = (rounds or {}).get("hollow_floor") or []

@@ -26,7 +26,7 @@ def progress_line(case: Case) -> str:
 
 
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
-           "load_min", "load_max", "unreliable", "steps", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
+           "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
            "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
            "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "split_unreliable", "failure"]
 
@@ -45,7 +45,7 @@ def table_row(case: Case) -> dict:
             "repeats": len(case.wall_times), "asked": case.asked or None,
             "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
             "unreliable": ("; ".join(problems) + f": {case_noise(case, problems)}") if problems else None,
-            "steps": case.steps, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
+            "steps": case.steps, "rhs": case.rhs, "method": case.method, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
             "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
                                                  ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
                                                   "w_rms_after_transient")},
@@ -134,7 +134,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
             wall = f"{r['wall_median_s']:.3f} s"
         note = "; ".join(x for x in ((r["failure"] or "")[:90], r.get("unreliable") or "") if x)
         runs = f"{r['repeats']}" + (f" of {r['asked']}" if r.get("asked") and r["asked"] != r["repeats"] else "")
-        lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {r['steps']} | "
+        steps = f"{r['steps']}" + (f" ({r['rhs']} RHS)" if r.get("rhs") is not None and r["kind"] == "master" else "")
+        lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {steps} | "
                      f"{_pct(r['overhead_above_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
                      f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
                      f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
@@ -153,6 +154,12 @@ def markdown(result: dict, rows: list[dict]) -> str:
         if ratios.get("best_master_over_monolithic"):
             lines[-1] += (f"  It takes {_ratio(ratios['best_master_over_monolithic'])} the time of the monolithic "
                           "solution (scipy DOP853 on the unsplit equations) at this error.")
+        if ratios.get("best_master_over_monolithic_cvode"):
+            lines[-1] += (f"  It takes {_ratio(ratios['best_master_over_monolithic_cvode'])} the time of CVODE on "
+                          "the unsplit equations at this error.")
+    methods = sorted({(r["engine"], r["method"]) for r in rows if r.get("method")})
+    if methods:
+        lines += ["", "Integrators: " + "; ".join(f"{engine}: {method}" for engine, method in methods) + "."]
         if c.get("ratios") is not None:
             lines += ["", "Each ratio is the median of the ratios of runs made side by side (the cases it divides "
                       "run in turn, round after round), with their range; the run times above are the cases' own "
@@ -274,7 +281,8 @@ def plot(path: Path, result: dict) -> Path:
     fig, ax = plt.subplots(figsize=(11, 6), layout="constrained")
     groups: dict[str, list[Case]] = {}
     for case in result["cases"]:
-        key = case.engine if case.kind != "monolithic" else "monolithic (scipy DOP853)"
+        key = ({"monolithic": "monolithic (scipy DOP853)", "monolithic-cvode": "monolithic (CVODE)"}
+               .get(case.engine, case.engine))
         groups.setdefault(key, []).append(case)
     for name, group in groups.items():
         points = sorted((c.wall, c.errors["tau_rms"], c.step) for c in group if c.stable and "tau_rms" in c.errors)

@@ -18,7 +18,7 @@ from harness.studies.cases import FAILED, CaseLog, case_key
 
 @dataclass
 class Case:
-    engine: str                 # a master's name, a peer's, or "monolithic"
+    engine: str                 # a master's name, a peer's, "monolithic" (DOP853) or "monolithic-cvode"
     kind: str                   # "master", "peer", "monolithic"
     step: float | None          # communication step [s] (first step for adaptive runs)
     tolerance: float | None = None
@@ -46,6 +46,10 @@ class Case:
     load: list = field(default_factory=list)
     #: why the split is not shown (``trust.split_problems``), with the machine's noise
     split_unreliable: str | None = None
+    #: the integrator and why (the monolithic CVODE's and the Model Exchange master's)
+    method: str | None = None
+    #: right-hand-side evaluations (monolithic solutions, the Model Exchange master)
+    rhs: int | None = None
 
     @property
     def wall(self) -> float:
@@ -58,7 +62,7 @@ class Case:
     @property
     def label(self) -> str:
         if self.kind == "monolithic":
-            return f"monolithic rtol={self.tolerance:g}"
+            return f"{self.engine} rtol={self.tolerance:g}"
         if self.tolerance is not None:
             return f"{self.engine} tol={self.tolerance:g}"
         return f"{self.engine} h={self.step:g}"
@@ -77,7 +81,7 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
     if not steps and not tolerances:
         steps = {name: [scene.experiment.step] for name, m in master_family.MASTERS.items() if not m.adaptive}
     try:
-        master_family.check(*steps, *tolerances)
+        master_family.check(*steps, *tolerances, *table.get("output_steps", {}))
     except master_family.UnknownMaster as error:
         raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
     if only:
@@ -92,6 +96,14 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
         "peer_tolerances": {name: [float(x) for x in values]
                             for name, values in table.get("peer_tolerances", {}).items()},
         "monolithic": [float(x) for x in table.get("monolithic_rtol", [1e-4, 1e-6, 1e-8])],
+        # the same unsplit equations under CVODE (BDF or Adams, as the stability analysis
+        # chooses for the Model Exchange master): the strongly coupled master's own peer,
+        # where the scene's plan names its tolerances
+        "monolithic_cvode": [float(x) for x in table.get("monolithic_cvode_rtol", [])],
+        # the output grid [s] of a master's tolerance runs where it records on a grid (the
+        # Model Exchange master; default the scene's step), e.g. the grid the masters it is
+        # compared with record on
+        "output_steps": {name: float(h) for name, h in table.get("output_steps", {}).items()},
         "target_error": float(table.get("target_error", 1e-3)),
         "baseline": table.get("baseline", "jacobi"),
         "repeats_limit_s": float(table.get("repeats_limit_s", 5.0)),

@@ -77,10 +77,11 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
             take(Case(name, "master", h),
                  lambda name=name, h=h: timing.run_master(scene, name, h, None, repeats, fmu_dir, limit, twins))
     for name, tolerances in p["tolerances"].items():
+        at = p["output_steps"].get(name, scene.experiment.step)
         for tol in tolerances:
-            take(Case(name, "master", scene.experiment.step, tol),
-                 lambda name=name, tol=tol: timing.run_master(scene, name, scene.experiment.step, tol, repeats,
-                                                              fmu_dir, limit, twins))
+            take(Case(name, "master", at, tol),
+                 lambda name=name, tol=tol, at=at: timing.run_master(scene, name, at, tol, repeats, fmu_dir, limit,
+                                                                     twins))
     if peers:
         for name, steps in p["peers"].items():
             for h in steps:
@@ -95,6 +96,10 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         for rtol in p["monolithic"]:
             take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
                  lambda rtol=rtol: timing.run_monolithic(scene, rtol, scene.experiment.step, repeats))
+        for rtol in p["monolithic_cvode"]:
+            take(Case(timing.MONOLITHIC_CVODE, "monolithic", scene.experiment.step, rtol),
+                 lambda rtol=rtol: timing.run_monolithic(scene, rtol, scene.experiment.step, repeats,
+                                                         timing.MONOLITHIC_CVODE))
     for case in cases:
         headlines.split_case(case)
     # The headline comparisons, measured side by side: the cases they divide run in turn,

@@ -12,9 +12,10 @@ import numpy as np
 from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.engine import interrupt
+from harness.engine import masters as master_family
 from harness.engine.run import RunResult, simulate
 from harness.judges import metrics
-from harness.judges import monolithic
+from harness.judges import monolithic, stability
 from harness.studies import trust
 from harness.studies.bench import floors
 from harness.studies.bench.schedule import Case
@@ -56,6 +57,7 @@ def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None) -> Case:
             case.fmu_calls = int(result.counters.get("fmu_calls", 0))
             case.rollbacks = int(result.counters.get("rollbacks", 0))
             case.calls_by_kind = result.counters.get("calls_by_kind", {})
+            case.rhs = result.counters.get("rhs")
             if len(result.times) > 1:
                 case.largest_step = float(np.max(np.diff(result.times)))
             if not result.ok:
@@ -78,11 +80,29 @@ FLOOR_STEPS = 2000
 PRICE_STEPS = 1000
 
 
+#: the engine name of the unsplit equations under CVODE (``run_monolithic``)
+MONOLITHIC_CVODE = "monolithic-cvode"
+
+
+def master_options(scene, name: str, tolerance: float | None) -> tuple[dict, str | None]:
+    """A master's options in the benchmark: its tolerance, and for the Model Exchange
+    master the CVODE method the stability analysis chooses (as ``lever run`` passes it),
+    with which and why (None for a master without a method to choose)."""
+    options = {"tolerance": tolerance} if tolerance is not None else {}
+    if "method" not in master_family.MASTERS[name].options:
+        return options, None
+    chosen = stability.cvode_method(scene)
+    if chosen is None:
+        return options, "CVODE, Adams or BDF as the master chooses from its Jacobian at the start"
+    options["method"] = chosen[0]
+    return options, f"CVODE-{chosen[0]}: {chosen[1]}"
+
+
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
     """A master's case: its runs, each after the FMU-call floor at its step (the scene's
     for an adaptive master), and with ``twins`` (the do-nothing FMUs) the prices of a call
     into ours and into the twins just before and just after the runs, for its time split."""
-    options = {"tolerance": tolerance} if tolerance is not None else {}
+    options, method = master_options(scene, name, tolerance)
     at = step if tolerance is None else scene.experiment.step
     prices = {"ours": [], "hollow": []}
 
@@ -98,6 +118,7 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: P
     price()
     if twins is not None:
         case.prices = prices
+    case.method = method
     return case
 
 
@@ -112,21 +133,35 @@ def run_peer(scene, name, step, repeats, fmu_dir, limit_s, tolerance=None) -> Ca
                     repeats, limit_s)
 
 
-def run_monolithic(scene, rtol, grid_step, repeats) -> Case:
-    """The unsplit equations with scipy at a looser tolerance: the cost of not
-    co-simulating at all (same physics code, no FMU calls)."""
-    case = Case("monolithic", "monolithic", grid_step, rtol)
+def monolithic_method(scene, engine: str) -> tuple[str, str]:
+    """``(method, why)`` of a monolithic engine: scipy's DOP853, or CVODE's BDF or Adams as
+    the stability analysis chooses it for the scene (BDF where it has no driveline to
+    analyse)."""
+    if engine != MONOLITHIC_CVODE:
+        return "DOP853", "scipy's DOP853"
+    chosen = stability.cvode_method(scene)
+    method = chosen[0] if chosen else "BDF"
+    return f"CVODE-{method}", (chosen[1] if chosen else "no driveline to analyse")
+
+
+def run_monolithic(scene, rtol, grid_step, repeats, engine: str = "monolithic") -> Case:
+    """The unsplit equations at a looser tolerance, with scipy's DOP853 (``engine``
+    "monolithic") or CVODE (``MONOLITHIC_CVODE``): the cost of not co-simulating at all
+    (same physics code, no FMU calls)."""
+    case = Case(engine, "monolithic", grid_step, rtol)
+    method, why = monolithic_method(scene, engine)
+    case.method = f"{method}: {why}"
     e = scene.experiment
     times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / grid_step)) + 1)
     solution = None
     case.asked = repeats
     case.load.append(trust.load_average())
     for _ in range(repeats):
-        solution = monolithic.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2)
+        solution = monolithic.solve(scene, times, use_cache=False, rtol=rtol, atol=rtol * 1e-2, method=method)
         interrupt.check()
         case.wall_times.append(solution.wall_time)
     case.load.append(trust.load_average())
-    case.steps = solution.n_rhs
+    case.steps = case.rhs = solution.n_rhs
     _judge(case, scene, solution.times, solution.traces)
     return case
 
@@ -153,9 +188,9 @@ def _rerun(scene: scenes.Scene, case: Case, fmu_dir: Path) -> float:
     if case.kind == "monolithic":
         e = scene.experiment
         times = np.linspace(e.start, e.stop, int(round((e.stop - e.start) / case.step)) + 1)
-        return monolithic.solve(scene, times, use_cache=False, rtol=case.tolerance,
-                               atol=case.tolerance * 1e-2).wall_time
-    options = {"tolerance": case.tolerance} if case.tolerance is not None else {}
+        return monolithic.solve(scene, times, use_cache=False, rtol=case.tolerance, atol=case.tolerance * 1e-2,
+                                method=monolithic_method(scene, case.engine)[0]).wall_time
+    options, _ = master_options(scene, case.engine, case.tolerance)
     result = simulate(scene, case.engine, case.step, fmu_dir, options=options)
     interrupt.check()
     if not result.ok:
