@@ -86,7 +86,10 @@ def layer_table() -> list[tuple[str, list[str]]]:
     for line in block.group(1).splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if len(cells) >= 3 and cells[0].isdigit():
+            assert int(cells[0]) == len(rows), f"{ARCHITECTURE}: layer row numbered {cells[0]} where {len(rows)} is next"
             rows.append((cells[1], re.findall(r"`([\w.]+)`", cells[2])))
+    names = [name for name, _ in rows]
+    assert len(set(names)) == len(names), f"{ARCHITECTURE}: a layer written twice: {names}"
     return rows
 
 
