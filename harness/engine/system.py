@@ -22,6 +22,7 @@ from harness.description import plan as plans
 from harness.description import scene as scenes
 # the formats layer (SSP, OSP, the container, the peers) finds these here too
 from harness.engine.component import Component, step_call
+from harness.engine.fmi3_component import open_component
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS
 
@@ -158,7 +159,7 @@ class System:
         self.components: dict[str, CoSimComponent] = {}
         try:
             for name in scene.components:
-                self.components[name] = Component(name, plan.paths[name], logging_on)
+                self.components[name] = open_component(name, plan.paths[name], logging_on)
         except Exception:
             self.free()
             raise
