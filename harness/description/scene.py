@@ -536,6 +536,11 @@ def _check_limits(limits: dict) -> list[str]:
     return findings
 
 
+#: FMI 3.0's types that carry the same values as FMI 2.0's (a 64-bit float, a 32-bit
+#: integer): connected to each other, an FMI 2.0 FMU's with an FMI 3.0 one's
+_WIRE = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer"}
+
+
 def connection_findings(c: Connection, variables: dict) -> list[str]:
     """A connection between variables of different quantities (their units' dimensions
     differ: a torque into a speed) is a finding; so is one between different types."""
@@ -543,9 +548,9 @@ def connection_findings(c: Connection, variables: dict) -> list[str]:
         out, into = variables[c.source][c.output], variables[c.target][c.input]
     except KeyError:
         return []            # a missing variable is already a finding
-    if out.type != into.type:
+    if _WIRE.get(out.type, out.type) != _WIRE.get(into.type, into.type):
         return [f"connection '{c}': {c.source}.{c.output} is a {out.type}, {c.target}.{c.input} a {into.type}"]
-    if out.type not in ("Real", "Float64"):
+    if _WIRE.get(out.type) != "Real":
         return []
     try:
         same = units.same_dimension(out.unit, into.unit)
