@@ -41,7 +41,7 @@ _numbers = itertools.count(1)
 
 def _log(environment, status, category, message):
     name = _environments.get(environment or 0, "")
-    fmi2._dispatch(None, name.encode("utf-8"), status, category, message)
+    fmi2.dispatch_message(name, status, category, message)
 
 
 # module globals: alive as long as the process, as the FMUs' pointers to them must be
@@ -103,7 +103,7 @@ class Component3(Component):
         self.messages: deque[str] = deque(maxlen=50)
         self.gets = self.sets = self.steps = self.state_calls = 0
         self.time = 0.0
-        self.instance_name = f"{name}#{next(fmi2._instances)}"
+        self.instance_name = fmi2.new_instance_name(name)
         self._environment = next(_numbers)
         _environments[self._environment] = self.instance_name
         fmi2.route_messages(self.instance_name, self.messages)
@@ -125,7 +125,7 @@ class Component3(Component):
         self._freed = False
         self.state = fmi2.INSTANTIATED
         functions = self.fmu._functions
-        get, set_ = fmi2._unconverted(functions["fmi3GetFloat64"]), fmi2._unconverted(functions["fmi3SetFloat64"])
+        get, set_ = fmi2.unconverted(functions["fmi3GetFloat64"]), fmi2.unconverted(functions["fmi3SetFloat64"])
         step = functions["fmi3DoStep"]
         flags = self._flags = (ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool())
         last = self._last_time = ctypes.c_double()
