@@ -346,11 +346,17 @@ def scene_page() -> str:
         kind = _TOML_TYPES.get(str(f.type), str(f.type))
         if f.name == "master":
             kind = "a master's name ([masters.md](masters.md))"
+        if f.name == "fmi":
+            kind = " or ".join(str(v) for v in scene.FMI_EDITIONS)
         rows.append([f"`{f.name}`", kind, unit, default])
     out.append(table(["field", "value", "unit", "default"], rows) + "\n")
     out.append("A time is a number in seconds or a number with a time unit (`\"500 ms\"`). `transient` is the "
                "start-up time left out of the statistics (means, amplitudes); `strict = true` refuses a run "
-               "with an input connected to nothing and given no value (`lever run --strict`).\n\n")
+               "with an input connected to nothing and given no value (`lever run --strict`). `fmi = 3` runs the "
+               "FMI 3.0 editions of the FMUs the scene names by name (`build/fmus3`, [fmus.md](../fmus.md#fmi-30-editions)"
+               ") instead of the FMI 2.0 ones (`build/fmus`), with every master, and exports them so; an FMU named "
+               "by path runs as the FMI version its model description states, whatever `fmi` says (a scene may "
+               "mix FMI 2.0 and 3.0 FMUs). `--set experiment.fmi=3` does it for a run.\n\n")
 
     out.append("## [limits]\n\nBounds of the divergence guard, each > 0 (`inf` allowed); unset ones are "
                "derived from the scene.\n\n")

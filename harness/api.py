@@ -789,12 +789,15 @@ def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overri
 
 def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:
     """``lever compliance``: fmpy's validation and ours on each FMU file (none: the built
-    ones, built first); ``(file, findings)`` one file at a time (empty: none)."""
+    ones, built first: the FMI 2.0 editions, then the FMI 3.0 ones); ``(file, findings)``
+    one file at a time (empty: none)."""
     from harness.compliance import check_fmu
+    from harness.paths import fmi3_dir
 
     fmus = [Path(f) for f in fmus]
     if not fmus:
-        fmus = sorted(build().glob("*.fmu"))
+        built = build()
+        fmus = sorted(built.glob("*.fmu")) + sorted(fmi3_dir(built).glob("*.fmu"))
     for path in fmus:
         yield path, check_fmu(path)
 

@@ -23,9 +23,9 @@ from fmpy import read_model_description
 
 from lever.physics import component_parameters
 
-from harness.description import scene_kinds
+from harness.description import scene_kinds, typed_values
 from harness.description import scene as scenes
-from harness.paths import FMUS
+from harness.paths import FMUS, fmi3_dir
 
 
 @dataclass(frozen=True)
@@ -110,16 +110,20 @@ class Plan:
 
 
 
-def fmu_path(fmu: str, fmu_dir: Path = FMUS) -> Path:
-    """The file of a component's ``fmu``: a path as given (``X.fmu``), a name in ``fmu_dir``."""
-    return Path(fmu) if scenes.is_fmu_path(fmu) else Path(fmu_dir) / f"{fmu}.fmu"
+def fmu_path(fmu: str, fmu_dir: Path = FMUS, fmi: int = 2) -> Path:
+    """The file of a component's ``fmu``: a path as given (``X.fmu``), a name in ``fmu_dir``
+    (its FMI 3.0 edition, ``fmi`` 3: in ``harness.paths.fmi3_dir(fmu_dir)``)."""
+    if scenes.is_fmu_path(fmu):
+        return Path(fmu)
+    return (fmi3_dir(fmu_dir) if fmi == 3 else Path(fmu_dir)) / f"{fmu}.fmu"
 
 
 def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
-    """The model descriptions of the scene's FMUs (by FMU as the scene names it) whose files exist."""
+    """The model descriptions of the scene's FMUs (by FMU as the scene names it) whose files
+    exist (the edition ``scene.experiment.fmi`` of those named by name)."""
     out = {}
     for spec in scene.components.values():
-        path = fmu_path(spec.fmu, fmu_dir)
+        path = fmu_path(spec.fmu, fmu_dir, scene.experiment.fmi)
         if spec.fmu not in out and path.exists():
             out[spec.fmu] = read_model_description(str(path))
     return out
@@ -129,8 +133,9 @@ def converted(var, value, label: str):
     """A scene's ``value`` for the model variable ``var`` as the FMU takes it: a number with
     a unit converted to the variable's unit (``scenes.validate`` has checked its dimension),
     a harmonics or samples table to its text; other values as they are."""
-    if var.type == "Real" or isinstance(value, dict):
-        return scenes.quantity(value, label, (var.unit or "") if var.type == "Real" else None)
+    real = typed_values.kind(var) == "Real"
+    if real or isinstance(value, dict):
+        return scenes.quantity(value, label, (var.unit or "") if real else None)
     return value
 
 
@@ -157,7 +162,8 @@ def check(scene: scenes.Scene, overrides=(), fmu_dir: Path = FMUS) -> Plan:
                 {k: converted(variables[k], v, f"{name}.{k}") for k, v in spec.parameters.items()})
     rectifier = scene_kinds.rectifier(scene)
     return Plan(scene=scene, name=scene.name, experiment=scene.experiment, fmu_dir=Path(fmu_dir),
-                paths=MappingProxyType({n: fmu_path(c.fmu, fmu_dir) for n, c in scene.components.items()}),
+                paths=MappingProxyType({n: fmu_path(c.fmu, fmu_dir, scene.experiment.fmi)
+                                        for n, c in scene.components.items()}),
                 descriptions=MappingProxyType(descriptions), start_values=MappingProxyType(start_values),
                 connections=tuple(scene.connections), recorded=tuple(recorded_names(scene)), refusals=refusals,
                 unconnected=tuple(scenes.unconnected_inputs(scene, descriptions)),

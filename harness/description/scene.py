@@ -73,6 +73,9 @@ class Experiment:
     #: refuse the run when an input is left unconnected (and not given a value), instead
     #: of naming it and running on with its start value (``strict = true``, ``--strict``)
     strict: bool = False
+    #: the FMI edition of the FMUs the scene names by name: 2 (build/fmus) or 3 (their FMI
+    #: 3.0 editions, build/fmus3); an FMU by path is what its file is
+    fmi: int = 2
 
     def __post_init__(self):
         self.transient_follows_length = self.transient is None
@@ -94,6 +97,8 @@ def default_transient(start: float, stop: float) -> float:
 
 #: the experiment's fields that are times [s]
 EXPERIMENT_TIMES = ("start", "stop", "step", "transient")
+#: the values of ``experiment.fmi``
+FMI_EDITIONS = (2, 3)
 
 
 @dataclass
@@ -244,8 +249,9 @@ def samples_parameter(value: dict, name: str) -> str:
 
 def experiment_value(field_name: str, value, label: str):
     """The experiment's field ``field_name`` from a scene's or ``--set``'s ``value``: a time
-    (a number in s, or "<number> <time unit>": "500 ms"), the master's name, or ``strict``
-    (true/false); ``SceneError`` naming ``label`` and what is allowed otherwise."""
+    (a number in s, or "<number> <time unit>": "500 ms"), the master's name, ``strict``
+    (true/false) or ``fmi`` (2 or 3); ``SceneError`` naming ``label`` and what is allowed
+    otherwise."""
     if field_name == "master":
         if not isinstance(value, str):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected the name of a master (a string)")
@@ -254,8 +260,13 @@ def experiment_value(field_name: str, value, label: str):
         if not isinstance(value, bool):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected true or false")
         return value
+    if field_name == "fmi":
+        if value not in FMI_EDITIONS or isinstance(value, bool):
+            raise SceneError(f"{label} = {units.kind_of_value(value)}: expected 2 or 3 (the FMI edition of the "
+                             "FMUs named by name: 2 in build/fmus, 3 in build/fmus3)")
+        return int(value)
     if field_name not in EXPERIMENT_TIMES:
-        fields = EXPERIMENT_TIMES + ("master", "strict")
+        fields = EXPERIMENT_TIMES + ("master", "strict", "fmi")
         raise SceneError(f"{label}: the experiment has no field '{field_name}'{did_you_mean(field_name, fields)} "
                          f"(fields: {', '.join(fields)})")
     if isinstance(value, str):
@@ -525,6 +536,11 @@ def _check_limits(limits: dict) -> list[str]:
     return findings
 
 
+#: FMI 3.0's types that carry the same values as FMI 2.0's (a 64-bit float, a 32-bit
+#: integer): connected to each other, an FMI 2.0 FMU's with an FMI 3.0 one's
+_WIRE = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Integer"}
+
+
 def connection_findings(c: Connection, variables: dict) -> list[str]:
     """A connection between variables of different quantities (their units' dimensions
     differ: a torque into a speed) is a finding; so is one between different types."""
@@ -532,9 +548,9 @@ def connection_findings(c: Connection, variables: dict) -> list[str]:
         out, into = variables[c.source][c.output], variables[c.target][c.input]
     except KeyError:
         return []            # a missing variable is already a finding
-    if out.type != into.type:
+    if _WIRE.get(out.type, out.type) != _WIRE.get(into.type, into.type):
         return [f"connection '{c}': {c.source}.{c.output} is a {out.type}, {c.target}.{c.input} a {into.type}"]
-    if out.type != "Real":
+    if _WIRE.get(out.type) != "Real":
         return []
     try:
         same = units.same_dimension(out.unit, into.unit)
@@ -583,7 +599,7 @@ def value_findings(label: str, var, value) -> list[str]:
             value = quantity(value, label)
         except SceneError as error:
             return [str(error)]
-    if var.type != "Real":
+    if typed_values.kind(var) != "Real":
         return typed_values.findings(label, var, value, given)
     unit_text = f" {var.unit}" if var.unit else ""
     if isinstance(value, str):

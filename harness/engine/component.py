@@ -378,3 +378,18 @@ class Component:
         finally:
             _routes.pop(self.instance_name, None)
 
+
+
+# -- shared with the FMI 3.0 component (harness.engine.fmi3_component) --------------------------
+
+def dispatch_message(instance_name: str, status: int, category: bytes, message: bytes):
+    """Route a log message of the instance ``instance_name`` as this module routes FMI 2.0's."""
+    _dispatch(None, instance_name.encode("utf-8"), status, category, message)
+
+
+def new_instance_name(name: str) -> str:
+    """A process-unique instance name for component ``name`` (it routes the log messages)."""
+    return f"{name}#{next(_instances)}"
+
+
+unconverted = _unconverted

@@ -22,6 +22,7 @@ from harness.description import plan as plans
 from harness.description import scene as scenes
 # the formats layer (SSP, OSP, the container, the peers) finds these here too
 from harness.engine.component import Component, step_call
+from harness.engine.fmi3_component import open_component
 from harness.engine.interface import CoSimComponent
 from harness.paths import FMUS
 
@@ -163,9 +164,17 @@ class System:
         if plan.refusals:
             raise SceneInvalid(scene.name, list(plan.refusals))
         self.interface = interface
-        kind = Component
+        kind = open_component
         if interface == MODEL_EXCHANGE:
             from harness.engine.me_component import ModelExchangeComponent, NoModelExchange
+            newer = [name for name, spec in scene.components.items()
+                     if plan.descriptions[spec.fmu].fmiVersion != "2.0"]
+            if newer:
+                raise NoModelExchange(
+                    f"scene '{scene.name}': " + "; ".join(
+                        f"component '{n}' (FMU {scene.components[n].fmu}) is FMI "
+                        f"{plan.descriptions[scene.components[n].fmu].fmiVersion}" for n in newer)
+                    + " - the Model Exchange master integrates FMI 2.0 Model Exchange FMUs")
             lacking = [name for name, spec in scene.components.items()
                        if plan.descriptions[spec.fmu].modelExchange is None]
             if lacking:

@@ -47,7 +47,7 @@ def build_container(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Pat
     if findings:
         raise SceneInvalid(scene.name, findings)
     e = scene.experiment
-    components = {name: Component(name=name, filename=fmu_path(spec.fmu, fmu_dir), modelDescription=descriptions[spec.fmu])
+    components = {name: Component(name=name, filename=fmu_path(spec.fmu, fmu_dir, e.fmi), modelDescription=descriptions[spec.fmu])
                   for name, spec in scene.components.items()}
     variables = {name: {v.name: v for v in descriptions[spec.fmu].modelVariables}
                  for name, spec in scene.components.items()}

@@ -52,7 +52,7 @@ def scene_groups(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, list[Gr
     """Component -> its FMU's variable groups (empty when the FMU has no OSP description)."""
     out = {}
     for name, spec in scene.components.items():
-        path = description_path(fmu_path(spec.fmu, fmu_dir))
+        path = description_path(fmu_path(spec.fmu, fmu_dir, scene.experiment.fmi))
         out[name] = read_groups(path) if path.exists() else []
     return out
 
@@ -124,7 +124,7 @@ def system_structure(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str:
     simulators = ET.SubElement(root, "Simulators")
     for name, spec in scene.components.items():
         simulator = ET.SubElement(simulators, "Simulator", {
-            "name": name, "source": str(fmu_path(spec.fmu, fmu_dir).resolve())})
+            "name": name, "source": str(fmu_path(spec.fmu, fmu_dir, scene.experiment.fmi).resolve())})
         if spec.parameters:
             variables = {v.name: v for v in descriptions[spec.fmu].modelVariables}
             initial = ET.SubElement(simulator, "InitialValues")

@@ -72,6 +72,9 @@ MAX_UNPACKED_BYTES = 1 << 30
 MAX_FILES = 10_000
 #: the variable types an exported archive has connectors for (what libcosim and fmpy.ssp take)
 CONNECTOR_TYPES = ("Real", "Integer", "Boolean")
+#: FMI 3.0's types whose connectors an SSP 1.0 file declares as the kind they carry
+#: (``typed_values.CALL_TYPE``: Float64 as Real, Int32 as Integer)
+FMI3_CONNECTOR_TYPES = ("Float64", "Int32")
 _BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
@@ -97,16 +100,17 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
     findings = scenes.validate(scene, descriptions)
     sources = archive_sources(scene, fmu_dir)
     by_member: dict[str, Path] = {}
+    fmi = scene.experiment.fmi
     for fmu, member in sources.items():
-        other = by_member.setdefault(member, fmu_path(fmu, fmu_dir))
-        if other != fmu_path(fmu, fmu_dir):
-            findings.append(f"two FMU files named {Path(member).name} ({other} and {fmu_path(fmu, fmu_dir)}): an "
+        other = by_member.setdefault(member, fmu_path(fmu, fmu_dir, fmi))
+        if other != fmu_path(fmu, fmu_dir, fmi):
+            findings.append(f"two FMU files named {Path(member).name} ({other} and {fmu_path(fmu, fmu_dir, fmi)}): an "
                             "SSP archive holds its FMUs in one folder; rename one")
     for c in scene.connections:
         for comp, var in ((c.source, c.output), (c.target, c.input)):
             md = descriptions.get(scene.components[comp].fmu) if comp in scene.components else None
             kind = next((v.type for v in md.modelVariables if v.name == var), None) if md else None
-            if kind is not None and kind not in CONNECTOR_TYPES:
+            if kind is not None and kind not in CONNECTOR_TYPES + FMI3_CONNECTOR_TYPES:
                 findings.append(f"connection '{c}': {comp}.{var} is a {kind}; SSP readers (libcosim, fmpy.ssp) "
                                 f"connect {', '.join(CONNECTOR_TYPES)} variables only")
     if findings:
@@ -122,7 +126,7 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
         for member, text in files.items():
             archive.writestr(member, text)
         for fmu, member in sources.items():
-            source = fmu_path(fmu, fmu_dir)
+            source = fmu_path(fmu, fmu_dir, fmi)
             archive.write(source, member)
             osp = source.with_name(f"{source.stem}_OspModelDescription.xml")
             if osp.exists():
@@ -140,7 +144,7 @@ def archive_sources(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, str]
     """Each of the scene's FMUs (as its components name them: ours by name, others by
     path) -> its member in the archive, ``resources/<file name>``: what the SSD's
     ``source`` says, so the archive resolves it whatever folder the FMU came from."""
-    return {fmu: f"resources/{fmu_path(fmu, fmu_dir).name}"
+    return {fmu: f"resources/{fmu_path(fmu, fmu_dir, scene.experiment.fmi).name}"
             for fmu in dict.fromkeys(spec.fmu for spec in scene.components.values())}
 
 
@@ -162,14 +166,15 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
         for var in md.modelVariables:
             if not (var.causality == "output" or (var.causality == "input" and var.name in wired)):
                 continue
-            if var.type not in CONNECTOR_TYPES:
+            if var.type not in CONNECTOR_TYPES + FMI3_CONNECTOR_TYPES:
                 continue
+            kind = typed_values.kind(var)
             connector = ET.SubElement(connectors, _q("ssd", "Connector"), {"name": var.name, "kind": var.causality})
             attrs = {}
-            if var.type == "Real" and var.unit:
+            if kind == "Real" and var.unit:
                 attrs["unit"] = var.unit
                 used_units.add(var.unit)
-            ET.SubElement(connector, _q("ssc", var.type), attrs)
+            ET.SubElement(connector, _q("ssc", kind), attrs)
         bindings = ET.SubElement(component, _q("ssd", "ParameterBindings"))
         ET.SubElement(bindings, _q("ssd", "ParameterBinding"), {
             "type": "application/x-ssp-parameter-set", "source": f"resources/{name}.ssv"})

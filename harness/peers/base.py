@@ -97,7 +97,7 @@ class SceneSetup:
         self.scene = scene
         self.fmu_dir = fmu_dir
         self.record = record
-        self.fmu_paths = {name: fmu_path(spec.fmu, fmu_dir) for name, spec in scene.components.items()}
+        self.fmu_paths = {name: fmu_path(spec.fmu, fmu_dir, scene.experiment.fmi) for name, spec in scene.components.items()}
         self.descriptions = {name: descriptions[spec.fmu] for name, spec in scene.components.items()}
         self.variables = {name: {v.name: v for v in md.modelVariables} for name, md in self.descriptions.items()}
         self.parameters = {name: {k: scenes.quantity(v, f"{name}.{k}") for k, v in spec.parameters.items()}

@@ -40,4 +40,14 @@ def make(name: str, system: System, step: float, **options) -> Master:
         # nothing to iterate on or to estimate an error from (e.g. the rectifier scene's one FMU)
         raise MasterFailure(f"master '{name}' iterates on the values the scene's components exchange, and scene "
                             f"'{system.scene.name}' connects none: use jacobi")
+    if issubclass(cls, (IterativeMaster, StepControl)):
+        # these masters roll every step back with FMU states (an FMU without them would
+        # refuse the first fmiGetFMUstate, or worse, return a state it cannot restore)
+        lacking = [f"{n} ({c.fmu_path.name}, FMI {c.description.fmiVersion})" for n, c in
+                   ((n, system.components[n]) for n in system.stateful)
+                   if not getattr(c.description.coSimulation, "canGetAndSetFMUstate", True)]
+        if lacking:
+            raise MasterFailure(f"master '{name}' rolls steps back with FMU states, and {', '.join(lacking)} "
+                                "declares canGetAndSetFMUstate = false: use a master that does not roll back "
+                                "(jacobi, gauss-seidel, jacobi-linear, jacobi-quadratic, jacobi-midpoint)")
     return cls(system, step, **options)
