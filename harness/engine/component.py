@@ -391,5 +391,3 @@ def new_instance_name(name: str) -> str:
     """A process-unique instance name for component ``name`` (it routes the log messages)."""
     return f"{name}#{next(_instances)}"
 
-
-unconverted = _unconverted

@@ -17,8 +17,9 @@ from harness.description import scene as scenes
 from harness.engine.fmi3_component import Component3, UnsupportedFmu, open_component
 from harness.engine.component import FmuCallError
 from harness.engine.masters.registry import MASTERS
+from harness.engine.me_component import NoModelExchange
 from harness.engine.run import simulate
-from harness.engine.system import System
+from harness.engine.system import CO_SIMULATION, System
 from harness.formats import ssp
 from harness.paths import FMUS, SCENES, fmi3_dir
 
@@ -39,7 +40,11 @@ def _same_traces(fmi2, fmi3, names=None):
         assert float(np.max(np.abs(fmi3.traces[name] - values))) <= 1e-13 * scale, name
 
 
-@pytest.mark.parametrize("master", list(MASTERS))
+#: the co-simulation masters (the Model Exchange master integrates FMI 2.0 Model Exchange FMUs)
+CO_SIMULATION_MASTERS = [name for name, cls in MASTERS.items() if cls.interface == CO_SIMULATION]
+
+
+@pytest.mark.parametrize("master", CO_SIMULATION_MASTERS)
 @pytest.mark.parametrize("scene_name", ["kavz685", "kavz685_stiff"])
 def test_every_master_runs_the_fmi3_editions_as_the_fmi2_ones(scene_name, master):
     scene = scenes.load(scene_name).with_overrides([f"experiment.stop={STOP}"])
@@ -171,3 +176,9 @@ def test_an_fmi3_scene_exports_to_ssp_with_its_fmi3_fmus_and_runs_from_it(tmp_pa
     assert "<ssc:Real" in ssd and "Float64" not in ssd
     loaded = ssp.read_scene(archive)
     _same_traces(simulate(scene, master="jacobi"), simulate(loaded, master="jacobi"))
+
+
+def test_the_model_exchange_master_refuses_fmi3_fmus_by_name():
+    scene = scenes.load("kavz685").with_overrides([f"experiment.stop={STOP}", "experiment.fmi=3"])
+    with pytest.raises(NoModelExchange, match=r"component 'engine' \(FMU EngineShaft\) is FMI 3\.0.*FMI 2\.0 Model Exchange"):
+        simulate(scene, master="me-cvode")
