@@ -40,6 +40,8 @@ class Peer(ABC):
     summary: str = ""
     #: its step varies: it chooses its number of steps (``tolerance`` steers it)
     adaptive: bool = False
+    #: the FMI versions (major) of the FMUs it runs; a scene with another is refused by name
+    fmi_versions: tuple[str, ...] = ("2",)
     #: it records no row at the start time: its first row is after the first step
     from_first_step: bool = False
     #: what its ``RunResult.wall_time`` covers
@@ -55,6 +57,15 @@ class Peer(ABC):
         """What of ``setup.scene`` it cannot run (its start time, a parameter it cannot
         set, ...), said before anything runs; None if it can run it."""
         return None
+
+    def fmi_problem(self, setup: SceneSetup) -> str | None:
+        """The scene's FMUs of an FMI version it does not run, named; None if there are none."""
+        others = [f"{name} (FMI {md.fmiVersion})" for name, md in setup.descriptions.items()
+                  if md.fmiVersion.split(".")[0] not in self.fmi_versions]
+        if not others:
+            return None
+        return (f"peer '{self.name}' runs FMI {' and '.join(v + '.0' for v in self.fmi_versions)} FMUs; scene "
+                f"'{setup.scene.name}' has {', '.join(others)}")
 
     def steps_fixed(self, scene: scenes.Scene) -> bool:
         """Whether its run of ``scene`` makes the scene's fixed steps (else it only has to
@@ -90,7 +101,7 @@ class SceneSetup:
                 variable = next((v for v in descriptions[spec.fmu].modelVariables if v.name == var), None)
                 if variable is None:
                     findings.append(f"record '{item}': {comp} has no variable '{var}'")
-                elif variable.type != "Real":
+                elif variable.type not in ("Real", "Float64"):       # FMI 2.0's and 3.0's name
                     findings.append(f"record '{item}': peers record Real variables only, not {variable.type}")
         if findings:
             raise SceneInvalid(scene.name, findings)

@@ -13,6 +13,7 @@ from harness.peers.base import Peer, SceneSetup
 
 class OurHarness(Peer):
     counters = ("steps", "fmu_calls", "rollbacks", "iterations", "rejected")
+    fmi_versions = ("2", "3")
 
     def __init__(self, master: str | None = None):
         self.master = master

@@ -49,7 +49,7 @@ def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = F
         raise ValueError(problem)
     peer = PEERS[name]
     setup = SceneSetup(scene, Path(fmu_dir), list(recorded_names(scene) if record is None else record))
-    if problem := peer.scene_problem(setup):
+    if problem := peer.fmi_problem(setup) or peer.scene_problem(setup):
         raise ValueError(problem)
     result = peer.run(setup, float(step), None if tolerance is None else float(tolerance), environment)
     return refuse_other_experiment(result, name, scene, float(step))

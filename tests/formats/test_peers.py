@@ -108,3 +108,12 @@ def test_the_benchmark_runs_a_peer_by_its_name(fmu_dir):
     case = bench.run_peer(spec, "fmpy-jacobi", 1e-3, 1, fmu_dir, 5.0)
     assert case.failure is None and case.steps == 300 and case.errors["tau_rms"] < 1e-2, case
     assert bench.run_peer(spec, "simulink", 1e-3, 1, fmu_dir, 5.0).failure.startswith("not run: unknown peer")
+
+
+def test_a_peer_refuses_fmus_of_an_fmi_version_it_does_not_run_and_ours_runs_them(fmu_dir):
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0", "experiment.fmi=3"])
+    for name, peer in peers.PEERS.items():
+        if "3" not in peer.fmi_versions:
+            with pytest.raises(ValueError, match=rf"peer '{name}' runs FMI 2.0 FMUs; scene 'kavz685' has .*FMI 3.0"):
+                peers.simulate_peer(name, spec, 1e-3, fmu_dir)
+    assert peers.simulate_peer("lever-jacobi", spec, 1e-3, fmu_dir).ok
