@@ -180,6 +180,7 @@ SLOW = (
     "formats/test_outputs.py::test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder",
     "formats/test_peers.py::test_all_peers_are_available",
     "formats/test_peers.py::test_ecos_runs_the_scene_as_a_peer",
+    "formats/test_peers.py::test_a_peer_refuses_fmus_of_an_fmi_version_it_does_not_run_and_ours_runs_them",
     "formats/test_peers.py::test_libcosim_reports_a_refused_parameter_instead_of_crashing",
     "formats/test_peers.py::test_libcosim_runs_our_fmus",
     "formats/test_ssp_engines.py",
