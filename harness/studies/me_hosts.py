@@ -38,7 +38,7 @@ import numpy as np
 from ..description import scene as scenes
 from ..description.plan import converted
 from ..formats import reference_traces
-from ..paths import FMUS
+from ..paths import FMUS, fmi3_dir
 from ..peers import BARE_ENVIRONMENT
 from . import hosts
 
@@ -116,13 +116,6 @@ def run_fmpy(case: AloneCase, fmu_dir: Path = FMUS, rtol: float = FMPY_RTOL) -> 
 #: 2000-5000 rad/s (RK4 is stable to h * 5000 < 2.8, accurate well below): 1e-5 s there
 C_SUBSTEPS = {"FreewheelRectifier": 20}
 C_SUBSTEPS_DEFAULT = 10
-
-
-def fmi3_dir(fmu_dir: Path = FMUS) -> Path:
-    """Where the FMI 3.0 editions of the FMUs in ``fmu_dir`` are (build/fmus3 beside
-    build/fmus, as build/fmus.py puts them)."""
-    here = Path(fmu_dir).resolve()
-    return here.with_name("fmus3") if here.name == "fmus" else here / "fmi3"
 
 
 def run_c_importer_me(program: Path, case: AloneCase, scratch: Path, fmu_dir: Path = FMUS,
