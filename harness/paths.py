@@ -47,3 +47,10 @@ def fmi3_dir(fmu_dir: Path) -> Path:
     fmu_dir = Path(fmu_dir)
     return fmu_dir.with_name("fmus3") if fmu_dir.name == "fmus" else fmu_dir / "fmi3"
 RESULTS = Path.cwd() / "results" if INSTALLED else ROOT / "results"
+
+
+def fmi3_dir(fmu_dir: Path = FMUS) -> Path:
+    """Where the FMI 3.0 editions of the FMUs in ``fmu_dir`` are: ``fmus3`` beside a folder
+    named ``fmus``, else ``<fmu_dir>/fmi3`` (as build/fmus.py puts them)."""
+    here = Path(fmu_dir).resolve()
+    return here.with_name("fmus3") if here.name == "fmus" else here / "fmi3"

@@ -8,7 +8,11 @@ judged against its stand-alone reference (``lever validate --result``):
   environment: the standard's Model Exchange calling sequence around a fixed-step classical
   Runge-Kutta integrator (RK4) with event indicators checked after every step, a sign change
   located by bisection, the inputs from a CSV (linear between rows, a repeated row an input
-  event), the outputs to a CSV.
+  event), the outputs to a CSV;
+* ``c-importer-fmi3-rk4`` and ``c-importer-fmi3-cs`` - the same C importer on the FMI 3.0
+  edition (``build/fmus3``, ``--me3``, ``--cs3``): the same RK4 loop through FMI 3.0's Model
+  Exchange calls, and its Co-Simulation loop (the inputs set at each communication point,
+  ``fmi3DoStep``, the outputs read after it: the references' own sampling).
 
 An FMU with a stand-alone reference (``reference_traces.FMU_CASES``) runs as its reference
 says (defaults, its inputs, its span and output step).  The freewheel rectifier has none
@@ -34,7 +38,7 @@ import numpy as np
 from ..description import scene as scenes
 from ..description.plan import converted
 from ..formats import reference_traces
-from ..paths import FMUS
+from ..paths import FMUS, fmi3_dir
 from ..peers import BARE_ENVIRONMENT
 from . import hosts
 
@@ -115,19 +119,26 @@ C_SUBSTEPS_DEFAULT = 10
 
 
 def run_c_importer_me(program: Path, case: AloneCase, scratch: Path, fmu_dir: Path = FMUS,
-                      env: dict | None = None, substeps: int | None = None,
-                      timeout: float = 600) -> tuple[np.ndarray, dict, subprocess.CompletedProcess]:
-    """The C importer's Model Exchange loop on ``case``: its inputs written to a CSV for it, its
-    outputs read from the CSV it writes.  Raises RuntimeError when it fails."""
+                      env: dict | None = None, substeps: int | None = None, timeout: float = 600,
+                      fmi: int = 2, interface: str = "ModelExchange") -> tuple[np.ndarray, dict, subprocess.CompletedProcess]:
+    """The C importer's Model Exchange loop (or, with ``interface="CoSimulation"``, its
+    Co-Simulation loop driven by the same inputs) on ``case`` through FMI ``fmi`` (2 or 3;
+    the FMI 3.0 edition is taken from ``fmi3_dir(fmu_dir)``): its inputs written to a CSV
+    for it, its outputs read from the CSV it writes.  Raises RuntimeError when it fails."""
     from fmpy import extract, read_model_description
 
+    if fmi not in (2, 3) or interface not in ("ModelExchange", "CoSimulation"):
+        raise ValueError(f"the C importer runs FMI 2 or 3, ModelExchange or CoSimulation, not {fmi} {interface}")
+    me = interface == "ModelExchange"
+    source = Path(fmu_dir) if fmi == 2 else fmi3_dir(fmu_dir)
     scratch.mkdir(parents=True, exist_ok=True)
-    folder = scratch / case.fmu
+    folder = scratch / (case.fmu if fmi == 2 else f"{case.fmu}-fmi3")
     if not folder.exists():
-        extract(str(Path(fmu_dir) / f"{case.fmu}.fmu"), str(folder))
+        extract(str(source / f"{case.fmu}.fmu"), str(folder))
     md = read_model_description(str(folder / "modelDescription.xml"))
     variables = {v.name: v for v in md.modelVariables}
-    inputs_csv = scratch / f"{case.fmu}_me_in.csv"
+    tag = f"{'me' if me else 'cs'}{'' if fmi == 2 else '3'}"
+    inputs_csv = scratch / f"{case.fmu}_{tag}_in.csv"
     input_vrs = []
     if case.inputs is not None:
         names = list(case.inputs.signals)
@@ -138,23 +149,29 @@ def run_c_importer_me(program: Path, case: AloneCase, scratch: Path, fmu_dir: Pa
     parameters = []
     for name, value in case.start_values.items():
         v = variables[name]
-        kind = {"Real": "r", "Integer": "i"}.get(v.type)
+        kind = {"Real": "r", "Float64": "r", "Integer": "i", "Int32": "i"}.get(v.type)
         if kind is None:
             raise ValueError(f"the C importer sets Real and Integer start values only, not {v.type} {name}")
         parameters.append(f"{kind}{v.valueReference}={float(value)!r}")
     outputs = list(dict.fromkeys(case.columns.values()))
-    out_csv = scratch / f"{case.fmu}_me_out.csv"
+    out_csv = scratch / f"{case.fmu}_{tag}_out.csv"
     opt = case.opt
     n_out = int(round((opt.stop - opt.start) / opt.step))
-    args = [str(program), "--me", str(folder), md.modelExchange.modelIdentifier, md.guid,
-            str(md.numberOfContinuousStates), str(md.numberOfEventIndicators), repr(opt.start), repr(opt.step),
-            str(n_out), str(substeps or C_SUBSTEPS.get(case.fmu, C_SUBSTEPS_DEFAULT)), str(inputs_csv),
+    identifier = (md.modelExchange if me else md.coSimulation).modelIdentifier
+    if me:
+        sizes = [str(md.numberOfContinuousStates), str(md.numberOfEventIndicators)]
+        timing = [repr(opt.start), repr(opt.step), str(n_out),
+                  str(substeps or C_SUBSTEPS.get(case.fmu, C_SUBSTEPS_DEFAULT))]
+    else:
+        sizes, timing = [], [repr(opt.start), repr(opt.step), str(n_out)]
+    args = [str(program), f"--{tag}", str(folder), identifier, md.guid, *sizes, *timing, str(inputs_csv),
             ",".join(map(str, input_vrs)) or "-", ",".join(parameters) or "-",
             ",".join(f"{n}={variables[n].valueReference}" for n in outputs), str(out_csv)]
     done = subprocess.run(args, env=BARE_ENVIRONMENT if env is None else env, capture_output=True, text=True,
                           timeout=timeout)
     if done.returncode != 0:
-        raise RuntimeError(f"the C importer failed on {case.fmu} (exit {done.returncode}):\n{done.stderr[-3000:]}")
+        raise RuntimeError(f"the C importer failed on {case.fmu} (FMI {fmi} {interface}, exit {done.returncode}):\n"
+                           f"{done.stderr[-3000:]}")
     table = reference_traces.read_csv(out_csv)
     return table.times, {ref: table.signals[var] for ref, var in case.columns.items()}, done
 
@@ -195,9 +212,13 @@ def write_result(path: Path, times: np.ndarray, traces: dict) -> Path:
     return path
 
 
-def main(out: Path, fmus=None) -> list[str]:
-    """Runs every FMU's Model Exchange edition in both hosts, writes each result to
-    ``out/<host>/<FMU>_me.csv`` and returns the ``lever validate --result`` command for each."""
+#: the hosts ``main`` runs, in order
+HOSTS = ("fmpy-cvode", "c-importer-rk4", "c-importer-fmi3-rk4", "c-importer-fmi3-cs")
+
+
+def main(out: Path, fmus=None, names: tuple = HOSTS) -> list[str]:
+    """Runs every FMU alone in each host of ``names``, writes each result to
+    ``out/<host>/<FMU>_me.csv`` (``_cs.csv`` for Co-Simulation) and returns the ``lever validate --result`` command for each."""
     import tempfile
 
     commands = []
@@ -205,12 +226,16 @@ def main(out: Path, fmus=None) -> list[str]:
         program = compile_c_importer(Path(scratch) / "bin" / "minimal_importer")
         for fmu in fmus or [m for m in reference_traces.registry.NAMES]:
             case = alone_case(fmu)
-            for host in ("fmpy-cvode", "c-importer-rk4"):
+            for host in names:
                 if host == "fmpy-cvode":
                     times, traces = run_fmpy(case)
                 else:
-                    times, traces, _ = run_c_importer_me(program, case, Path(scratch) / "run")
-                path = write_result(out / host / f"{fmu}_me.csv", times, traces)
+                    fmi = 3 if "fmi3" in host else 2
+                    interface = "CoSimulation" if host.endswith("-cs") else "ModelExchange"
+                    times, traces, _ = run_c_importer_me(program, case, Path(scratch) / "run", fmi=fmi,
+                                                         interface=interface)
+                suffix = "cs" if host.endswith("-cs") else "me"
+                path = write_result(out / host / f"{fmu}_{suffix}.csv", times, traces)
                 commands.append(f"lever validate --result {path} {case.reference} --out {out / host / fmu}")
     return commands
 

@@ -41,12 +41,39 @@
  * handled), each output step made of SUBSTEPS RK4 steps (shorter ones up to an event).
  * prints on stderr "me: rk4_steps=N state_events=N time_events=N input_events=N
  * step_events=N loop_s=S"; exit 0 on success.
+ *
+ * Co-Simulation driven by inputs (--cs): instantiate as fmi2CoSimulation, fmi2SetupExperiment
+ * (stop time defined), the start values, fmi2EnterInitializationMode, the inputs at the start,
+ * fmi2ExitInitializationMode, the outputs at the start; then per communication step the
+ * inputs at its start (right values at a repeated row), fmi2DoStep and the outputs at its end
+ * - the cross-check's sampling - and fmi2Terminate, fmi2FreeInstance.
+ *
+ * usage: minimal_importer --cs DIR MODEL GUID START STEP N_STEPS INPUT_CSV INPUT_VRS
+ *                         START_VALUES OUTPUTS OUTPUT_CSV
+ * (the arguments as for --me); writes a row at START and after every step; prints on stderr
+ * "cs: steps=N loop_s=S".
+ *
+ * FMI 3.0 (--me3, --cs3, the arguments as for --me, --cs; GUID is the instantiation token):
+ * the binary from binaries/x86_64-linux, resourcePath DIR/resources/;
+ * fmi3InstantiateModelExchange or fmi3InstantiateCoSimulation (no event mode, no early
+ * return, no intermediate update), the start values in Instantiated, then
+ * fmi3EnterInitializationMode (tolerance undefined: RK4 has no error control; the start and
+ * stop times), the inputs, fmi3ExitInitializationMode; Model Exchange: the event iteration
+ * with fmi3UpdateDiscreteStates until no discrete state needs an update,
+ * fmi3EnterContinuousTimeMode, the same RK4 loop over fmi3SetTime, fmi3SetFloat64,
+ * fmi3SetContinuousStates, fmi3GetContinuousStateDerivatives, fmi3GetEventIndicators,
+ * fmi3CompletedIntegratorStep, fmi3EnterEventMode; Co-Simulation: fmi3DoStep with its
+ * out-arguments (the FMU asking for event handling, to terminate or returning early is an
+ * error here: this host offers none of them; lastSuccessfulTime must be the step's end);
+ * at the end fmi3Terminate and fmi3FreeInstance.
  */
 #include <dlfcn.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -153,9 +180,31 @@ typedef fmi2Status (*SetTimeT)(fmi2Component, fmi2Real);
 typedef fmi2Status (*SetStatesT)(fmi2Component, const fmi2Real[], size_t);
 typedef fmi2Status (*GetArrayT)(fmi2Component, fmi2Real[], size_t);
 
+/* FMI 3.0 (fmi3FunctionTypes.h): the functions whose signatures differ from FMI 2.0's; the
+ * status enums agree from OK to Fatal, a value reference is a 32-bit unsigned int. */
+typedef void (*Logger3T)(void *, int, const char *, const char *);
+typedef void *(*InstantiateME3T)(const char *, const char *, const char *, bool, bool, void *, Logger3T);
+typedef void *(*InstantiateCS3T)(const char *, const char *, const char *, bool, bool, bool, bool,
+                                 const uint32_t[], size_t, void *, Logger3T, void *);
+typedef fmi2Status (*EnterInit3T)(void *, bool, double, double, bool, double);
+typedef fmi2Status (*GetFloat64T)(void *, const uint32_t[], size_t, double[], size_t);
+typedef fmi2Status (*SetFloat64T)(void *, const uint32_t[], size_t, const double[], size_t);
+typedef fmi2Status (*SetInt32T)(void *, const uint32_t[], size_t, const int32_t[], size_t);
+typedef fmi2Status (*UpdateDiscreteStatesT)(void *, bool *, bool *, bool *, bool *, bool *, double *);
+typedef fmi2Status (*CompletedIntegratorStep3T)(void *, bool, bool *, bool *);
+typedef fmi2Status (*DoStep3T)(void *, double, double, bool, bool *, bool *, bool *, double *);
+
+static void logger3(void *env, int status, const char *category, const char *message) {
+    (void)env;
+    fprintf(stderr, "[%d] (%s): %s\n", status, category ? category : "", message ? message : "");
+}
+
 /* The instance and what the loop needs of it. */
 typedef struct {
+    int v3; /* FMI 3.0 */
     fmi2Component c;
+    SetFloat64T set_float64;
+    UpdateDiscreteStatesT update_discrete_states;
     SetRealT set_real;
     SetTimeT set_time;
     SetStatesT set_states;
@@ -246,10 +295,15 @@ static double next_input_event(const Me *m, double t) {
     return 1e300;
 }
 
+/* fmi2SetReal or fmi3SetFloat64 (every variable a scalar: as many values as references). */
+static fmi2Status set_reals(Me *m, const fmi2ValueReference *vr, size_t n, const double *values) {
+    return m->v3 ? m->set_float64(m->c, vr, n, values, n) : m->set_real(m->c, vr, n, values);
+}
+
 static void set_inputs(Me *m, double t, int right) {
     if (m->nu == 0) return;
     inputs_at(m, t, right);
-    CHECK(m->set_real(m->c, m->u_vr, m->nu, m->u));
+    CHECK(set_reals(m, m->u_vr, m->nu, m->u));
 }
 
 /* dx/dt at (t, x) with the inputs of t: at a discontinuity the right values, or the left
@@ -300,7 +354,16 @@ static void event_iteration(Me *m, double *next) {
     int rounds = 0;
     do {
         memset(&info, 0, sizeof info);
-        CHECK(m->new_discrete_states(m->c, &info));
+        if (m->v3) {
+            bool update = false, end = false, nominals = false, values = false, defined = false;
+            double when = 0.0;
+            CHECK(m->update_discrete_states(m->c, &update, &end, &nominals, &values, &defined, &when));
+            info.newDiscreteStatesNeeded = update, info.terminateSimulation = end;
+            info.nominalsOfContinuousStatesChanged = nominals, info.valuesOfContinuousStatesChanged = values;
+            info.nextEventTimeDefined = defined, info.nextEventTime = when;
+        } else {
+            CHECK(m->new_discrete_states(m->c, &info));
+        }
         if (info.terminateSimulation) die("the FMU asked to terminate the simulation");
         if (++rounds > 1000) die("the event iteration did not converge in 1000 rounds");
     } while (info.newDiscreteStatesNeeded);
@@ -318,96 +381,256 @@ static void handle_event(Me *m, double t, double *x, double *z, double *next) {
     if (m->nz) CHECK(m->get_indicators(m->c, z, m->nz));
 }
 
-static int me_main(int argc, char **argv) {
-    if (argc != 16) {
-        fprintf(stderr, "usage: %s --me DIR MODEL GUID NX NZ START OUTPUT_STEP N_OUTPUT SUBSTEPS INPUT_CSV "
-                        "INPUT_VRS START_VALUES OUTPUTS OUTPUT_CSV\n", argv[0]);
+/* The arguments both loops share: the input value references, the inputs' CSV, the outputs
+ * ("name=VR"). */
+typedef struct {
+    char *names[256];
+    fmi2ValueReference y_vr[256];
+    size_t ny;
+    double *y;
+} Outputs;
+
+static void parse_inputs(Me *m, char *vrs, const char *csv) {
+    m->u_vr = calloc(64, sizeof *m->u_vr);
+    if (!m->u_vr) die("out of memory");
+    if (strcmp(vrs, "-") != 0) {
+        for (char *p = vrs; *p && m->nu < 64;) {
+            m->u_vr[m->nu++] = (fmi2ValueReference)strtoul(p, &p, 10);
+            if (*p == ',') p++;
+        }
+    }
+    read_inputs(m, csv);
+    m->u = alloc(m->nu);
+}
+
+static void parse_outputs(Outputs *o, char *text) {
+    o->ny = 0;
+    for (char *p = text; *p && o->ny < 256;) {
+        char *eq = strchr(p, '=');
+        if (!eq) die("OUTPUTS: expected name=VR");
+        *eq = '\0';
+        o->names[o->ny] = p;
+        o->y_vr[o->ny++] = (fmi2ValueReference)strtoul(eq + 1, &p, 10);
+        if (*p == ',') p++;
+    }
+    o->y = alloc(o->ny);
+}
+
+/* What both loops call besides the Model Exchange functions. */
+typedef struct {
+    void *lib;
+    FreeInstanceT free_instance;
+    ModeT exit_init, terminate;
+    GetRealT get_real;
+    GetFloat64T get_float64;
+    SetIntegerT set_integer;
+    SetInt32T set_int32;
+} Api;
+
+static void *load(const char *dir, const char *model, int v3) {
+    char path[4096];
+    snprintf(path, sizeof path, "%s/binaries/%s/%s.so", dir, v3 ? "x86_64-linux" : "linux64", model);
+    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!lib) {
+        fprintf(stderr, "minimal_importer: cannot load %s: %s\n", path, dlerror());
+        exit(3);
+    }
+    return lib;
+}
+
+#define SYMBOL(m, name) symbol(lib, (m)->v3 ? "fmi3" name : "fmi2" name)
+
+static void common_api(Me *m, Api *api, void *lib) {
+    api->lib = lib;
+    api->free_instance = (FreeInstanceT)SYMBOL(m, "FreeInstance");
+    api->exit_init = (ModeT)SYMBOL(m, "ExitInitializationMode");
+    api->terminate = (ModeT)SYMBOL(m, "Terminate");
+    if (m->v3) {
+        api->get_float64 = (GetFloat64T)symbol(lib, "fmi3GetFloat64");
+        api->set_int32 = (SetInt32T)symbol(lib, "fmi3SetInt32");
+        m->set_float64 = (SetFloat64T)symbol(lib, "fmi3SetFloat64");
+    } else {
+        api->get_real = (GetRealT)symbol(lib, "fmi2GetReal");
+        api->set_integer = (SetIntegerT)symbol(lib, "fmi2SetInteger");
+        m->set_real = (SetRealT)symbol(lib, "fmi2SetReal");
+    }
+}
+
+static fmi2Status get_reals(const Me *m, const Api *api, Outputs *o) {
+    return m->v3 ? api->get_float64(m->c, o->y_vr, o->ny, o->y, o->ny) : api->get_real(m->c, o->y_vr, o->ny, o->y);
+}
+
+/* "rVR=VALUE" (Real) or "iVR=VALUE" (Integer) start values, comma-separated ("-": none). */
+static void set_start_values(Me *m, const Api *api, char *spec) {
+    if (strcmp(spec, "-") == 0) return;
+    for (char *p = spec; *p;) {
+        char kind = *p++;
+        fmi2ValueReference vr = (fmi2ValueReference)strtoul(p, &p, 10);
+        if (*p++ != '=') die("START_VALUES: expected rVR=VALUE or iVR=VALUE");
+        double value = strtod(p, &p);
+        if (kind == 'r') {
+            CHECK(set_reals(m, &vr, 1, &value));
+        } else if (kind == 'i') {
+            fmi2Integer i = (fmi2Integer)value;
+            CHECK(m->v3 ? api->set_int32(m->c, &vr, 1, &i, 1) : api->set_integer(m->c, &vr, 1, &i));
+        } else {
+            die("START_VALUES: a value is r (Real) or i (Integer)");
+        }
+        if (*p == ',') p++;
+    }
+}
+
+/* Instantiated (for Model Exchange or Co-Simulation), its start values set, in initialization
+ * mode at `start` (stop time `stop`). */
+static void instantiate_and_enter(Me *m, const Api *api, int me, const char *dir, const char *guid, char *start_values,
+                                  double start, double stop) {
+    void *lib = api->lib;
+    if (m->v3) {
+        char resources[4096];
+        snprintf(resources, sizeof resources, "%s/resources/", dir);
+        if (me) {
+            m->c = ((InstantiateME3T)symbol(lib, "fmi3InstantiateModelExchange"))("me-host", guid, resources, false,
+                                                                                  false, NULL, logger3);
+        } else {
+            m->c = ((InstantiateCS3T)symbol(lib, "fmi3InstantiateCoSimulation"))(
+                "cs-host", guid, resources, false, false, false, false, NULL, 0, NULL, logger3, NULL);
+        }
+        if (!m->c) die(me ? "fmi3InstantiateModelExchange failed" : "fmi3InstantiateCoSimulation failed");
+        set_start_values(m, api, start_values);
+        CHECK(((EnterInit3T)symbol(lib, "fmi3EnterInitializationMode"))(m->c, false, 0.0, start, true, stop));
+    } else {
+        char uri[4096];
+        snprintf(uri, sizeof uri, "file://%s/resources", dir);
+        static fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+        m->c = ((InstantiateT)symbol(lib, "fmi2Instantiate"))(me ? "me-host" : "cs-host",
+                                                             me ? fmi2ModelExchange : fmi2CoSimulation, guid, uri,
+                                                             &callbacks, 0, 0);
+        if (!m->c) die(me ? "fmi2Instantiate (fmi2ModelExchange) failed" : "fmi2Instantiate (fmi2CoSimulation) failed");
+        CHECK(((SetupExperimentT)symbol(lib, "fmi2SetupExperiment"))(m->c, 0, 0.0, start, !me, stop));
+        set_start_values(m, api, start_values);
+        CHECK(((ModeT)symbol(lib, "fmi2EnterInitializationMode"))(m->c));
+    }
+}
+
+static FILE *open_output(const char *path, const Outputs *o) {
+    FILE *out = fopen(path, "w");
+    if (!out) die("cannot write the output CSV");
+    fprintf(out, "time");
+    for (size_t j = 0; j < o->ny; j++) fprintf(out, ",%s", o->names[j]);
+    fprintf(out, "\n");
+    return out;
+}
+
+static void write_row(FILE *out, double t, const Outputs *o) {
+    fprintf(out, "%.17g", t);
+    for (size_t j = 0; j < o->ny; j++) fprintf(out, ",%.17g", o->y[j]);
+    fprintf(out, "\n");
+}
+
+static double seconds_since(const struct timespec *began) {
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return (double)(now.tv_sec - began->tv_sec) + 1e-9 * (now.tv_nsec - began->tv_nsec);
+}
+
+/* Co-Simulation driven by inputs (--cs, --cs3). */
+static int cs_main(int argc, char **argv, int v3) {
+    if (argc != 13) {
+        fprintf(stderr, "usage: %s %s DIR MODEL GUID START STEP N_STEPS INPUT_CSV INPUT_VRS START_VALUES OUTPUTS "
+                        "OUTPUT_CSV\n", argv[0], argv[1]);
         return 2;
     }
     const char *dir = argv[2], *model = argv[3], *guid = argv[4];
     Me m;
     memset(&m, 0, sizeof m);
+    m.v3 = v3;
+    double start = strtod(argv[5], NULL), h = strtod(argv[6], NULL);
+    long n = strtol(argv[7], NULL, 10);
+    if (!(h > 0.0) || n < 1) die("bad STEP or N_STEPS");
+    parse_inputs(&m, argv[9], argv[8]);
+    Outputs o;
+    parse_outputs(&o, argv[11]);
+    Api api;
+    void *lib = load(dir, model, v3);
+    common_api(&m, &api, lib);
+    DoStepT step2 = v3 ? NULL : (DoStepT)symbol(lib, "fmi2DoStep");
+    DoStep3T step3 = v3 ? (DoStep3T)symbol(lib, "fmi3DoStep") : NULL;
+
+    instantiate_and_enter(&m, &api, 0, dir, guid, argv[10], start, start + (double)n * h);
+    set_inputs(&m, start, 1);
+    CHECK(api.exit_init(m.c));
+    FILE *out = open_output(argv[12], &o);
+    CHECK(get_reals(&m, &api, &o));
+    write_row(out, start, &o);
+    struct timespec began;
+    clock_gettime(CLOCK_MONOTONIC, &began);
+    for (long k = 0; k < n; k++) {
+        double t = start + (double)k * h, t_next = start + (double)(k + 1) * h;
+        set_inputs(&m, t, 1);
+        if (v3) {
+            bool event = true, end = true, early = true;
+            double reached = -1.0;
+            CHECK(step3(m.c, t, t_next - t, true, &event, &end, &early, &reached));
+            if (event || end || early) die("fmi3DoStep asked for event handling, to terminate or returned early");
+            if (reached != t_next) die("fmi3DoStep's lastSuccessfulTime is not the step's end");
+        } else {
+            CHECK(step2(m.c, t, t_next - t, 1));
+        }
+        CHECK(get_reals(&m, &api, &o));
+        write_row(out, t_next, &o);
+    }
+    double loop = seconds_since(&began);
+    fclose(out);
+    CHECK(api.terminate(m.c));
+    api.free_instance(m.c);
+    fprintf(stderr, "cs: steps=%ld loop_s=%.6f\n", n, loop);
+    printf("freed\n");
+    fflush(stdout);
+    fflush(stderr);
+    _exit(0); /* see the end of main */
+}
+
+static int me_main(int argc, char **argv, int v3) {
+    if (argc != 16) {
+        fprintf(stderr, "usage: %s %s DIR MODEL GUID NX NZ START OUTPUT_STEP N_OUTPUT SUBSTEPS INPUT_CSV "
+                        "INPUT_VRS START_VALUES OUTPUTS OUTPUT_CSV\n", argv[0], argv[1]);
+        return 2;
+    }
+    const char *dir = argv[2], *guid = argv[4];
+    Me m;
+    memset(&m, 0, sizeof m);
+    m.v3 = v3;
     m.nx = (size_t)strtoul(argv[5], NULL, 10);
     m.nz = (size_t)strtoul(argv[6], NULL, 10);
     double start = strtod(argv[7], NULL), output_step = strtod(argv[8], NULL);
     long n_output = strtol(argv[9], NULL, 10), substeps = strtol(argv[10], NULL, 10);
     if (!(output_step > 0.0) || n_output < 1 || substeps < 1) die("bad OUTPUT_STEP, N_OUTPUT or SUBSTEPS");
+    parse_inputs(&m, argv[12], argv[11]);
+    Outputs o;
+    parse_outputs(&o, argv[14]);
 
-    /* the input value references */
-    m.u_vr = calloc(64, sizeof *m.u_vr);
-    if (!m.u_vr) die("out of memory");
-    if (strcmp(argv[12], "-") != 0) {
-        for (char *p = argv[12]; *p && m.nu < 64;) {
-            m.u_vr[m.nu++] = (fmi2ValueReference)strtoul(p, &p, 10);
-            if (*p == ',') p++;
-        }
+    Api api;
+    void *lib = load(dir, argv[3], v3);
+    common_api(&m, &api, lib);
+    m.set_time = (SetTimeT)SYMBOL(&m, "SetTime");
+    m.set_states = (SetStatesT)SYMBOL(&m, "SetContinuousStates");
+    m.get_derivatives = (GetArrayT)symbol(lib, v3 ? "fmi3GetContinuousStateDerivatives" : "fmi2GetDerivatives");
+    m.get_indicators = (GetArrayT)SYMBOL(&m, "GetEventIndicators");
+    m.get_states = (GetArrayT)SYMBOL(&m, "GetContinuousStates");
+    m.enter_event_mode = (ModeT)SYMBOL(&m, "EnterEventMode");
+    m.enter_continuous_time_mode = (ModeT)SYMBOL(&m, "EnterContinuousTimeMode");
+    CompletedIntegratorStepT completed = NULL;
+    CompletedIntegratorStep3T completed3 = NULL;
+    if (v3) {
+        m.update_discrete_states = (UpdateDiscreteStatesT)symbol(lib, "fmi3UpdateDiscreteStates");
+        completed3 = (CompletedIntegratorStep3T)symbol(lib, "fmi3CompletedIntegratorStep");
+    } else {
+        m.new_discrete_states = (NewDiscreteStatesT)symbol(lib, "fmi2NewDiscreteStates");
+        completed = (CompletedIntegratorStepT)symbol(lib, "fmi2CompletedIntegratorStep");
     }
-    /* the outputs: name=vr */
-    char *names[256];
-    fmi2ValueReference y_vr[256];
-    size_t ny = 0;
-    for (char *p = argv[14]; *p && ny < 256;) {
-        char *eq = strchr(p, '=');
-        if (!eq) die("OUTPUTS: expected name=VR");
-        *eq = '\0';
-        names[ny] = p;
-        y_vr[ny++] = (fmi2ValueReference)strtoul(eq + 1, &p, 10);
-        if (*p == ',') p++;
-    }
-    read_inputs(&m, argv[11]);
-    m.u = alloc(m.nu);
-
-    char path[4096], uri[4096];
-    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", dir, model);
-    snprintf(uri, sizeof uri, "file://%s/resources", dir);
-    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!lib) {
-        fprintf(stderr, "minimal_importer: cannot load %s: %s\n", path, dlerror());
-        return 3;
-    }
-    InstantiateT instantiate = (InstantiateT)symbol(lib, "fmi2Instantiate");
-    FreeInstanceT free_instance = (FreeInstanceT)symbol(lib, "fmi2FreeInstance");
-    SetupExperimentT setup = (SetupExperimentT)symbol(lib, "fmi2SetupExperiment");
-    ModeT enter = (ModeT)symbol(lib, "fmi2EnterInitializationMode");
-    ModeT exit_init = (ModeT)symbol(lib, "fmi2ExitInitializationMode");
-    ModeT terminate = (ModeT)symbol(lib, "fmi2Terminate");
-    GetRealT get = (GetRealT)symbol(lib, "fmi2GetReal");
-    SetIntegerT set_integer = (SetIntegerT)symbol(lib, "fmi2SetInteger");
-    CompletedIntegratorStepT completed = (CompletedIntegratorStepT)symbol(lib, "fmi2CompletedIntegratorStep");
-    m.set_real = (SetRealT)symbol(lib, "fmi2SetReal");
-    m.set_time = (SetTimeT)symbol(lib, "fmi2SetTime");
-    m.set_states = (SetStatesT)symbol(lib, "fmi2SetContinuousStates");
-    m.get_derivatives = (GetArrayT)symbol(lib, "fmi2GetDerivatives");
-    m.get_indicators = (GetArrayT)symbol(lib, "fmi2GetEventIndicators");
-    m.get_states = (GetArrayT)symbol(lib, "fmi2GetContinuousStates");
-    m.enter_event_mode = (ModeT)symbol(lib, "fmi2EnterEventMode");
-    m.enter_continuous_time_mode = (ModeT)symbol(lib, "fmi2EnterContinuousTimeMode");
-    m.new_discrete_states = (NewDiscreteStatesT)symbol(lib, "fmi2NewDiscreteStates");
-
-    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    m.c = instantiate("me-host", fmi2ModelExchange, guid, uri, &callbacks, 0, 0);
-    if (!m.c) die("fmi2Instantiate (fmi2ModelExchange) failed");
-    CHECK(setup(m.c, 0, 0.0, start, 0, 0.0));
-    if (strcmp(argv[13], "-") != 0) {
-        for (char *p = argv[13]; *p;) {
-            char kind = *p++;
-            fmi2ValueReference vr = (fmi2ValueReference)strtoul(p, &p, 10);
-            if (*p++ != '=') die("START_VALUES: expected rVR=VALUE or iVR=VALUE");
-            double value = strtod(p, &p);
-            if (kind == 'r') {
-                CHECK(m.set_real(m.c, &vr, 1, &value));
-            } else if (kind == 'i') {
-                fmi2Integer i = (fmi2Integer)value;
-                CHECK(set_integer(m.c, &vr, 1, &i));
-            } else {
-                die("START_VALUES: a value is r (Real) or i (Integer)");
-            }
-            if (*p == ',') p++;
-        }
-    }
-    CHECK(enter(m.c));
+    instantiate_and_enter(&m, &api, 1, dir, guid, argv[13], start, start + (double)n_output * output_step);
     set_inputs(&m, start, 1);
-    CHECK(exit_init(m.c));
+    CHECK(api.exit_init(m.c));
     double next_time_event;
     event_iteration(&m, &next_time_event);
     CHECK(m.enter_continuous_time_mode(m.c));
@@ -417,12 +640,7 @@ static int me_main(int argc, char **argv) {
     if (m.nx) CHECK(m.get_states(m.c, x, m.nx));
     if (m.nz) CHECK(m.get_indicators(m.c, z, m.nz));
 
-    FILE *out = fopen(argv[15], "w");
-    if (!out) die("cannot write the output CSV");
-    fprintf(out, "time");
-    for (size_t j = 0; j < ny; j++) fprintf(out, ",%s", names[j]);
-    fprintf(out, "\n");
-    fmi2Real *y = (fmi2Real *)alloc(ny);
+    FILE *out = open_output(argv[15], &o);
     long state_events = 0, time_events = 0, input_events = 0, step_events = 0;
 
     struct timespec began, ended;
@@ -466,7 +684,13 @@ static int me_main(int argc, char **argv) {
             t = t_new;
             if (t > target - 1e-9 * output_step && stop_at != 3) t = target; /* no sliver left */
             fmi2Boolean step_event = 0, stop = 0;
-            CHECK(completed(m.c, 1, &step_event, &stop));
+            if (v3) {
+                bool enter_event = false, end = false;
+                CHECK(completed3(m.c, true, &enter_event, &end));
+                step_event = enter_event, stop = end;
+            } else {
+                CHECK(completed(m.c, 1, &step_event, &stop));
+            }
             if (stop) die("the FMU asked to terminate the simulation");
             memcpy(x, x_new, m.nx * sizeof *x);
             memcpy(z, z_new, m.nz * sizeof *z);
@@ -482,15 +706,13 @@ static int me_main(int argc, char **argv) {
         CHECK(m.set_time(m.c, t));
         set_inputs(&m, t, 1);
         if (m.nx) CHECK(m.set_states(m.c, x, m.nx));
-        CHECK(get(m.c, y_vr, ny, y));
-        fprintf(out, "%.17g", t);
-        for (size_t j = 0; j < ny; j++) fprintf(out, ",%.17g", y[j]);
-        fprintf(out, "\n");
+        CHECK(get_reals(&m, &api, &o));
+        write_row(out, t, &o);
     }
     clock_gettime(CLOCK_MONOTONIC, &ended);
     fclose(out);
-    CHECK(terminate(m.c));
-    free_instance(m.c);
+    CHECK(api.terminate(m.c));
+    api.free_instance(m.c);
     fprintf(stderr, "me: rk4_steps=%ld state_events=%ld time_events=%ld input_events=%ld step_events=%ld "
                     "loop_s=%.6f\n", m.rk4_steps, state_events, time_events, input_events, step_events,
             (double)(ended.tv_sec - began.tv_sec) + 1e-9 * (ended.tv_nsec - began.tv_nsec));
@@ -501,8 +723,11 @@ static int me_main(int argc, char **argv) {
 }
 
 int main(int argc, char **argv) {
-    if (argc > 1 && strcmp(argv[1], "--me") == 0) {
-        return me_main(argc, argv);
+    if (argc > 1 && (strcmp(argv[1], "--me") == 0 || strcmp(argv[1], "--me3") == 0)) {
+        return me_main(argc, argv, strcmp(argv[1], "--me3") == 0);
+    }
+    if (argc > 1 && (strcmp(argv[1], "--cs") == 0 || strcmp(argv[1], "--cs3") == 0)) {
+        return cs_main(argc, argv, strcmp(argv[1], "--cs3") == 0);
     }
     if (argc != 9) {
         fprintf(stderr, "usage: %s DIR MODEL_IDENTIFIER GUID INPUT_VR INPUT_VALUE OUTPUT_VR STEP N\n",

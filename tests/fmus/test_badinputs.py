@@ -77,3 +77,44 @@ def test_the_summary_counts_cases_and_names_failures(fmu_dir):
     text = badinputs.summary(outcomes)
     assert text.splitlines()[0].endswith("3 cases through fmpy's FMU2Slave, 2 pass, 1 fail")
     assert "FAIL EngineShaft: a good inertia: status 0, expected fmi2Error or fmi2Discard" in text
+
+
+def test_the_corpus_covers_the_fmi3_state_machine_sizes_nan_and_states_for_every_fmu():
+    fmi3 = [c for c in CORPUS if c.action[:2] == ("call", "fmi3")]
+    assert {c.interface for c in fmi3} == {"CoSimulation3", "ModelExchange3"}
+    for fmu in FMU_NAMES:
+        nx, nz = badinputs.ME_SIZES[fmu]
+        cases = [c for c in fmi3 if c.fmu == fmu]
+        me = [c for c in cases if c.interface == "ModelExchange3"]
+        # every Model Exchange function in every state the FMI 3.0 table does not allow
+        refused = {(c.action[2][0], c.phase) for c in me if c.category == "FMI 3 out-of-order call"}
+        for function, allowed in badinputs.ME3_ALLOWED.items():
+            assert {(function, p) for p in badinputs.ME3_PHASES if p not in allowed} <= refused, (fmu, function)
+        on_cs = {c.action[2][0] for c in cases if c.interface == "CoSimulation3" and "Co-Simulation instance" in c.label}
+        assert {"fmi3SetTime", "fmi3SetContinuousStates", "fmi3GetContinuousStateDerivatives"} <= on_cs, fmu
+        assert {"fmi3DoStep", "fmi3GetFMUState"} <= {c.action[2][0] for c in me if "Model Exchange instance" in c.label}
+        # nValues for every type's getter and setter in both interfaces, the arrays of another size
+        counted = {(c.interface, c.action[2][0]) for c in cases if c.action[2][1:2] == ("count",)}
+        assert len(counted) == 2 * 2 * len(badinputs.FMI3_TYPES), fmu
+        sized = {(c.action[2][0], c.action[2][2]) for c in me if c.action[2][1:2] == ("size",)}
+        for function, size in badinputs.ME3_ARRAYS.items():
+            n = nx if size == "nx" else nz
+            assert (function, n + 1) in sized and (not n or (function, n - 1) in sized), (fmu, function)
+        categories = {c.category for c in cases}
+        assert {"FMI 3 out-of-order call", "FMI 3 wrong size or reference", "FMI 3 non-finite value",
+                "FMI 3 bad state"} <= categories, fmu
+        edits = {c.action[2][1] for c in cases if c.action[2][0] == "state3"}
+        assert edits == set(badinputs.STATE3_EDITS), fmu
+        assert {c.action[2][1] for c in cases if c.action[2][0] == "state3-inner"} == set(badinputs.state_edits(fmu))
+    assert len(fmi3) > 800 and len(CORPUS) - len(fmi3) > 800
+
+
+def test_an_accepted_fmi3_call_fails_its_case(fmu_dir):
+    """The FMI 3 runner fails a case whose call is not refused (a legal fmi3SetTime) and says so."""
+    legal = badinputs.Case("EngineShaft", "FMI 3 out-of-order call", "fmi3SetTime in continuous (legal)",
+                           "continuous", ("call", "fmi3", ("fmi3SetTime",)), ("fmi3SetTime",),
+                           interface="ModelExchange3")
+    outcome = badinputs.run_case(legal, fmu_dir)
+    assert not outcome.passed and "status 0, expected fmi3Error" in outcome.problems[0]
+    text = badinputs.summary([outcome])
+    assert "FMU3Slave (0) and FMU3Model (1)" in text and "FMI 3.0 cases: 1 (the corpus 0 -> 1 cases with them)" in text

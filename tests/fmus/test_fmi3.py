@@ -300,6 +300,8 @@ def test_serialized_state_continues_in_a_fresh_instance_bit_for_bit(unpacked, na
         state = fmu.getFMUState()
         blob = fmu.serializeFMUState(state)
         fmu.freeFMUState(state)
+        # the model's part names the instantiation token (a state of another build is refused)
+        assert f'"guid": "{md.guid}"'.encode() in blob
         restored = fresh.deserializeFMUState(blob)
         fresh.setFMUState(restored)
         assert fresh.serializeFMUState(restored) == blob

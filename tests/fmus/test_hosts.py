@@ -5,6 +5,7 @@ the KAVZ-685 scene from our SSP export judged by `lever validate --result`; and 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -144,3 +145,54 @@ def test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi(fmu_dir, ecos_
     # the first step is the same in all three; from the second on, the lag shows
     assert traces["coupling.tau1"][1] == pytest.approx(ours.traces["coupling.tau1"][1], abs=1e-5)
     assert abs(traces["coupling.tau1"][2] - ours.traces["coupling.tau1"][2]) > 0.1
+
+
+# -- the FMI 3.0 editions ---------------------------------------------------------------------------
+
+#: what each FMI 3.0 edition alone records in ecos: ALONE, and the rectifier's speeds
+ALONE_FMI3 = {**ALONE, "FreewheelRectifier": ["half_coupling_speed", "driven_speed", "driven_acceleration"]}
+
+
+@pytest.mark.parametrize("fmu", list(ALONE_FMI3))
+def test_ecos_runs_each_fmi3_edition_alone_as_the_fmi2_edition(fmu, fmu_dir, ecos_bin, tmp_path):
+    """ecos's FMI 3.0 co-simulation (it loads the edition by its fmiVersion) in a bare
+    environment: the same six decimals as the FMI 2.0 edition in ecos, which matches our
+    harness (the test above).  ecos logs what it is told to (the outputs): logging every
+    variable of an edition with event indicators gives zeros (docs/hosts.md, FMI 3.0)."""
+    import shutil
+
+    from harness.studies.me_hosts import fmi3_dir
+
+    record = [f"instance.{v}" for v in ALONE_FMI3[fmu]]
+    runs = {}
+    for edition, folder in (("fmi2", fmu_dir), ("fmi3", fmi3_dir(fmu_dir))):
+        (tmp_path / edition).mkdir()
+        target = shutil.copy(folder / f"{fmu}.fmu", tmp_path / edition / f"{fmu}.fmu")
+        run3 = ecos.run_ecos(Path(target), 0.2, 1e-3, ecos_bin, record=record)
+        runs[edition] = ecos.ecos_traces(run3.csv)
+    assert "Loading FMI version 3" in run3.log
+    (t2, traces2), (t3, traces3) = runs["fmi2"], runs["fmi3"]
+    assert len(t3) == 201 and np.array_equal(t2, t3)
+    assert sorted(traces3) == sorted(record)
+    for name in record:
+        assert np.array_equal(traces3[name], traces2[name]), name
+
+
+def test_ecos_runs_the_fmi3_misalignment_source_to_its_reference(lever, fmu_dir, ecos_bin, tmp_path):
+    """The one stand-alone reference without inputs (a lone FMU in ecos takes no inputs):
+    the FMI 3.0 source over its reference's span, judged by ``lever validate --result``."""
+    import shutil
+
+    from harness.formats import reference_traces
+    from harness.studies.me_hosts import fmi3_dir, write_result
+
+    ref = reference_traces.read("MisalignmentSource")
+    assert ref.inputs is None
+    target = Path(shutil.copy(fmi3_dir(fmu_dir) / "MisalignmentSource.fmu", tmp_path / "MisalignmentSource.fmu"))
+    signals = list(ref.outputs.signals)
+    run3 = ecos.run_ecos(target, ref.opt.stop, ref.opt.step, ecos_bin, record=[f"instance.{s}" for s in signals])
+    times, traces = ecos.ecos_traces(run3.csv)
+    assert times[-1] == pytest.approx(ref.opt.stop, abs=1e-9)
+    csv_path = write_result(tmp_path / "ecos3.csv", times, {s: traces[f"instance.{s}"] for s in signals})
+    outcome = lever("validate", "--result", str(csv_path), "MisalignmentSource", "--out", str(tmp_path / "v"))
+    assert outcome.exit_code == 0 and "MisalignmentSource: PASS" in outcome.output, outcome.output

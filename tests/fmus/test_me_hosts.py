@@ -81,3 +81,62 @@ def test_the_c_importers_co_simulation_path_still_runs(fmu_dir, c_host, tmp_path
     unzipped = extract(str(fmu_dir / "EngineShaft.fmu"), str(tmp_path / "e"))
     done = hosts.run_c_importer(c_host, tmp_path / "e", "EngineShaft", 3, 1e-3, BARE_ENVIRONMENT)
     assert done.returncode == 0 and done.stdout.split()[-1] == "freed", (unzipped, done.stderr)
+
+
+# -- FMI 3.0 -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("fmu", FMU_NAMES)
+def test_the_c_importers_fmi3_model_exchange_loop_passes_lever_validate(fmu, lever, fmu_dir, c_host, tmp_path):
+    """The FMI 3.0 edition (build/fmus3) in the same RK4 loop through FMI 3.0's calls
+    (fmi3InstantiateModelExchange, fmi3UpdateDiscreteStates, ...), bare environment."""
+    case = me_hosts.alone_case(fmu)
+    times, traces, done = me_hosts.run_c_importer_me(c_host, case, tmp_path / "run", fmu_dir, fmi=3)
+    counts = me_hosts.c_counts(done)
+    n_out = round((case.opt.stop - case.opt.start) / case.opt.step)
+    assert len(times) == n_out + 1 and times[-1] == pytest.approx(case.opt.stop)
+    if fmu == "LeverCoupling":
+        assert counts["input_events"] == 1
+    if fmu == "FreewheelRectifier":
+        assert counts["state_events"] > 50
+    if fmu == "MisalignmentSource":
+        assert counts["time_events"] == 1          # fmi3UpdateDiscreteStates's nextEventTime
+    _judge(lever, case, times, traces, tmp_path)
+
+
+@pytest.mark.parametrize("fmu", FMU_NAMES)
+def test_the_c_importers_fmi3_co_simulation_passes_lever_validate_as_fmi2(fmu, lever, fmu_dir, c_host, tmp_path):
+    """fmi3InstantiateCoSimulation, fmi3EnterInitializationMode with start and stop,
+    fmi3DoStep with its out-arguments, the inputs set at each communication point: the
+    reference passes, and the outputs are the FMI 2.0 edition's in the same loop bit for bit."""
+    case = me_hosts.alone_case(fmu)
+    runs = {fmi: me_hosts.run_c_importer_me(c_host, case, tmp_path / "run", fmu_dir, fmi=fmi,
+                                            interface="CoSimulation") for fmi in (2, 3)}
+    times, traces, done = runs[3]
+    n_out = round((case.opt.stop - case.opt.start) / case.opt.step)
+    assert len(times) == n_out + 1 and times[-1] == pytest.approx(case.opt.stop)
+    assert f"cs: steps={n_out} " in done.stderr and done.stdout.split()[-1] == "freed"
+    assert np.array_equal(runs[2][0], times)
+    for name, values in traces.items():
+        assert np.array_equal(values, runs[2][1][name]), name
+    outcome = _validate(lever, case, times, traces, tmp_path)
+    assert outcome.exit_code == 0 and f"{case.reference}: PASS" in outcome.output, outcome.output
+
+
+def test_the_c_importer_refuses_an_fmi3_edition_it_cannot_load(fmu_dir, c_host, tmp_path):
+    """A wrong instantiation token is refused at fmi3InstantiateCoSimulation: the importer
+    stops there with the FMU's message, and no numbers are written."""
+    import dataclasses
+
+    case = me_hosts.alone_case("MisalignmentSource")
+    from fmpy import extract
+
+    extract(str(me_hosts.fmi3_dir(fmu_dir) / "MisalignmentSource.fmu"), str(tmp_path / "run" / "MisalignmentSource-fmi3"))
+    text = (tmp_path / "run" / "MisalignmentSource-fmi3" / "modelDescription.xml").read_text()
+    token = text.split('instantiationToken="', 1)[1].split('"', 1)[0]
+    (tmp_path / "run" / "MisalignmentSource-fmi3" / "modelDescription.xml").write_text(
+        text.replace(token, "{00000000-0000-0000-0000-000000000000}"))
+    with pytest.raises(RuntimeError, match="fmi3InstantiateCoSimulation failed") as failed:
+        me_hosts.run_c_importer_me(c_host, dataclasses.replace(case), tmp_path / "run", fmu_dir, fmi=3,
+                                   interface="CoSimulation")
+    assert "GUID" in str(failed.value) or "token" in str(failed.value), failed.value
+    assert not (tmp_path / "run" / "MisalignmentSource_cs3_out.csv").exists()

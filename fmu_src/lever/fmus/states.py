@@ -70,14 +70,15 @@ _GUIDS: dict[str, str] = {}
 
 def _guid_of(resources) -> str:
     """The GUID in the model description of the unpacked FMU whose resources folder is
-    ``resources`` ("" where there is none to read: the model run outside an FMU)."""
+    ``resources`` (FMI 3.0 calls it the instantiation token; "" where there is none to read:
+    the model run outside an FMU)."""
     key = str(resources or "")
     if key not in _GUIDS:
         guid = ""
         if key:
             try:
                 text = (Path(key).parent / "modelDescription.xml").read_text(encoding="utf-8", errors="replace")
-                found = re.search(r'\bguid\s*=\s*"([^"]*)"', text)
+                found = re.search(r'\b(?:guid|instantiationToken)\s*=\s*"([^"]*)"', text)
                 guid = found.group(1) if found else ""
             except (OSError, ValueError):
                 pass
