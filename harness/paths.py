@@ -39,13 +39,6 @@ def _fmu_dir() -> Path:
 
 
 FMUS = _fmu_dir()
-
-
-def fmi3_dir(fmu_dir: Path) -> Path:
-    """Where the FMI 3.0 editions of the FMUs in ``fmu_dir`` are (as build/fmus.py writes
-    them): ``fmus3`` beside a folder named ``fmus``, else its subfolder ``fmi3``."""
-    fmu_dir = Path(fmu_dir)
-    return fmu_dir.with_name("fmus3") if fmu_dir.name == "fmus" else fmu_dir / "fmi3"
 RESULTS = Path.cwd() / "results" if INSTALLED else ROOT / "results"
 
 
