@@ -44,7 +44,7 @@ def compliance(fmus):
 @click.command("badinputs")
 @click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
 def bad_inputs(verbose):
-    """Run the bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave and FMU2Model on
+    """Run the bad-input corpus (harness/formats/badinputs/) through fmpy's FMU2Slave and FMU2Model on
     the built FMUs, and FMU3Slave and FMU3Model on their FMI 3.0 editions: every case must be refused
     with an FMI error naming the variable and its range."""
     outcomes, summary = api.bad_inputs()

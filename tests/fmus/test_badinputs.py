@@ -1,4 +1,4 @@
-"""The bad-input corpus (harness/formats/badinputs.py) through fmpy's FMU2Slave on the built FMUs:
+"""The bad-input corpus (harness/formats/badinputs/) through fmpy's FMU2Slave on the built FMUs:
 every case is refused with fmi2Error/fmi2Discard and a message naming the variable and
 what is allowed, nothing is fatal, and every instance is freed cleanly."""
 from __future__ import annotations
@@ -41,29 +41,29 @@ def test_the_corpus_covers_every_kind_of_bad_input_for_every_fmu():
     for fmu in badinputs.DECLARED:
         edits = {c.action[2][0] for c in CORPUS if c.fmu == fmu and c.action[:2] == ("call", "edited-state")}
         # every generic edit its state has something for, and for the engine the lagged torque's own
-        assert edits - set(badinputs._STATE_EDITS) == ({"internal-empty"} if fmu == "EngineShaft" else set()), fmu
-        assert set(badinputs.state_edits(fmu)) <= edits, fmu
-    assert len(badinputs.state_edits("MisalignmentSource")) == len(badinputs._STATE_EDITS) - 3   # no input or real
+        assert edits - set(badinputs.co_simulation.STATE_EDITS) == ({"internal-empty"} if fmu == "EngineShaft" else set()), fmu
+        assert set(badinputs.co_simulation.state_edits(fmu)) <= edits, fmu
+    assert len(badinputs.co_simulation.state_edits("MisalignmentSource")) == len(badinputs.co_simulation.STATE_EDITS) - 3   # no input or real
     assert len({c.name for c in CORPUS}) == len(CORPUS) > 800
 
 
 def test_the_corpus_covers_every_model_exchange_call_and_state_for_every_fmu():
     me = [c for c in CORPUS if c.action[:2] == ("call", "me")]
     for fmu in FMU_NAMES:
-        nx, _ = badinputs.ME_SIZES[fmu]
+        nx, _ = badinputs.model_exchange.ME_SIZES[fmu]
         cases = [c for c in me if c.fmu == fmu]
         on_me = [c for c in cases if c.interface == "ModelExchange"]
         # every ME function refused in a state the table does not allow, and on a Co-Simulation instance
         wrong_state = {c.action[2][0] for c in on_me if c.category == "out-of-order ME call"}
-        assert set(badinputs.ME_FUNCTIONS) | {"fmi2GetDirectionalDerivative"} <= wrong_state, fmu
-        assert {c.phase for c in on_me} == set(badinputs.ME_PHASES), fmu
+        assert set(badinputs.model_exchange.ME_FUNCTIONS) | {"fmi2GetDirectionalDerivative"} <= wrong_state, fmu
+        assert {c.phase for c in on_me} == set(badinputs.model_exchange.ME_PHASES), fmu
         on_cs = {c.action[2][0] for c in cases if c.interface == "CoSimulation"}
-        assert on_cs == set(badinputs.ME_FUNCTIONS), fmu
+        assert on_cs == set(badinputs.model_exchange.ME_FUNCTIONS), fmu
         assert {"fmi2DoStep", "fmi2GetFMUstate"} <= wrong_state, fmu
         # every array of the wrong size (and NULL where the model has states), NaN/inf states
         sized = {(c.action[2][0], c.action[2][2]) for c in on_me if c.action[2][1:2] == ("size",)}
-        for function, size in badinputs.ME_ARRAYS.items():
-            n = nx if size == "nx" else badinputs.ME_SIZES[fmu][1]
+        for function, size in badinputs.model_exchange.ME_ARRAYS.items():
+            n = nx if size == "nx" else badinputs.model_exchange.ME_SIZES[fmu][1]
             assert (function, n + 1) in sized and (not n or (function, n - 1) in sized), (fmu, function)
         assert sum(c.category == "non-finite ME state" for c in on_me) == (3 if nx else 0) + 3, fmu
         assert sum(c.category == "bad directional derivative" for c in on_me) >= 6, fmu
@@ -83,29 +83,29 @@ def test_the_corpus_covers_the_fmi3_state_machine_sizes_nan_and_states_for_every
     fmi3 = [c for c in CORPUS if c.action[:2] == ("call", "fmi3")]
     assert {c.interface for c in fmi3} == {"CoSimulation3", "ModelExchange3"}
     for fmu in FMU_NAMES:
-        nx, nz = badinputs.ME_SIZES[fmu]
+        nx, nz = badinputs.model_exchange.ME_SIZES[fmu]
         cases = [c for c in fmi3 if c.fmu == fmu]
         me = [c for c in cases if c.interface == "ModelExchange3"]
         # every Model Exchange function in every state the FMI 3.0 table does not allow
         refused = {(c.action[2][0], c.phase) for c in me if c.category == "FMI 3 out-of-order call"}
-        for function, allowed in badinputs.ME3_ALLOWED.items():
-            assert {(function, p) for p in badinputs.ME3_PHASES if p not in allowed} <= refused, (fmu, function)
+        for function, allowed in badinputs.fmi3.ME3_ALLOWED.items():
+            assert {(function, p) for p in badinputs.fmi3.ME3_PHASES if p not in allowed} <= refused, (fmu, function)
         on_cs = {c.action[2][0] for c in cases if c.interface == "CoSimulation3" and "Co-Simulation instance" in c.label}
         assert {"fmi3SetTime", "fmi3SetContinuousStates", "fmi3GetContinuousStateDerivatives"} <= on_cs, fmu
         assert {"fmi3DoStep", "fmi3GetFMUState"} <= {c.action[2][0] for c in me if "Model Exchange instance" in c.label}
         # nValues for every type's getter and setter in both interfaces, the arrays of another size
         counted = {(c.interface, c.action[2][0]) for c in cases if c.action[2][1:2] == ("count",)}
-        assert len(counted) == 2 * 2 * len(badinputs.FMI3_TYPES), fmu
+        assert len(counted) == 2 * 2 * len(badinputs.fmi3.FMI3_TYPES), fmu
         sized = {(c.action[2][0], c.action[2][2]) for c in me if c.action[2][1:2] == ("size",)}
-        for function, size in badinputs.ME3_ARRAYS.items():
+        for function, size in badinputs.fmi3.ME3_ARRAYS.items():
             n = nx if size == "nx" else nz
             assert (function, n + 1) in sized and (not n or (function, n - 1) in sized), (fmu, function)
         categories = {c.category for c in cases}
         assert {"FMI 3 out-of-order call", "FMI 3 wrong size or reference", "FMI 3 non-finite value",
                 "FMI 3 bad state"} <= categories, fmu
         edits = {c.action[2][1] for c in cases if c.action[2][0] == "state3"}
-        assert edits == set(badinputs.STATE3_EDITS), fmu
-        assert {c.action[2][1] for c in cases if c.action[2][0] == "state3-inner"} == set(badinputs.state_edits(fmu))
+        assert edits == set(badinputs.fmi3.STATE3_EDITS), fmu
+        assert {c.action[2][1] for c in cases if c.action[2][0] == "state3-inner"} == set(badinputs.co_simulation.state_edits(fmu))
     assert len(fmi3) > 800 and len(CORPUS) - len(fmi3) > 800
 
 

@@ -7,7 +7,7 @@ the engine slope K1 >= 0...) from docs/physics.md (section given per row), the
 computability bounds from docs/decisions.md ("Ranges that keep every admitted value
 computable": inertias from 1e-6 kg*m2), and the engineering caps (1e9 N*m/rad...) from the
 FMUs' own documentation (``documentation/_main.html``, generated at build).  The
-bad-input corpus (harness/badinputs.py) is generated from the parameter declarations it tests, so a
+bad-input corpus (harness/formats/badinputs/) is generated from the parameter declarations it tests, so a
 range widened there (say, to admit a negative stiffness) widens the corpus with it; this
 table does not move.
 

@@ -213,8 +213,8 @@ class Instance:
 
     def __init__(self, fmu_dir: Path, fmu: str):
         from harness.formats import badinputs
-        self.slave = badinputs._Slave(fmu, fmu_dir)
-        badinputs._listen()
+        self.slave = badinputs.co_simulation.Slave(fmu, fmu_dir)
+        badinputs.common.listen()
 
     def reset(self):
         self.slave.log.clear()

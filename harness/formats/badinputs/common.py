@@ -1,0 +1,91 @@
+"""What every part of the bad-input corpus shares: a case (``Case``) and its outcome
+(``Outcome``), the FMUs' declared parameters and inputs, the log every instance's messages
+are collected in, and the FMI status codes."""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+from lever.fmus import registry
+from lever.physics.parameters import Parameter
+
+FMI2_OK, FMI2_WARNING, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL = range(5)
+REFUSED = (FMI2_DISCARD, FMI2_ERROR)
+
+#: FMU -> its adapter class, for every FMU of the registry
+ADAPTERS = {m.name: m.adapter() for m in registry.MODELS}
+#: FMU -> (parameters, names of its inputs), as the adapters declare them
+DECLARED = {fmu: (tuple(cls.PARAMETERS), tuple(p.name for p in cls.INPUTS)) for fmu, cls in ADAPTERS.items()}
+PHASES = ("instantiated", "initialization", "stepping")
+DEG = math.pi / 180.0
+
+
+
+@dataclass(frozen=True)
+class Case:
+    """One bad input.
+
+    ``phase``: where the FMU is when the bad input arrives (``instantiated``,
+    ``initialization`` or ``stepping``, the last after one step).  ``setup``: good values
+    set first.  ``action``: ``("set", name, value)`` or ``("call", fmi_function, args)``.
+    ``refused_by``: the call that must return error/discard: the action itself
+    (``"action"``) or ``fmi2ExitInitializationMode`` (``"exit"``: values that are only
+    judged together, when the model is built).  ``expect``: fragments the logged error
+    message must contain (the variable and its allowed range).  ``start``: the start time.
+    """
+
+    fmu: str
+    category: str
+    label: str
+    phase: str
+    action: tuple
+    expect: tuple[str, ...]
+    setup: tuple[tuple[str, object], ...] = ()
+    refused_by: str = "action"
+    #: the start time given to fmi2SetupExperiment (the first step starts there)
+    start: float = 0.0
+    #: the interface the instance is instantiated for: ``CoSimulation`` (fmpy's FMU2Slave) or
+    #: ``ModelExchange`` (FMU2Model; ``phase`` then one of ``ME_PHASES``)
+    interface: str = "CoSimulation"
+
+    @property
+    def name(self) -> str:
+        return f"{self.fmu}: {self.label}"
+
+
+def declared(fmu: str, name: str) -> Parameter:
+    cls = ADAPTERS[fmu]
+    return {p.name: p for p in (*cls.PARAMETERS, *cls.INPUTS)}[name]
+
+
+# -- running a case ---------------------------------------------------------------------------------------
+
+@dataclass
+class Outcome:
+    case: Case
+    status: int | None = None          # status of the call that had to refuse
+    messages: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return not self.problems
+
+
+instance_numbers = itertools.count(1)
+LOG: dict[str, list[tuple[int, str]]] = {}
+listening = False
+
+
+def listen():
+    global listening
+    if not listening:
+        from harness.engine.component import add_log_listener
+        add_log_listener(lambda name, status, category, text: LOG.setdefault(name, []).append((status, text)))
+        listening = True
+
+
+def c_array(n: int):
+    import ctypes
+    return (ctypes.c_double * max(n + 1, 1))()
