@@ -197,7 +197,7 @@ class Component:
         self.gets = self.sets = self.steps = self.state_calls = 0
         self.time = 0.0
         # A process-unique instance name routes this instance's log messages here.
-        self.instance_name = f"{name}#{next(_instances)}"
+        self.instance_name = new_instance_name(name)
         _routes[self.instance_name] = self.messages
         _pin_logger()
         self.fmu = self._instantiate(logging_on)
@@ -377,7 +377,6 @@ class Component:
             self.fmu.freeInstance()
         finally:
             _routes.pop(self.instance_name, None)
-
 
 
 # -- shared with the FMI 3.0 component (harness.engine.fmi3_component) --------------------------

@@ -9,8 +9,8 @@ from pathlib import Path
 from lever.physics.parameters import Parameter
 
 from harness.formats.badinputs.common import (DECLARED, DEG, FMI2_DISCARD, FMI2_FATAL, FMI2_OK, FMI2_WARNING,
-                                              LOG, PHASES, REFUSED, Case, Outcome, ADAPTERS,
-                                              declared, instance_numbers, listen)
+                                              LOG, PHASES, REFUSED, Case, Outcome, ADAPTERS, declared,
+                                              instance_numbers, listen, model_description, status_of)
 from harness.paths import FMUS
 
 
@@ -385,19 +385,13 @@ def cases() -> list[Case]:
 class Slave:
     """One FMU2Slave instance of a built FMU with its own log."""
 
-    #: model descriptions by FMU path, read once per process (the Model Exchange cases share it)
-    descriptions: dict[str, object] = {}
-
     def __init__(self, fmu: str, fmu_dir: Path):
-        import fmpy
         from fmpy.fmi2 import FMU2Slave
         from harness.engine.component import log_callbacks
         from harness.engine.component import unzipped as extracted
 
         path = Path(fmu_dir) / f"{fmu}.fmu"
-        if str(path) not in self.descriptions:
-            self.descriptions[str(path)] = fmpy.read_model_description(str(path))
-        self.md, unzipped = self.descriptions[str(path)], extracted(path)
+        self.md, unzipped = model_description(path), extracted(path)
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.instance = f"corpus-{fmu}-{next(instance_numbers)}"
         self.log = LOG.setdefault(self.instance, [])
@@ -407,12 +401,7 @@ class Slave:
         self.time = 0.0
 
     def call(self, function: str, *args) -> int:
-        from fmpy.fmi1 import FMICallException
-        try:
-            getattr(self.fmu, function)(*args)
-        except FMICallException as error:
-            return error.status
-        return FMI2_OK
+        return status_of(self.fmu, function, *args)
 
     def set(self, name: str, value) -> int:
         v = self.variables[name]

@@ -89,3 +89,40 @@ def listen():
 def c_array(n: int):
     import ctypes
     return (ctypes.c_double * max(n + 1, 1))()
+
+
+_DESCRIPTIONS: dict[str, object] = {}
+
+
+def model_description(path) -> object:
+    """The model description of the FMU file ``path``, read once per process."""
+    key = str(path)
+    if key not in _DESCRIPTIONS:
+        import fmpy
+        _DESCRIPTIONS[key] = fmpy.read_model_description(key)
+    return _DESCRIPTIONS[key]
+
+
+def status_of(fmu, function: str, *args) -> int:
+    """fmpy's method ``function`` of ``fmu`` called: the status it raised, else OK (0 in FMI
+    2.0 and 3.0)."""
+    from fmpy.fmi1 import FMICallException
+    try:
+        getattr(fmu, function)(*args)
+    except FMICallException as error:
+        return error.status
+    return FMI2_OK
+
+
+def settle(update) -> int:
+    """The event iteration: ``update()`` (fmi2NewDiscreteStates / fmi3UpdateDiscreteStates,
+    whose first result says another round is needed) until no round is needed: OK, the
+    status a round raised, or Error after 100 rounds."""
+    from fmpy.fmi1 import FMICallException
+    for _ in range(100):
+        try:
+            if not update()[0]:
+                return FMI2_OK
+        except FMICallException as error:
+            return error.status
+    return FMI2_ERROR

@@ -6,7 +6,8 @@ import ctypes
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (DECLARED, Case, Outcome, c_array, declared, instance_numbers)
+from harness.formats.badinputs.common import (DECLARED, Case, Outcome, c_array, declared, instance_numbers,
+                                              model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import SHIM_HEADER, STATE_EDITS, edited_state, state_edits
 from harness.formats.badinputs.model_exchange import ME_SIZES
 from harness.paths import FMUS
@@ -187,18 +188,13 @@ class _Instance3:
     log; the calls under test go through ctypes with prototypes of their own, so that no
     wrapper of fmpy's checks or changes what they pass."""
 
-    _descriptions: dict[str, object] = {}
-
     def __init__(self, fmu: str, fmu_dir: Path, interface: str):
-        import fmpy
         from fmpy.fmi3 import FMU3Model, FMU3Slave
         from harness.engine.component import unzipped as extracted
         from harness.paths import fmi3_dir
 
         path = fmi3_dir(fmu_dir) / f"{fmu}.fmu"
-        if str(path) not in self._descriptions:
-            self._descriptions[str(path)] = fmpy.read_model_description(str(path))
-        self.md = self._descriptions[str(path)]
+        self.md = model_description(path)
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.cs = interface == "CoSimulation3"
         self.nx, self.nz = ME_SIZES[fmu]
@@ -219,24 +215,11 @@ class _Instance3:
         prototype = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, *argtypes)
         return int(prototype((function, self.fmu.dll))(self.fmu.component, *args))
 
-    def call(self, function: str, *args):
-        """An fmpy method: its result, or the status it raised."""
-        from fmpy.fmi1 import FMICallException
-        try:
-            getattr(self.fmu, function)(*args)
-        except FMICallException as error:
-            return error.status
-        return FMI3_OK
+    def call(self, function: str, *args) -> int:
+        return status_of(self.fmu, function, *args)
 
     def _event_iteration(self) -> int:
-        from fmpy.fmi1 import FMICallException
-        for _ in range(100):
-            try:
-                if not self.fmu.updateDiscreteStates()[0]:
-                    return FMI3_OK
-            except FMICallException as error:
-                return error.status
-        return FMI3_ERROR
+        return settle(self.fmu.updateDiscreteStates)
 
     def advance(self, phase: str) -> int:
         """From the current phase on to ``phase``; the worst status seen."""

@@ -6,8 +6,8 @@ import math
 from pathlib import Path
 
 from harness.formats.badinputs.common import (DECLARED, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_OK,
-                                              FMI2_WARNING, LOG, Case, Outcome, c_array,
-                                              instance_numbers, listen)
+                                              FMI2_WARNING, LOG, Case, Outcome, c_array, instance_numbers,
+                                              listen, model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import Slave
 from harness.paths import FMUS
 
@@ -131,15 +131,12 @@ class _Model:
     ``FMU2Slave`` for the Model Exchange calls on a Co-Simulation instance), its own log."""
 
     def __init__(self, fmu: str, fmu_dir: Path, interface: str):
-        import fmpy
         from fmpy.fmi2 import FMU2Model, FMU2Slave
         from harness.engine.component import log_callbacks
         from harness.engine.component import unzipped as extracted
 
         path = Path(fmu_dir) / f"{fmu}.fmu"
-        if str(path) not in Slave.descriptions:
-            Slave.descriptions[str(path)] = fmpy.read_model_description(str(path))
-        self.md, unzipped = Slave.descriptions[str(path)], extracted(path)
+        self.md, unzipped = model_description(path), extracted(path)
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.nx, self.nz = self.md.numberOfContinuousStates, self.md.numberOfEventIndicators
         self.me = interface == "ModelExchange"
@@ -154,12 +151,7 @@ class _Model:
         self.time = 0.0
 
     def call(self, function: str, *args) -> int:
-        from fmpy.fmi1 import FMICallException
-        try:
-            getattr(self.fmu, function)(*args)
-        except FMICallException as error:
-            return error.status
-        return FMI2_OK
+        return status_of(self.fmu, function, *args)
 
     def raw(self, function: str, argtypes, *args) -> int:
         """A function called straight from the library (one fmpy does not wrap for this
@@ -186,14 +178,7 @@ class _Model:
         return worst
 
     def _event_iteration(self) -> int:
-        from fmpy.fmi1 import FMICallException
-        for _ in range(100):
-            try:
-                if not self.fmu.newDiscreteStates()[0]:
-                    return FMI2_OK
-            except FMICallException as error:
-                return error.status
-        return FMI2_ERROR
+        return settle(self.fmu.newDiscreteStates)
 
     def states(self) -> list | None:
         if not self.me or self.phase == "instantiated" or not self.nx:
