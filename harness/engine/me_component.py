@@ -88,7 +88,9 @@ class ModelExchangeComponent(Component):
     # -- the continuous part -------------------------------------------------------------------
     def set_time(self, t: float):
         self.me_counts["time"] += 1
-        self._status(f"fmi2SetTime(t = {t:.9g})", self._set_time(self.raw.handle, ctypes.c_double(t)))
+        status = self._set_time(self.raw.handle, ctypes.c_double(t))
+        if status > 1:      # the call's text only when it failed: this runs at every right-hand side
+            self.fail(f"fmi2SetTime(t = {t:.9g})", status)
         self.time = t
 
     def set_states(self):
