@@ -187,17 +187,7 @@ class Component:
     """An instantiated FMU: named variables, parameters applied, fast value access."""
 
     def __init__(self, name: str, fmu_path: Path | str, logging_on: bool = False):
-        self.name = name
-        self.fmu_path = Path(fmu_path)
-        self.description = read_model_description(str(self.fmu_path))
-        self.variables = {v.name: v for v in self.description.modelVariables}
-        self._unzipped = unzipped(self.fmu_path)
-        self.messages: deque[str] = deque(maxlen=50)
-        # FMI calls made on the hot path, by kind (the benchmark prices each kind)
-        self.gets = self.sets = self.steps = self.state_calls = 0
-        self.time = 0.0
-        # A process-unique instance name routes this instance's log messages here.
-        self.instance_name = new_instance_name(name)
+        self._open(name, fmu_path)
         _routes[self.instance_name] = self.messages
         _pin_logger()
         self.fmu = self._instantiate(logging_on)
@@ -209,6 +199,20 @@ class Component:
         self._set_state = self.fmu._functions["fmi2SetFMUstate"]
         self._free_state = self.fmu._functions["fmi2FreeFMUstate"]
         self._freed = False
+
+    def _open(self, name: str, fmu_path: Path | str, description=None):
+        """What a component holds before its FMU is instantiated (every FMI version)."""
+        self.name = name
+        self.fmu_path = Path(fmu_path)
+        self.description = description or read_model_description(str(self.fmu_path))
+        self.variables = {v.name: v for v in self.description.modelVariables}
+        self._unzipped = unzipped(self.fmu_path)
+        self.messages: deque[str] = deque(maxlen=50)
+        # FMI calls made on the hot path, by kind (the benchmark prices each kind)
+        self.gets = self.sets = self.steps = self.state_calls = 0
+        self.time = 0.0
+        # A process-unique instance name routes this instance's log messages here.
+        self.instance_name = f"{name}#{next(_instances)}"
 
     def _instantiate(self, logging_on: bool):
         """The FMU instance, its co-simulation interface (see ``harness.engine.me_component``
@@ -384,9 +388,4 @@ class Component:
 def dispatch_message(instance_name: str, status: int, category: bytes, message: bytes):
     """Route a log message of the instance ``instance_name`` as this module routes FMI 2.0's."""
     _dispatch(None, instance_name.encode("utf-8"), status, category, message)
-
-
-def new_instance_name(name: str) -> str:
-    """A process-unique instance name for component ``name`` (it routes the log messages)."""
-    return f"{name}#{next(_instances)}"
 

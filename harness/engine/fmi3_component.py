@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import ctypes
 import itertools
-from collections import deque
 from pathlib import Path
 
 from fmpy import read_model_description
@@ -24,7 +23,7 @@ from fmpy.fmi3 import FMU3Slave, fmi3IntermediateUpdateCallback, fmi3LogMessageC
 
 from harness.description import typed_values
 from harness.engine import component as fmi2
-from harness.engine.component import INITIALIZATION, STEPPING, Component, FmuCallError, step_call, unzipped
+from harness.engine.component import INITIALIZATION, STEPPING, Component, FmuCallError, step_call
 from harness.engine.interface import RawCalls
 
 #: the FMI 2.0 names the system and the masters give the calls they make -> FMI 3.0's
@@ -95,15 +94,7 @@ class Component3(Component):
     """An instantiated FMI 3.0 Co-Simulation FMU (see the module docstring)."""
 
     def __init__(self, name: str, fmu_path: Path | str, logging_on: bool = False, description=None):
-        self.name = name
-        self.fmu_path = Path(fmu_path)
-        self.description = description or read_model_description(str(self.fmu_path))
-        self.variables = {v.name: v for v in self.description.modelVariables}
-        self._unzipped = unzipped(self.fmu_path)
-        self.messages: deque[str] = deque(maxlen=50)
-        self.gets = self.sets = self.steps = self.state_calls = 0
-        self.time = 0.0
-        self.instance_name = fmi2.new_instance_name(name)
+        self._open(name, fmu_path, description)
         self._environment = next(_numbers)
         _environments[self._environment] = self.instance_name
         fmi2.route_messages(self.instance_name, self.messages)
