@@ -88,10 +88,15 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
     # a jacobi step makes 11 FMI calls (3 steps, 3 reads, 3 sets - one per target - and
     # the shafts' accelerations read again), the floor's calls
     assert result["hollow_floor_per_step_s"] > 0
-    # (a split that cannot be - a share below zero on a busy machine - is left out, with why)
+    # (a split that cannot be - a share below zero on a busy machine - is left out, with why;
+    # so is the split of a run time that is no result on a busy machine, which says why in
+    # `unreliable`)
     for r in rows[:-1]:
         if r["split_unreliable"]:
             assert r["crossing_s"] == "" and "machine too noisy" in r["split_unreliable"], r
+            continue
+        if r["unreliable"]:
+            assert r["crossing_s"] == "" and r["slave_s"] == "" and r["master_s"] == "", r
             continue
         parts = [float(r[f"{part}_s"]) for part in ("crossing", "slave", "master")]
         assert parts[0] > 0 and min(parts) >= 0 and sum(parts) == pytest.approx(float(r["wall_median_s"])), r
