@@ -19,6 +19,10 @@ from harness.engine.component import Component, log_callbacks, unconverted
 #: the kinds of Model Exchange call counted, as ``System.calls_by_kind`` reports them
 ME_CALL_KINDS = ("time", "states", "derivatives", "indicators", "directional", "event")
 
+#: an FMU's Integer calculated parameter saying how many of its event indicators (the first
+#: ones) can change sign with the parameters set (our FMUs declare it; docs/model-exchange.md)
+LIVE_EVENT_INDICATORS = "live_event_indicators"
+
 
 class NoModelExchange(ValueError):
     """An FMU that offers co-simulation only."""
@@ -84,6 +88,17 @@ class ModelExchangeComponent(Component):
     def _status(self, call: str, status: int):
         if status > 1:
             self.fail(call, status)
+
+    def live_indicators(self) -> int:
+        """How many event indicators (the first ones) can change sign: what the FMU's
+        ``LIVE_EVENT_INDICATORS`` says after initialization, where it declares that Integer
+        calculated parameter with a value in [0, nz]; all ``nz`` otherwise."""
+        var = self.variables.get(LIVE_EVENT_INDICATORS)
+        if var is None or var.type != "Integer" or var.causality != "calculatedParameter":
+            return self.nz
+        value = self._checked(f"fmi2GetInteger({LIVE_EVENT_INDICATORS})", self.fmu.getInteger,
+                              [var.valueReference])[0]
+        return value if 0 <= value <= self.nz else self.nz
 
     # -- the continuous part -------------------------------------------------------------------
     def set_time(self, t: float):

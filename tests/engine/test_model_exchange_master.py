@@ -158,6 +158,18 @@ def test_state_events_stick_and_slip_like_the_reference():
         assert np.max(np.abs(result.traces[name] - ref.traces[name])) <= 1e-3 * scale, name
 
 
+def test_root_finding_leaves_out_the_indicators_that_cannot_change_sign():
+    # KAVZ-685: a linear engine characteristic and no load friction - neither shaft's
+    # indicator can change sign, and no root function costs an evaluation
+    result = simulate(shortened("kavz685", 0.05), "me-cvode")
+    assert result.ok, result.failure
+    assert (result.counters["root_functions"], result.counters["dead_indicators"]) == (0, 2)
+    assert all(k["indicators"] == 0 for k in result.counters["calls_by_kind"].values())
+    # the freewheel's are all searched
+    rectifier = simulate(shortened("freewheel_rectifier", 0.01), "me-cvode", step=1e-4)
+    assert rectifier.counters["root_functions"] > 0 and rectifier.counters["dead_indicators"] == 0
+
+
 def test_time_events_of_a_misalignment_table():
     scene = scenes.load("kavz685_misalignment_ramp")
     scene = shortened("kavz685_misalignment_ramp", min(scene.experiment.stop, 2.0))

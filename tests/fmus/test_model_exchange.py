@@ -142,6 +142,33 @@ def test_me_run_matches_co_simulation(fmu_dir, name, parameters, tau):
             out, cs[out][-1], me[out][-1])
 
 
+@pytest.mark.parametrize("name, parameters, live", [
+    ("EngineShaft", {}, 0),                                            # linear characteristic: no edges
+    ("EngineShaft", {"characteristic": "0:600; 40:620; 80:0"}, 1),     # the table's points are edges
+    ("LoadShaft", {}, 0),                                              # no friction: no stops
+    ("LoadShaft", {"friction_torque": 1.0, "breakaway_torque": 2.0}, 1),
+    ("FreewheelRectifier", {}, None),                                  # every contact and stop: all
+])
+def test_live_event_indicators_say_which_can_change_sign(unpacked, name, parameters, live):
+    md = unpacked[name][0]
+    variable = next(v for v in md.modelVariables if v.name == "live_event_indicators")
+    assert (variable.type, variable.causality, variable.variability) == ("Integer", "calculatedParameter", "fixed")
+    for kind in (FMU2Model, FMU2Slave):
+        fmu, md, vr = open_model(unpacked, name, kind, parameters)
+        try:
+            value = fmu.getInteger([vr["live_event_indicators"]])[0]
+            assert value == (md.numberOfEventIndicators if live is None else live)
+            if kind is FMU2Model and value < md.numberOfEventIndicators:
+                # the ones left out stay positive while the model moves
+                fmu.setTime(0.5)
+                n = md.numberOfEventIndicators
+                z = (ctypes.c_double * n)()
+                fmu.getEventIndicators(z, n)
+                assert all(v > 0.0 for v in z[value:])
+        finally:
+            free(fmu)
+
+
 def test_me_friction_stop_and_hold(fmu_dir):
     # Coulomb friction brakes the shaft from 39 rad/s to rest (at t = 39*0.161/20 s =
     # 0.314 s): the stop is an event, after which static friction holds it.  The

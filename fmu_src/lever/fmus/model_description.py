@@ -24,13 +24,13 @@ def declared_type(spec) -> tuple[str, str, dict]:
                 attrs["displayUnit"] = DISPLAY_UNITS[unit]
         return quantity, "Real", attrs
     if kind == "integer":
-        return _camel(spec.name), "Integer", {"quantity": _camel(spec.name)}
+        return camel_case(spec.name), "Integer", {"quantity": camel_case(spec.name)}
     if spec.choices:
-        return _camel(spec.name), "String", {}
+        return camel_case(spec.name), "String", {}
     return "PointTable", "String", {}
 
 
-def _camel(name: str) -> str:
+def camel_case(name: str) -> str:
     return "".join(part.capitalize() for part in name.split("_"))
 
 

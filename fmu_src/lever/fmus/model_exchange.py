@@ -25,14 +25,14 @@ import math
 from typing import NamedTuple, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
-from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Real
+from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
 
 from ..physics.me_base import der
 from ..physics.parameters import DISPLAY_UNITS
 from .base import LeverSlave, _nan_values
 from .declarations import Output
 from .guard import guarded
-from .model_description import declared_type, define_unit
+from .model_description import camel_case, declared_type, define_unit
 from .recompute import ALL, CLEAN
 
 CHANNEL = 0x40000000
@@ -51,6 +51,11 @@ INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfCont
 
 #: an output whose directional derivative is taken by central differences
 _NUMERICAL = "numerical"
+
+#: the Integer calculated parameter that says how many event indicators can change sign
+#: with the parameters set (the first ones; the others stay positive): a host may leave the
+#: rest out of its root finding, each of which costs an evaluation of the model
+LIVE_EVENT_INDICATORS = "live_event_indicators"
 
 
 def _read_by_get_real():
@@ -104,6 +109,14 @@ class ModelExchangeSlave(LeverSlave):
                                                 variability=Fmi2Variability.continuous,
                                                 initial=Fmi2Initial.calculated, description=text,
                                                 getter=_read_by_get_real), nested=False)
+        if self.ME_EVENT_INDICATORS:
+            # registered last: the value references of every other variable stay as they were
+            self.register_variable(Integer(LIVE_EVENT_INDICATORS, causality=Fmi2Causality.calculatedParameter,
+                                           variability=Fmi2Variability.fixed, initial=Fmi2Initial.calculated,
+                                           description="event indicators that can change sign with the parameters "
+                                                       "set: the first ones; the others stay positive, a host may "
+                                                       "leave them out of its root finding",
+                                           getter=_read_by_get_real), nested=False)
         if "_me_locals" not in type(self).__dict__:
             self._layout()
 
@@ -121,6 +134,7 @@ class ModelExchangeSlave(LeverSlave):
         cls._special_from = min(cls._me_locals) if cls._me_locals else CHANNEL
         cls._input_names = tuple(p.name for p in self.INPUTS)
         cls._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
+        cls._live_vr = cls._vr_of.get(LIVE_EVENT_INDICATORS)
 
     # -- what each model provides ----------------------------------------------------------------
     def _me_physics(self):
@@ -137,6 +151,14 @@ class ModelExchangeSlave(LeverSlave):
         if len(values) > self.ME_EVENT_INDICATORS:
             raise ValueError(f"{len(values)} event indicators, {self.ME_EVENT_INDICATORS} declared")
         return list(values) + [1.0] * (self.ME_EVENT_INDICATORS - len(values))
+
+    def _live_event_indicators(self) -> int:
+        """How many of the event indicators (the first ones) can change sign with the
+        parameters set: the physics' model's events, folded as ``_fold_indicators`` folds
+        them; all of them while the model is not built."""
+        if self._phase == "instantiated" or self._model_stale or self._build_error is not None:
+            return self.ME_EVENT_INDICATORS
+        return min(len(self._me_current().EVENTS), self.ME_EVENT_INDICATORS)
 
     def _events_settled(self, t, x, u):
         """After an event update: what the adapter keeps besides the physics (default none)."""
@@ -222,6 +244,13 @@ class ModelExchangeSlave(LeverSlave):
                 return self._channel_get(vrs)
             return self._get_with_locals(vrs)
         return LeverSlave.get_real.__wrapped__(self, vrs)
+
+    @guarded(default=lambda self, vrs: [0] * len(vrs))
+    def get_integer(self, vrs):
+        if self._live_vr in vrs:
+            return [self._live_event_indicators() if vr == self._live_vr else
+                    LeverSlave.get_integer.__wrapped__(self, [vr])[0] for vr in vrs]
+        return LeverSlave.get_integer.__wrapped__(self, vrs)
 
     @guarded()
     def set_real(self, vrs, values):
@@ -572,6 +601,14 @@ class ModelExchangeSlave(LeverSlave):
         names = {o.name for o in self.OUTPUTS} | {self.vars[vr].name for vr in self._me_locals}
         for name in sorted(names, key=index_of.get):
             unknown(initial, name, only_inputs=True)
+        if self._live_vr is not None:
+            type_name = camel_case(LIVE_EVENT_INDICATORS)
+            nodes[index_of[LIVE_EVENT_INDICATORS] - 1][0].set("declaredType", type_name)
+            SubElement(SubElement(types, "SimpleType", {"name": type_name}), "Integer",
+                       {"quantity": type_name, "min": "0", "max": str(self.ME_EVENT_INDICATORS)})
+            # a calculated parameter is an initial unknown; it depends on the parameters
+            # (no dependencies attribute: on every known)
+            SubElement(initial, "Unknown", {"index": str(index_of[LIVE_EVENT_INDICATORS])})
         return root
 
 

@@ -21,7 +21,10 @@ algebraic loop between direct-feedthrough FMUs is refused before it runs
 (``harness.engine.system.dependency_order`` names the loop); without one ``dg/du`` is
 nilpotent, so ``I - dg/du`` is invertible and one propagation in dependency order exact.
 
-Events: the FMUs' event indicators are CVODE's root functions; at a root, and at a time
+Events: the FMUs' event indicators are CVODE's root functions - those that can change sign:
+an FMU that declares how many of its indicators can (``live_event_indicators``, an Integer
+calculated parameter: ours do) has only those searched, since each root-function
+evaluation costs an evaluation of every FMU at a point of its own; at a root, and at a time
 event an FMU announces (``nextEventTime``), every FMU enters event mode, the discrete states
 are updated until none needs another round (``fmi2NewDiscreteStates``, the values
 propagated after each), the FMUs return to continuous time and CVODE restarts from the
@@ -120,7 +123,8 @@ class ModelExchangeCvodeMaster(Master):
         components = [system.components[n] for n in system.scene.components]
         self._all = components
         self._with_states = [c for c in components if c.nx]
-        self._with_indicators = [c for c in components if c.nz]
+        live = {c.name: c.live_indicators() for c in components if c.nz}
+        self._with_indicators = [c for c in components if live.get(c.name)]
         self._slices, first = [], 0
         for c in self._with_states:
             self._slices.append((c, first, first + c.nx, np.ctypeslib.as_array(c.x)[:c.nx],
@@ -129,9 +133,12 @@ class ModelExchangeCvodeMaster(Master):
         self.nx = first
         self._zslices, first = [], 0
         for c in self._with_indicators:
-            self._zslices.append((c, first, first + c.nz, np.ctypeslib.as_array(c.z)[:c.nz]))
-            first += c.nz
+            n = live[c.name]
+            self._zslices.append((c, first, first + n, np.ctypeslib.as_array(c.z)[:n]))
+            first += n
         self.nz = first
+        #: event indicators the FMUs declare but say cannot change sign, left out of the search
+        self.n_dead_indicators = sum(c.nz for c in components) - first
         self._plan = system.propagation_plan
         self._point_t = None
         self._point_y = np.full(self.nx, np.nan)
@@ -347,5 +354,6 @@ class ModelExchangeCvodeMaster(Master):
         return {**super().counters(), "method": self.method, "method_reason": self.method_reason,
                 "jacobian": self.jacobian, "tolerance": self.tolerance, "rhs": self.n_rhs,
                 "jacobians": self._cvode_jacobians + self._cvode_jacobians_now,
-                "directional_jacobians": self.n_jacobians, "events": self.n_events,
+                "directional_jacobians": self.n_jacobians, "root_functions": self.nz,
+                "dead_indicators": self.n_dead_indicators, "events": self.n_events,
                 "time_events": self.n_time_events}
