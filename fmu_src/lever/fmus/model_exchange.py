@@ -135,6 +135,13 @@ class ModelExchangeSlave(LeverSlave):
         cls._input_names = tuple(p.name for p in self.INPUTS)
         cls._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
         cls._live_vr = cls._vr_of.get(LIVE_EVENT_INDICATORS)
+        # the channel references of the calls a host makes at every right-hand side, so
+        # that those calls are told apart by one list comparison
+        n = len(self.ME_STATES)
+        cls._time_refs = [CHANNEL + (CONTROL << KIND_SHIFT) + SET_TIME]
+        cls._state_index = list(range(n))
+        cls._state_refs = [CHANNEL + (STATES << KIND_SHIFT) + k for k in range(n)]
+        cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
 
     # -- what each model provides ----------------------------------------------------------------
     def _me_physics(self):
@@ -298,17 +305,17 @@ class ModelExchangeSlave(LeverSlave):
     def _channel_set(self, vrs, values):
         if len(vrs) != len(values):
             raise ValueError(f"{len(vrs)} value references but {len(values)} values")
+        if vrs == self._time_refs:
+            return self._set_time(values[0])
+        if vrs == self._state_refs:
+            return self._set_states(self._state_index, values)
         kind, index = self._split(vrs)
         if kind == CONTROL and index == [SET_INTERFACE]:
             if self._phase != "instantiated":
                 raise ValueError("the interface is chosen at instantiation")
             self._me = values[0] == 1.0
         elif kind == CONTROL and index == [SET_TIME]:
-            if not math.isfinite(values[0]):
-                self._error(f"fmi2SetTime: time {values[0]!r} is not finite; the time stays {self._time!r} s")
-                return
-            self._time = float(values[0])
-            self._dirty = ALL
+            self._set_time(values[0])
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
@@ -318,7 +325,16 @@ class ModelExchangeSlave(LeverSlave):
         else:
             raise ValueError(f"value references {list(vrs)} are nothing the native entry may set")
 
+    def _set_time(self, t):
+        if not math.isfinite(t):
+            self._error(f"fmi2SetTime: time {t!r} is not finite; the time stays {self._time!r} s")
+            return
+        self._time = float(t)
+        self._dirty = ALL
+
     def _channel_get(self, vrs):
+        if vrs == self._derivative_refs:
+            return self._derivatives()
         kind, index = self._split(vrs)
         if kind == CONTROL:
             sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS)}
@@ -345,7 +361,7 @@ class ModelExchangeSlave(LeverSlave):
 
     def _set_states(self, index, values):
         n = len(self.ME_STATES)
-        if index != list(range(n)):
+        if index is not self._state_index and index != self._state_index:
             self._error(f"fmi2SetContinuousStates: {len(index)} states given, this model has {n}; nothing was set")
             return
         bad = [self.ME_STATES[k].name for k, v in enumerate(values) if not math.isfinite(v)]
