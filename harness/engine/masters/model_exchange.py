@@ -38,7 +38,8 @@ scene's driveline (``harness.judges.stability.cvode_method``, the same rule on i
 two-inertia model) and says it in the run's notes; the run's counters say which and why (``method``, ``method_reason``), and what it took:
 ``rhs`` right-hand sides (the difference quotients' included), ``jacobians`` CVODE formed,
 ``directional_jacobians`` assembled from directional derivatives (the method choice's one
-included), ``events`` and ``time_events``.
+included), ``root_functions`` searched and ``dead_indicators`` left out, ``events`` and
+``time_events``.
 """
 from __future__ import annotations
 
