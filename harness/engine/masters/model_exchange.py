@@ -142,7 +142,7 @@ class ModelExchangeCvodeMaster(Master):
         self.n_dead_indicators = sum(c.nz for c in components) - first
         self._plan = system.propagation_plan
         self._point_t = None
-        self._point_y = np.full(self.nx, np.nan)
+        self._point_bytes = b""
         self._next_time_event = math.inf
         # the FMUs leave initialization in event mode: settle the discrete states there
         self._event_rounds(self.t)
@@ -162,7 +162,8 @@ class ModelExchangeCvodeMaster(Master):
         """Time and states of every FMU at ``(t, y)``, the values propagated; skipped where
         the system is there already (CVODE asks the Jacobian and the root functions at the
         point of its last right-hand side)."""
-        if t == self._point_t and np.array_equal(y, self._point_y):
+        point = y.tobytes()     # a tenth of np.array_equal's cost; equal bytes are equal states
+        if t == self._point_t and point == self._point_bytes:
             return
         if t != self._point_t:
             for c in self._all:
@@ -172,7 +173,7 @@ class ModelExchangeCvodeMaster(Master):
             c.set_states()
         self.system.propagate_with(self._plan)
         self._point_t = t
-        self._point_y[:] = y
+        self._point_bytes = point
 
     def _rhs(self, t, y, yp):
         self.n_rhs += 1
