@@ -164,6 +164,7 @@ SLOW = (
     "fmus/test_fmus.py::test_the_model_runs_on_the_standard_library_alone",
     "fmus/test_hosts.py::test_ecos_applies_the_exported_parameter_values",
     "fmus/test_hosts.py::test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi",
+    "fmus/test_hosts.py::test_ecos_logging_every_variable_of_an_fmi3_edition_logs_its_event_indicators",
     "fmus/test_hosts.py::test_ecos_runs_each_fmu_alone_in_a_bare_environment",
     "fmus/test_hosts.py::test_ecos_runs_each_fmi3_edition_alone_as_the_fmi2_edition",
     "fmus/test_hosts.py::test_ecos_runs_the_fmi3_misalignment_source_to_its_reference",
