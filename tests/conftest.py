@@ -199,6 +199,7 @@ SLOW = (
     "judges/test_stability.py::test_stand_in_with_a_viscous_load_steps_like_the_real_fmus",
     "judges/test_validate.py::test_a_result_shifted_in_time_gets_a_verdict_not_a_traceback",
     "judges/test_validate.py::test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span",
+    "judges/test_validate.py::test_an_fmu_file_validates_stand_alone_as_its_models_name_does",
     "judges/test_validate.py::test_every_fmu_and_scene_validates_against_its_reference",
     "judges/test_validate.py::test_external_csv_of_a_scene_passes_and_a_lagging_one_fails",
     "judges/test_validate.py::test_external_csv_of_an_fmu_with_prefixed_columns",
