@@ -839,9 +839,9 @@ def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overri
 
 
 def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:
-    """``lever compliance``: fmpy's validation and ours on each FMU file (none: the built
-    ones, built first: the FMI 2.0 editions, then the FMI 3.0 ones); ``(file, findings)``
-    one file at a time (empty: none)."""
+    """``lever compliance``: fmpy's validation and ours on each FMU file, or on the FMU
+    files in a folder (none: the built ones, built first: the FMI 2.0 editions, then the
+    FMI 3.0 ones); ``(file, findings)`` one file at a time (empty: none)."""
     from harness.compliance import check_fmu
     from harness.paths import fmi3_dir
 
@@ -850,7 +850,14 @@ def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str
         built = build()
         fmus = sorted(built.glob("*.fmu")) + sorted(fmi3_dir(built).glob("*.fmu"))
     for path in fmus:
-        yield path, check_fmu(path)
+        if path.is_dir():
+            inside = sorted(path.glob("*.fmu"))
+            if not inside:
+                yield path, [f"{path}: a folder without FMU files (*.fmu)"]
+            for fmu in inside:
+                yield fmu, check_fmu(fmu)
+        else:
+            yield path, check_fmu(path)
 
 
 def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: float | None = 0.2

@@ -522,6 +522,12 @@ def test_model_exchange_refusals_and_event_mode(unpacked, name):
         fmu.freeInstance()
 
 
+def test_lever_compliance_on_the_fmi3_folder_finds_nothing(lever, fmu3_dir):
+    done = lever("compliance", fmu3_dir)
+    assert done.exit_code == 0, done.output
+    assert done.output.splitlines() == [f"{fmu3_dir / name}.fmu: 0 findings" for name in sorted(NAMES)]
+
+
 def test_lever_compliance_checks_the_fmi3_variables(fmu3_dir):
     """Our own checks read FMI 3.0 descriptions too: a variable without description or
     unit is found."""
