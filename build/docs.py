@@ -116,8 +116,9 @@ def fmi3_section(fmu_dir: Path) -> str:
     out = ["## FMI 3.0 editions\n\n",
            "Each FMU also comes as FMI 3.0 (Co-Simulation and Model Exchange in one file, `build/fmus3/`, "
            "see [fmus.md](../fmus.md#fmi-30-editions)): the same variables with the same value references "
-           "(Real as Float64, Integer as Int32), plus the independent variable `time` and, for Model Exchange, "
-           "one variable per event indicator, which this table lists.\n\n"]
+           "(Real as Float64, Integer as Int32), plus the independent variable `time` and one variable per "
+           "Model Exchange event indicator (readable in both interfaces from Initialization Mode on), which this "
+           "table lists.\n\n"]
     rows = []
     for fmu in fmus:
         md = read_model_description(str(fmu))

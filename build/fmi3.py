@@ -12,7 +12,9 @@ value references, units, ranges and dependencies:
   ``String`` (start as a ``<Start value=...>`` child); ``derivative`` names the value
   reference instead of the index; ``SimpleType`` -> ``Float64Type``/``Int32Type``/...;
 * FMI 3.0 asks for one independent variable: ``time`` (the next free value reference);
-* event indicators are variables in FMI 3.0: ``event_indicator_<k>``, after ``time``;
+* event indicators are variables in FMI 3.0: ``event_indicator_<k>``, after ``time``, local
+  and readable in both interfaces (FMI 3.0 ignores only the ``EventIndicator`` elements in
+  Co-Simulation);
 * ``ModelStructure``: ``Output``, ``ContinuousStateDerivative``, ``InitialUnknown``,
   ``EventIndicator`` with dependencies as value references.
 
@@ -122,12 +124,12 @@ def translate(fmi2_xml: bytes) -> tuple[str, str]:
         ET.SubElement(variables, "Float64", {
             "name": f"event_indicator_{k + 1}", "valueReference": str(indicator_vr + k), "causality": "local",
             "variability": "continuous", "initial": "calculated", "declaredType": "EventIndicator",
-            "description": f"event indicator {k + 1} of {n_indicators} (Model Exchange): the model has an event "
-                           "where it changes sign"})
+            "description": f"event indicator {k + 1} of {n_indicators}: the model has an event where it changes "
+                           "sign (Model Exchange); Co-Simulation reads it at the current state, inputs and modes"})
     if n_indicators:
         ET.SubElement(types, "Float64Type", {
             "name": "EventIndicator", "quantity": "Ratio",
-            "description": "a Model Exchange event indicator (dimensionless: only its sign matters)"})
+            "description": "an event indicator (dimensionless: only its sign matters)"})
 
     structure = ET.SubElement(root, "ModelStructure")
     config = [f"# Written by build/fmi3.py from {identifier}'s FMI 2.0 model description.",

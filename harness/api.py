@@ -342,14 +342,16 @@ class Validation:
         return self.findings.passed
 
 
-def fmu_start_values(model: str, assignments, fmu_dir: Path | None = None) -> dict:
+def fmu_start_values(model: str, assignments, fmu_dir: Path | None = None, fmu_path: Path | None = None) -> dict:
     """``name=value`` settings for an FMU run stand-alone: its parameters (and inputs not in
-    the ``_in.csv``), checked against the model description; InputError otherwise."""
+    the ``_in.csv``), checked against the model description (of ``model`` in ``fmu_dir``, or
+    of the FMU file ``fmu_path``); InputError otherwise."""
     from fmpy import read_model_description
 
     from harness.description.plan import converted
 
-    variables = {v.name: v for v in read_model_description(str(Path(fmu_dir or FMUS) / f"{model}.fmu")).modelVariables}
+    path = fmu_path if fmu_path is not None else Path(fmu_dir or FMUS) / f"{model}.fmu"
+    variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
     values = {}
     for assignment in _assignments(assignments):
         if "=" not in assignment:
@@ -389,19 +391,57 @@ def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
     return low, high
 
 
+def _fmu_file(name) -> Path | None:
+    """NAME as an FMU file (``lever validate path/Model.fmu``), or None for a name."""
+    return Path(name) if str(name).lower().endswith(".fmu") else None
+
+
+def fmu_file_model(path: Path) -> tuple[str, str]:
+    """(model, FMI version) of the FMU file ``path`` to validate stand-alone: a Co-Simulation
+    FMU, FMI 2.0 or 3.0, of a model with a stand-alone reference (its ``modelName``), which
+    judges it; InputError otherwise."""
+    from fmpy import read_model_description
+
+    from harness.formats import reference_traces
+
+    if not Path(path).is_file():
+        raise InputError(f"{path}: no such FMU file")
+    try:
+        description = read_model_description(str(path))
+    except Exception as error:   # fmpy raises what zipfile and its XML reader raise
+        raise InputError(f"{path}: not an FMU whose model description can be read ({error})") from None
+    model, version = description.modelName, description.fmiVersion
+    if version != "2.0" and not version.startswith("3."):
+        raise InputError(f"{path}: FMI {version}; lever runs FMI 2.0 and 3.0 FMUs")
+    if description.coSimulation is None:
+        raise InputError(f"{path}: FMI {version} without Co-Simulation; a stand-alone run steps the FMU")
+    if model not in reference_traces.FMU_CASES:
+        why = reference_traces.why_no_reference(model)
+        raise InputError(f"{path}: {why}; that scene runs the built FMUs (`--set experiment.fmi=3`: their FMI 3.0 "
+                         f"editions), not this file" if why else
+                         f"{path}: its model '{model}' has no stand-alone reference (FMUs with one: "
+                         f"{', '.join(reference_traces.FMU_CASES)})")
+    return model, version
+
+
 def validate(name: str, *, overrides=None, master: str | None = None, step: float | None = None,
              result: Path | str | tuple | None = None, tolerance: str = "lever",
              window: tuple[float | None, float | None] | str | None = None, out: Path | str | None = None) -> Validation:
     """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
-    ``result`` instead - a CSV another tool wrote, or ``(times, {signal: values})``.
-    ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a shorter
-    run); ``out``: write validation.json, the result and a plot per failing signal there."""
+    ``result`` instead - a CSV another tool wrote, or ``(times, {signal: values})``.  NAME
+    may be an FMU file (``.fmu``, FMI 2.0 or 3.0, such as an FMI 3.0 edition in
+    build/fmus3): it runs stand-alone as its model's name does, judged by that model's
+    reference.  ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a
+    shorter run); ``out``: write validation.json, the result and a plot per failing signal
+    there."""
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
     from harness.judges import validation
 
+    fmu_file = _fmu_file(name)
+    label, name = (str(name), fmu_file_model(fmu_file)[0]) if fmu_file is not None else (name, name)
     known = reference_traces.all_names()
     if name not in known:
         raise InputError(reference_traces.why_no_reference(name)
@@ -426,11 +466,13 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         judged = reference_traces.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
                                    "given")
     else:
-        build()
+        if fmu_file is None:
+            build()
         if ref.kind == "fmu":
             if master or step:
-                raise InputError(f"--master/--step: {name} is an FMU run stand-alone at its _ref.opt step")
-            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides))
+                raise InputError(f"--master/--step: {label} is an FMU run stand-alone at its _ref.opt step")
+            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
+                                              fmu_path=fmu_file)
         else:
             spec = load(name, overrides)
             if master:
@@ -448,21 +490,26 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
                              f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
-    findings, bands = validation.compare_span(name, judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
-                                         validation.TOLERANCES[tolerance], start, stop, (ref.opt.start, ref.opt.stop))
+    findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
+                                              ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
+                                              (ref.opt.start, ref.opt.stop))
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
         reference_traces.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
-    return Validation(name, findings, bands, judged, ref, Path(out) if out is not None else None)
+    return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
 
 
 def reference_names(names: Iterable[str] = ()) -> list[str]:
-    """``names`` checked against the committed reference traces (none: all of them)."""
+    """``names`` checked against the committed reference traces (none: all of them); an
+    FMU file (``.fmu``) is checked as ``validate`` runs it."""
     from harness.formats import reference_traces
 
     known = reference_traces.all_names()
-    unknown = [n for n in names if n not in known]
+    for name in names:
+        if _fmu_file(name) is not None:
+            fmu_file_model(_fmu_file(name))
+    unknown = [n for n in names if n not in known and _fmu_file(n) is None]
     if unknown:
         said = "; ".join(filter(None, map(reference_traces.why_no_reference, unknown)))
         raise InputError(said or f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
@@ -484,10 +531,14 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
     span = parse_window(window)
     if step is not None and (problem := scenes.step_problem(step, "--step")):
         raise InputError(problem)
-    if result is None:
+    if result is None and any(_fmu_file(name) is None for name in chosen):
         build()
     for name in chosen:
-        target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / name
+        folder = name
+        if _fmu_file(name) is not None:       # results/validate/<Model>-fmi<major version>
+            model, version = fmu_file_model(_fmu_file(name))
+            folder = f"{model}-fmi{version.split('.')[0]}"
+        target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_assignments(overrides), master=master, step=step, result=result,
                        tolerance=tolerance, window=span, out=target)
 
@@ -788,9 +839,9 @@ def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overri
 
 
 def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:
-    """``lever compliance``: fmpy's validation and ours on each FMU file (none: the built
-    ones, built first: the FMI 2.0 editions, then the FMI 3.0 ones); ``(file, findings)``
-    one file at a time (empty: none)."""
+    """``lever compliance``: fmpy's validation and ours on each FMU file, or on the FMU
+    files in a folder (none: the built ones, built first: the FMI 2.0 editions, then the
+    FMI 3.0 ones); ``(file, findings)`` one file at a time (empty: none)."""
     from harness.compliance import check_fmu
     from harness.paths import fmi3_dir
 
@@ -799,7 +850,14 @@ def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str
         built = build()
         fmus = sorted(built.glob("*.fmu")) + sorted(fmi3_dir(built).glob("*.fmu"))
     for path in fmus:
-        yield path, check_fmu(path)
+        if path.is_dir():
+            inside = sorted(path.glob("*.fmu"))
+            if not inside:
+                yield path, [f"{path}: a folder without FMU files (*.fmu)"]
+            for fmu in inside:
+                yield fmu, check_fmu(fmu)
+        else:
+            yield path, check_fmu(path)
 
 
 def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: float | None = 0.2

@@ -29,7 +29,9 @@
  *      terminated) are implemented here, and fmi2GetDirectionalDerivative in both
  *      interfaces.  The model is reached through pythonfmu's fmi2GetReal/fmi2SetReal on
  *      value references of the shim's own "channel" (CHANNEL and above; see
- *      fmu_src/lever/fmus/model_exchange.py), which a host's calls may not use.
+ *      fmu_src/lever/fmus/model_exchange.py), which a host's calls may not use.  One
+ *      function that is not FMI 2.0's, leverGetEventIndicatorValues, gives the FMI 3.0 entry
+ *      (lever_fmi3_shim.c) the event indicators in Co-Simulation too.
  *   4. One Python thread state per host thread: pythonfmu calls PyGILState_Ensure and
  *      Release around every call, which creates and destroys a thread state each time when
  *      the calling thread is unknown to Python.  The shim registers one thread state for
@@ -233,6 +235,13 @@ SHIM_DECLARE(fmi2GetVersion)
 SHIM_DECLARE(fmi2SetDebugLogging)
 SHIM_INNER_FUNCTIONS(SHIM_DECLARE)
 SHIM_ME_FUNCTIONS(SHIM_DECLARE)
+
+/* Not an FMI 2.0 function: the event indicators in either interface, for the FMI 3.0 entry in
+ * front of this library (lever_fmi3_shim.c).  FMI 3.0 declares them as variables, which a
+ * Co-Simulation importer may read like any other; FMI 2.0 has no such variables, and its
+ * fmi2GetEventIndicators stays a Model Exchange function. */
+typedef fmi2Status leverGetEventIndicatorValuesTYPE(fmi2Component, fmi2Real[], size_t);
+SHIM_DECLARE(leverGetEventIndicatorValues)
 
 /* ------------------------------------------------------------------------- */
 /* Small helpers                                                             */
@@ -987,6 +996,9 @@ static const char *state_name(int state)
 #define MEMASK_fmi2GetDerivatives (ME_RUNNING | ST_TERMINATED)
 #define MEMASK_fmi2GetEventIndicators (ST_INITIALIZATION | ME_RUNNING | ST_TERMINATED)
 #define MEMASK_fmi2GetContinuousStates MEMASK_fmi2GetEventIndicators
+/* Co-Simulation: wherever its variables have values (FMI 3.0: Initialization Mode on). */
+#define MASK_leverGetEventIndicatorValues (ST_INITIALIZATION | INITIALIZED)
+#define MEMASK_leverGetEventIndicatorValues MEMASK_fmi2GetEventIndicators
 #define MEMASK_fmi2GetNominalsOfContinuousStates (ST_INSTANTIATED | ME_RUNNING | ST_TERMINATED)
 
 /* The channel to the model (fmu_src/lever/fmus/model_exchange.py): value references
@@ -1028,6 +1040,7 @@ typedef struct {
     fmi2Real time;          /* the current communication point (Model Exchange: fmi2SetTime's) */
     int me;                 /* instantiated as fmi2ModelExchange */
     size_t nx, nz;          /* Model Exchange: continuous states, event indicators */
+    int nzKnown;            /* nz was read (Model Exchange: at instantiation; else on first use) */
 } Shim;
 
 /* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
@@ -1366,6 +1379,7 @@ static fmi2Status me_connect(Shim *s)
         }
         s->nx = (size_t)n[0];
         s->nz = (size_t)n[1];
+        s->nzKnown = 1;
     }
     return status;
 }
@@ -2158,3 +2172,27 @@ ME_GETTER(fmi2GetDerivatives, CH_DERIVATIVES, nx, "derivatives")
 ME_GETTER(fmi2GetEventIndicators, CH_INDICATORS, nz, "event indicators")
 ME_GETTER(fmi2GetContinuousStates, CH_STATES, nx, "states")
 ME_GETTER(fmi2GetNominalsOfContinuousStates, CH_NOMINALS, nx, "nominals")
+
+fmi2Status leverGetEventIndicatorValues(fmi2Component c, fmi2Real out[], size_t n)
+{
+    /* Named after the call it serves, as the FMI 3.0 entry renames it: fmi3GetFloat64. */
+    static const char function[] = "fmi2GetReal of the event indicators";
+    Shim *s = SHIM(c);
+    if (!shim_begin(s, function, s && s->me ? MEMASK_leverGetEventIndicatorValues
+                                            : MASK_leverGetEventIndicatorValues)) return fmi2Error;
+    if (!s->nzKnown) {
+        fmi2ValueReference size = SIZE_INDICATORS;
+        fmi2Real nz = 0.0;
+        fmi2Status status = channel_get(s, function, CH_CONTROL, &size, 1, &nz);
+        if (!succeeded(status)) {
+            return status;
+        }
+        if (!(nz >= 0.0 && nz < 1e6)) {
+            return shim_error(s, "%s: the model reports %g event indicators", function, nz);
+        }
+        s->nz = (size_t)nz;
+        s->nzKnown = 1;
+    }
+    if (!me_array(s, function, out, n, s->nz, "event indicators")) return fmi2Error;
+    return n ? channel_get(s, function, CH_INDICATORS, NULL, n, out) : fmi2OK;
+}

@@ -15,7 +15,8 @@
  *     models have no structural parameters), checked before anything is forwarded, with
  *     FMI 3 names in every message (the inner layer's messages are translated);
  *   - the independent variable `time` and the event-indicator variables the FMI 3 model
- *     description declares, answered here;
+ *     description declares, answered here (the indicators in either interface through the
+ *     FMI 2 entry's leverGetEventIndicatorValues, which is not an FMI 2.0 function);
  *   - fmi3GetNumberOfVariableDependencies / fmi3GetVariableDependencies from the
  *     ModelStructure the build wrote into resources/lever_fmi3.cfg;
  *   - fmi3GetAdjointDerivative: the transpose product of the same partials that
@@ -165,7 +166,8 @@ typedef struct {
     X(fmi2Status, fmi2GetDerivatives, (fmi2Component, fmi2Real[], size_t))                         \
     X(fmi2Status, fmi2GetEventIndicators, (fmi2Component, fmi2Real[], size_t))                     \
     X(fmi2Status, fmi2GetContinuousStates, (fmi2Component, fmi2Real[], size_t))                    \
-    X(fmi2Status, fmi2GetNominalsOfContinuousStates, (fmi2Component, fmi2Real[], size_t))
+    X(fmi2Status, fmi2GetNominalsOfContinuousStates, (fmi2Component, fmi2Real[], size_t))          \
+    X(fmi2Status, leverGetEventIndicatorValues, (fmi2Component, fmi2Real[], size_t))
 
 typedef struct {
 #define INNER_MEMBER(ret, name, args) ret(*name) args;
@@ -842,7 +844,11 @@ EXPORT fmi3Status fmi3Reset(fmi3Instance instance)
 #define GETTABLE S_ANY
 #define SETTABLE (S_INSTANTIATED | S_INITIALIZATION | S_EVENT | S_CONTINUOUS | S_STEP)
 
-/* Reads the variables this layer declares into value[] (the others are left alone). */
+/* Reads the variables this layer declares into value[] (the others are left alone).  An
+ * event indicator is a local variable like any other to a Co-Simulation importer (FMI 3.0
+ * ignores only the <EventIndicator> elements there): the physics' indicator at the current
+ * state and inputs, with the modes the co-simulation edition is in.  It is calculated, so it
+ * has no value before Initialization Mode (Instantiated offers start values only). */
 static fmi3Status own_values(Instance *s, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 value[])
 {
     fmi2Real *indicators = NULL;
@@ -851,15 +857,16 @@ static fmi3Status own_values(Instance *s, const fmi3ValueReference vr[], size_t 
         if (vr[i] == s->cfg.timeVr) {
             value[i] = s->time;
         } else if (is_indicator(s, vr[i])) {
-            if (!s->me || !(s->state & (S_INITIALIZATION | S_EVENT | S_CONTINUOUS | S_TERMINATED))) {
-                status = fail(s, "fmi3GetFloat64: value reference %u is an event indicator: it has a value in Model "
-                                 "Exchange after fmi3EnterInitializationMode only (this instance: %s, %s)",
-                              vr[i], s->me ? "Model Exchange" : "Co-Simulation", state_name(s->state));
+            if (s->state == S_INSTANTIATED) {
+                status = fail(s, "fmi3GetFloat64: value reference %u is an event indicator, calculated by the model: "
+                                 "it has a value from fmi3EnterInitializationMode on, and no start value to give in "
+                                 "Instantiated", vr[i]);
             } else {
                 if (!indicators) {
                     indicators = malloc(s->cfg.nz * sizeof *indicators);
-                    status = indicators ? status3(s->api->fmi2GetEventIndicators(s->inner, indicators, s->cfg.nz))
-                                        : fail(s, "fmi3GetFloat64: out of memory");
+                    status = indicators
+                                 ? status3(s->api->leverGetEventIndicatorValues(s->inner, indicators, s->cfg.nz))
+                                 : fail(s, "fmi3GetFloat64: out of memory");
                 }
                 if (succeeded(status)) {
                     value[i] = indicators[vr[i] - s->cfg.indicatorVr];

@@ -28,8 +28,8 @@ def build(force, out):
 @click.command("compliance")
 @click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
 def compliance(fmus):
-    """Compliance checks on FMU files (default: the built ones, FMI 2.0 and 3.0 editions):
-    fmpy's validation plus ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
+    """Compliance checks on FMU files, or the FMU files in a folder (default: the built ones,
+    FMI 2.0 and 3.0 editions): fmpy's validation plus ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
     when there are findings."""
     total = 0
     for path, findings in api.compliance(fmus):

@@ -161,6 +161,9 @@ def validate(names, assignments, master, step, result_csv, tolerance, window, me
     or a scene, with its master) and compare every recorded output with its committed
     reference trace: RMS and max error, fraction of samples outside the tolerance band,
     pass/fail per signal; a plot per failing signal.  NAMES default: every reference.
+    A NAME may be an FMU file (FMI 2.0 or 3.0, e.g. build/fmus3/EngineShaft.fmu): run
+    stand-alone as its model's name is, judged by that model's reference (results in
+    results/validate/<Model>-fmi<version>).
 
     Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
     2 on bad input."""

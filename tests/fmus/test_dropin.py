@@ -79,6 +79,8 @@ def test_lever_check_reports_what_a_careless_fmu_lacks(lever, fmu_dir, tmp_path)
         assert expected in findings, (expected, findings)
     result = lever("compliance", str(broken))
     assert result.exit_code == 1 and "no documentation/_main.html" in result.output
+    in_folder = lever("compliance", str(tmp_path))        # a folder: the FMU files in it
+    assert in_folder.exit_code == 1 and in_folder.output == result.output
 
 
 def test_documentation_is_generated_from_the_declarations(fmu_dir):

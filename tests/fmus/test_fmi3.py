@@ -3,8 +3,9 @@ build/shim/lever_fmi3_shim.c): fmpy validates them with no finding; in fmpy's Co
 and Model Exchange simulations they give the FMI 2.0 editions' outputs; their directional
 and adjoint derivatives agree with central differences, their output derivatives with the
 motion, their dependency queries with the ModelStructure; a serialized state continues in a
-fresh instance bit for bit; refused calls return fmi3Error with a message in FMI 3 terms and
-leave the instance usable.
+fresh instance bit for bit; a Co-Simulation instance reads the event-indicator variables the
+Model Exchange instance gives at the same state; refused calls return fmi3Error with a message
+in FMI 3 terms and leave the instance usable.
 """
 from __future__ import annotations
 
@@ -323,6 +324,119 @@ def test_serialized_state_continues_in_a_fresh_instance_bit_for_bit(unpacked, na
             f.freeInstance()
 
 
+# -- event indicators in Co-Simulation --------------------------------------------------------------
+
+#: parameters and inputs under which each FMU's indicators change sign within 0.3 s: the
+#: engine's tabulated characteristic crossed, the load stopping and sticking; the freewheel's
+#: contacts and clutches at their defaults
+INDICATOR_CASES = {
+    "EngineShaft": ({"characteristic": "0:600; 40:620; 80:0"}, {"tau": -100.0}),
+    "LoadShaft": ({"friction_torque": 3000.0, "breakaway_torque": 4000.0}, {"tau": 0.5}),
+    "FreewheelRectifier": ({}, {}),
+}
+#: outputs that name an FMU's discrete modes (the shafts' follow from their states)
+MODE_OUTPUTS = {"FreewheelRectifier": ("disc_slip", "flywheel_stuck")}
+
+
+def _with_parameters(fmu, variables, parameters, inputs):
+    for name, value in parameters.items():
+        setter = fmu.setString if isinstance(value, str) else fmu.setFloat64
+        setter([variables[name].valueReference], [value])
+    fmu.enterInitializationMode(startTime=0.0)
+    for name, value in inputs.items():
+        fmu.setFloat64([variables[name].valueReference], [value])
+
+
+@pytest.mark.parametrize("name", sorted(INDICATOR_CASES))
+def test_a_co_simulation_instance_reads_the_event_indicators_of_model_exchange_at_its_state(unpacked, name):
+    """FMI 3.0 declares the event indicators as local variables, which fmi3GetFloat64 of a
+    Co-Simulation instance returns like any other: the physics' indicators at its state,
+    inputs and modes.  The Model Exchange instance, set to the same time and states (with an
+    event iteration where an indicator changes sign, as a Model Exchange host does), gives
+    the same values bit for bit wherever its modes are the co-simulation's."""
+    parameters, inputs = INDICATOR_CASES[name]
+    log = Log()
+    cs, md, variables = slave(unpacked, name, log)
+    me, _, _ = model(unpacked, name, log)
+    indicators = [v.valueReference for v in md.modelVariables if v.name.startswith("event_indicator_")]
+    states = [u.variable.derivative.valueReference for u in md.derivatives]
+    modes = [variables[n].valueReference for n in MODE_OUTPUTS.get(name, ())]
+    nx, nz = len(states), len(indicators)
+    assert nz == md.numberOfEventIndicators > 0
+    try:
+        _refused(lambda: cs.getFloat64(indicators), log, "fmi3GetFloat64", "event indicator", "Instantiated")
+        for fmu in (cs, me):
+            _with_parameters(fmu, variables, parameters, inputs)
+        assert cs.getFloat64(indicators) == me.getFloat64(indicators)       # Initialization Mode
+        cs.exitInitializationMode()
+        me.exitInitializationMode()
+        assert cs.getFloat64(indicators) == me.getFloat64(indicators)       # Step Mode / Event Mode
+        while me.updateDiscreteStates()[0]:
+            pass
+        me.enterContinuousTimeMode()
+        before = array_of(me.getEventIndicators, nz)
+        t, h, compared, events, events_compared = 0.0, 1e-3, 0, 0, 0
+        for _ in range(300):
+            cs.doStep(t, h)
+            t += h
+            x = cs.getFloat64(states)
+            me.setTime(t)
+            me.setContinuousStates((ctypes.c_double * nx)(*x), nx)
+            z = array_of(me.getEventIndicators, nz)
+            if any((a > 0) != (b > 0) for a, b in zip(before, z)):
+                events += 1
+                me.enterEventMode()
+                while me.updateDiscreteStates()[0]:
+                    pass
+                me.enterContinuousTimeMode()
+                z = array_of(me.getEventIndicators, nz)
+            before = z
+            read = cs.getFloat64(indicators)
+            if cs.getFloat64(modes) == me.getFloat64(modes):
+                assert read == list(z), (t, read, list(z))
+                assert me.getFloat64(indicators) == read
+                compared += 1
+                events_compared = events
+        # the co-simulation's modes switch between communication points at times, which the
+        # Model Exchange instance, stepped at those points only, does not see: not compared
+        # (an event compared after: the modes switched and the values still agree)
+        assert compared >= 250 and events_compared >= 1, (compared, events_compared)
+        # at the current inputs: a new input value reaches the indicators before the next step
+        if inputs:
+            tau = variables["tau"].valueReference
+            cs.setFloat64([tau], [-inputs["tau"]])
+            me.setFloat64([tau], [-inputs["tau"]])
+            assert cs.getFloat64(indicators) == me.getFloat64(indicators) == list(array_of(me.getEventIndicators, nz))
+        cs.terminate()
+        me.terminate()
+        assert cs.getFloat64(indicators) == me.getFloat64(indicators)       # Terminated
+        assert not [m for s, m in log if s >= FMI3_ERROR and "Instantiated" not in m], log
+    finally:
+        cs.freeInstance()
+        me.freeInstance()
+
+
+@pytest.mark.parametrize("make", [slave, model])
+def test_an_indicator_read_in_initialization_mode_follows_the_parameters_set_there(unpacked, make):
+    """A parameter set in Initialization Mode makes the model the indicators are read from
+    (read there, they are computed), not the one of the values before."""
+    log = Log()
+    fmu, md, variables = make(unpacked, "EngineShaft", log)
+    indicator = [variables["event_indicator_1"].valueReference]
+    try:
+        fmu.enterInitializationMode(startTime=0.0)
+        assert fmu.getFloat64(indicator) == [1.0]          # a linear characteristic: no event
+        # points at 0, 38.5 and 80 rad/s around w_start = 39 rad/s: 0.5 rad/s to the nearest
+        fmu.setString([variables["characteristic"].valueReference], ["0:600; 38.5:620; 80:0"])
+        assert fmu.getFloat64(indicator) == [0.5]
+        fmu.exitInitializationMode()
+        assert fmu.getFloat64(indicator) == [0.5]
+        assert not [m for s, m in log if s >= FMI3_ERROR], log
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+
+
 # -- refusals ---------------------------------------------------------------------------------------
 
 def _refused(call, log, *words):
@@ -406,6 +520,12 @@ def test_model_exchange_refusals_and_event_mode(unpacked, name):
     finally:
         fmu.terminate()
         fmu.freeInstance()
+
+
+def test_lever_compliance_on_the_fmi3_folder_finds_nothing(lever, fmu3_dir):
+    done = lever("compliance", fmu3_dir)
+    assert done.exit_code == 0, done.output
+    assert done.output.splitlines() == [f"{fmu3_dir / name}.fmu: 0 findings" for name in sorted(NAMES)]
 
 
 def test_lever_compliance_checks_the_fmi3_variables(fmu3_dir):

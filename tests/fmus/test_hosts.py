@@ -157,8 +157,8 @@ ALONE_FMI3 = {**ALONE, "FreewheelRectifier": ["half_coupling_speed", "driven_spe
 def test_ecos_runs_each_fmi3_edition_alone_as_the_fmi2_edition(fmu, fmu_dir, ecos_bin, tmp_path):
     """ecos's FMI 3.0 co-simulation (it loads the edition by its fmiVersion) in a bare
     environment: the same six decimals as the FMI 2.0 edition in ecos, which matches our
-    harness (the test above).  ecos logs what it is told to (the outputs): logging every
-    variable of an edition with event indicators gives zeros (docs/hosts.md, FMI 3.0)."""
+    harness (the test above).  ecos logs what it is told to (the outputs); logging every
+    variable: the test below."""
     import shutil
 
     from harness.studies.me_hosts import fmi3_dir
@@ -176,6 +176,49 @@ def test_ecos_runs_each_fmi3_edition_alone_as_the_fmi2_edition(fmu, fmu_dir, eco
     assert sorted(traces3) == sorted(record)
     for name in record:
         assert np.array_equal(traces3[name], traces2[name]), name
+
+
+@pytest.mark.parametrize("fmu", ["EngineShaft", "LoadShaft", "FreewheelRectifier"])
+def test_ecos_logging_every_variable_of_an_fmi3_edition_logs_its_event_indicators(fmu, fmu_dir, ecos_bin, tmp_path):
+    """ecos's default log reads every Float64 in one call, the event indicators with them
+    (a Co-Simulation importer may read any variable): every column the FMI 2.0 edition's log
+    has is equal, and the indicators are the values fmpy reads from the FMI 3.0 edition at
+    the same points (to the six decimals ecos prints)."""
+    import shutil
+
+    import fmpy
+    from fmpy.fmi3 import FMU3Slave
+
+    from harness.studies.me_hosts import fmi3_dir
+
+    runs = {}
+    for edition, folder in (("fmi2", fmu_dir), ("fmi3", fmi3_dir(fmu_dir))):
+        (tmp_path / edition).mkdir()
+        target = shutil.copy(folder / f"{fmu}.fmu", tmp_path / edition / f"{fmu}.fmu")
+        runs[edition] = ecos.ecos_traces(ecos.run_ecos(Path(target), 0.2, 1e-3, ecos_bin).csv)
+    (t2, traces2), (t3, traces3) = runs["fmi2"], runs["fmi3"]
+    assert len(t3) == 201 and np.array_equal(t2, t3)
+    assert set(traces2) < set(traces3)
+    for name in traces2:
+        assert np.array_equal(traces3[name], traces2[name]), name
+
+    path = fmi3_dir(fmu_dir) / f"{fmu}.fmu"
+    md = fmpy.read_model_description(str(path))
+    indicators = [v for v in md.modelVariables if v.name.startswith("event_indicator_")]
+    assert indicators and all(f"instance.{v.name}" in traces3 for v in indicators)
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(path), unzipdir=str(tmp_path / "x")),
+                      modelIdentifier=fmu, instanceName="instance")
+    slave.instantiate()
+    slave.enterInitializationMode(startTime=0.0)
+    slave.exitInitializationMode()
+    read = [slave.getFloat64([v.valueReference for v in indicators])]
+    for k in range(200):
+        slave.doStep(k * 1e-3, 1e-3)
+        read.append(slave.getFloat64([v.valueReference for v in indicators]))
+    slave.terminate()
+    slave.freeInstance()
+    for k, v in enumerate(indicators):
+        assert np.allclose(traces3[f"instance.{v.name}"], [row[k] for row in read], rtol=0, atol=1e-6), v.name
 
 
 def test_ecos_runs_the_fmi3_misalignment_source_to_its_reference(lever, fmu_dir, ecos_bin, tmp_path):

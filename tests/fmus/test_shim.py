@@ -229,6 +229,8 @@ def test_shim_exports_the_cs_api_only(shim_so):
     assert lib.fmi2GetReal(None, vr, ctypes.c_size_t(1), val) == FMI2_ERROR
     assert lib.fmi2SetDebugLogging(None, 1, ctypes.c_size_t(0), None) == FMI2_ERROR
     assert lib.fmi2Terminate(None) == FMI2_ERROR
+    # the one function that is not FMI 2.0's: the FMI 3.0 entry's path to the event indicators
+    assert lib.leverGetEventIndicatorValues(None, val, ctypes.c_size_t(1)) == FMI2_ERROR
     lib.fmi2FreeInstance(None)
 
 

@@ -193,6 +193,47 @@ def test_heavier_load_shaft_fails_its_motion_not_its_load_torque(fmu_dir):
     assert "w" in failed and failed <= {"phi", "w", "a", "load_work"}
 
 
+# -- lever validate FILE.fmu: an FMU file stand-alone, FMI 2.0 or 3.0 ---------------------------
+
+def _figures(out):
+    summary = json.loads((out / "validation.json").read_text())
+    return summary["passed"], summary["signals"]
+
+
+@pytest.mark.parametrize("model, assignments", [("LoadShaft", ()), ("LeverCoupling", ("--set", "stiffness=750"))])
+def test_an_fmu_file_validates_stand_alone_as_its_models_name_does(lever, fmu_dir, tmp_path, model, assignments):
+    """``lever validate build/fmus3/Model.fmu`` runs that file (here the FMI 3.0 edition) as
+    ``lever validate Model`` runs the built FMI 2.0 one, judged by the model's reference: the
+    same verdict and figures (the editions' outputs are bit-identical), passing or failing;
+    the FMI 2.0 file likewise."""
+    from harness.paths import fmi3_dir
+
+    by_name = lever("validate", model, *assignments, "--out", tmp_path / "name")
+    expected = _figures(tmp_path / "name")
+    for edition, folder in (("fmi2", fmu_dir), ("fmi3", fmi3_dir(fmu_dir))):
+        path = folder / f"{model}.fmu"
+        done = lever("validate", path, *assignments, "--out", tmp_path / edition)
+        assert done.exit_code == by_name.exit_code == (1 if assignments else 0), done.output
+        assert f"{path} (FMI {edition[-1]}.0)" in done.output
+        assert f"{path}: {'FAIL' if assignments else 'PASS'}" in done.output
+        assert _figures(tmp_path / edition) == expected
+        assert (tmp_path / edition / f"{model}_out.csv").exists()
+
+
+def test_an_fmu_file_that_cannot_be_validated_stand_alone_is_bad_input(lever, fmu_dir, tmp_path):
+    from harness.paths import fmi3_dir
+
+    not_fmu = tmp_path / "notes.fmu"
+    not_fmu.write_text("not a zip")
+    for path, words in ((tmp_path / "missing.fmu", "no such FMU file"),
+                        (not_fmu, "model description can be read"),
+                        (fmi3_dir(fmu_dir) / "FreewheelRectifier.fmu", "experiment.fmi=3")):
+        done = lever("validate", path)
+        assert done.exit_code == 2 and words in done.output, done.output
+    done = lever("validate", fmi3_dir(fmu_dir) / "EngineShaft.fmu", "--step", "0.01")
+    assert done.exit_code == 2 and "stand-alone" in done.output
+
+
 @pytest.fixture(scope="module")
 def kavz685_run(fmu_dir):
     return reference_traces.run_scene(scenes.load("kavz685"))

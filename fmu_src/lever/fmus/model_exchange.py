@@ -28,7 +28,7 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
 
 from ..physics.me_base import der
-from ..physics.parameters import DISPLAY_UNITS
+from ..physics.parameters import DISPLAY_UNITS, ParameterError
 from .base import LeverSlave, _nan_values
 from .declarations import Output
 from .guard import guarded
@@ -184,8 +184,12 @@ class ModelExchangeSlave(LeverSlave):
 
     # -- the physics' model at the current point ----------------------------------------------------
     def _me_current(self):
+        if self._model_stale and self._phase == "initialization":
+            # Parameters set in Initialization Mode: the model they make, built for what is
+            # read now (a read may compute there), judged at fmi2ExitInitializationMode.
+            self._try_build(report=False)
         if self._model_stale or self._build_error is not None:
-            raise ValueError(f"the model is not built: {self._build_error or 'parameters changed since'}")
+            raise ParameterError("", f"the model is not built: {self._build_error or 'parameters changed since'}")
         key = self._physics_key()
         if self._me_model is None or self._me_source is not key:
             self._me_model, self._me_source = self._me_physics(), key
@@ -346,6 +350,7 @@ class ModelExchangeSlave(LeverSlave):
             values = self._derivatives()
             return [values[i] for i in index]
         if kind == INDICATORS:
+            self._cs_modes()
             values = self._indicators()
             return [values[i] for i in index]
         if kind == NOMINALS:

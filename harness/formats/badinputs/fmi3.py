@@ -133,8 +133,22 @@ def cases() -> list[Case]:
                       ("fmi3GetBinary", "Binary"), "type"),
             ]
             if nz:
-                cases.append(_fmi3(fmu, sizes, "fmi3SetFloat64 of an event indicator", phase, interface,
-                                   "fmi3SetFloat64", ("fmi3SetFloat64", "event indicator", "cannot be set"),
+                cases += [
+                    _fmi3(fmu, sizes, "fmi3SetFloat64 of an event indicator", phase, interface,
+                          "fmi3SetFloat64", ("fmi3SetFloat64", "event indicator", "cannot be set"), "indicator"),
+                    _fmi3(fmu, sizes, "fmi3GetFloat64 of an event indicator and an unknown value reference", phase,
+                          interface, "fmi3GetFloat64", ("value reference", "999999"), "indicator-unknown"),
+                ]
+            # the first value reference past the variables the FMI 3 entry adds (time, the indicators)
+            cases.append(_fmi3(fmu, sizes, "fmi3GetFloat64 of the value reference after the last event indicator"
+                               if nz else "fmi3GetFloat64 of the value reference after time", phase, interface,
+                               "fmi3GetFloat64", ("fmi3GetFloat64", "value reference", "no real variable"), "past"))
+        # an event indicator is calculated: no value before Initialization Mode
+        if nz:
+            for interface in (cs, me):
+                cases.append(_fmi3(fmu, order, "fmi3GetFloat64 of an event indicator in instantiated", "instantiated",
+                                   interface, "fmi3GetFloat64",
+                                   ("fmi3GetFloat64", "event indicator", "fmi3EnterInitializationMode", "Instantiated"),
                                    "indicator"))
         for function, size in ME3_ARRAYS.items():
             n = nx if size == "nx" else nz
@@ -200,6 +214,8 @@ class _Instance3:
         self.nx, self.nz = ME_SIZES[fmu]
         self.instance = f"corpus3-{fmu}-{next(instance_numbers)}"
         self.log: list[tuple[int, str]] = []
+        #: what a call under test did wrong beyond its status and messages
+        self.problems: list[str] = []
         cls = FMU3Slave if self.cs else FMU3Model
         self.fmu = cls(guid=self.md.guid, unzipDirectory=extracted(path), modelIdentifier=fmu,
                        instanceName=self.instance)
@@ -242,8 +258,10 @@ class _Instance3:
         return worst
 
     def reals(self) -> dict | None:
-        """Every Float64 but the event indicators (a Co-Simulation instance has no value for them)."""
-        names = [n for n, v in self.variables.items() if v.type == "Float64" and not n.startswith("event_indicator_")]
+        """Every Float64 (the event indicators from Initialization Mode on: before, they have
+        no value)."""
+        names = [n for n, v in self.variables.items() if v.type == "Float64"
+                 and not (self.phase == "instantiated" and n.startswith("event_indicator_"))]
         from fmpy.fmi1 import FMICallException
         try:
             return dict(zip(names, self.fmu.getFloat64([self.variables[n].valueReference for n in names])))
@@ -401,8 +419,17 @@ def _act3(inst: _Instance3, case: Case, fmu_dir: Path) -> int:
         return inst.raw(function, [ptr, size_t, ptr, size_t], (ctypes.c_uint32 * 1)(vr), 1, values, 2)
     if kind == "null":
         return inst.raw(function, [ptr, size_t, ptr, size_t], (ctypes.c_uint32 * 1)(vr), 1, None, 1)
-    if kind in ("unknown", "time", "indicator", "value"):
-        vr = {"unknown": 999_999, "time": inst.variables["time"].valueReference,
+    if kind == "indicator-unknown":
+        values = (dbl * 2)(-1.0, -1.0)
+        status = inst.raw(function, [ptr, size_t, ptr, size_t],
+                          (ctypes.c_uint32 * 2)(inst.variables["event_indicator_1"].valueReference, 999_999), 2,
+                          values, 2)
+        if list(values) != [-1.0, -1.0]:
+            inst.problems.append(f"the refused read wrote {list(values)} into the values array")
+        return status
+    if kind in ("unknown", "time", "indicator", "value", "past"):
+        own = [v.valueReference for n, v in inst.variables.items() if n == "time" or n.startswith("event_indicator_")]
+        vr = {"unknown": 999_999, "time": inst.variables["time"].valueReference, "past": max(own) + 1,
               "indicator": inst.variables.get("event_indicator_1", inst.variables["time"]).valueReference}.get(kind)
         value = 1.0
         if kind == "value":
@@ -429,6 +456,7 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         seen = len(inst.log)
         status = _act3(inst, case, fmu_dir)
         outcome.status = status
+        outcome.problems += inst.problems
         logged = inst.log[seen:]
         outcome.messages = [text for level, text in logged if level >= FMI3_DISCARD]
         if status != FMI3_ERROR:
