@@ -534,12 +534,13 @@ def references(names: Iterable[str] = (), update: bool = False) -> Iterator[Refe
 
 def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, only: Iterable[str] = (),
           peers: bool = True, monolithic: bool = True, out: Path | str | None = None, resume: bool = True,
-          progress: Callable[[str], None] | None = None, claimed: bool = False) -> dict:
+          progress: Callable[[str], None] | None = None, claimed: bool = False, fmi_editions: bool = True) -> dict:
     """The work-precision benchmark of ``lever bench``: every master (``only``: these), the
-    peers and the monolithic solutions over a range of steps; returns the result (its
-    ``claims``: time at the target error, best master, ...) and writes bench.csv, bench.md,
-    bench.json and work_precision.png to ``out`` (default results/bench/<scene>), resuming
-    from its cases.jsonl unless ``resume`` is false."""
+    peers and the monolithic solutions over a range of steps, and (``fmi_editions``) the
+    FMUs' FMI 2.0 and FMI 3.0 editions side by side; returns the result (its ``claims``:
+    time at the target error, best master, ...; ``fmi_editions``) and writes bench.csv,
+    bench.md, bench.json and work_precision.png to ``out`` (default results/bench/<scene>),
+    resuming from its cases.jsonl unless ``resume`` is false."""
     from harness.formats import outputs
     from harness.studies import bench as benchmark
 
@@ -557,7 +558,8 @@ def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, onl
             raise InputError(str(error)) from None
     with _resumable(out):
         result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
-                                 progress=progress or (lambda *_: None), out=out, resume=resume)
+                                 progress=progress or (lambda *_: None), out=out, resume=resume,
+                                 fmi_editions=fmi_editions)
         result["written"] = benchmark.write(out, result)
     result["summary"] = benchmark.summary_lines(result)
     return result

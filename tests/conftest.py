@@ -243,6 +243,7 @@ SLOW = (
     "project/test_layers.py::test_no_import_circle_among_harness_modules",
     "project/test_layers.py::test_no_private_name_is_used_outside_its_module",
     "studies/test_bench.py::test_bench_records_failed_cases_goes_on_and_resumes",
+    "studies/test_bench.py::test_the_fmi_editions_are_measured_in_turn_round_by_round",
     "studies/test_bench.py::test_small_bench_writes_its_table_plot_and_claims",
     "studies/test_bench.py::test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion",
     "studies/test_latency.py::test_lever_run_latency_writes_the_table",

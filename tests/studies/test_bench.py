@@ -116,6 +116,13 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
         assert "even a master that cost nothing" in (tmp_path / "bench.md").read_text() or step.get("unreliable")
     assert json.loads((tmp_path / "bench.json").read_text())["machine"]["cpus"] >= 1
     assert "## Where the time goes" in (tmp_path / "bench.md").read_text()
+    # the FMI 2.0 and FMI 3.0 editions, side by side under the baseline at the scene's step
+    editions = json.loads((tmp_path / "bench.json").read_text())["fmi_editions"]
+    assert (editions["master"], editions["step"], editions["steps"]) == ("jacobi", 1e-3, 300)
+    assert editions["run"]["ratio"]["ratios"] == pytest.approx([editions["run"]["fmi3_s"][0] /
+                                                                editions["run"]["fmi2_s"][0]])
+    assert "## FMI 2.0 and FMI 3.0 editions" in (tmp_path / "bench.md").read_text()
+    assert any(line.startswith("  FMI 3.0 / FMI 2.0 editions: floor ") for line in bench.summary_lines(result))
 
 
 def test_the_time_split_prices_each_call_and_leaves_the_rest_to_the_master():
@@ -170,11 +177,12 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
-    # three cases and the two floors (our FMUs', the do-nothing twins'); no case reaches the
-    # target, so no headline is measured side by side
-    assert lines[0].startswith("resuming: 5 case(s) already in")
+    # three cases, the two floors (our FMUs', the do-nothing twins') and the FMI editions'
+    # comparison; no case reaches the target, so no headline is measured side by side
+    assert lines[0].startswith("resuming: 6 case(s) already in")
     assert [bench.table_row(c) for c in again["cases"]] == [bench.table_row(c) for c in first["cases"]]
     assert again["floor_per_step_s"] == first["floor_per_step_s"]
+    assert again["fmi_editions"] == first["fmi_editions"] and first["fmi_editions"]["run"]["fmi3"]["n"] == 1
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.
     monkeypatch.undo()
@@ -182,7 +190,9 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
     spec.bench["monolithic_rtol"] = []
-    grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False)
+    grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False,
+                        fmi_editions=False)
+    assert grown["fmi_editions"] is None and "FMI 2.0 and FMI 3.0" not in bench.markdown(grown, [])
     assert [c.step for c in grown["cases"] if c.engine == "trapezoidal-newton"] == [2e-3, 4e-3]
     assert (tmp_path / "cases.old1.jsonl").exists()
 
@@ -295,3 +305,44 @@ def test_where_the_floors_motion_diverges_it_starts_again_and_never_calls_a_fail
     refused.clear()
     assert all(price > 0 for price in bench.call_prices(stiff, n_steps=400, step=2e-3)["engine"].values())
     assert refused
+
+
+def test_the_fmi_editions_are_measured_in_turn_round_by_round(fmu_dir, monkeypatch):
+    """Each round measures the floor, the call prices and the run with both editions; each
+    ratio is FMI 3.0 over FMI 2.0 within a round; both runs computed the same traces."""
+    from harness.studies.bench import editions
+
+    monkeypatch.setattr(editions, "FLOOR_STEPS", 200)
+    monkeypatch.setattr(editions, "PRICE_STEPS", 100)
+    kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
+    compared = editions.compare(kavz, "gauss-seidel", 1e-3, 2, fmu_dir)
+    assert (compared["master"], compared["steps"], compared["largest_trace_difference"]) == ("gauss-seidel", 50, 0.0)
+    figures = [compared["floor"], compared["run"], *(f for kinds in compared["prices"].values() for f in kinds.values())]
+    for f in figures:
+        assert len(f["fmi2_s"]) == len(f["fmi3_s"]) == 2 and min(f["fmi2_s"] + f["fmi3_s"]) >= 0.0
+        assert f["ratio"]["ratios"] == pytest.approx([a / b for a, b in zip(f["fmi3_s"], f["fmi2_s"]) if b > 0])
+    assert min(compared["floor"]["fmi2_s"] + compared["floor"]["fmi3_s"]) > 0.0
+    # every component's calls, and the states of those that roll back, priced for both
+    assert {name: set(kinds) for name, kinds in compared["prices"].items()} == {
+        "engine": {"get", "set", "step", "state"}, "load": {"get", "set", "step", "state"},
+        "coupling": {"get", "set", "step"}}
+    text = "\n".join(editions.markdown(compared))
+    assert "| coupling step, a call | " in text and "bit for bit the same" in text
+
+
+def test_the_fmi_editions_are_not_compared_where_there_is_no_other_edition(tmp_path, fmu_dir):
+    from harness.paths import SCENES
+    from harness.studies.bench import editions
+
+    assert editions.missing(scene.load("kavz685"), fmu_dir) is None
+    text = (SCENES / "kavz685.toml").read_text().replace('fmu = "LeverCoupling"',
+                                                               f'fmu = "{fmu_dir / "LeverCoupling.fmu"}"')
+    (tmp_path / "user.toml").write_text(text)
+    assert "coupling's FMU is a file" in editions.missing(scene.load(tmp_path / "user.toml"), fmu_dir)
+    only_fmi2 = tmp_path / "fmus"
+    only_fmi2.mkdir()
+    for name in ("EngineShaft", "LeverCoupling", "LoadShaft"):
+        (only_fmi2 / f"{name}.fmu").write_bytes((fmu_dir / f"{name}.fmu").read_bytes())
+    assert "no FMI 3.0 edition of EngineShaft" in editions.missing(scene.load("kavz685"), only_fmi2)
+    assert editions.summary_lines({"not_compared": "why"}) == [
+        "  FMI 3.0 against FMI 2.0 editions not compared: why"]
