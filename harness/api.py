@@ -752,6 +752,8 @@ def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts
     if fmu_dir is None:
         build()
     environment = comparison.set_up_environment() if native_env == "set-up" else None
+    if refused := comparison.problems(spec, chosen, fmu_dir or spec.fmu_dir or FMUS):
+        raise InputError("; ".join(refused) + " (--host chooses the hosts)")
     report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
                                    log=log or (lambda *_: None))
     folder = Path(out) if out else comparison.default_out(spec)

@@ -168,6 +168,7 @@ SLOW = (
     "fmus/test_hosts.py::test_ecos_runs_each_fmi3_edition_alone_as_the_fmi2_edition",
     "fmus/test_hosts.py::test_ecos_runs_the_fmi3_misalignment_source_to_its_reference",
     "fmus/test_hosts.py::test_lever_hosts_writes_the_table",
+    "fmus/test_hosts.py::test_lever_hosts_refuses_the_hosts_that_cannot_run_an_fmi3_scene_before_anything_runs",
     "fmus/test_hosts.py::test_the_kavz685_scene_in_ecos_passes_lever_validate",
     "fmus/test_me_hosts.py::test_fmpy_model_exchange_cvode_passes_lever_validate",
     "fmus/test_me_hosts.py::test_the_c_importers_model_exchange_loop_passes_lever_validate",

@@ -129,6 +129,18 @@ def test_lever_hosts_writes_the_table(lever, tmp_path, fmu_dir):
     assert bad.exit_code != 0 and "unknown host simulink" in bad.output
 
 
+def test_lever_hosts_refuses_the_hosts_that_cannot_run_an_fmi3_scene_before_anything_runs(lever, fmu_dir, tmp_path):
+    """libcosim runs no FMI 3.0 FMU and the C importer's timing loop is FMI 2.0's: each says
+    so, before anything runs or is written; the others run the FMI 3.0 editions."""
+    refused = lever("hosts", "--set", "experiment.fmi=3", "--out", str(tmp_path / "h"))
+    assert refused.exit_code == 2 and not (tmp_path / "h").exists(), refused.output
+    assert "peer 'libcosim-fixed' runs FMI 2.0 FMUs" in refused.output
+    assert "host c-importer times the FMI 2.0 editions' stepping loop only" in refused.output
+    assert hosts.problems(scene.load("kavz685").with_overrides(["experiment.fmi=3"]),
+                          ("harness-jacobi", "ecos", "ecos-serial"), fmu_dir) == []
+    assert hosts.problems(scene.load("kavz685"), hosts.HOSTS, fmu_dir) == []
+
+
 def test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi(fmu_dir, ecos_bin, tmp_path):
     """What docs/hosts.md says of ecos's coupling, measured: its shafts move as libcosim's do
     (to ecos's six decimals), both giving the shafts the coupling torque of the states one
