@@ -225,27 +225,38 @@ def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir)
     assert len(result) == 11 and (result["tau1"] == 0.0).all() and (result["phi1"] == 0.3).all()
 
 
-@pytest.mark.parametrize("measure", ["call_floor", "call_prices"])
+@pytest.mark.parametrize("measure", ["call_floor", "call_prices", "floors_side_by_side", "prices_side_by_side"])
 def test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion(monkeypatch, measure):
     # The floor's calls must move the scene as a master would: without the propagation's
     # copies the shafts got their start torques for ever, the load shaft ran away and its
-    # speed-dependent substeps priced a step that no master makes.
+    # speed-dependent substeps priced a step that no master makes.  Side by side (the FMI
+    # 2.0 and 3.0 editions taking turns every 700 steps) each system makes every step.
     from harness.engine.system import System
-    seen = {}
+    seen = []
     free = System.free
 
     def noting(system):
-        seen.update(engine=system.value("engine", "w"), load=system.value("load", "w"))
+        seen.append({"engine": system.value("engine", "w"), "load": system.value("load", "w"),
+                     "time": system.components["engine"].time})
         free(system)
 
     monkeypatch.setattr(System, "free", noting)
     kavz = scene.load("kavz685")
+    both = [kavz, kavz.with_overrides(["experiment.fmi=3"])]
     if measure == "call_floor":
-        bench.call_floor(kavz, n_steps=3000)
-    else:
+        assert bench.call_floor(kavz, n_steps=3000) > 0
+    elif measure == "call_prices":
         bench.call_prices(kavz, n_steps=3000)
+    elif measure == "floors_side_by_side":
+        assert min(bench.floors.floors_side_by_side(both, 3000, chunk=700)) > 0
+    else:
+        prices = bench.floors.prices_side_by_side(both, n_steps=3000, chunk=700)
+        assert [set(p) for p in prices] == [{"engine", "load", "coupling"}] * 2
+        assert [set(p["engine"]) for p in prices] == [{"get", "set", "step", "state"}] * 2
+    assert len(seen) == (2 if measure.endswith("side_by_side") else 1)
     # after 3 s the driveline turns at its steady 36-38 rad/s (the scene's run: 36.66 mean)
-    assert 35.0 < seen["engine"] < 39.0 and 35.0 < seen["load"] < 39.0, seen
+    for s in seen:
+        assert 35.0 < s["engine"] < 39.0 and 35.0 < s["load"] < 39.0 and s["time"] == pytest.approx(3.0), s
 
 
 def test_the_floor_step_makes_the_calls_of_a_jacobi_step(fmu_dir):
@@ -314,6 +325,7 @@ def test_the_fmi_editions_are_measured_in_turn_round_by_round(fmu_dir, monkeypat
 
     monkeypatch.setattr(editions, "FLOOR_STEPS", 200)
     monkeypatch.setattr(editions, "PRICE_STEPS", 100)
+    monkeypatch.setattr(editions, "CHUNK", 30)
     kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
     compared = editions.compare(kavz, "gauss-seidel", 1e-3, 2, fmu_dir)
     assert (compared["master"], compared["steps"], compared["largest_trace_difference"]) == ("gauss-seidel", 50, 0.0)

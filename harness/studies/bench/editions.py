@@ -4,7 +4,9 @@ recording), each call's price by component and kind (``floors.call_prices``), an
 scene's run with each edition under the same master at the same step.  Every measurement is
 made for both editions in each round, the editions' order alternating from round to round,
 so FMI 3.0 over FMI 2.0 is taken round by round (``trust.paired_ratio``): median [min-max]
-of the rounds' ratios.
+of the rounds' ratios.  Within a round the two editions' floors, and their prices, take
+turns every few hundred steps (``floors.floors_side_by_side``, ``prices_side_by_side``):
+on a machine shared with other work, a pair of figures then saw the same moments.
 
 Both editions are the same model code behind the same calls (the FMI 3.0 entry hands the
 values through to the FMI 2.0 one): the difference is what the FMI 3.0 entry and the
@@ -31,6 +33,9 @@ FLOOR_STEPS = 5000
 
 #: steps of each edition's pricing of the calls a round
 PRICE_STEPS = 2000
+
+#: steps an edition makes before the other takes its turn (floor, prices): tens of milliseconds
+CHUNK = 200
 
 
 def missing(scene: scenes.Scene, fmu_dir: Path = FMUS) -> str | None:
@@ -61,13 +66,13 @@ def compare(scene: scenes.Scene, master: str, step: float, repeats: int, fmu_dir
     for k in range(repeats):
         loads.append(trust.load_average())
         order = EDITIONS if k % 2 == 0 else EDITIONS[::-1]
-        for fmi in order:
-            floor_times[fmi].append(floors.call_floor(versions[fmi], n_steps=FLOOR_STEPS, fmu_dir=fmu_dir,
-                                                      step=step))
-            interrupt.check()
-        for fmi in order:
-            prices[fmi].append(floors.call_prices(versions[fmi], fmu_dir, n_steps=PRICE_STEPS, step=step))
-            interrupt.check()
+        measured = floors.floors_side_by_side([versions[fmi] for fmi in order], FLOOR_STEPS, fmu_dir, step, CHUNK)
+        for fmi, figure in zip(order, measured):
+            floor_times[fmi].append(figure)
+        measured = floors.prices_side_by_side([versions[fmi] for fmi in order], fmu_dir, PRICE_STEPS, step, CHUNK)
+        interrupt.check()
+        for fmi, figure in zip(order, measured):
+            prices[fmi].append(figure)
         results = {}
         for fmi in order:
             results[fmi] = simulate(versions[fmi], master, step, fmu_dir)
@@ -80,7 +85,7 @@ def compare(scene: scenes.Scene, master: str, step: float, repeats: int, fmu_dir
             difference = _largest_difference(results[2], results[3])
     loads.append(trust.load_average())
     return {"master": master, "step": step, "repeats": repeats, "steps": steps,
-            "floor_steps": FLOOR_STEPS, "price_steps": PRICE_STEPS,
+            "floor_steps": FLOOR_STEPS, "price_steps": PRICE_STEPS, "chunk": CHUNK,
             "largest_trace_difference": difference, "load": loads,
             "floor": _side_by_side(floor_times),
             "prices": {name: {kind: _side_by_side({fmi: [p[name][kind] for p in prices[fmi]] for fmi in EDITIONS})
@@ -120,8 +125,9 @@ def markdown(editions: dict | None) -> list[str]:
               f"communication step of the FMI calls alone ({editions['floor_steps']} steps a round, no master, no "
               f"recording); the prices are per call, each timed where it falls in the floor's step "
               f"({editions['price_steps']} steps a round; state: get, set and free an FMU state, a third of the "
-              f"three); the run is {editions['master']} at h = {editions['step']:g} s "
-              f"({editions['steps']} steps).", "",
+              f"three); in a round the two editions' floors, and their prices, take turns every "
+              f"{editions.get('chunk', '')} steps.  The run is {editions['master']} at h = {editions['step']:g} s "
+              f"({editions['steps']} steps), one edition after the other.", "",
               "| what | FMI 2.0 | FMI 3.0 | FMI 3.0 / FMI 2.0 |", "|---|---|---|---|",
               _row("floor, a step", editions["floor"], "us")]
     for name, kinds in editions["prices"].items():
