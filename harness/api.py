@@ -718,6 +718,7 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     """``lever engines``: the scene in every engine that runs our FMUs (``engines``: these),
     error against the monolithic reference and run time; writes engines.md and engines.json
     to ``out`` (default results/engines/<scene>) and returns their paths."""
+    from harness import peers
     from harness.studies import engines as comparison
 
     spec = load(scene, overrides)
@@ -726,6 +727,8 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     if unknown:
         raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
     build()
+    if refused := [said for name in chosen if (said := peers.problem(name, spec, spec.fmu_dir or FMUS))]:
+        raise InputError("; ".join(refused) + " (--engine chooses the engines)")
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
     return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
 

@@ -188,6 +188,7 @@ SLOW = (
     "formats/test_peers.py::test_a_peer_refuses_fmus_of_an_fmi_version_it_does_not_run_and_says_why",
     "formats/test_peers.py::test_ecos_runs_the_fmi3_editions_as_the_fmi2_ones",
     "formats/test_peers.py::test_libcosim_refuses_an_fmi3_fmu_itself_as_its_peers_say",
+    "formats/test_peers.py::test_what_stops_a_peer_is_said_before_anything_runs",
     "formats/test_peers.py::test_libcosim_reports_a_refused_parameter_instead_of_crashing",
     "formats/test_peers.py::test_libcosim_runs_our_fmus",
     "formats/test_ssp_engines.py",

@@ -103,10 +103,8 @@ class _Peer:
         self.peer, self.scene_record = peer, scene_record
 
     def problem(self, scene: scenes.Scene, fmu_dir: Path) -> str | None:
-        """What of the scene the peer cannot run, said before anything runs."""
-        peer = peers.PEERS[self.peer]
-        setup = peers.SceneSetup(scene, fmu_dir, list(scene.record))
-        return peer.fmi_problem(setup) or peer.scene_problem(setup)
+        """What stops the peer from running the scene, said before anything runs."""
+        return peers.problem(self.peer, scene, fmu_dir)
 
     def __call__(self, scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
                  env: dict | None) -> tuple[float, str | None]:

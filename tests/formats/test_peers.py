@@ -189,3 +189,17 @@ def test_ecos_logging_everything_never_gives_zeros_for_an_fmi3_scene(fmu_dir):
                    peers.simulate_peer("ecos-log-all", spec, 1e-3, fmu_dir))
     # an FMU without event indicators gives every value in one call: the question is the FMU's
     assert ecos.refused_read(fmu_path("LeverCoupling", fmu_dir, 3)) is None
+
+
+def test_what_stops_a_peer_is_said_before_anything_runs(lever, fmu_dir, tmp_path):
+    """``peers.problem``: an unknown peer, an FMI version or a scene it cannot run; `lever
+    engines` refuses such engines by it before running any."""
+    spec3 = scene.load("kavz685").with_overrides(["experiment.fmi=3"])
+    assert peers.problem("lever", spec3, fmu_dir) is None and peers.problem("ecos", spec3, fmu_dir) is None
+    assert peers.problem("simulink", spec3, fmu_dir).startswith("peer 'simulink' is not available: unknown peer")
+    assert peers.problem("fmpy-ssp", spec3, fmu_dir).startswith("peer 'fmpy-ssp' runs FMI 2.0 FMUs")
+    assert "simulates from t = 0 only" in peers.problem("ecos", spec3.with_overrides(["experiment.start=0.1"]), fmu_dir)
+    refused = lever("engines", "--set", "experiment.fmi=3", "--out", tmp_path / "e")
+    assert refused.exit_code == 2 and not (tmp_path / "e").exists(), refused.output
+    assert all(f"peer '{name}' runs FMI 2.0 FMUs" in refused.output
+               for name in ("container", "fmpy-ssp", "libcosim-ssp", "libcosim-ecco"))
