@@ -585,12 +585,13 @@ def references(names: Iterable[str] = (), update: bool = False) -> Iterator[Refe
 
 def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, only: Iterable[str] = (),
           peers: bool = True, monolithic: bool = True, out: Path | str | None = None, resume: bool = True,
-          progress: Callable[[str], None] | None = None, claimed: bool = False) -> dict:
+          progress: Callable[[str], None] | None = None, claimed: bool = False, fmi_editions: bool = True) -> dict:
     """The work-precision benchmark of ``lever bench``: every master (``only``: these), the
-    peers and the monolithic solutions over a range of steps; returns the result (its
-    ``claims``: time at the target error, best master, ...) and writes bench.csv, bench.md,
-    bench.json and work_precision.png to ``out`` (default results/bench/<scene>), resuming
-    from its cases.jsonl unless ``resume`` is false."""
+    peers and the monolithic solutions over a range of steps, and (``fmi_editions``) the
+    FMUs' FMI 2.0 and FMI 3.0 editions side by side; returns the result (its ``claims``:
+    time at the target error, best master, ...; ``fmi_editions``) and writes bench.csv,
+    bench.md, bench.json and work_precision.png to ``out`` (default results/bench/<scene>),
+    resuming from its cases.jsonl unless ``resume`` is false."""
     from harness.formats import outputs
     from harness.studies import bench as benchmark
 
@@ -608,7 +609,8 @@ def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, onl
             raise InputError(str(error)) from None
     with _resumable(out):
         result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
-                                 progress=progress or (lambda *_: None), out=out, resume=resume)
+                                 progress=progress or (lambda *_: None), out=out, resume=resume,
+                                 fmi_editions=fmi_editions)
         result["written"] = benchmark.write(out, result)
     result["summary"] = benchmark.summary_lines(result)
     return result
@@ -767,6 +769,7 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     """``lever engines``: the scene in every engine that runs our FMUs (``engines``: these),
     error against the monolithic reference and run time; writes engines.md and engines.json
     to ``out`` (default results/engines/<scene>) and returns their paths."""
+    from harness import peers
     from harness.studies import engines as comparison
 
     spec = load(scene, overrides)
@@ -775,6 +778,8 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     if unknown:
         raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
     build()
+    if refused := [said for name in chosen if (said := peers.problem(name, spec, spec.fmu_dir or FMUS))]:
+        raise InputError("; ".join(refused) + " (--engine chooses the engines)")
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
     return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
 
@@ -801,6 +806,8 @@ def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts
     if fmu_dir is None:
         build()
     environment = comparison.set_up_environment() if native_env == "set-up" else None
+    if refused := comparison.problems(spec, chosen, fmu_dir or spec.fmu_dir or FMUS):
+        raise InputError("; ".join(refused) + " (--host chooses the hosts)")
     report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
                                    log=log or (lambda *_: None))
     folder = Path(out) if out else comparison.default_out(spec)

@@ -20,16 +20,19 @@ from harness.paths import RESULTS
 @click.option("--only", "only", multiple=True, metavar="MASTER", help="Bench only these masters (repeatable).")
 @click.option("--no-peers", is_flag=True, help="Leave out fmpy and libcosim.")
 @click.option("--no-monolithic", is_flag=True, help="Leave out the monolithic scipy solutions.")
+@click.option("--no-fmi-editions", is_flag=True, help="Leave out the FMUs' FMI 2.0 and FMI 3.0 editions side by "
+              "side (FMU-call floor, each call's price, the baseline master's run).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/bench/<scene>).")
 @click.option("--fresh", is_flag=True, help="Start afresh instead of resuming from the cases already in "
               "OUT/cases.jsonl (the earlier log is kept, renamed).")
-def bench(scene, repeats, only, no_peers, no_monolithic, out, fresh):
-    """Error against run time for every master (and peers) on SCENE: writes bench.csv,
-    bench.md, bench.json and work_precision.png."""
+def bench(scene, repeats, only, no_peers, no_monolithic, no_fmi_editions, out, fresh):
+    """Error against run time for every master (and peers) on SCENE, and the FMUs' FMI 3.0
+    editions against their FMI 2.0 ones: writes bench.csv, bench.md, bench.json and
+    work_precision.png."""
     with user_errors():
         result = api.bench(scene, repeats=repeats, only=list(only), peers=not no_peers, monolithic=not no_monolithic,
-                           progress=click.echo, out=out, resume=not fresh)
+                           progress=click.echo, out=out, resume=not fresh, fmi_editions=not no_fmi_editions)
     click.echo("")
     for line in result["summary"]:
         click.echo(line)

@@ -7,7 +7,7 @@ peer's name is checked.  A new engine: a module with a ``Peer`` subclass, named 
 ``registry.PEERS``."""
 from harness.peers.base import BARE_ENVIRONMENT, Peer, SceneSetup, experiment_problem
 from harness.peers.libcosim import LibcosimError
-from harness.peers.registry import PEERS, available, refuse_other_experiment, simulate_peer
+from harness.peers.registry import PEERS, available, problem, refuse_other_experiment, simulate_peer
 
 __all__ = ["BARE_ENVIRONMENT", "Peer", "SceneSetup", "experiment_problem", "LibcosimError", "PEERS", "available",
-           "refuse_other_experiment", "simulate_peer"]
+           "problem", "refuse_other_experiment", "simulate_peer"]

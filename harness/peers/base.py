@@ -42,6 +42,8 @@ class Peer(ABC):
     adaptive: bool = False
     #: the FMI versions (major) of the FMUs it runs; a scene with another is refused by name
     fmi_versions: tuple[str, ...] = ("2",)
+    #: why it runs no other FMI version (what in the engine stops it), said in the refusal
+    fmi_limit: str = ""
     #: it records no row at the start time: its first row is after the first step
     from_first_step: bool = False
     #: what its ``RunResult.wall_time`` covers
@@ -65,7 +67,7 @@ class Peer(ABC):
         if not others:
             return None
         return (f"peer '{self.name}' runs FMI {' and '.join(v + '.0' for v in self.fmi_versions)} FMUs; scene "
-                f"'{setup.scene.name}' has {', '.join(others)}")
+                f"'{setup.scene.name}' has {', '.join(others)}" + (f": {self.fmi_limit}" if self.fmi_limit else ""))
 
     def steps_fixed(self, scene: scenes.Scene) -> bool:
         """Whether its run of ``scene`` makes the scene's fixed steps (else it only has to

@@ -19,6 +19,8 @@ class ContainerFmu(Peer):
     name = "container"
     summary = "our container FMU (fmpy container_fmu) stepped by fmpy.simulate_fmu"
     timed = "everything: unpacking, instantiating and stepping (fmpy.simulate_fmu is one call)"
+    fmi_limit = ("fmpy 0.3.32's container FMU is an FMI 2.0 FMU that calls its components through the FMI 2.0 API "
+                 "and declares their variables with FMI 2.0's types")
 
     def run(self, setup: SceneSetup, step: float, tolerance: float | None, environment: dict | None) -> RunResult:
         import fmpy

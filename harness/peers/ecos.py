@@ -5,7 +5,12 @@ default) and logs what the harness records (a ``--csvConfig``); ``ecos-serial`` 
 one after the other (``--noParallel``); ``ecos-log-all`` logs with ecos's default CSV log,
 every variable of every FMU each step (about 60 reads a step, each a Python call: where
 ecos's time goes by default).  Their wall time is ecos's own stepping loop's, from its
-progress log.
+progress log.  ecos runs FMI 2.0 and FMI 3.0 Co-Simulation FMUs (it loads each by its
+``fmiVersion``).  Its default CSV log reads every Float64 variable of an FMI 3.0 FMU in one
+``fmi3GetFloat64`` and does not look at the status: where the FMU refuses that call, every
+value it logs is 0 and the run still ends well, so ``ecos-log-all`` first asks each FMI 3.0
+FMU of the scene that question itself (``refused_read``) and refuses the scene when one
+says no.
 
 The program runs in a bare environment by default (``PATH=/usr/bin:/bin``, and the path to
 PyPI ``tbb``'s ``libtbb.so.12``, ecos's own need): our FMUs find their Python themselves.
@@ -13,6 +18,7 @@ PyPI ``tbb``'s ``libtbb.so.12``, ecos's own need): our FMUs find their Python th
 from __future__ import annotations
 
 import csv
+import functools
 import importlib.metadata
 import math
 import re
@@ -143,6 +149,32 @@ def ecos_traces(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return data[:, 0], {name: data[:, k + 1] for k, name in enumerate(columns)}
 
 
+def refused_read(fmu: Path) -> str | None:
+    """What an FMI 3.0 Co-Simulation instance of ``fmu`` says when every Float64 variable
+    is read in one ``fmi3GetFloat64`` after initialisation, as ecos's default CSV log reads
+    them after every step; None when it gives them.  Asked once per file and version of it
+    in a process."""
+    stat = Path(fmu).stat()
+    return _refused_read(str(Path(fmu).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=64)
+def _refused_read(path: str, mtime_ns: int, size: int) -> str | None:
+    from harness.engine.component import FmuCallError
+    from harness.engine.fmi3_component import open_component
+
+    component = open_component("probe", path)
+    try:
+        component.initialize(0.0, None)
+        component.exit_initialization()
+        component.get([v.name for v in component.description.modelVariables if v.type == "Float64"])
+        return None
+    except FmuCallError as refused:
+        return "; ".join(refused.messages) or str(refused)
+    finally:
+        component.free()
+
+
 class Ecos(Peer):
     """ecos's program on the scene's SSP export, in ``environment`` (default bare): the FMUs
     stepped in parallel threads or one after the other, logging the recorded variables or
@@ -150,6 +182,7 @@ class Ecos(Peer):
 
     timed = "ecos's own stepping loop, from its progress log"
     counters = ()
+    fmi_versions = ("2", "3")
 
     def __init__(self, name: str = "ecos", parallel: bool = True, log_all: bool = False):
         self.name, self.parallel, self.log_all = name, parallel, log_all
@@ -169,6 +202,14 @@ class Ecos(Peer):
         if scene.experiment.start != 0.0:
             return f"peer '{self.name}' simulates from t = 0 only; scene '{scene.name}' starts at " \
                    f"{scene.experiment.start:g} s"
+        if self.log_all:
+            for name, md in setup.descriptions.items():
+                if md.fmiVersion.startswith("3.") and (said := refused_read(setup.fmu_paths[name])):
+                    return (f"peer '{self.name}' logs every Float64 variable of {name} "
+                            f"({setup.fmu_paths[name].name}, FMI {md.fmiVersion}) in one fmi3GetFloat64 after "
+                            f"each step, and ecos does not check its status: the FMU refuses that call in "
+                            f"Co-Simulation ({said}), so ecos would log zeros; peer 'ecos' logs the recorded "
+                            "variables")
         return None
 
     def run(self, setup: SceneSetup, step: float, tolerance: float | None, environment: dict | None) -> RunResult:

@@ -1,9 +1,12 @@
 """``fmpy-jacobi``: the plain baseline, a fixed-step Jacobi loop written on fmpy's
-high-level ``FMU2Slave`` API (``getReal``/``setReal``/``doStep``, one Python call each), as
-an fmpy user would write it.  The same algorithm as the harness's ``jacobi`` (after every
-step, outputs are propagated in dependency order, so the coupling's torques are those of
-the shafts' new states) without the harness's raw ctypes calls: its traces are the
-harness's bit for bit.
+high-level API (``FMU2Slave``: ``getReal``/``setReal``/``doStep``; an FMI 3.0 FMU's
+``FMU3Slave``: ``getFloat64``/``setFloat64``/``doStep``; one Python call each), as an fmpy
+user would write it.  The same algorithm as the harness's ``jacobi`` (after every step,
+outputs are propagated in dependency order, so the coupling's torques are those of the
+shafts' new states) without the harness's raw ctypes calls: its traces are the harness's
+bit for bit.  An FMI 3.0 instance is made with Event Mode and early return off, as the
+harness makes it: a step that asks for Event Mode, ends the simulation or returns early
+ends the run, never a silently short step.
 """
 from __future__ import annotations
 
@@ -19,9 +22,49 @@ from harness.engine.run import RunResult
 from harness.peers.base import Peer, SceneSetup
 
 
+class _Fmi3Slave:
+    """An fmpy ``FMU3Slave`` behind the calls the loop makes of an ``FMU2Slave``:
+    ``getReal``/``setReal`` are ``getFloat64``/``setFloat64``, ``setupExperiment`` is kept
+    for ``enterInitializationMode`` (FMI 3.0 takes the start and stop time there), and a
+    ``doStep`` that sets one of its flags raises (see the module docstring)."""
+
+    def __init__(self, md, unzipped: str, instance: str):
+        from fmpy.fmi3 import FMU3Slave
+
+        self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                             instanceName=instance)
+
+        # FMI 3.0's callback carries no instance name: each instance gets one that routes by its name
+        def log(environment, status, category, message):
+            harness_component.dispatch_message(instance, status, category, message)
+
+        self.fmu.instantiate(eventModeUsed=False, earlyReturnAllowed=False, logMessage=log)
+        self.getReal, self.setReal = self.fmu.getFloat64, self.fmu.setFloat64
+        self.times: tuple[float, float | None] = (0.0, None)
+
+    def __getattr__(self, name):
+        return getattr(self.fmu, name)
+
+    def setupExperiment(self, startTime: float, stopTime: float | None):
+        self.times = (startTime, stopTime)
+
+    def enterInitializationMode(self):
+        self.fmu.enterInitializationMode(startTime=self.times[0], stopTime=self.times[1])
+
+    def doStep(self, currentCommunicationPoint: float, communicationStepSize: float):
+        events, terminate, early, last = self.fmu.doStep(currentCommunicationPoint, communicationStepSize)
+        if events or terminate or early:
+            asked = ", ".join(name for name, flag in (("eventHandlingNeeded", events), ("terminateSimulation", terminate),
+                                                      ("earlyReturn", early)) if flag)
+            raise RuntimeError(f"fmi3DoStep(t = {currentCommunicationPoint:.6g} s) set {asked} (lastSuccessfulTime = "
+                               f"{last:.9g} s): this loop makes every step whole, without Event Mode")
+
+
 class FmpyJacobi(Peer):
     name = "fmpy-jacobi"
-    summary = "fixed-step Jacobi on fmpy's FMU2Slave API (getReal/setReal/doStep per call)"
+    summary = ("fixed-step Jacobi on fmpy's FMU2Slave/FMU3Slave API (getReal/setReal/doStep, "
+               "getFloat64/setFloat64/doStep per call)")
+    fmi_versions = ("2", "3")
 
     def run(self, setup: SceneSetup, step: float, tolerance: float | None, environment: dict | None) -> RunResult:
         from fmpy.fmi2 import FMU2Slave
@@ -41,14 +84,14 @@ class FmpyJacobi(Peer):
                             for c in scene.connections if c.source == name] for name in setup.order}
         recorded = [(item.partition(".")[0], position[tuple(item.split(".", 1))]) for item in setup.record]
 
-        slaves: dict[str, FMU2Slave] = {}
+        slaves: dict[str, FMU2Slave | _Fmi3Slave] = {}
         unzipped: list[str] = []
         messages: deque[str] = deque(maxlen=5)
         values: dict[str, list[float]] = {}
         rows: list[list[float]] = []
         n_steps = 0
         failure = stage = None
-        finished = False    # every step taken: fmi2Terminate allowed (FMI 2.0: not after an error or before stepping)
+        finished = False    # every step taken: Terminate allowed (not after an error or before stepping)
 
         def propagate():
             for name in setup.order:
@@ -71,6 +114,9 @@ class FmpyJacobi(Peer):
                 # The harness's process-wide logger routes messages by instance name: keep
                 # this peer's, to say in a failure what the FMU said.
                 harness_component.route_messages(instance, messages)
+                if md.fmiVersion.startswith("3."):
+                    slaves[name] = _Fmi3Slave(md, unzipped[-1], instance)
+                    continue
                 fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped[-1],
                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=instance)
                 fmu.instantiate(callbacks=harness_component.log_callbacks())
@@ -81,7 +127,9 @@ class FmpyJacobi(Peer):
                 stage = "initialisation"
                 for name, fmu in slaves.items():
                     for param, value in setup.parameters[name].items():
-                        typed_values.set_on(fmu, setup.variables[name][param], value, f"{name}.{param}")
+                        # an FMI 3.0 parameter through the setter of its type (setInt32, setBoolean, ...)
+                        typed_values.set_on(fmu.fmu if isinstance(fmu, _Fmi3Slave) else fmu,
+                                            setup.variables[name][param], value, f"{name}.{param}")
                     fmu.setupExperiment(startTime=e.start, stopTime=e.stop)
                     fmu.enterInitializationMode()
                 propagate()

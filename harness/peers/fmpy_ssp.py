@@ -31,6 +31,8 @@ class FmpySsp(Peer):
     summary = "fmpy.ssp.simulate_ssp on the scene's SSP export; inputs start at 0, feedthrough outputs lag one step"
     from_first_step = True
     timed = "everything: unpacking, instantiating and stepping the FMUs (simulate_ssp is one call)"
+    fmi_limit = ("fmpy 0.3.32's fmpy.ssp makes every FMU that is not FMI 1.0 an FMI 2.0 FMU2Slave (it looks for "
+                 "binaries/linux64, which an FMI 3.0 FMU has not)")
 
     def unavailable(self) -> str | None:
         try:

@@ -95,6 +95,8 @@ class LibcosimFixed(Peer):
 
     name = "libcosim-fixed"
     summary = "OSP libcosim fixed-step algorithm (libcosimpy); feedthrough outputs lag one step"
+    fmi_limit = ("libcosim (libcosimpy 0.0.6) imports FMI 1.0 and 2.0 FMUs only: its importer knows no other "
+                 "fmiVersion and refuses the FMU ('Unsupported FMI version')")
     #: libcosim builds the components, connections and parameter values from a file itself
     builds_system = False
 

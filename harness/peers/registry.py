@@ -31,6 +31,18 @@ def available(name: str) -> str | None:
     return PEERS[name].unavailable()
 
 
+def problem(name: str, scene: scenes.Scene, fmu_dir: Path = FMUS) -> str | None:
+    """What stops peer ``name`` from running ``scene`` - unknown, unavailable here, an FMI
+    version or a part of the scene it cannot run - said before anything runs; None if
+    nothing does.  ``SceneInvalid`` for a scene the FMUs cannot run."""
+    reason = available(name)
+    if reason:
+        return f"peer '{name}' is not available: {reason}"
+    peer = PEERS[name]
+    setup = SceneSetup(scene, Path(fmu_dir), list(recorded_names(scene)))
+    return peer.fmi_problem(setup) or peer.scene_problem(setup)
+
+
 def simulate_peer(name: str, scene: scenes.Scene, step: float, fmu_dir: Path = FMUS,
                   record: list[str] | None = None, tolerance: float | None = None,
                   environment: dict | None = None) -> RunResult:

@@ -102,6 +102,10 @@ class _Peer:
     def __init__(self, peer: str, scene_record: bool = False):
         self.peer, self.scene_record = peer, scene_record
 
+    def problem(self, scene: scenes.Scene, fmu_dir: Path) -> str | None:
+        """What stops the peer from running the scene, said before anything runs."""
+        return peers.problem(self.peer, scene, fmu_dir)
+
     def __call__(self, scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
                  env: dict | None) -> tuple[float, str | None]:
         result = peers.simulate_peer(self.peer, scene, step, fmu_dir,
@@ -109,34 +113,51 @@ class _Peer:
         return result.wall_time, result.failure
 
 
-def _c_importer_time(scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
-                     env: dict | None) -> tuple[float, None]:
-    from fmpy import extract
+class _CImporter:
+    """Our C importer stepping each of the scene's FMUs alone (see the module docstring):
+    the sum of its stepping loops."""
 
-    program = scratch / "bin" / "minimal_importer"
-    if not program.exists():
-        compile_c_importer(program)
-    steps = round((scene.experiment.stop - scene.experiment.start) / step)
-    total = 0.0
-    for model in sorted({c.fmu for c in scene.components.values()}):
-        unzipped = scratch / "unzipped" / model
-        if not unzipped.exists():
-            extract(str(fmu_dir / f"{model}.fmu"), str(unzipped))
-        done = run_c_importer(program, unzipped, model, steps, step, BARE_ENVIRONMENT if env is None else env,
-                              timeout=600)
-        loop = re.search(r"^loop_s=([0-9.]+)$", done.stderr, re.M)
-        if done.returncode != 0 or not loop:
-            raise RuntimeError(f"the C importer failed on {model} (exit {done.returncode}):\n{done.stderr[-2000:]}")
-        total += float(loop.group(1))
-    return total, None
+    def problem(self, scene: scenes.Scene, fmu_dir: Path) -> str | None:
+        if scene.experiment.fmi != 2:
+            return (f"host c-importer times the FMI 2.0 editions' stepping loop only; scene '{scene.name}' runs "
+                    f"the FMI {scene.experiment.fmi}.0 editions")
+        return None
+
+    def __call__(self, scene: scenes.Scene, step: float, fmu_dir: Path, scratch: Path,
+                 env: dict | None) -> tuple[float, None]:
+        from fmpy import extract
+
+        program = scratch / "bin" / "minimal_importer"
+        if not program.exists():
+            compile_c_importer(program)
+        steps = round((scene.experiment.stop - scene.experiment.start) / step)
+        total = 0.0
+        for model in sorted({c.fmu for c in scene.components.values()}):
+            unzipped = scratch / "unzipped" / model
+            if not unzipped.exists():
+                extract(str(fmu_dir / f"{model}.fmu"), str(unzipped))
+            done = run_c_importer(program, unzipped, model, steps, step, BARE_ENVIRONMENT if env is None else env,
+                                  timeout=600)
+            loop = re.search(r"^loop_s=([0-9.]+)$", done.stderr, re.M)
+            if done.returncode != 0 or not loop:
+                raise RuntimeError(f"the C importer failed on {model} (exit {done.returncode}):\n"
+                                   f"{done.stderr[-2000:]}")
+            total += float(loop.group(1))
+        return total, None
 
 
 #: each host, in the order a round runs them, and how it is timed: ecos logs the scene's
 #: record (its ``--csvConfig``) or, ``ecos-log-all``, every variable
 _TIMERS = {"harness-jacobi": _Peer("lever-jacobi"), "libcosim-fixed": _Peer("libcosim-fixed"),
            "ecos": _Peer("ecos", scene_record=True), "ecos-serial": _Peer("ecos-serial", scene_record=True),
-           "ecos-log-all": _Peer("ecos-log-all", scene_record=True), "c-importer": _c_importer_time}
+           "ecos-log-all": _Peer("ecos-log-all", scene_record=True), "c-importer": _CImporter()}
 HOSTS = tuple(_TIMERS)
+
+
+def problems(scene: scenes.Scene, hosts, fmu_dir: Path = FMUS) -> list[str]:
+    """Why any of ``hosts`` cannot run the scene (an FMI version it does not run, ...),
+    each said in a sentence before anything runs."""
+    return [said for host in hosts if (said := _TIMERS[host].problem(scene, fmu_dir))]
 
 
 def time_hosts(scene: scenes.Scene, step: float, repeats: int, fmu_dir: Path = FMUS,

@@ -74,6 +74,7 @@ def test_the_command_line_goes_through_the_api(lever, fmu_dir, tmp_path, monkeyp
 
     def bench_stops_at_once(*args, **kwargs):          # the routing is the point, not a benchmark
         calls.append("bench")
+        calls.append(kwargs.get("fmi_editions"))
         raise api.InputError("stopped by the test")
     monkeypatch.setattr(api, "bench", bench_stops_at_once)
     assert lever("run", "kavz685", "--stop", "0.2", "--no-reference", "--out", tmp_path / "r").exit_code == 0
@@ -81,7 +82,9 @@ def test_the_command_line_goes_through_the_api(lever, fmu_dir, tmp_path, monkeyp
                  "--out", tmp_path / "v").exit_code == 0
     assert calls == ["run", "validate"]
     benched = lever("bench", "kavz685", "--only", "jacobi", "--out", str(tmp_path / "b"))
-    assert calls[-1] == "bench" and "stopped by the test" in benched.output, benched.output
+    assert calls[-2:] == ["bench", True] and "stopped by the test" in benched.output, benched.output
+    lever("bench", "kavz685", "--no-fmi-editions", "--out", str(tmp_path / "b"))
+    assert calls[-2:] == ["bench", False]
 
 
 def test_a_run_says_how_it_ended(fmu_dir):

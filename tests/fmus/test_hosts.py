@@ -51,10 +51,14 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
         assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
 
 
-def test_the_kavz685_scene_in_ecos_passes_lever_validate(lever, fmu_dir, ecos_bin, tmp_path):
-    spec = scene.load("kavz685")
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmi, lever, fmu_dir, ecos_bin, tmp_path):
+    """The whole scene (10 s at 1 ms) from our SSP export, with the FMI 2.0 FMUs or the FMI
+    3.0 editions (the export of ``experiment.fmi = 3`` carries those), in a bare environment."""
+    spec = scene.load("kavz685").with_overrides([f"experiment.fmi={fmi}"])
     archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
     result = ecos.run_ecos(archive, spec.experiment.stop, spec.experiment.step, ecos_bin, record=list(spec.record))
+    assert ("Loading FMI version 3" in result.log) == (fmi == 3)     # ecos says so of FMI 3.0 FMUs only
     times, traces = ecos.ecos_traces(result.csv)
     assert times[-1] == pytest.approx(spec.experiment.stop, abs=1e-9)
     assert sorted(traces) == sorted(spec.record)          # ecos logged what its CSV configuration names
@@ -123,6 +127,18 @@ def test_lever_hosts_writes_the_table(lever, tmp_path, fmu_dir):
     assert "| ecos |" in (tmp_path / "hosts.md").read_text()
     bad = lever("hosts", "--host", "simulink")
     assert bad.exit_code != 0 and "unknown host simulink" in bad.output
+
+
+def test_lever_hosts_refuses_the_hosts_that_cannot_run_an_fmi3_scene_before_anything_runs(lever, fmu_dir, tmp_path):
+    """libcosim runs no FMI 3.0 FMU and the C importer's timing loop is FMI 2.0's: each says
+    so, before anything runs or is written; the others run the FMI 3.0 editions."""
+    refused = lever("hosts", "--set", "experiment.fmi=3", "--out", str(tmp_path / "h"))
+    assert refused.exit_code == 2 and not (tmp_path / "h").exists(), refused.output
+    assert "peer 'libcosim-fixed' runs FMI 2.0 FMUs" in refused.output
+    assert "host c-importer times the FMI 2.0 editions' stepping loop only" in refused.output
+    assert hosts.problems(scene.load("kavz685").with_overrides(["experiment.fmi=3"]),
+                          ("harness-jacobi", "ecos", "ecos-serial"), fmu_dir) == []
+    assert hosts.problems(scene.load("kavz685"), hosts.HOSTS, fmu_dir) == []
 
 
 def test_ecos_couples_as_libcosim_does_one_step_behind_our_jacobi(fmu_dir, ecos_bin, tmp_path):

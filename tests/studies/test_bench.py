@@ -116,6 +116,13 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir):
         assert "even a master that cost nothing" in (tmp_path / "bench.md").read_text() or step.get("unreliable")
     assert json.loads((tmp_path / "bench.json").read_text())["machine"]["cpus"] >= 1
     assert "## Where the time goes" in (tmp_path / "bench.md").read_text()
+    # the FMI 2.0 and FMI 3.0 editions, side by side under the baseline at the scene's step
+    editions = json.loads((tmp_path / "bench.json").read_text())["fmi_editions"]
+    assert (editions["master"], editions["step"], editions["steps"]) == ("jacobi", 1e-3, 300)
+    assert editions["run"]["ratio"]["ratios"] == pytest.approx([editions["run"]["fmi3_s"][0] /
+                                                                editions["run"]["fmi2_s"][0]])
+    assert "## FMI 2.0 and FMI 3.0 editions" in (tmp_path / "bench.md").read_text()
+    assert any(line.startswith("  FMI 3.0 / FMI 2.0 editions: floor ") for line in bench.summary_lines(result))
 
 
 def test_the_time_split_prices_each_call_and_leaves_the_rest_to_the_master():
@@ -170,11 +177,12 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
     lines = []
     again = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, progress=lines.append)
     assert calls == []
-    # three cases and the two floors (our FMUs', the do-nothing twins'); no case reaches the
-    # target, so no headline is measured side by side
-    assert lines[0].startswith("resuming: 5 case(s) already in")
+    # three cases, the two floors (our FMUs', the do-nothing twins') and the FMI editions'
+    # comparison; no case reaches the target, so no headline is measured side by side
+    assert lines[0].startswith("resuming: 6 case(s) already in")
     assert [bench.table_row(c) for c in again["cases"]] == [bench.table_row(c) for c in first["cases"]]
     assert again["floor_per_step_s"] == first["floor_per_step_s"]
+    assert again["fmi_editions"] == first["fmi_editions"] and first["fmi_editions"]["run"]["fmi3"]["n"] == 1
 
     # A changed plan keeps the cases it shares; a fresh run recomputes them all.
     monkeypatch.undo()
@@ -182,7 +190,9 @@ def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monke
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     spec.bench["steps"]["trapezoidal-newton"] = [2e-3, 4e-3]
     spec.bench["monolithic_rtol"] = []
-    grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False)
+    grown = bench.bench(spec, repeats=1, fmu_dir=fmu_dir, peers=False, out=tmp_path, resume=False,
+                        fmi_editions=False)
+    assert grown["fmi_editions"] is None and "FMI 2.0 and FMI 3.0" not in bench.markdown(grown, [])
     assert [c.step for c in grown["cases"] if c.engine == "trapezoidal-newton"] == [2e-3, 4e-3]
     assert (tmp_path / "cases.old1.jsonl").exists()
 
@@ -215,27 +225,38 @@ def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir)
     assert len(result) == 11 and (result["tau1"] == 0.0).all() and (result["phi1"] == 0.3).all()
 
 
-@pytest.mark.parametrize("measure", ["call_floor", "call_prices"])
+@pytest.mark.parametrize("measure", ["call_floor", "call_prices", "floors_side_by_side", "prices_side_by_side"])
 def test_the_floor_loops_carry_the_values_so_the_models_run_the_scenes_motion(monkeypatch, measure):
     # The floor's calls must move the scene as a master would: without the propagation's
     # copies the shafts got their start torques for ever, the load shaft ran away and its
-    # speed-dependent substeps priced a step that no master makes.
+    # speed-dependent substeps priced a step that no master makes.  Side by side (the FMI
+    # 2.0 and 3.0 editions taking turns every 700 steps) each system makes every step.
     from harness.engine.system import System
-    seen = {}
+    seen = []
     free = System.free
 
     def noting(system):
-        seen.update(engine=system.value("engine", "w"), load=system.value("load", "w"))
+        seen.append({"engine": system.value("engine", "w"), "load": system.value("load", "w"),
+                     "time": system.components["engine"].time})
         free(system)
 
     monkeypatch.setattr(System, "free", noting)
     kavz = scene.load("kavz685")
+    both = [kavz, kavz.with_overrides(["experiment.fmi=3"])]
     if measure == "call_floor":
-        bench.call_floor(kavz, n_steps=3000)
-    else:
+        assert bench.call_floor(kavz, n_steps=3000) > 0
+    elif measure == "call_prices":
         bench.call_prices(kavz, n_steps=3000)
+    elif measure == "floors_side_by_side":
+        assert min(bench.floors.floors_side_by_side(both, 3000, chunk=700)) > 0
+    else:
+        prices = bench.floors.prices_side_by_side(both, n_steps=3000, chunk=700)
+        assert [set(p) for p in prices] == [{"engine", "load", "coupling"}] * 2
+        assert [set(p["engine"]) for p in prices] == [{"get", "set", "step", "state"}] * 2
+    assert len(seen) == (2 if measure.endswith("side_by_side") else 1)
     # after 3 s the driveline turns at its steady 36-38 rad/s (the scene's run: 36.66 mean)
-    assert 35.0 < seen["engine"] < 39.0 and 35.0 < seen["load"] < 39.0, seen
+    for s in seen:
+        assert 35.0 < s["engine"] < 39.0 and 35.0 < s["load"] < 39.0 and s["time"] == pytest.approx(3.0), s
 
 
 def test_the_floor_step_makes_the_calls_of_a_jacobi_step(fmu_dir):
@@ -295,3 +316,45 @@ def test_where_the_floors_motion_diverges_it_starts_again_and_never_calls_a_fail
     refused.clear()
     assert all(price > 0 for price in bench.call_prices(stiff, n_steps=400, step=2e-3)["engine"].values())
     assert refused
+
+
+def test_the_fmi_editions_are_measured_in_turn_round_by_round(fmu_dir, monkeypatch):
+    """Each round measures the floor, the call prices and the run with both editions; each
+    ratio is FMI 3.0 over FMI 2.0 within a round; both runs computed the same traces."""
+    from harness.studies.bench import editions
+
+    monkeypatch.setattr(editions, "FLOOR_STEPS", 200)
+    monkeypatch.setattr(editions, "PRICE_STEPS", 100)
+    monkeypatch.setattr(editions, "CHUNK", 30)
+    kavz = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0.01"])
+    compared = editions.compare(kavz, "gauss-seidel", 1e-3, 2, fmu_dir)
+    assert (compared["master"], compared["steps"], compared["largest_trace_difference"]) == ("gauss-seidel", 50, 0.0)
+    figures = [compared["floor"], compared["run"], *(f for kinds in compared["prices"].values() for f in kinds.values())]
+    for f in figures:
+        assert len(f["fmi2_s"]) == len(f["fmi3_s"]) == 2 and min(f["fmi2_s"] + f["fmi3_s"]) >= 0.0
+        assert f["ratio"]["ratios"] == pytest.approx([a / b for a, b in zip(f["fmi3_s"], f["fmi2_s"]) if b > 0])
+    assert min(compared["floor"]["fmi2_s"] + compared["floor"]["fmi3_s"]) > 0.0
+    # every component's calls, and the states of those that roll back, priced for both
+    assert {name: set(kinds) for name, kinds in compared["prices"].items()} == {
+        "engine": {"get", "set", "step", "state"}, "load": {"get", "set", "step", "state"},
+        "coupling": {"get", "set", "step"}}
+    text = "\n".join(editions.markdown(compared))
+    assert "| coupling step, a call | " in text and "bit for bit the same" in text
+
+
+def test_the_fmi_editions_are_not_compared_where_there_is_no_other_edition(tmp_path, fmu_dir):
+    from harness.paths import SCENES
+    from harness.studies.bench import editions
+
+    assert editions.missing(scene.load("kavz685"), fmu_dir) is None
+    text = (SCENES / "kavz685.toml").read_text().replace('fmu = "LeverCoupling"',
+                                                               f'fmu = "{fmu_dir / "LeverCoupling.fmu"}"')
+    (tmp_path / "user.toml").write_text(text)
+    assert "coupling's FMU is a file" in editions.missing(scene.load(tmp_path / "user.toml"), fmu_dir)
+    only_fmi2 = tmp_path / "fmus"
+    only_fmi2.mkdir()
+    for name in ("EngineShaft", "LeverCoupling", "LoadShaft"):
+        (only_fmi2 / f"{name}.fmu").write_bytes((fmu_dir / f"{name}.fmu").read_bytes())
+    assert "no FMI 3.0 edition of EngineShaft" in editions.missing(scene.load("kavz685"), only_fmi2)
+    assert editions.summary_lines({"not_compared": "why"}) == [
+        "  FMI 3.0 against FMI 2.0 editions not compared: why"]

@@ -1,6 +1,7 @@
 """The work-precision benchmark: error against run time for every way the harness can
 step a scene, next to other co-simulation engines on the same FMUs, the monolithic
-solution and the FMU-call floor (``lever bench [SCENE]``).
+solution and the FMU-call floor (``lever bench [SCENE]``); and what the FMUs' FMI 3.0
+editions cost beside their FMI 2.0 ones (floor, call prices, a run, side by side).
 
 Each case runs ``repeats`` times; the run time quoted is the median [min-max] of the
 stepping loops (instantiation left out, for every engine alike).  What is divided by what
@@ -25,10 +26,12 @@ the target error); masters it does not name are left out.
 The package, one module a job: ``schedule`` (the plan, the Case, the case log), ``timing``
 (running and timing the cases, the side-by-side rounds), ``floors`` (the FMU-call floor and
 call prices, the time split), ``do_nothing_twins`` (the FMUs' do-nothing twins the floor and
-the split are also timed on), ``headlines`` (the claims and what is no result), ``report``
-(tables, bench.md/bench.json/bench.csv, the plot) and ``study`` (the whole benchmark in
-order).  What other modules use is named here.
+the split are also timed on), ``editions`` (the FMUs' FMI 2.0 and FMI 3.0 editions side by
+side: floor, call prices, a run), ``headlines`` (the claims and what is no result),
+``report`` (tables, bench.md/bench.json/bench.csv, the plot) and ``study`` (the whole
+benchmark in order).  What other modules use is named here.
 """
+from harness.studies.bench.editions import compare as compare_editions
 from harness.studies.bench.floors import CALL_KINDS, call_floor, call_prices, time_split
 from harness.studies.bench.headlines import (bracket, case_noise, case_problems, claims, eigenfrequency,
                                              headline_cases, interpolate, overhead_above_floor, split_case,
@@ -41,7 +44,8 @@ from harness.studies.bench.timing import measure_rounds, run_master, run_monolit
 from harness.studies.cases import case_key
 
 __all__ = ["CALL_KINDS", "COLUMNS", "Case", "bench", "bracket", "call_floor", "call_prices", "case_key",
-           "case_noise", "case_problems", "claims", "default_out", "eigenfrequency", "faster_text", "fingerprint",
+           "case_noise", "case_problems", "claims", "compare_editions", "default_out", "eigenfrequency",
+           "faster_text", "fingerprint",
            "headline_cases", "interpolate", "machine_text", "markdown", "measure_rounds", "overhead_above_floor",
            "plan", "plot", "run_master", "run_monolithic", "run_peer", "split_case", "summary_lines", "table_row",
            "time_at_error", "time_split", "write"]

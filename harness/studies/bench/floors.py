@@ -56,24 +56,57 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS, 
     any master must pay at the least.  Steps of ``step`` (default the scene's): a shaft's
     fmi2DoStep costs more the longer the step.  Where the motion diverges at this step it
     starts again from the initial states (``_start_again``); only completed steps are timed."""
-    system = System(scene, fmu_dir, record=recorded_names(scene))
-    states = None
+    return floors_side_by_side([scene], n_steps, fmu_dir, step)[0]
+
+
+def floors_side_by_side(versions: list[scenes.Scene], n_steps: int, fmu_dir: Path = FMUS,
+                        step: float | None = None, chunk: int | None = None) -> list[float]:
+    """``call_floor`` of each scene in ``versions`` (e.g. one scene with its FMUs' FMI 2.0
+    and FMI 3.0 editions), all instantiated at once and taking turns every ``chunk``
+    completed steps (default: all ``n_steps`` at once), so that each saw the machine the
+    others saw; seconds per step of each."""
+    loops = []
     try:
-        system.initialize()
-        states = _initial_states(system)
-        plan = system.floor_plan()
-        floor_step = system.floor_step
-        timer = clock.perf_counter
-        h = step or scene.experiment.step
-        start = t = scene.experiment.start
-        spent, done = 0.0, 0
+        for scene in versions:
+            loops.append(_FloorLoop(scene, fmu_dir, step))
+        while any(loop.done < n_steps for loop in loops):
+            for loop in loops:
+                loop.advance(min(chunk or n_steps, n_steps - loop.done))
+        interrupt.check()
+        return [loop.spent / n_steps for loop in loops]
+    finally:
+        for loop in loops:
+            loop.free()
+
+
+class _FloorLoop:
+    """One scene's system making the floor's steps (``call_floor``) a number at a time."""
+
+    def __init__(self, scene: scenes.Scene, fmu_dir: Path, step: float | None):
+        self.system = System(scene, fmu_dir, record=recorded_names(scene))
+        self.states = None
+        try:
+            self.system.initialize()
+            self.states = _initial_states(self.system)
+            self.plan = self.system.floor_plan()
+        except BaseException:
+            self.free()
+            raise
+        self.h = step or scene.experiment.step
+        self.start = self.t = scene.experiment.start
+        self.spent, self.done = 0.0, 0
+
+    def advance(self, count: int):
+        """``count`` more completed steps, their time added to ``spent``."""
+        floor_step, timer, plan, h = self.system.floor_step, clock.perf_counter, self.plan, self.h
+        t, spent, done, goal = self.t, self.spent, self.done, self.done + count
         last = timer()
-        while done < n_steps:
+        while done < goal:
             try:
                 floor_step(t, h, plan)
             except FmuCallError as error:
-                _start_again(system, states if t != start else None, start, error)
-                t = start
+                _start_again(self.system, self.states if t != self.start else None, self.start, error)
+                t = self.start
                 last = timer()
                 continue
             now = timer()
@@ -81,11 +114,12 @@ def call_floor(scene: scenes.Scene, n_steps: int = 20000, fmu_dir: Path = FMUS, 
             last = now
             done += 1
             t += h
-        interrupt.check()
-        return spent / n_steps
-    finally:
-        _free_states(states)
-        system.free()
+        self.t, self.spent, self.done = t, spent, done
+
+    def free(self):
+        _free_states(self.states)
+        self.states = None
+        self.system.free()
 
 
 #: kinds of FMI call a master makes, as ``System.calls_by_kind`` counts them
@@ -101,13 +135,58 @@ def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
     in turn (a third of the three), for the stateful components that can roll back.  Summed
     over one step's calls, the prices are the floor.  Steps of ``step`` (default the
     scene's): a shaft's fmi2DoStep costs more the longer the step (it sub-steps its load)."""
-    timer = clock.perf_counter
-    system = System(scene, fmu_dir, record=recorded_names(scene))
-    states = None
+    return prices_side_by_side([scene], fmu_dir, n_steps, step)[0]
+
+
+def prices_side_by_side(versions: list[scenes.Scene], fmu_dir: Path = FMUS, n_steps: int = 2000,
+                        step: float | None = None, chunk: int | None = None) -> list[dict[str, dict[str, float]]]:
+    """``call_prices`` of each scene in ``versions``, all instantiated at once and taking
+    turns every ``chunk`` steps (default: all at once), the state calls too."""
+    loops = []
     try:
-        system.initialize()
-        states = _initial_states(system)
-        spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
+        for scene in versions:
+            loops.append(_PriceLoop(scene, fmu_dir, step))
+        while any(loop.done < n_steps for loop in loops):
+            for loop in loops:
+                loop.advance(min(chunk or n_steps, n_steps - loop.done))
+        # the timer's own share of an interval, taken from every timed call
+        timer = clock.perf_counter
+        empty = 0.0
+        for _ in range(n_steps):
+            started = timer()
+            empty += timer() - started
+        own = empty / n_steps
+        prices = [loop.prices(own) for loop in loops]
+        priced = [0] * len(loops)
+        while any(k < n_steps for k in priced):
+            for i, loop in enumerate(loops):
+                count = min(chunk or n_steps, n_steps - priced[i])
+                loop.time_states(count)
+                priced[i] += count
+        for loop, found in zip(loops, prices):
+            for name, spent in loop.state_spent.items():
+                found[name]["state"] = spent / (3 * n_steps)
+        return prices
+    finally:
+        for loop in loops:
+            loop.free()
+
+
+class _PriceLoop:
+    """One scene's system making the floor's steps with every call timed on its own
+    (``call_prices``), a number of steps at a time."""
+
+    def __init__(self, scene: scenes.Scene, fmu_dir: Path, step: float | None):
+        self.system = system = System(scene, fmu_dir, record=recorded_names(scene))
+        self.states = None
+        try:
+            system.initialize()
+            self.states = _initial_states(system)
+        except BaseException:
+            self.free()
+            raise
+        timer = clock.perf_counter
+        self.spent = spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
 
         def timed(call, account: dict, kind: str):
             # the interval holds the raw call alone, as the floor's loop makes it
@@ -125,53 +204,61 @@ def call_prices(scene: scenes.Scene, fmu_dir: Path = FMUS, n_steps: int = 2000,
                                        for send in visit.sends))
 
         plan = system.floor_plan()
-        plan = FloorPlan(tuple(replace(call, do_step=timed(call.do_step, spent[call.component.name], "step"))
-                               for call in plan.steps),
-                         [timed_visit(v) for v in plan.propagation], [timed_visit(v) for v in plan.rereads])
-        counted = system.calls_by_kind
-        made = {name: dict.fromkeys(spent[name], 0) for name in spent}
-        h = step or scene.experiment.step
-        start = t = scene.experiment.start
-        done = 0
-        while done < n_steps:
+        self.plan = FloorPlan(tuple(replace(call, do_step=timed(call.do_step, spent[call.component.name], "step"))
+                                    for call in plan.steps),
+                              [timed_visit(v) for v in plan.propagation], [timed_visit(v) for v in plan.rereads])
+        self.made = {name: dict.fromkeys(spent[name], 0) for name in spent}
+        self.h = step or scene.experiment.step
+        self.start = self.t = scene.experiment.start
+        self.done = 0
+        self.state_spent = {name: 0.0 for name in system.stateful
+                            if system.components[name].description.coSimulation.canGetAndSetFMUstate}
+
+    def advance(self, count: int):
+        """``count`` more completed steps, their calls priced."""
+        system, spent, made, counted = self.system, self.spent, self.made, self.system.calls_by_kind
+        goal = self.done + count
+        while self.done < goal:
             before = counted()
             kept = {name: dict(kinds) for name, kinds in spent.items()}
             try:
-                system.floor_step(t, h, plan)
+                system.floor_step(self.t, self.h, self.plan)
             except FmuCallError as error:
                 # the failed step's calls are not priced (see call_floor)
-                _start_again(system, states if t != start else None, start, error)
+                _start_again(system, self.states if self.t != self.start else None, self.start, error)
                 for name in spent:
                     spent[name].update(kept[name])
-                t = start
+                self.t = self.start
                 continue
             after = counted()
             for name in made:
                 for kind in made[name]:
                     made[name][kind] += after[name][kind] - before[name][kind]
-            done += 1
-            t += h
-        # the timer's own share of an interval, taken from every timed call
-        empty = 0.0
-        for _ in range(n_steps):
+            self.done += 1
+            self.t += self.h
+
+    def prices(self, own: float) -> dict[str, dict[str, float]]:
+        """Seconds per call of each component and kind so far, less the timer's ``own``."""
+        return {name: {kind: max(0.0, self.spent[name][kind] / self.made[name][kind] - own)
+                       for kind in self.spent[name] if self.made[name][kind]} for name in self.spent}
+
+    def time_states(self, count: int):
+        """``count`` rounds of getting, setting and freeing a state of each component that
+        can roll back, timed into ``state_spent``."""
+        timer = clock.perf_counter
+        for name in self.state_spent:
+            c = self.system.components[name]
             started = timer()
-            empty += timer() - started
-        own = empty / n_steps
-        prices = {name: {kind: max(0.0, spent[name][kind] / made[name][kind] - own)
-                         for kind in spent[name] if made[name][kind]} for name in spent}
-        for name in system.stateful:
-            c = system.components[name]
-            if c.description.coSimulation.canGetAndSetFMUstate:
-                started = timer()
-                for _ in range(n_steps):
-                    state = c.save_state()
-                    c.restore_state(state, c.time)
-                    c.free_state(state)
-                prices[name]["state"] = (timer() - started) / (3 * n_steps)
-        return prices
-    finally:
-        _free_states(states)
-        system.free()
+            for _ in range(count):
+                state = c.save_state()
+                c.restore_state(state, c.time)
+                c.free_state(state)
+            self.state_spent[name] += timer() - started
+
+    def free(self):
+        _free_states(self.states)
+        self.states = None
+        self.system.free()
 
 
 def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, dict[str, float]],

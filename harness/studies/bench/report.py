@@ -13,6 +13,7 @@ import numpy as np
 from harness.description import scene as scenes
 from harness.paths import RESULTS
 from harness.studies import trust
+from harness.studies.bench import editions
 from harness.studies.bench.headlines import case_noise, case_problems, overhead_above_floor
 from harness.studies.bench.schedule import Case
 
@@ -232,6 +233,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
                 lines.append(f"- {name} {setting} (h*omega_n = {r['h_omega']:.2f}): "
                              + (f"stable, energy residual {r['energy_residual']:.2e}, tau RMS {_pct(r['tau_rms'])}"
                                 if r["stable"] else "failed"))
+    lines += editions.markdown(result.get("fmi_editions"))
     return "\n".join(lines) + "\n"
 
 
@@ -270,6 +272,7 @@ def summary_lines(result: dict) -> list[str]:
     if claims.get("overhead_above_floor"):
         lines.append("  above the FMU-call floor: " + ", ".join(
             f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    lines += editions.summary_lines(result.get("fmi_editions"))
     lines.append("  " + machine_text(result.get("machine")))
     return lines
 

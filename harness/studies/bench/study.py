@@ -1,6 +1,6 @@
 """The whole benchmark, in order: the FMU-call floors (ours, the do-nothing twins'), every
 case of the plan through the case log, the time splits, the side-by-side rounds of the
-headline cases, and the claims."""
+headline cases, the FMI 2.0 and FMI 3.0 editions side by side, and the claims."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,23 +9,41 @@ from harness.description import scene as scenes
 from harness.engine import interrupt
 from harness.paths import FMUS
 from harness.studies import trust
-from harness.studies.bench import do_nothing_twins, floors, headlines, report, schedule, timing
+from harness.studies.bench import do_nothing_twins, editions, floors, headlines, report, schedule, timing
 from harness.studies.bench.schedule import Case
 from harness.studies.cases import CaseLog, case_key
 
 
 def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: list[str] | None = None,
           peers: bool = True, monolithic: bool = True, progress=None, out: Path | None = None,
-          resume: bool = True) -> dict:
+          resume: bool = True, fmi_editions: bool = True) -> dict:
     """Run the scene's plan.  With ``out``, every finished case goes to ``out/cases.jsonl``
     as it finishes (harness.studies.cases): a benchmark killed part-way and run again resumes
     with the cases not yet done (``resume=False`` starts afresh).  Ctrl-C stops it at the
-    running case's next step (logged as interrupted) with ``Interrupted``."""
+    running case's next step (logged as interrupted) with ``Interrupted``.
+    ``fmi_editions``: also the FMI 2.0 and FMI 3.0 editions side by side (``editions``)."""
     with interrupt.deferred():
-        return _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume)
+        return _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume, fmi_editions)
 
 
-def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume) -> dict:
+def _compare_editions(scene, p, repeats, fmu_dir, log, say) -> dict:
+    """The editions' comparison under the plan's baseline master at the scene's step,
+    through the case log; what stops it is said in the result."""
+    why = editions.missing(scene, fmu_dir)
+    if why:
+        say(f"FMI 2.0 and 3.0 editions not compared: {why}")
+        return {"not_compared": why}
+    master, step = p["baseline"], scene.experiment.step
+    say(f"FMI 2.0 and 3.0 editions side by side: floor, call prices and {master} at h = {step:g} s, "
+        f"{repeats} round(s)")
+    key = case_key("editions", repeats, master, step)
+    try:
+        return schedule.rounds_logged(log, key, lambda: editions.compare(scene, master, step, repeats, fmu_dir))
+    except Exception as error:  # noqa: BLE001 - without a case log: the benchmark keeps its other results
+        return {"failure": f"{type(error).__name__}: {error}"}
+
+
+def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume, fmi_editions) -> dict:
     p = schedule.plan(scene, only)
     say = progress or (lambda text: None)
     log = CaseLog(out, schedule.fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
@@ -112,11 +130,14 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         rounds = schedule.rounds_logged(log, key,
                                         lambda: timing.measure_rounds(scene, chosen, repeats, fmu_dir, twins))
         machine.samples += [x for x in rounds.get("load", []) if x is not None]
+    compared = _compare_editions(scene, p, repeats, fmu_dir, log, say) if fmi_editions else None
+    if compared is not None:
+        machine.samples += [x for x in compared.get("load", []) if x is not None]
     return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
             "floor_spread": trust.spread(ours_case.wall_times),
             "hollow_floor_per_step_s": hollow_case.wall if hollow_case else None,
             "hollow_floor_spread": trust.spread(hollow_case.wall_times) if hollow_case else None,
-            "machine": machine.summary(), "rounds": rounds,
+            "machine": machine.summary(), "rounds": rounds, "fmi_editions": compared,
             "eigenfrequency_rad_s": headlines.eigenfrequency(scene), "cases": cases,
             "claims": headlines.claims(scene, cases, p, hollow_case.wall if hollow_case else None, rounds=rounds,
                                        machine=machine.summary())}
