@@ -183,6 +183,10 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
+        if self._model_stale and self._phase == "initialization":
+            # parameters set in Initialization Mode: read the model they make (judged at
+            # fmi2ExitInitializationMode), never the one of the values before
+            self._try_build(report=False)
         if self._dirty and self._phase in _LIVE:
             self._refresh()
         names = self._real_names
