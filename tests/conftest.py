@@ -192,6 +192,7 @@ SLOW = (
     "formats/test_peers.py::test_what_stops_a_peer_is_said_before_anything_runs",
     "formats/test_peers.py::test_libcosim_reports_a_refused_parameter_instead_of_crashing",
     "formats/test_peers.py::test_libcosim_runs_our_fmus",
+    "formats/test_peers.py::test_every_peer_keeps_the_contract",
     "formats/test_ssp_engines.py",
     "judges/test_revolutions.py::test_the_plot_files_over_the_angle",
     "judges/test_stability.py::test_advisor_warns_and_proposes_stable_choices",
