@@ -8,7 +8,7 @@ from pathlib import Path
 
 from lever.physics.parameters import Parameter
 
-from harness.formats.badinputs.common import (DECLARED, DEG, FMI2_DISCARD, FMI2_FATAL, FMI2_OK, FMI2_WARNING,
+from harness.formats.badinputs.common import (changed, judge_log, DECLARED, DEG, FMI2_OK, FMI2_WARNING,
                                               LOG, PHASES, REFUSED, Case, Outcome, ADAPTERS, declared,
                                               instance_numbers, listen, model_description, status_of)
 from harness.paths import FMUS
@@ -525,25 +525,17 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
             status = slave.call("exitInitializationMode")
         outcome.status = status
         logged = slave.log[seen:]
-        outcome.messages = [text for level, text in logged if level >= FMI2_DISCARD]
         if status not in REFUSED:
             outcome.problems.append(f"status {status}, expected fmi2Error or fmi2Discard")
-        if any(level == FMI2_FATAL for level, _ in logged):
-            outcome.problems.append("a fatal status was logged")
-        text = " ".join(outcome.messages)
-        missing = [f for f in case.expect if f.lower() not in text.lower()]
-        if missing:
-            outcome.problems.append(f"the message does not say {missing}: {text!r}")
+        judge_log(outcome, logged, case)
         if case.refused_by == "action":
             if before is not None:
                 after = slave.get(case.action[1])
                 if not (after == before or (isinstance(before, float) and math.isnan(before) and math.isnan(after))):
                     outcome.problems.append(f"the refused value was applied: {before!r} -> {after!r}")
-            after = slave.reals()
-            changed = [n for n, x in everything.items()
-                       if not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
-            if changed:
-                outcome.problems.append(f"the refused call changed {', '.join(changed)}")
+            moved = changed(everything, slave.reals())
+            if moved:
+                outcome.problems.append(f"the refused call changed {', '.join(moved)}")
             if (case.phase == "stepping" and case.action[1] not in ("terminate-then-step", "terminate-then-set")
                     and not slave.step_ok()):
                 outcome.problems.append(f"the instance did not step on after the refusal: {slave.log[-1:]}")

@@ -126,3 +126,24 @@ def settle(update) -> int:
         except FMICallException as error:
             return error.status
     return FMI2_ERROR
+
+
+def judge_log(outcome: Outcome, logged: list, case: Case) -> str:
+    """What every refused call is judged by in the messages it logged (``(level, text)``,
+    FMI 2.0 and 3.0 levels alike): the refusals kept as ``outcome.messages``, no fatal
+    status, each fragment ``case.expect`` names said; the messages' text."""
+    outcome.messages = [text for level, text in logged if level >= FMI2_DISCARD]
+    if any(level == FMI2_FATAL for level, _ in logged):
+        outcome.problems.append("a fatal status was logged")
+    text = " ".join(outcome.messages)
+    missing = [f for f in case.expect if f.lower() not in text.lower()]
+    if missing:
+        outcome.problems.append(f"the message does not say {missing}: {text!r}")
+    return text
+
+
+def changed(before: dict, after: dict | None) -> list[str]:
+    """The variables whose value differs between two reads (NaN equal to NaN; all of them
+    when the second read failed)."""
+    return [n for n, x in before.items()
+            if after is None or not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]

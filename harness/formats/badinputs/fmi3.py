@@ -6,7 +6,7 @@ import ctypes
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (DECLARED, Case, Outcome, c_array, declared, instance_numbers,
+from harness.formats.badinputs.common import (changed, judge_log, DECLARED, Case, Outcome, c_array, declared, instance_numbers,
                                               model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import SHIM_HEADER, STATE_EDITS, edited_state, state_edits
 from harness.formats.badinputs.model_exchange import ME_SIZES
@@ -458,23 +458,16 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         outcome.status = status
         outcome.problems += inst.problems
         logged = inst.log[seen:]
-        outcome.messages = [text for level, text in logged if level >= FMI3_DISCARD]
         if status != FMI3_ERROR:
             outcome.problems.append(f"status {status}, expected fmi3Error")
-        if any(level == FMI3_FATAL for level, _ in logged):
-            outcome.problems.append("a fatal status was logged")
-        text = " ".join(outcome.messages)
-        missing = [f for f in case.expect if f.lower() not in text.lower()]
-        if missing:
-            outcome.problems.append(f"the message does not say {missing}: {text!r}")
+        text = judge_log(outcome, logged, case)
         if "fmi2" in text:
             outcome.problems.append(f"the message speaks of FMI 2.0 functions: {text!r}")
         after = inst.reals()
         if everything is not None:
-            changed = [n for n, x in everything.items()
-                       if after is None or not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
-            if changed:
-                outcome.problems.append(f"the refused call changed {', '.join(changed[:5])}")
+            moved = changed(everything, after)
+            if moved:
+                outcome.problems.append(f"the refused call changed {', '.join(moved[:5])}")
         if states is not None and inst.states() != states:
             outcome.problems.append(f"the refused call changed the states: {states} -> {inst.states()}")
         why = inst.usable()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (DECLARED, FMI2_DISCARD, FMI2_ERROR, FMI2_FATAL, FMI2_OK,
+from harness.formats.badinputs.common import (changed, judge_log, DECLARED, FMI2_ERROR, FMI2_OK,
                                               FMI2_WARNING, LOG, Case, Outcome, c_array, instance_numbers,
                                               listen, model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import Slave
@@ -310,19 +310,12 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         status = _act_me(model, case)
         outcome.status = status
         logged = model.log[seen:]
-        outcome.messages = [text for level, text in logged if level >= FMI2_DISCARD]
         if status != FMI2_ERROR:
             outcome.problems.append(f"status {status}, expected fmi2Error")
-        if any(level == FMI2_FATAL for level, _ in logged):
-            outcome.problems.append("a fatal status was logged")
-        text = " ".join(outcome.messages)
-        missing = [f for f in case.expect if f.lower() not in text.lower()]
-        if missing:
-            outcome.problems.append(f"the message does not say {missing}: {text!r}")
-        after = model.reals()
-        changed = [n for n, x in everything.items() if not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
-        if changed:
-            outcome.problems.append(f"the refused call changed {', '.join(changed)}")
+        judge_log(outcome, logged, case)
+        moved = changed(everything, model.reals())
+        if moved:
+            outcome.problems.append(f"the refused call changed {', '.join(moved)}")
         if states is not None and model.states() != states:
             outcome.problems.append(f"the refused call changed the states: {states} -> {model.states()}")
         why = model.usable()
