@@ -8,7 +8,7 @@ from pathlib import Path
 
 from lever.physics.parameters import Parameter
 
-from harness.formats.badinputs.common import (changed, judge_log, DECLARED, DEG, FMI2_OK, FMI2_WARNING,
+from harness.formats.badinputs.common import (changed, free_instance, judge_log, DECLARED, DEG, FMI2_OK, FMI2_WARNING,
                                               LOG, PHASES, REFUSED, Case, Outcome, ADAPTERS, declared,
                                               instance_numbers, listen, model_description, status_of)
 from harness.paths import FMUS
@@ -439,13 +439,8 @@ class Slave:
         return status <= FMI2_WARNING and all(math.isfinite(x) for x in self.fmu.getReal(outputs))
 
     def free(self) -> list[str]:
-        problems = []
         self.call("terminate")
-        try:
-            self.fmu.freeInstance()
-        except Exception as error:  # noqa: BLE001 - reported as the case's problem
-            problems.append(f"fmi2FreeInstance raised {error!r}")
-        return problems
+        return free_instance(self.fmu)
 
 
 def _foreign_state_bytes(case: Case, fmu_dir: Path) -> bytes:

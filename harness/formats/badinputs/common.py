@@ -147,3 +147,12 @@ def changed(before: dict, after: dict | None) -> list[str]:
     when the second read failed)."""
     return [n for n, x in before.items()
             if after is None or not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
+
+
+def free_instance(fmu, function: str = "fmi2FreeInstance") -> list[str]:
+    """Free an fmpy instance; its raising is the case's problem (the list of them)."""
+    try:
+        fmu.freeInstance()
+    except Exception as error:  # noqa: BLE001 - reported as the case's problem
+        return [f"{function} raised {error!r}"]
+    return []

@@ -6,7 +6,7 @@ import ctypes
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (changed, judge_log, DECLARED, Case, Outcome, c_array, declared, instance_numbers,
+from harness.formats.badinputs.common import (changed, free_instance, judge_log, DECLARED, Case, Outcome, c_array, declared, instance_numbers,
                                               model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import SHIM_HEADER, STATE_EDITS, edited_state, state_edits
 from harness.formats.badinputs.model_exchange import ME_SIZES
@@ -311,11 +311,7 @@ class _Instance3:
     def free(self) -> list[str]:
         if self.phase in ("step", "event", "continuous"):
             self.call("terminate")
-        try:
-            self.fmu.freeInstance()
-        except Exception as error:  # noqa: BLE001 - reported as the case's problem
-            return [f"fmi3FreeInstance raised {error!r}"]
-        return []
+        return free_instance(self.fmu, "fmi3FreeInstance")
 
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (changed, judge_log, DECLARED, FMI2_ERROR, FMI2_OK,
+from harness.formats.badinputs.common import (changed, free_instance, judge_log, DECLARED, FMI2_ERROR, FMI2_OK,
                                               FMI2_WARNING, LOG, Case, Outcome, c_array, instance_numbers,
                                               listen, model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import Slave
@@ -220,16 +220,9 @@ class _Model:
         return None
 
     def free(self) -> list[str]:
-        problems = []
-        if self.me and self.phase in ("event", "continuous"):
+        if not self.me or self.phase in ("event", "continuous"):
             self.call("terminate")
-        elif not self.me:
-            self.call("terminate")
-        try:
-            self.fmu.freeInstance()
-        except Exception as error:  # noqa: BLE001 - reported as the case's problem
-            problems.append(f"fmi2FreeInstance raised {error!r}")
-        return problems
+        return free_instance(self.fmu)
 
 
 def _act_me(model: _Model, case: Case) -> int:
