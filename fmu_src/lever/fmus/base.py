@@ -183,10 +183,8 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        if self._model_stale and self._phase == "initialization":
-            # parameters set in Initialization Mode: read the model they make (judged at
-            # fmi2ExitInitializationMode), never the one of the values before
-            self._try_build(report=False)
+        if self._model_stale:
+            self._build_for_reading()
         if self._dirty and self._phase in _LIVE:
             self._refresh()
         names = self._real_names
@@ -241,6 +239,12 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
 
     # -- model construction and outputs -----------------------------------------------------
     _model_stale = True
+
+    def _build_for_reading(self):
+        """Parameters set in Initialization Mode: what is read there comes from the model
+        they make (judged at fmi2ExitInitializationMode), never from the one before."""
+        if self._model_stale and self._phase == "initialization":
+            self._try_build(report=False)
 
     def _try_build(self, report: bool = True, reset: bool = True):
         """Build the physics from the parameters; ``reset`` also puts the state to its

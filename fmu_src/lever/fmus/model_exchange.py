@@ -184,10 +184,7 @@ class ModelExchangeSlave(LeverSlave):
 
     # -- the physics' model at the current point ----------------------------------------------------
     def _me_current(self):
-        if self._model_stale and self._phase == "initialization":
-            # Parameters set in Initialization Mode: the model they make, built for what is
-            # read now (a read may compute there), judged at fmi2ExitInitializationMode.
-            self._try_build(report=False)
+        self._build_for_reading()
         if self._model_stale or self._build_error is not None:
             raise ParameterError("", f"the model is not built: {self._build_error or 'parameters changed since'}")
         key = self._physics_key()
