@@ -1008,7 +1008,7 @@ static const char *state_name(int state)
 #define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
 enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
        CH_EVENT_INFO, CH_OUTPUT_RATES };
-enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2 };
+enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2, CONTROL_POINT = 3, CONTROL_SYNC = 4 };
 enum { SIZE_STATES = 0, SIZE_INDICATORS = 1 };
 #define COMMAND_NEW_DISCRETE_STATES 2.0
 #define EVENT_INFO_FIELDS 6
@@ -1041,7 +1041,20 @@ typedef struct {
     int me;                 /* instantiated as fmi2ModelExchange */
     size_t nx, nz;          /* Model Exchange: continuous states, event indicators */
     int nzKnown;            /* nz was read (Model Exchange: at instantiation; else on first use) */
+    /* Model Exchange: the point block shared with the Python slave (POINT_* below). */
+    fmi2Real *point;
 } Shim;
+
+/* The point block: fmi2SetTime and fmi2SetContinuousStates are checked here and written to
+ * a block of doubles the Python slave reads (its address handed over with CONTROL_POINT),
+ * and the model takes them at its next fmi2GetReal or fmi2SetReal, the way every channel
+ * call reaches it; a call that reaches the model any other way is preceded by a sync
+ * (me_sync).  A host that sets the time and the states at every right-hand side then pays
+ * no call into Python for them: two of the five calls an integrator makes per model and
+ * point.  [0]: what is pending (POINT_TIME | POINT_STATES), [1]: the time, [2..]: states. */
+#define POINT_TIME 1
+#define POINT_STATES 2
+#define POINT_HEADER 2
 
 /* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
 #define STATE_MAGIC 0x4c565253u /* "LVRS" */
@@ -1127,6 +1140,7 @@ static void free_slot(Slot *slot)
 
 static void free_shim(Shim *s)
 {
+    free(s->point);
     free_categories(s);
     free(s->instanceName);
     free(s);
@@ -1272,7 +1286,15 @@ static int succeeded(fmi2Status status) { return status == fmi2OK || status == f
 #define FORWARD(name, c, ...)                                                                      \
     do {                                                                                           \
         BEGIN(name, c);                                                                            \
+        SYNC(name, c);                                                                             \
         return shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner, __VA_ARGS__));                 \
+    } while (0)
+
+/* The pending time and states taken by the model before this call (me_sync). */
+#define SYNC(name, c)                                                                              \
+    do {                                                                                           \
+        fmi2Status synced_ = me_sync(SHIM(c));                                                     \
+        if (!succeeded(synced_)) return synced_;                                                   \
     } while (0)
 
 /* ------------------------------------------------------------------------- */
@@ -1360,6 +1382,8 @@ static int me_array(Shim *s, const char *function, const void *array, size_t n, 
     return 1;
 }
 
+static fmi2Status point_connect(Shim *s);
+
 /* Tells a fresh Python slave that it runs as Model Exchange and reads its sizes. */
 static fmi2Status me_connect(Shim *s)
 {
@@ -1380,8 +1404,43 @@ static fmi2Status me_connect(Shim *s)
         s->nx = (size_t)n[0];
         s->nz = (size_t)n[1];
         s->nzKnown = 1;
+        status = point_connect(s);
     }
     return status;
+}
+
+/* Hands the point block (made once per instance, nothing pending) to the Python slave. */
+static fmi2Status point_connect(Shim *s)
+{
+    if (!s->point) {
+        s->point = calloc(POINT_HEADER + (s->nx ? s->nx : 1), sizeof *s->point);
+        if (!s->point) {
+            return shim_error(s, "fmi2Instantiate: out of memory");
+        }
+    }
+    s->point[0] = 0.0;
+    s->point[1] = s->time;
+    fmi2ValueReference control = CONTROL_POINT;
+    /* an address of a 64-bit process is below 2^53: a double holds it exactly */
+    fmi2Real address = (fmi2Real)(uintptr_t)s->point;
+    fmi2Status status = channel_set(s, "fmi2Instantiate", CH_CONTROL, &control, 1, &address);
+    if (!succeeded(status)) {
+        free(s->point);
+        s->point = NULL;
+    }
+    return status;
+}
+
+/* Before a call that reaches the model other than by fmi2GetReal/fmi2SetReal: the time and
+ * states the host set since the model last saw them, taken in one call. */
+static fmi2Status me_sync(Shim *s)
+{
+    if (!s->point || s->point[0] == 0.0) {
+        return fmi2OK;
+    }
+    fmi2ValueReference control = CONTROL_SYNC;
+    fmi2Real nothing = 0.0;
+    return channel_set(s, "the time and states set before this call", CH_CONTROL, &control, 1, &nothing);
 }
 
 /* ------------------------------------------------------------------------- */
@@ -1608,6 +1667,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 #define TRANSITION(name, c, to)                                                                    \
     do {                                                                                           \
         BEGIN(name, c);                                                                            \
+        SYNC(name, c);                                                                             \
         fmi2Status status_ = shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner));                \
         if (succeeded(status_)) SHIM(c)->state = (to);                                             \
         return status_;                                                                            \
@@ -1634,6 +1694,9 @@ fmi2Status fmi2Reset(fmi2Component c)
     if (succeeded(status)) {
         s->state = ST_INSTANTIATED;
         s->time = 0.0;
+        if (s->point) {
+            s->point[0] = 0.0; /* what was pending belonged to the model reset */
+        }
         if (s->me) {
             /* a fresh Python slave: told again that it runs as Model Exchange */
             fmi2Status connected = me_connect(s);
@@ -1732,6 +1795,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
                                  "nothing was set", i, vr[i], bad);
         }
     }
+    SYNC(fmi2SetString, c);
     return shim_end(s, "fmi2SetString", g_api->fmi2SetString(s->inner, vr, nvr, value));
 }
 
@@ -2135,6 +2199,11 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
     if (!isfinite(time)) {
         return shim_error(s, "fmi2SetTime: time %g is not finite; the time stays %.17g s", time, s->time);
     }
+    if (s->point) {
+        s->time = s->point[1] = time;
+        s->point[0] = (fmi2Real)((int)s->point[0] | POINT_TIME);
+        return fmi2OK;
+    }
     fmi2ValueReference control = CONTROL_TIME;
     fmi2Status status = channel_set(s, "fmi2SetTime", CH_CONTROL, &control, 1, &time);
     if (succeeded(status)) {
@@ -2154,6 +2223,13 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
         if (!isfinite(x[i])) {
             return shim_error(s, "fmi2SetContinuousStates: x[%zu] = %g is not finite; no state was set", i, x[i]);
         }
+    }
+    if (s->point) {
+        if (nx) {
+            memcpy(s->point + POINT_HEADER, x, nx * sizeof *x);
+        }
+        s->point[0] = (fmi2Real)((int)s->point[0] | POINT_STATES);
+        return fmi2OK;
     }
     return channel_set(s, "fmi2SetContinuousStates", CH_STATES, NULL, nx, x);
 }

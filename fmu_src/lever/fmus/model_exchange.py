@@ -21,6 +21,7 @@ can have (the model description is one for all parameter values).
 """
 from __future__ import annotations
 
+import ctypes
 import math
 from typing import NamedTuple, Sequence
 from xml.etree.ElementTree import Element, SubElement
@@ -40,8 +41,11 @@ KIND_SHIFT = 20
 INDEX_MASK = (1 << KIND_SHIFT) - 1
 # kinds of channel references
 CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES = range(9)
-# CONTROL set: the interface (1: Model Exchange), the time, a command; get: the sizes
-SET_INTERFACE, SET_TIME, SET_COMMAND = 0, 1, 2
+# CONTROL set: the interface (1: Model Exchange), the time, a command, the address of the
+# native entry's point block (0: none), a sync (nothing but the point block taken); get: the sizes
+SET_INTERFACE, SET_TIME, SET_COMMAND, SET_POINT, SYNC = 0, 1, 2, 3, 4
+# the point block: what is pending (bits), the time, the states (build/shim: POINT_*)
+POINT_TIME, POINT_STATES, POINT_HEADER = 1, 2, 2
 GET_STATES, GET_INDICATORS = 0, 1
 NEW_DISCRETE_STATES = 2.0
 # EVENT_INFO: what fmi2NewDiscreteStates reports
@@ -62,6 +66,16 @@ def _read_by_get_real():
     """pythonfmu's getter of a local variable, which it never calls (``get_real`` reads the
     locals): one function for all instead of a closure per instance."""
     raise NotImplementedError("read through get_real")
+
+
+class _Layout(NamedTuple):
+    """Where the hot path (outputs, derivatives at every right-hand side) finds what the
+    physics' model takes, made once per model: attribute and name lookups spelled out."""
+    attributes: tuple | None   #: the states' attributes in the physics' order (None: ``_x`` is a subclass's)
+    positions: tuple           #: where each of the physics' states sits in ``ME_STATES``
+    identity: bool             #: the physics' states are ``ME_STATES``, in that order
+    inputs: tuple              #: the physics' inputs (the FMU's names)
+    outputs: tuple | None      #: the physics' outputs (None: ``_me_output_values`` is a subclass's)
 
 
 class StateVariable(NamedTuple):
@@ -95,9 +109,11 @@ class ModelExchangeSlave(LeverSlave):
     # collector: the fewer objects one holds, the less waits for it.
     _me = False               # the native entry instantiated the Model Exchange interface
     _me_model = None          # the physics' model, made for the physics built
+    _me_layout = None         # its _Layout
     _me_source = None
     _seeds: dict = {}         # known value reference -> seed of a directional derivative
     _event_info = (0.0,) * len(INFO_FIELDS)
+    _point = None             # the native entry's point block (ctypes doubles), once it gave one
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -142,6 +158,13 @@ class ModelExchangeSlave(LeverSlave):
         cls._state_index = list(range(n))
         cls._state_refs = [CHANNEL + (STATES << KIND_SHIFT) + k for k in range(n)]
         cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
+        # Outputs that are states, kept in the attribute of their own name (``_x`` the
+        # default): read without the model evaluated, as a host reads the angles and speeds
+        # it feeds to a coupling at every right-hand side.
+        outputs = {o.name for o in self.OUTPUTS}
+        cls._state_outputs = frozenset(
+            cls._vr_of[s.name] for s in self.ME_STATES
+            if s.name in outputs and s.attribute == s.name and cls._x is ModelExchangeSlave._x)
 
     # -- what each model provides ----------------------------------------------------------------
     def _me_physics(self):
@@ -190,6 +213,7 @@ class ModelExchangeSlave(LeverSlave):
         key = self._physics_key()
         if self._me_model is None or self._me_source is not key:
             self._me_model, self._me_source = self._me_physics(), key
+            self._me_layout = self._layout_of(self._me_model)
             self._start_modes()
         return self._me_model
 
@@ -199,18 +223,34 @@ class ModelExchangeSlave(LeverSlave):
             model.initialize(self._time, self._x_physics(), self._u())
         self._events_settled(self._time, self._x_physics(), self._u())
 
+    def _layout_of(self, model) -> _Layout:
+        cls = type(self)
+        positions = tuple(self._state_of_physics[name] for name in model.STATES)
+        attributes = (tuple(self.ME_STATES[k].attribute for k in positions)
+                      if cls._x is ModelExchangeSlave._x else None)
+        return _Layout(attributes, positions, positions == tuple(range(len(self.ME_STATES))), tuple(model.INPUTS),
+                       tuple(model.OUTPUTS) if cls._me_output_values is ModelExchangeSlave._me_output_values
+                       else None)
+
     def _x_physics(self) -> list:
+        layout = self._me_layout
+        if layout.attributes is not None:
+            return [float(getattr(self, a)) for a in layout.attributes]
         x = self._x()
-        return [x[self._state_of_physics[name]] for name in self._me_model.STATES]
+        return [x[k] for k in layout.positions]
 
     def _u(self) -> list:
-        return [float(getattr(self, name)) for name in self._me_model.INPUTS]
+        return [float(getattr(self, name)) for name in self._me_layout.inputs]
 
     def _derivatives(self) -> list:
         model = self._me_current()
+        values = model.derivatives(self._time, self._x_physics(), self._u())
+        layout = self._me_layout
+        if layout.identity:
+            return list(values)
         out = [0.0] * len(self.ME_STATES)     # a state the physics does not have stays constant
-        for name, value in zip(model.STATES, model.derivatives(self._time, self._x_physics(), self._u())):
-            out[self._state_of_physics[name]] = value
+        for k, value in zip(layout.positions, values):
+            out[k] = value
         return out
 
     def _indicators(self) -> list:
@@ -231,10 +271,21 @@ class ModelExchangeSlave(LeverSlave):
         if self._build_error is not None or self._model_stale:
             return
         model = self._me_current()
-        values = self._me_output_values(model, self._time, self._x_physics(), self._u())
-        for name, value in values.items():
-            setattr(self, name, value)
-        self._dirty = CLEAN
+        names = self._me_layout.outputs
+        if names is not None:
+            outputs = model.outputs(self._time, self._x_physics(), self._u())
+            for name, value in zip(names, outputs):
+                setattr(self, name, value)
+            self._dirty = CLEAN
+            total = sum(outputs)        # finite unless an output is not (or the sum overflows)
+            if total - total == 0.0:
+                return
+            values = dict(zip(names, outputs))
+        else:
+            values = self._me_output_values(model, self._time, self._x_physics(), self._u())
+            for name, value in values.items():
+                setattr(self, name, value)
+            self._dirty = CLEAN
         bad = [name for name, value in values.items() if not math.isfinite(value)]
         if bad:
             self._dirty = ALL
@@ -245,8 +296,26 @@ class ModelExchangeSlave(LeverSlave):
     def _is_channel(vrs) -> bool:
         return bool(vrs) and max(vrs) >= CHANNEL
 
+    def _take_point(self):
+        """The time and states the host set through the native entry since the model last
+        saw them (checked there: finite, the right number)."""
+        point = self._point
+        pending = int(point[0])
+        point[0] = 0.0
+        if pending & POINT_TIME:
+            self._time = point[1]
+        if pending & POINT_STATES:
+            self._set_x(point[POINT_HEADER:POINT_HEADER + len(self._state_index)])
+        self._dirty = ALL
+
     @guarded(default=_nan_values)
     def get_real(self, vrs):
+        point = self._point
+        if point is not None:           # only in Model Exchange
+            if point[0]:
+                self._take_point()
+            if self._state_outputs.issuperset(vrs) and self._phase == "stepping":
+                return [float(getattr(self, self._real_names[vr])) for vr in vrs]
         if vrs and max(vrs) >= self._special_from:
             if self._is_channel(vrs):
                 return self._channel_get(vrs)
@@ -262,6 +331,8 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded()
     def set_real(self, vrs, values):
+        if self._point is not None and self._point[0]:
+            self._take_point()
         if self._is_channel(vrs):
             return self._channel_set(vrs, values)
         return LeverSlave.set_real.__wrapped__(self, vrs, values)
@@ -317,6 +388,12 @@ class ModelExchangeSlave(LeverSlave):
             self._me = values[0] == 1.0
         elif kind == CONTROL and index == [SET_TIME]:
             self._set_time(values[0])
+        elif kind == CONTROL and index == [SYNC]:
+            pass                        # the point block was taken above
+        elif kind == CONTROL and index == [SET_POINT]:
+            address = int(values[0])
+            self._point = (ctypes.c_double * (POINT_HEADER + max(len(self.ME_STATES), 1))).from_address(address) \
+                if address else None
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
@@ -366,7 +443,9 @@ class ModelExchangeSlave(LeverSlave):
         if index is not self._state_index and index != self._state_index:
             self._error(f"fmi2SetContinuousStates: {len(index)} states given, this model has {n}; nothing was set")
             return
-        bad = [self.ME_STATES[k].name for k, v in enumerate(values) if not math.isfinite(v)]
+        total = sum(values)
+        bad = [] if total - total == 0.0 else [self.ME_STATES[k].name for k, v in enumerate(values)
+                                                if not math.isfinite(v)]
         if bad:
             self._error(f"fmi2SetContinuousStates: state(s) {', '.join(bad)} not finite ({list(values)!r}); "
                         f"the states stay {self._x()!r}")
