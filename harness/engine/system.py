@@ -355,6 +355,41 @@ class System:
                                                 for name in dependent if name in self.inputs])
         self.has_dependent_outputs = bool(dependent)
 
+    def connection_plan(self) -> tuple[list[Visit], list[Visit]]:
+        """``(connections, rest)``: a full propagation that reads of each component without
+        direct feedthrough only the outputs its connections carry (the head of its
+        buffer, which ``_plan`` puts first), and the reads of the rest of those buffers
+        (recorded outputs, the ones that depend on inputs among them), to run after it.
+        For a master that evaluates the system at points where nothing is recorded (a
+        right-hand side): a shaft's angle and speed are its states, the rest needs its
+        model evaluated.  Run together they leave every buffer as ``propagate()`` and
+        ``refresh_dependent()`` do."""
+        connected = {}
+        for c in self.scene.connections:
+            connected.setdefault(c.source, set()).add(c.output)
+        plan, rest = [], []
+        for visit in self._full_plan:
+            name = visit.component.name
+            exposed = self.exposed[name]
+            head = 0
+            while head < len(exposed) and exposed[head] in connected.get(name, ()):
+                head += 1
+            if name in self.feedthrough or head == len(exposed) or \
+                    any(i >= head for copy in visit.copies for _, i in copy.pairs):
+                plan.append(visit)
+                continue
+            component = visit.component
+            size_u, size_d = ctypes.sizeof(ctypes.c_uint), ctypes.sizeof(ctypes.c_double)
+            vrs, values = self.buffers[name]
+            plan.append(Visit(component, component.raw.get_real if head else None, visit.handle,
+                              (ctypes.c_uint * head).from_buffer(vrs), component.raw.count(head),
+                              (ctypes.c_double * head).from_buffer(values), visit.copies, visit.sends))
+            n = len(exposed) - head
+            rest.append(Visit(component, component.raw.get_real, visit.handle,
+                              (ctypes.c_uint * n).from_buffer(vrs, head * size_u), component.raw.count(n),
+                              (ctypes.c_double * n).from_buffer(values, head * size_d), (), ()))
+        return plan, rest
+
     def send_plan(self, writes: list[Inputs]) -> list[Visit]:
         """A plan for ``propagate_with`` that reads nothing and sends each ``Inputs`` of
         ``writes`` in one fmi2SetReal (empty when there is nothing to send)."""

@@ -58,6 +58,9 @@ class Master:
     adaptive = False
     #: the FMI interface the master's system instantiates the FMUs in
     interface = CO_SIMULATION
+    #: the master reads every recorded output itself at the end of each step (the ones that
+    #: depend on inputs after those are written), so ``step`` need not read them again
+    reads_recorded = False
     #: options ``make`` accepts for this master, with their defaults
     options: dict = {}
 
@@ -97,7 +100,7 @@ class Master:
         h = self.h if h is None else h
         target = self.t + h if t_next is None else t_next
         taken = self._step_impl(self.t, target - self.t)
-        if self.system.has_dependent_outputs:
+        if self.system.has_dependent_outputs and not self.reads_recorded:
             # recorded outputs that depend on inputs (a shaft's acceleration on its torque)
             # were read before the step's last inputs were written: read them with those
             self.system.refresh_dependent(send=self._inputs_unsent)

@@ -102,6 +102,7 @@ class ModelExchangeCvodeMaster(Master):
     description = ("Model Exchange: the FMUs' states integrated together by CVODE (Adams or BDF), "
                    "analytic Jacobian from directional derivatives, events by root finding")
     interface = MODEL_EXCHANGE
+    reads_recorded = True
     options = {"tolerance": 1e-6, "method": "auto", "jacobian": "analytic", "max_step": None}
 
     def __init__(self, system: System, step: float, **options):
@@ -140,7 +141,9 @@ class ModelExchangeCvodeMaster(Master):
         self.nz = first
         #: event indicators the FMUs declare but say cannot change sign, left out of the search
         self.n_dead_indicators = sum(c.nz for c in components) - first
-        self._plan = system.propagation_plan
+        # a right-hand side reads of each FMU only what the connections carry; the recorded
+        # outputs are read at the output points alone
+        self._plan, self._recorded_reads = system.connection_plan()
         self._point_t = None
         self._point_bytes = b""
         self._next_time_event = math.inf
@@ -317,6 +320,7 @@ class ModelExchangeCvodeMaster(Master):
                 self.n_time_events += 1
                 self._event(self._next_time_event, y)
         self._set_point(target, y)
+        self.system.propagate_with(self._recorded_reads)
         return None
 
     # -- events -------------------------------------------------------------------------------------
