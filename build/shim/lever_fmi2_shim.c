@@ -1007,9 +1007,9 @@ static const char *state_name(int state)
 #define CHANNEL_SHIFT 20
 #define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
 enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
-       CH_EVENT_INFO, CH_OUTPUT_RATES };
+       CH_EVENT_INFO, CH_OUTPUT_RATES, CH_INPUT_TABLE };
 enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2, CONTROL_POINT = 3, CONTROL_SYNC = 4 };
-enum { SIZE_STATES = 0, SIZE_INDICATORS = 1 };
+enum { SIZE_STATES = 0, SIZE_INDICATORS = 1, SIZE_DEFERRED_INPUTS = 2 };
 #define COMMAND_NEW_DISCRETE_STATES 2.0
 #define EVENT_INFO_FIELDS 6
 
@@ -1041,19 +1041,28 @@ typedef struct {
     int me;                 /* instantiated as fmi2ModelExchange */
     size_t nx, nz;          /* Model Exchange: continuous states, event indicators */
     int nzKnown;            /* nz was read (Model Exchange: at instantiation; else on first use) */
-    /* Model Exchange: the point block shared with the Python slave (POINT_* below). */
+    /* Model Exchange: the point block shared with the Python slave (POINT_* below), and the
+     * inputs it may hold: value reference and closed range of each, in the block's order. */
     fmi2Real *point;
+    size_t ninputs;
+    fmi2ValueReference *inputVr;
+    fmi2Real *inputRange; /* low, high of each input */
 } Shim;
 
-/* The point block: fmi2SetTime and fmi2SetContinuousStates are checked here and written to
- * a block of doubles the Python slave reads (its address handed over with CONTROL_POINT),
- * and the model takes them at its next fmi2GetReal or fmi2SetReal, the way every channel
- * call reaches it; a call that reaches the model any other way is preceded by a sync
- * (me_sync).  A host that sets the time and the states at every right-hand side then pays
- * no call into Python for them: two of the five calls an integrator makes per model and
- * point.  [0]: what is pending (POINT_TIME | POINT_STATES), [1]: the time, [2..]: states. */
+/* The point block: fmi2SetTime, fmi2SetContinuousStates and, while the model runs,
+ * fmi2SetReal of inputs the model applies without judgement (the model names them and
+ * their closed ranges at instantiation) are checked here and written to a block of doubles
+ * the Python slave reads (its address handed over with CONTROL_POINT); the model takes them
+ * at its next fmi2GetReal or fmi2SetReal, the way every channel call reaches it, and a call
+ * that reaches the model any other way is preceded by a sync (me_sync).  A value the check
+ * refuses (out of range, NaN, not such an input) goes to the model, which says why.  An
+ * integrator's right-hand side then calls into Python only to read: the time, the states
+ * and the coupled inputs it sets cost no call there.
+ * [0]: what is pending (POINT_TIME | POINT_STATES | POINT_INPUTS), [1]: the time,
+ * [2 .. 2+max(nx,1)): the states, then the inputs' values, then their pending flags. */
 #define POINT_TIME 1
 #define POINT_STATES 2
+#define POINT_INPUTS 4
 #define POINT_HEADER 2
 
 /* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
@@ -1141,6 +1150,8 @@ static void free_slot(Slot *slot)
 static void free_shim(Shim *s)
 {
     free(s->point);
+    free(s->inputVr);
+    free(s->inputRange);
     free_categories(s);
     free(s->instanceName);
     free(s);
@@ -1409,16 +1420,53 @@ static fmi2Status me_connect(Shim *s)
     return status;
 }
 
+/* The inputs the model lets the point block hold, read once per instance. */
+static fmi2Status read_deferred_inputs(Shim *s)
+{
+    fmi2ValueReference size = SIZE_DEFERRED_INPUTS;
+    fmi2Real m = 0.0;
+    fmi2Status status = channel_get(s, "fmi2Instantiate", CH_CONTROL, &size, 1, &m);
+    if (!succeeded(status)) {
+        return status;
+    }
+    if (!(m >= 0.0 && m < 1e4)) {
+        return shim_error(s, "fmi2Instantiate: the model reports %g inputs to keep", m);
+    }
+    size_t n = (size_t)m;
+    fmi2Real *table = malloc((3 * n + 1) * sizeof *table);
+    s->inputVr = malloc((n + 1) * sizeof *s->inputVr);
+    s->inputRange = malloc((2 * n + 1) * sizeof *s->inputRange);
+    if (!table || !s->inputVr || !s->inputRange) {
+        free(table);
+        return shim_error(s, "fmi2Instantiate: out of memory");
+    }
+    status = n ? channel_get(s, "fmi2Instantiate", CH_INPUT_TABLE, NULL, 3 * n, table) : fmi2OK;
+    if (succeeded(status)) {
+        for (size_t i = 0; i < n; i++) {
+            s->inputVr[i] = (fmi2ValueReference)table[3 * i];
+            s->inputRange[2 * i] = table[3 * i + 1];
+            s->inputRange[2 * i + 1] = table[3 * i + 2];
+        }
+        s->ninputs = n;
+    }
+    free(table);
+    return status;
+}
+
 /* Hands the point block (made once per instance, nothing pending) to the Python slave. */
 static fmi2Status point_connect(Shim *s)
 {
     if (!s->point) {
-        s->point = calloc(POINT_HEADER + (s->nx ? s->nx : 1), sizeof *s->point);
+        fmi2Status status = read_deferred_inputs(s);
+        if (!succeeded(status)) {
+            return status;
+        }
+        s->point = calloc(POINT_HEADER + (s->nx ? s->nx : 1) + 2 * s->ninputs, sizeof *s->point);
         if (!s->point) {
             return shim_error(s, "fmi2Instantiate: out of memory");
         }
     }
-    s->point[0] = 0.0;
+    memset(s->point, 0, (POINT_HEADER + (s->nx ? s->nx : 1) + 2 * s->ninputs) * sizeof *s->point);
     s->point[1] = s->time;
     fmi2ValueReference control = CONTROL_POINT;
     /* an address of a 64-bit process is below 2^53: a double holds it exactly */
@@ -1427,8 +1475,39 @@ static fmi2Status point_connect(Shim *s)
     if (!succeeded(status)) {
         free(s->point);
         s->point = NULL;
+        s->ninputs = 0;
     }
     return status;
+}
+
+/* fmi2SetReal kept in the point block: 1 if every value is an input the block holds and in
+ * its range (then written, pending), 0 to send the call to the model. */
+static int point_keeps(Shim *s, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
+{
+    if (!s->point || !s->ninputs || !(s->state & ME_RUNNING) || nvr == 0 || !value) {
+        return 0;
+    }
+    size_t slot[16];
+    if (nvr > sizeof slot / sizeof slot[0]) {
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        size_t k = 0;
+        while (k < s->ninputs && s->inputVr[k] != vr[i]) k++;
+        /* NaN fails both comparisons */
+        if (k == s->ninputs || !(s->inputRange[2 * k] <= value[i] && value[i] <= s->inputRange[2 * k + 1])) {
+            return 0;
+        }
+        slot[i] = k;
+    }
+    fmi2Real *values = s->point + POINT_HEADER + (s->nx ? s->nx : 1);
+    fmi2Real *pending = values + s->ninputs;
+    for (size_t i = 0; i < nvr; i++) {
+        values[slot[i]] = value[i];
+        pending[slot[i]] = 1.0;
+    }
+    s->point[0] = (fmi2Real)((int)s->point[0] | POINT_INPUTS);
+    return 1;
 }
 
 /* Before a call that reaches the model other than by fmi2GetReal/fmi2SetReal: the time and
@@ -1736,6 +1815,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 {
     BEGIN(fmi2SetReal, c);
     if (!host_references(SHIM(c), "fmi2SetReal", vr, nvr)) return fmi2Error;
+    if (point_keeps(SHIM(c), vr, nvr, value)) return fmi2OK;
     return shim_end(SHIM(c), "fmi2SetReal", g_api->fmi2SetReal(SHIM(c)->inner, vr, nvr, value));
 }
 

@@ -50,10 +50,14 @@ class LeverCoupling(ModelExchangeSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._family = None   # the coupling at any misalignment (the input may vary in time)
+        self._misalignment_vr = self._vr_of["misalignment"]
 
     def _build(self):
         # exact at the misalignment the model is built with; blended elsewhere (CouplingFamily)
         self._family = component_parameters.coupling_family_from(self._values() | {"misalignment": self.misalignment})
+
+    # judged by set_real below beyond its declared range: the native entry never holds it
+    JUDGED_INPUTS = ("misalignment",)
 
     @guarded()
     def set_real(self, vrs, values):
@@ -63,6 +67,9 @@ class LeverCoupling(ModelExchangeSlave):
         # a value the outputs cannot be computed for is refused and never applied.
         if self._is_channel(vrs):
             return ModelExchangeSlave.set_real.__wrapped__(self, vrs, values)
+        self._take_point()
+        if self._misalignment_vr not in vrs:       # the hot path: the flanges' angles and speeds
+            return LeverSlave.set_real.__wrapped__(self, vrs, values)
         before = {vr: getattr(self, self._real_names[vr]) for vr in vrs if vr in self._real_names}
         alpha = self.misalignment
         LeverSlave.set_real.__wrapped__(self, vrs, values)

@@ -34,19 +34,20 @@ from .base import LeverSlave, _nan_values
 from .declarations import Output
 from .guard import guarded
 from .model_description import camel_case, declared_type, define_unit
-from .recompute import ALL, CLEAN
+from .recompute import ALL, CLEAN, INPUTS_CHANGED
 
 CHANNEL = 0x40000000
 KIND_SHIFT = 20
 INDEX_MASK = (1 << KIND_SHIFT) - 1
 # kinds of channel references
-CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES = range(9)
+CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES, INPUT_TABLE = range(10)
 # CONTROL set: the interface (1: Model Exchange), the time, a command, the address of the
 # native entry's point block (0: none), a sync (nothing but the point block taken); get: the sizes
 SET_INTERFACE, SET_TIME, SET_COMMAND, SET_POINT, SYNC = 0, 1, 2, 3, 4
-# the point block: what is pending (bits), the time, the states (build/shim: POINT_*)
-POINT_TIME, POINT_STATES, POINT_HEADER = 1, 2, 2
-GET_STATES, GET_INDICATORS = 0, 1
+# the point block: what is pending (bits), the time, the states, then the deferred inputs'
+# values and their pending flags (build/shim: POINT_*)
+POINT_TIME, POINT_STATES, POINT_INPUTS, POINT_HEADER = 1, 2, 4, 2
+GET_STATES, GET_INDICATORS, GET_DEFERRED_INPUTS = 0, 1, 2
 NEW_DISCRETE_STATES = 2.0
 # EVENT_INFO: what fmi2NewDiscreteStates reports
 INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfContinuousStatesChanged",
@@ -114,6 +115,7 @@ class ModelExchangeSlave(LeverSlave):
     _seeds: dict = {}         # known value reference -> seed of a directional derivative
     _event_info = (0.0,) * len(INFO_FIELDS)
     _point = None             # the native entry's point block (ctypes doubles), once it gave one
+    _deferred_names = ()      # the inputs it may hold, in its order
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -296,24 +298,48 @@ class ModelExchangeSlave(LeverSlave):
     def _is_channel(vrs) -> bool:
         return bool(vrs) and max(vrs) >= CHANNEL
 
+    #: inputs whose set the model judges beyond their declared range (a subclass's
+    #: ``set_real``): never deferred
+    JUDGED_INPUTS: tuple = ()
+
+    def _deferred_inputs(self) -> list:
+        """``[(value reference, (name, low, high))]`` of the inputs the native entry may keep
+        in the point block when a host sets them in range while the model runs: those
+        ``set_real`` applies without further ado (its fast path), in value-reference order."""
+        judged = set(self.JUDGED_INPUTS)
+        names = set(self._input_names) - judged
+        return sorted((vr, entry) for vr, entry in self._fast_inputs.items() if entry[0] in names)
+
     def _take_point(self):
         """The time and states the host set through the native entry since the model last
-        saw them (checked there: finite, the right number)."""
+        saw them (checked there: finite, the right number), if any: first thing in every
+        call that reaches the model through fmi2GetReal or fmi2SetReal."""
         point = self._point
+        if point is None or not point[0]:
+            return
         pending = int(point[0])
         point[0] = 0.0
         if pending & POINT_TIME:
             self._time = point[1]
         if pending & POINT_STATES:
             self._set_x(point[POINT_HEADER:POINT_HEADER + len(self._state_index)])
-        self._dirty = ALL
+        if pending & (POINT_TIME | POINT_STATES):
+            self._dirty = ALL
+        if pending & POINT_INPUTS:
+            first = POINT_HEADER + max(len(self._state_index), 1)
+            names = self._deferred_names
+            m = len(names)
+            for name, value, flag in zip(names, point[first:first + m], point[first + m:first + 2 * m]):
+                if flag:
+                    setattr(self, name, value)
+            point[first + m:first + 2 * m] = [0.0] * m
+            if not self._dirty:
+                self._dirty = INPUTS_CHANGED
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        point = self._point
-        if point is not None:           # only in Model Exchange
-            if point[0]:
-                self._take_point()
+        if self._point is not None:     # only in Model Exchange
+            self._take_point()
             if self._state_outputs.issuperset(vrs) and self._phase == "stepping":
                 return [float(getattr(self, self._real_names[vr])) for vr in vrs]
         if vrs and max(vrs) >= self._special_from:
@@ -331,8 +357,7 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded()
     def set_real(self, vrs, values):
-        if self._point is not None and self._point[0]:
-            self._take_point()
+        self._take_point()
         if self._is_channel(vrs):
             return self._channel_set(vrs, values)
         return LeverSlave.set_real.__wrapped__(self, vrs, values)
@@ -392,8 +417,10 @@ class ModelExchangeSlave(LeverSlave):
             pass                        # the point block was taken above
         elif kind == CONTROL and index == [SET_POINT]:
             address = int(values[0])
-            self._point = (ctypes.c_double * (POINT_HEADER + max(len(self.ME_STATES), 1))).from_address(address) \
-                if address else None
+            deferred = self._deferred_inputs()
+            size = POINT_HEADER + max(len(self.ME_STATES), 1) + 2 * len(deferred)
+            self._point = (ctypes.c_double * size).from_address(address) if address else None
+            self._deferred_names = tuple(name for _, (name, _, _) in deferred)
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
@@ -415,8 +442,12 @@ class ModelExchangeSlave(LeverSlave):
             return self._derivatives()
         kind, index = self._split(vrs)
         if kind == CONTROL:
-            sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS)}
+            sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS),
+                     GET_DEFERRED_INPUTS: float(len(self._deferred_inputs()))}
             return [sizes[i] for i in index]
+        if kind == INPUT_TABLE:
+            table = [value for vr, (_, low, high) in self._deferred_inputs() for value in (float(vr), low, high)]
+            return [table[i] for i in index]
         if kind == STATES:
             x = self._x()
             return [x[i] for i in index]
