@@ -146,6 +146,41 @@ def test_fmi_calls_are_counted_by_kind():
     assert by_kind["coupling"]["derivatives"] == 0                               # no states
 
 
+def test_a_right_hand_side_reads_only_what_the_connections_carry():
+    """System.connection_plan: a right-hand side reads of each shaft its angle and speed
+    (its states) and nothing recorded; the recorded outputs are read at the output points,
+    and there the buffers hold what a full propagation and the re-read of the outputs that
+    depend on inputs leave, bit for bit."""
+    from harness.description import plan as plans
+    from harness.engine.system import MODEL_EXCHANGE, System
+    from harness.paths import FMUS
+
+    checked = plans.check(scenes.load("kavz685"), fmu_dir=FMUS)
+    system = System(checked, record=list(checked.recorded), interface=MODEL_EXCHANGE)
+    try:
+        system.initialize()
+        master = masters.make("me-cvode", system, 1e-3)
+        connected = {(c.source, c.output) for c in system.scene.connections}
+        for visit in master._plan:
+            name = visit.component.name
+            if name not in system.feedthrough:
+                assert {(name, system.exposed[name][i]) for i in range(len(visit.vrs))} <= connected
+        assert {v.component.name for v in master._recorded_reads} == {"engine", "load"}
+        rng = np.random.default_rng(3)
+        for k in range(5):
+            y = master._y * (1.0 + 0.01 * rng.standard_normal(master.nx))
+            master._set_point(0.01 * (k + 1), y)
+            system.propagate_with(master._recorded_reads)
+            lean = {n: list(values) for n, (_, values) in system.buffers.items()}
+            master._point_t = None
+            master._set_point(0.01 * (k + 1), y)
+            system.propagate()
+            system.refresh_dependent()
+            assert lean == {n: list(values) for n, (_, values) in system.buffers.items()}
+    finally:
+        system.free()
+
+
 def test_state_events_stick_and_slip_like_the_reference():
     # the freewheel rectifier: contacts and stick/slip are its 8 event indicators' roots
     scene = shortened("freewheel_rectifier", 0.05)
