@@ -1007,9 +1007,9 @@ static const char *state_name(int state)
 #define CHANNEL_SHIFT 20
 #define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
 enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
-       CH_EVENT_INFO, CH_OUTPUT_RATES, CH_INPUT_TABLE };
+       CH_EVENT_INFO, CH_OUTPUT_RATES, CH_INPUT_TABLE, CH_STATE_OUTPUT_TABLE };
 enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2, CONTROL_POINT = 3, CONTROL_SYNC = 4 };
-enum { SIZE_STATES = 0, SIZE_INDICATORS = 1, SIZE_DEFERRED_INPUTS = 2 };
+enum { SIZE_STATES = 0, SIZE_INDICATORS = 1, SIZE_DEFERRED_INPUTS = 2, SIZE_STATE_OUTPUTS = 3 };
 #define COMMAND_NEW_DISCRETE_STATES 2.0
 #define EVENT_INFO_FIELDS 6
 
@@ -1047,6 +1047,13 @@ typedef struct {
     size_t ninputs;
     fmi2ValueReference *inputVr;
     fmi2Real *inputRange; /* low, high of each input */
+    /* Outputs that are states (value reference, state index): read from the block's states
+     * while statesKnown - in Continuous-Time Mode, the states set since it was entered,
+     * which nothing but fmi2SetContinuousStates changes there. */
+    size_t nstateOutputs;
+    fmi2ValueReference *stateOutputVr;
+    size_t *stateOutputIndex;
+    int statesKnown;
 } Shim;
 
 /* The point block: fmi2SetTime, fmi2SetContinuousStates and, while the model runs,
@@ -1152,6 +1159,8 @@ static void free_shim(Shim *s)
     free(s->point);
     free(s->inputVr);
     free(s->inputRange);
+    free(s->stateOutputVr);
+    free(s->stateOutputIndex);
     free_categories(s);
     free(s->instanceName);
     free(s);
@@ -1453,11 +1462,74 @@ static fmi2Status read_deferred_inputs(Shim *s)
     return status;
 }
 
+/* The outputs that are states, read once per instance. */
+static fmi2Status read_state_outputs(Shim *s)
+{
+    fmi2ValueReference size = SIZE_STATE_OUTPUTS;
+    fmi2Real m = 0.0;
+    fmi2Status status = channel_get(s, "fmi2Instantiate", CH_CONTROL, &size, 1, &m);
+    if (!succeeded(status)) {
+        return status;
+    }
+    if (!(m >= 0.0 && m <= (fmi2Real)s->nx)) {
+        return shim_error(s, "fmi2Instantiate: the model reports %g outputs that are states", m);
+    }
+    size_t n = (size_t)m;
+    fmi2Real *table = malloc((2 * n + 1) * sizeof *table);
+    s->stateOutputVr = malloc((n + 1) * sizeof *s->stateOutputVr);
+    s->stateOutputIndex = malloc((n + 1) * sizeof *s->stateOutputIndex);
+    if (!table || !s->stateOutputVr || !s->stateOutputIndex) {
+        free(table);
+        return shim_error(s, "fmi2Instantiate: out of memory");
+    }
+    status = n ? channel_get(s, "fmi2Instantiate", CH_STATE_OUTPUT_TABLE, NULL, 2 * n, table) : fmi2OK;
+    if (succeeded(status)) {
+        for (size_t i = 0; i < n; i++) {
+            if (!(table[2 * i + 1] >= 0.0 && table[2 * i + 1] < (fmi2Real)s->nx)) {
+                free(table);
+                return shim_error(s, "fmi2Instantiate: the model reports state %g of %zu", table[2 * i + 1], s->nx);
+            }
+            s->stateOutputVr[i] = (fmi2ValueReference)table[2 * i];
+            s->stateOutputIndex[i] = (size_t)table[2 * i + 1];
+        }
+        s->nstateOutputs = n;
+    }
+    free(table);
+    return status;
+}
+
+/* fmi2GetReal answered from the point block: 1 if every value reference is an output that
+ * is a state and the block's states are the model's (statesKnown), 0 to ask the model. */
+static int point_answers(Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    if (!s->statesKnown || s->state != ST_CONTINUOUS_TIME || nvr == 0 || !value) {
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; i++) {
+        size_t k = 0;
+        while (k < s->nstateOutputs && s->stateOutputVr[k] != vr[i]) k++;
+        if (k == s->nstateOutputs) {
+            return 0;
+        }
+    }
+    const fmi2Real *x = s->point + POINT_HEADER;
+    for (size_t i = 0; i < nvr; i++) {
+        size_t k = 0;
+        while (s->stateOutputVr[k] != vr[i]) k++;
+        value[i] = x[s->stateOutputIndex[k]];
+    }
+    return 1;
+}
+
 /* Hands the point block (made once per instance, nothing pending) to the Python slave. */
 static fmi2Status point_connect(Shim *s)
 {
+    s->statesKnown = 0;
     if (!s->point) {
         fmi2Status status = read_deferred_inputs(s);
+        if (succeeded(status)) {
+            status = read_state_outputs(s);
+        }
         if (!succeeded(status)) {
             return status;
         }
@@ -1789,6 +1861,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 {
     BEGIN(fmi2GetReal, c);
     if (!host_references(SHIM(c), "fmi2GetReal", vr, nvr)) return fmi2Error;
+    if (point_answers(SHIM(c), vr, nvr, value)) return fmi2OK;
     return shim_end(SHIM(c), "fmi2GetReal", g_api->fmi2GetReal(SHIM(c)->inner, vr, nvr, value));
 }
 
@@ -1816,6 +1889,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     BEGIN(fmi2SetReal, c);
     if (!host_references(SHIM(c), "fmi2SetReal", vr, nvr)) return fmi2Error;
     if (point_keeps(SHIM(c), vr, nvr, value)) return fmi2OK;
+    SHIM(c)->statesKnown = 0;
     return shim_end(SHIM(c), "fmi2SetReal", g_api->fmi2SetReal(SHIM(c)->inner, vr, nvr, value));
 }
 
@@ -2220,6 +2294,7 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
     BEGIN(fmi2EnterEventMode, c);
     SHIM(c)->state = ST_EVENT_MODE;
+    SHIM(c)->statesKnown = 0; /* an event may move the states */
     return fmi2OK;
 }
 
@@ -2254,6 +2329,7 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
     BEGIN(fmi2EnterContinuousTimeMode, c);
     SHIM(c)->state = ST_CONTINUOUS_TIME;
+    SHIM(c)->statesKnown = 0; /* known again once the host sets them */
     return fmi2OK;
 }
 
@@ -2309,6 +2385,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
             memcpy(s->point + POINT_HEADER, x, nx * sizeof *x);
         }
         s->point[0] = (fmi2Real)((int)s->point[0] | POINT_STATES);
+        s->statesKnown = 1;
         return fmi2OK;
     }
     return channel_set(s, "fmi2SetContinuousStates", CH_STATES, NULL, nx, x);

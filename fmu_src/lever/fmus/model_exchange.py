@@ -40,14 +40,15 @@ CHANNEL = 0x40000000
 KIND_SHIFT = 20
 INDEX_MASK = (1 << KIND_SHIFT) - 1
 # kinds of channel references
-CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES, INPUT_TABLE = range(10)
+(CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES, INPUT_TABLE,
+ STATE_OUTPUT_TABLE) = range(11)
 # CONTROL set: the interface (1: Model Exchange), the time, a command, the address of the
 # native entry's point block (0: none), a sync (nothing but the point block taken); get: the sizes
 SET_INTERFACE, SET_TIME, SET_COMMAND, SET_POINT, SYNC = 0, 1, 2, 3, 4
 # the point block: what is pending (bits), the time, the states, then the deferred inputs'
 # values and their pending flags (build/shim: POINT_*)
 POINT_TIME, POINT_STATES, POINT_INPUTS, POINT_HEADER = 1, 2, 4, 2
-GET_STATES, GET_INDICATORS, GET_DEFERRED_INPUTS = 0, 1, 2
+GET_STATES, GET_INDICATORS, GET_DEFERRED_INPUTS, GET_STATE_OUTPUTS = 0, 1, 2, 3
 NEW_DISCRETE_STATES = 2.0
 # EVENT_INFO: what fmi2NewDiscreteStates reports
 INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfContinuousStatesChanged",
@@ -160,6 +161,7 @@ class ModelExchangeSlave(LeverSlave):
         cls._state_index = list(range(n))
         cls._state_refs = [CHANNEL + (STATES << KIND_SHIFT) + k for k in range(n)]
         cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
+        cls._state_attributes = tuple(s.attribute for s in self.ME_STATES)
         # Outputs that are states, kept in the attribute of their own name (``_x`` the
         # default): read without the model evaluated, as a host reads the angles and speeds
         # it feeds to a coupling at every right-hand side.
@@ -200,8 +202,8 @@ class ModelExchangeSlave(LeverSlave):
         return [float(getattr(self, s.attribute)) for s in self.ME_STATES]
 
     def _set_x(self, x):
-        for s, value in zip(self.ME_STATES, x):
-            setattr(self, s.attribute, float(value))
+        for attribute, value in zip(self._state_attributes, x):
+            setattr(self, attribute, float(value))
 
     def _me_output_values(self, model, t, x, u) -> dict:
         """The outputs by name in Model Exchange (default: the physics' model's)."""
@@ -310,6 +312,13 @@ class ModelExchangeSlave(LeverSlave):
         names = set(self._input_names) - judged
         return sorted((vr, entry) for vr, entry in self._fast_inputs.items() if entry[0] in names)
 
+    def _state_output_table(self) -> list:
+        """``[(value reference, state index)]`` of the outputs that are states (kept in the
+        attribute of their name): the native entry answers a read of those alone in
+        Continuous-Time Mode from the states the host set, without a call into Python."""
+        return sorted((vr, next(k for k, s in enumerate(self.ME_STATES) if self._vr_of[s.name] == vr))
+                      for vr in self._state_outputs)
+
     def _take_point(self):
         """The time and states the host set through the native entry since the model last
         saw them (checked there: finite, the right number), if any: first thing in every
@@ -317,22 +326,23 @@ class ModelExchangeSlave(LeverSlave):
         point = self._point
         if point is None or not point[0]:
             return
-        pending = int(point[0])
+        block = point[:]                # one copy of the block: cheaper than element by element
+        pending = int(block[0])
         point[0] = 0.0
         if pending & POINT_TIME:
-            self._time = point[1]
+            self._time = block[1]
         if pending & POINT_STATES:
-            self._set_x(point[POINT_HEADER:POINT_HEADER + len(self._state_index)])
+            self._set_x(block[POINT_HEADER:POINT_HEADER + len(self._state_index)])
         if pending & (POINT_TIME | POINT_STATES):
             self._dirty = ALL
         if pending & POINT_INPUTS:
             first = POINT_HEADER + max(len(self._state_index), 1)
             names = self._deferred_names
             m = len(names)
-            for name, value, flag in zip(names, point[first:first + m], point[first + m:first + 2 * m]):
+            for name, value, flag in zip(names, block[first:first + m], block[first + m:first + 2 * m]):
                 if flag:
                     setattr(self, name, value)
-            point[first + m:first + 2 * m] = [0.0] * m
+            point[first + m:first + 2 * m] = self._no_inputs_pending
             if not self._dirty:
                 self._dirty = INPUTS_CHANGED
 
@@ -421,6 +431,7 @@ class ModelExchangeSlave(LeverSlave):
             size = POINT_HEADER + max(len(self.ME_STATES), 1) + 2 * len(deferred)
             self._point = (ctypes.c_double * size).from_address(address) if address else None
             self._deferred_names = tuple(name for _, (name, _, _) in deferred)
+            self._no_inputs_pending = [0.0] * len(deferred)
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
@@ -443,8 +454,12 @@ class ModelExchangeSlave(LeverSlave):
         kind, index = self._split(vrs)
         if kind == CONTROL:
             sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS),
-                     GET_DEFERRED_INPUTS: float(len(self._deferred_inputs()))}
+                     GET_DEFERRED_INPUTS: float(len(self._deferred_inputs())),
+                     GET_STATE_OUTPUTS: float(len(self._state_output_table()))}
             return [sizes[i] for i in index]
+        if kind == STATE_OUTPUT_TABLE:
+            table = [float(value) for pair in self._state_output_table() for value in pair]
+            return [table[i] for i in index]
         if kind == INPUT_TABLE:
             table = [value for vr, (_, low, high) in self._deferred_inputs() for value in (float(vr), low, high)]
             return [table[i] for i in index]
