@@ -569,3 +569,26 @@ def test_states_read_after_an_event_are_the_models(unpacked):
         assert fmu.getReal([vr["phi"], vr["w"]]) == [x[0], 0.0]
     finally:
         free(fmu)
+
+
+
+def test_a_directional_derivative_after_an_event_is_the_new_modes(unpacked):
+    """The partials are kept for the next directional derivative at the same point (one per
+    state and input in a Jacobian), never across an event: a breakaway switches the load
+    shaft from held to slipping at the same states and inputs, and da/dtau with it."""
+    fmu, md, vr = open_model(unpacked, "LoadShaft",
+                             parameters={"friction_torque": 1.0, "breakaway_torque": 2.0, "w_start": 0.0})
+    try:
+        def da_dtau():
+            return fmu.getDirectionalDerivative([vr["a"]], [vr["tau"]], [1.0])[0]
+
+        fmu.setReal([vr["tau"]], [5.0])         # beyond the breakaway torque, still held
+        held = da_dtau()
+        assert held == da_dtau() == 0.0
+        fmu.enterEventMode()
+        while fmu.newDiscreteStates()[0]:
+            pass
+        fmu.enterContinuousTimeMode()
+        assert da_dtau() > 0.0                  # slipping: 1/I
+    finally:
+        free(fmu)

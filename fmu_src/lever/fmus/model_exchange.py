@@ -116,6 +116,8 @@ class ModelExchangeSlave(LeverSlave):
     _seeds: dict = {}         # known value reference -> seed of a directional derivative
     _event_info = (0.0,) * len(INFO_FIELDS)
     _point = None             # the native entry's point block (ctypes doubles), once it gave one
+    _keys_of = None           # (model, known keys, unknown keys) of directional derivatives' references
+    _partials_at = None       # (model, t, x, u, partials) of the last directional derivative
     _deferred_names = ()      # the inputs it may hold, in its order
 
     def __init__(self, **kwargs):
@@ -222,6 +224,7 @@ class ModelExchangeSlave(LeverSlave):
         return self._me_model
 
     def _start_modes(self):
+        self._partials_at = None        # the modes may change
         model = self._me_model
         if hasattr(model, "initialize"):
             model.initialize(self._time, self._x_physics(), self._u())
@@ -500,6 +503,7 @@ class ModelExchangeSlave(LeverSlave):
         self._dirty = ALL
 
     def _new_discrete_states(self):
+        self._partials_at = None        # the modes may change
         model = self._me_current()
         t, u = self._time, self._u()
         before = self._x()
@@ -551,9 +555,13 @@ class ModelExchangeSlave(LeverSlave):
     def _directional(self, unknowns, seeds):
         model = self._me_current()
         self._cs_modes()
+        cached = self._keys_of
+        if cached is None or cached[0] is not model:
+            cached = self._keys_of = (model, {}, {})
+        known_keys, unknown_keys = cached[1], cached[2]
         knowns = {}
         for vr, seed in seeds.items():
-            key = self._known_key(vr)
+            key = known_keys[vr] if vr in known_keys else known_keys.setdefault(vr, self._known_key(vr))
             if key is None:
                 self._error(f"fmi2GetDirectionalDerivative: value reference {vr} is no "
                             f"{'input or state' if self._me else 'input'} of {type(self).__name__}")
@@ -564,14 +572,14 @@ class ModelExchangeSlave(LeverSlave):
             knowns[key] = knowns.get(key, 0.0) + seed
         keys = []
         for vr in unknowns:
-            key = self._unknown_key(vr)
+            key = unknown_keys[vr] if vr in unknown_keys else unknown_keys.setdefault(vr, self._unknown_key(vr))
             if key is None:
                 self._error(f"fmi2GetDirectionalDerivative: value reference {vr} is no output or state "
                             f"derivative of {type(self).__name__}")
                 return _nan_values(self, unknowns)
             keys.append(key)
         t, x, u = self._time, self._x_physics(), self._u()
-        partials = model.partials(t, x, u)
+        partials = self._partials(model, t, x, u)
         out = []
         numerical = None
         for key in keys:
@@ -584,6 +592,16 @@ class ModelExchangeSlave(LeverSlave):
             else:
                 out.append(sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()))
         return out
+
+    def _partials(self, model, t, x, u) -> dict:
+        """``model.partials(t, x, u)``, kept for the next call at the same point and modes: a
+        host that assembles a Jacobian asks one directional derivative per state and input."""
+        kept = self._partials_at
+        if kept is not None and kept[0] is model and kept[1] == t and kept[2] == x and kept[3] == u:
+            return kept[4]
+        partials = model.partials(t, x, u)
+        self._partials_at = (model, t, x, u, partials)
+        return partials
 
     def _output_rates(self, unknowns):
         """The first time derivatives of the outputs ``unknowns`` (value references) at the
