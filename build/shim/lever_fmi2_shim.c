@@ -1429,27 +1429,45 @@ static fmi2Status me_connect(Shim *s)
     return status;
 }
 
-/* The inputs the model lets the point block hold, read once per instance. */
-static fmi2Status read_deferred_inputs(Shim *s)
+/* A table the model gives at instantiation: its number of rows (at most `most`), then
+ * `width` values a row, in *table (malloc'd; the caller frees it) and *rows. */
+static fmi2Status read_table(Shim *s, fmi2ValueReference size, unsigned kind, size_t width, fmi2Real most,
+                             const char *what, fmi2Real **table, size_t *rows)
 {
-    fmi2ValueReference size = SIZE_DEFERRED_INPUTS;
     fmi2Real m = 0.0;
+    *table = NULL;
+    *rows = 0;
     fmi2Status status = channel_get(s, "fmi2Instantiate", CH_CONTROL, &size, 1, &m);
     if (!succeeded(status)) {
         return status;
     }
-    if (!(m >= 0.0 && m < 1e4)) {
-        return shim_error(s, "fmi2Instantiate: the model reports %g inputs to keep", m);
+    if (!(m >= 0.0 && m <= most)) {
+        return shim_error(s, "fmi2Instantiate: the model reports %g %s", m, what);
     }
     size_t n = (size_t)m;
-    fmi2Real *table = malloc((3 * n + 1) * sizeof *table);
-    s->inputVr = malloc((n + 1) * sizeof *s->inputVr);
-    s->inputRange = malloc((2 * n + 1) * sizeof *s->inputRange);
-    if (!table || !s->inputVr || !s->inputRange) {
-        free(table);
+    *table = malloc((width * n + 1) * sizeof **table);
+    if (!*table) {
         return shim_error(s, "fmi2Instantiate: out of memory");
     }
-    status = n ? channel_get(s, "fmi2Instantiate", CH_INPUT_TABLE, NULL, 3 * n, table) : fmi2OK;
+    status = n ? channel_get(s, "fmi2Instantiate", kind, NULL, width * n, *table) : fmi2OK;
+    if (succeeded(status)) {
+        *rows = n;
+    }
+    return status;
+}
+
+/* The inputs the model lets the point block hold (value reference, low, high), read once
+ * per instance. */
+static fmi2Status read_deferred_inputs(Shim *s)
+{
+    fmi2Real *table;
+    size_t n;
+    fmi2Status status = read_table(s, SIZE_DEFERRED_INPUTS, CH_INPUT_TABLE, 3, 1e4, "inputs to keep", &table, &n);
+    s->inputVr = malloc((n + 1) * sizeof *s->inputVr);
+    s->inputRange = malloc((2 * n + 1) * sizeof *s->inputRange);
+    if (succeeded(status) && (!s->inputVr || !s->inputRange)) {
+        status = shim_error(s, "fmi2Instantiate: out of memory");
+    }
     if (succeeded(status)) {
         for (size_t i = 0; i < n; i++) {
             s->inputVr[i] = (fmi2ValueReference)table[3 * i];
@@ -1462,36 +1480,27 @@ static fmi2Status read_deferred_inputs(Shim *s)
     return status;
 }
 
-/* The outputs that are states, read once per instance. */
+/* The outputs that are states (value reference, state index), read once per instance. */
 static fmi2Status read_state_outputs(Shim *s)
 {
-    fmi2ValueReference size = SIZE_STATE_OUTPUTS;
-    fmi2Real m = 0.0;
-    fmi2Status status = channel_get(s, "fmi2Instantiate", CH_CONTROL, &size, 1, &m);
-    if (!succeeded(status)) {
-        return status;
-    }
-    if (!(m >= 0.0 && m <= (fmi2Real)s->nx)) {
-        return shim_error(s, "fmi2Instantiate: the model reports %g outputs that are states", m);
-    }
-    size_t n = (size_t)m;
-    fmi2Real *table = malloc((2 * n + 1) * sizeof *table);
+    fmi2Real *table;
+    size_t n;
+    fmi2Status status = read_table(s, SIZE_STATE_OUTPUTS, CH_STATE_OUTPUT_TABLE, 2, (fmi2Real)s->nx,
+                                   "outputs that are states", &table, &n);
     s->stateOutputVr = malloc((n + 1) * sizeof *s->stateOutputVr);
     s->stateOutputIndex = malloc((n + 1) * sizeof *s->stateOutputIndex);
-    if (!table || !s->stateOutputVr || !s->stateOutputIndex) {
-        free(table);
-        return shim_error(s, "fmi2Instantiate: out of memory");
+    if (succeeded(status) && (!s->stateOutputVr || !s->stateOutputIndex)) {
+        status = shim_error(s, "fmi2Instantiate: out of memory");
     }
-    status = n ? channel_get(s, "fmi2Instantiate", CH_STATE_OUTPUT_TABLE, NULL, 2 * n, table) : fmi2OK;
-    if (succeeded(status)) {
-        for (size_t i = 0; i < n; i++) {
-            if (!(table[2 * i + 1] >= 0.0 && table[2 * i + 1] < (fmi2Real)s->nx)) {
-                free(table);
-                return shim_error(s, "fmi2Instantiate: the model reports state %g of %zu", table[2 * i + 1], s->nx);
-            }
+    for (size_t i = 0; succeeded(status) && i < n; i++) {
+        if (!(table[2 * i + 1] >= 0.0 && table[2 * i + 1] < (fmi2Real)s->nx)) {
+            status = shim_error(s, "fmi2Instantiate: the model reports state %g of %zu", table[2 * i + 1], s->nx);
+        } else {
             s->stateOutputVr[i] = (fmi2ValueReference)table[2 * i];
             s->stateOutputIndex[i] = (size_t)table[2 * i + 1];
         }
+    }
+    if (succeeded(status)) {
         s->nstateOutputs = n;
     }
     free(table);
