@@ -280,3 +280,18 @@ def test_lever_run_says_the_method_and_takes_the_tolerance():
     assert any("me-cvode: CVODE BDF" in n and "stiff" in n for n in notes), notes
     with pytest.raises(ValueError, match="option 'method'"):
         simulate(shortened("kavz685", 0.01), "me-cvode", options={"method": "RK4"})
+
+
+def test_the_point_cost_example_runs(capsys):
+    """examples/me_point_cost.py (the changelog's per-point figures) runs and prints its table."""
+    import importlib.util
+
+    from harness.paths import FMUS
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "me_point_cost.py"
+    spec = importlib.util.spec_from_file_location("me_point_cost", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    assert example.main([str(FMUS), "--rounds", "2", "--points", "20"]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[-2].startswith("right-hand side") and rows[-1].startswith("output point")
