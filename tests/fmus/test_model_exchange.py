@@ -459,22 +459,15 @@ def test_me_instances_reset_and_reuse(unpacked):
 
 def read_back(fmu, md, vr, kind):
     """One way a host reads the model at the point it set."""
-    nx, nz = md.numberOfContinuousStates, md.numberOfEventIndicators
-    if kind == "derivatives":
-        out = (ctypes.c_double * max(nx, 1))()
-        if nx:
-            fmu.getDerivatives(out, nx)
-        return list(out)[:nx]
-    if kind == "states":
-        out = (ctypes.c_double * max(nx, 1))()
-        if nx:
-            fmu.getContinuousStates(out, nx)
-        return list(out)[:nx]
-    if kind == "indicators":
-        out = (ctypes.c_double * max(nz, 1))()
-        if nz:
-            fmu.getEventIndicators(out, nz)
-        return list(out)[:nz]
+    arrays = {"derivatives": (fmu.getDerivatives, md.numberOfContinuousStates),
+              "states": (fmu.getContinuousStates, md.numberOfContinuousStates),
+              "indicators": (fmu.getEventIndicators, md.numberOfEventIndicators)}
+    if kind in arrays:
+        getter, n = arrays[kind]
+        out = (ctypes.c_double * max(n, 1))()
+        if n:
+            getter(out, n)
+        return list(out)[:n]
     if kind == "outputs":
         return fmu.getReal([u.variable.valueReference for u in md.outputs])
     if kind == "state outputs":         # answered by the native entry from the states set
