@@ -351,8 +351,12 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
-        if self._point is not None:     # only in Model Exchange
-            self._take_point()
+        point = self._point
+        if point is not None:           # only in Model Exchange
+            if point[0]:
+                self._take_point()
+            if vrs == self._derivative_refs and vrs:      # every right-hand side
+                return self._derivatives()
             if self._state_outputs.issuperset(vrs) and self._phase == "stepping":
                 return [float(getattr(self, self._real_names[vr])) for vr in vrs]
         if vrs and max(vrs) >= self._special_from:
