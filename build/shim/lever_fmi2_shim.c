@@ -1463,6 +1463,9 @@ static fmi2Status read_deferred_inputs(Shim *s)
     fmi2Real *table;
     size_t n;
     fmi2Status status = read_table(s, SIZE_DEFERRED_INPUTS, CH_INPUT_TABLE, 3, 1e4, "inputs to keep", &table, &n);
+    free(s->inputVr); /* read again after a failed connection (fmi2Reset) */
+    free(s->inputRange);
+    s->ninputs = 0;
     s->inputVr = malloc((n + 1) * sizeof *s->inputVr);
     s->inputRange = malloc((2 * n + 1) * sizeof *s->inputRange);
     if (succeeded(status) && (!s->inputVr || !s->inputRange)) {
@@ -1487,6 +1490,9 @@ static fmi2Status read_state_outputs(Shim *s)
     size_t n;
     fmi2Status status = read_table(s, SIZE_STATE_OUTPUTS, CH_STATE_OUTPUT_TABLE, 2, (fmi2Real)s->nx,
                                    "outputs that are states", &table, &n);
+    free(s->stateOutputVr);
+    free(s->stateOutputIndex);
+    s->nstateOutputs = 0;
     s->stateOutputVr = malloc((n + 1) * sizeof *s->stateOutputVr);
     s->stateOutputIndex = malloc((n + 1) * sizeof *s->stateOutputIndex);
     if (succeeded(status) && (!s->stateOutputVr || !s->stateOutputIndex)) {
