@@ -338,22 +338,24 @@ class System:
         # inputs are written, so such an output lags a step unless it is read again - it
         # alone: the others cannot have changed (the model description says so).
         dependent = [name for name in self.order if name not in self.feedthrough and self.input_dependent[name]]
-        self.dependent_reads = []
-        for name in dependent:
-            component = self.components[name]
-            vrs, values = self.buffers[name]
-            n = len(self.input_dependent[name])
-            first = len(vrs) - n
-            self.dependent_reads.append(
-                Visit(component, component.raw.get_real, component.raw.handle,
-                      (ctypes.c_uint * n).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)),
-                      component.raw.count(n),
-                      (ctypes.c_double * n).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)), (), ()))
+        self.dependent_reads = [self._read(name, len(self.exposed[name]) - len(self.input_dependent[name]),
+                                           len(self.input_dependent[name])) for name in dependent]
         # For masters whose last propagation only filled the buffers: first send the
         # connected inputs of those components from their buffers.
         self._dependent_sends = self.send_plan([Inputs(self.components[name], *self.inputs[name])
                                                 for name in dependent if name in self.inputs])
         self.has_dependent_outputs = bool(dependent)
+
+    def _read(self, name: str, first: int, count: int, copies=(), sends=()) -> Visit:
+        """A ``Visit`` reading ``count`` outputs of ``name``'s buffer from ``first`` (views
+        sharing its memory), then ``copies`` and ``sends``."""
+        component = self.components[name]
+        vrs, values = self.buffers[name]
+        return Visit(component, component.raw.get_real if count else None, component.raw.handle,
+                     (ctypes.c_uint * count).from_buffer(vrs, first * ctypes.sizeof(ctypes.c_uint)),
+                     component.raw.count(count),
+                     (ctypes.c_double * count).from_buffer(values, first * ctypes.sizeof(ctypes.c_double)),
+                     copies, sends)
 
     def connection_plan(self) -> tuple[list[Visit], list[Visit]]:
         """``(connections, rest)``: a full propagation that reads of each component without
@@ -378,16 +380,8 @@ class System:
                     any(i >= head for copy in visit.copies for _, i in copy.pairs):
                 plan.append(visit)
                 continue
-            component = visit.component
-            size_u, size_d = ctypes.sizeof(ctypes.c_uint), ctypes.sizeof(ctypes.c_double)
-            vrs, values = self.buffers[name]
-            plan.append(Visit(component, component.raw.get_real if head else None, visit.handle,
-                              (ctypes.c_uint * head).from_buffer(vrs), component.raw.count(head),
-                              (ctypes.c_double * head).from_buffer(values), visit.copies, visit.sends))
-            n = len(exposed) - head
-            rest.append(Visit(component, component.raw.get_real, visit.handle,
-                              (ctypes.c_uint * n).from_buffer(vrs, head * size_u), component.raw.count(n),
-                              (ctypes.c_double * n).from_buffer(values, head * size_d), (), ()))
+            plan.append(self._read(name, 0, head, visit.copies, visit.sends))
+            rest.append(self._read(name, head, len(exposed) - head))
         return plan, rest
 
     def send_plan(self, writes: list[Inputs]) -> list[Visit]:
