@@ -1071,6 +1071,11 @@ typedef struct {
 #define POINT_STATES 2
 #define POINT_INPUTS 4
 #define POINT_HEADER 2
+/* where the inputs' values begin, and the block's size */
+#define POINT_INPUTS_AT(s) (POINT_HEADER + ((s)->nx ? (s)->nx : 1))
+#define POINT_SIZE(s) (POINT_INPUTS_AT(s) + 2 * (s)->ninputs)
+/* what the host set and the model has not taken yet */
+#define POINT_PENDING(s, what) ((s)->point[0] = (fmi2Real)((int)(s)->point[0] | (what)))
 
 /* What fmi2GetFMUstate hands out: the inner state and where the instance was. */
 #define STATE_MAGIC 0x4c565253u /* "LVRS" */
@@ -1306,12 +1311,12 @@ static int succeeded(fmi2Status status) { return status == fmi2OK || status == f
 #define FORWARD(name, c, ...)                                                                      \
     do {                                                                                           \
         BEGIN(name, c);                                                                            \
-        SYNC(name, c);                                                                             \
+        SYNC(c);                                                                                   \
         return shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner, __VA_ARGS__));                 \
     } while (0)
 
 /* The pending time and states taken by the model before this call (me_sync). */
-#define SYNC(name, c)                                                                              \
+#define SYNC(c)                                                                                    \
     do {                                                                                           \
         fmi2Status synced_ = me_sync(SHIM(c));                                                     \
         if (!succeeded(synced_)) return synced_;                                                   \
@@ -1463,7 +1468,7 @@ static fmi2Status read_deferred_inputs(Shim *s)
     fmi2Real *table;
     size_t n;
     fmi2Status status = read_table(s, SIZE_DEFERRED_INPUTS, CH_INPUT_TABLE, 3, 1e4, "inputs to keep", &table, &n);
-    free(s->inputVr); /* read again after a failed connection (fmi2Reset) */
+    free(s->inputVr); /* read again for the fresh slave of an fmi2Reset */
     free(s->inputRange);
     s->ninputs = 0;
     s->inputVr = malloc((n + 1) * sizeof *s->inputVr);
@@ -1520,45 +1525,39 @@ static int point_answers(Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi
     if (!s->statesKnown || s->state != ST_CONTINUOUS_TIME || nvr == 0 || !value) {
         return 0;
     }
-    for (size_t i = 0; i < nvr; i++) {
+    const fmi2Real *x = s->point + POINT_HEADER;
+    for (size_t i = 0; i < nvr; i++) { /* a miss: the model's read writes every value */
         size_t k = 0;
         while (k < s->nstateOutputs && s->stateOutputVr[k] != vr[i]) k++;
         if (k == s->nstateOutputs) {
             return 0;
         }
-    }
-    const fmi2Real *x = s->point + POINT_HEADER;
-    for (size_t i = 0; i < nvr; i++) {
-        size_t k = 0;
-        while (s->stateOutputVr[k] != vr[i]) k++;
         value[i] = x[s->stateOutputIndex[k]];
     }
     return 1;
 }
 
-/* Hands the point block (made once per instance, nothing pending) to the Python slave. */
+/* Makes the point block (nothing pending) and hands it to the Python slave: at instantiation
+ * and after every fmi2Reset, whose fresh slave gets a block of its own. */
 static fmi2Status point_connect(Shim *s)
 {
     s->statesKnown = 0;
-    if (!s->point) {
-        fmi2Status status = read_deferred_inputs(s);
-        if (succeeded(status)) {
-            status = read_state_outputs(s);
-        }
-        if (!succeeded(status)) {
-            return status;
-        }
-        s->point = calloc(POINT_HEADER + (s->nx ? s->nx : 1) + 2 * s->ninputs, sizeof *s->point);
-        if (!s->point) {
-            return shim_error(s, "fmi2Instantiate: out of memory");
-        }
+    fmi2Status status = read_deferred_inputs(s);
+    if (succeeded(status)) {
+        status = read_state_outputs(s);
     }
-    memset(s->point, 0, (POINT_HEADER + (s->nx ? s->nx : 1) + 2 * s->ninputs) * sizeof *s->point);
+    if (!succeeded(status)) {
+        return status;
+    }
+    s->point = calloc(POINT_SIZE(s), sizeof *s->point);
+    if (!s->point) {
+        return shim_error(s, "fmi2Instantiate: out of memory");
+    }
     s->point[1] = s->time;
     fmi2ValueReference control = CONTROL_POINT;
     /* an address of a 64-bit process is below 2^53: a double holds it exactly */
     fmi2Real address = (fmi2Real)(uintptr_t)s->point;
-    fmi2Status status = channel_set(s, "fmi2Instantiate", CH_CONTROL, &control, 1, &address);
+    status = channel_set(s, "fmi2Instantiate", CH_CONTROL, &control, 1, &address);
     if (!succeeded(status)) {
         free(s->point);
         s->point = NULL;
@@ -1587,13 +1586,13 @@ static int point_keeps(Shim *s, const fmi2ValueReference vr[], size_t nvr, const
         }
         slot[i] = k;
     }
-    fmi2Real *values = s->point + POINT_HEADER + (s->nx ? s->nx : 1);
+    fmi2Real *values = s->point + POINT_INPUTS_AT(s);
     fmi2Real *pending = values + s->ninputs;
     for (size_t i = 0; i < nvr; i++) {
         values[slot[i]] = value[i];
         pending[slot[i]] = 1.0;
     }
-    s->point[0] = (fmi2Real)((int)s->point[0] | POINT_INPUTS);
+    POINT_PENDING(s, POINT_INPUTS);
     return 1;
 }
 
@@ -1833,7 +1832,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
 #define TRANSITION(name, c, to)                                                                    \
     do {                                                                                           \
         BEGIN(name, c);                                                                            \
-        SYNC(name, c);                                                                             \
+        SYNC(c);                                                                                   \
         fmi2Status status_ = shim_end(SHIM(c), #name, g_api->name(SHIM(c)->inner));                \
         if (succeeded(status_)) SHIM(c)->state = (to);                                             \
         return status_;                                                                            \
@@ -1860,9 +1859,11 @@ fmi2Status fmi2Reset(fmi2Component c)
     if (succeeded(status)) {
         s->state = ST_INSTANTIATED;
         s->time = 0.0;
-        if (s->point) {
-            s->point[0] = 0.0; /* what was pending belonged to the model reset */
-        }
+        /* the point block belonged to the slave reset: a new one for the new slave, made only
+         * if it is connected (until then the time and states reach it by the channel) */
+        free(s->point);
+        s->point = NULL;
+        s->statesKnown = 0;
         if (s->me) {
             /* a fresh Python slave: told again that it runs as Model Exchange */
             fmi2Status connected = me_connect(s);
@@ -1964,7 +1965,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
                                  "nothing was set", i, vr[i], bad);
         }
     }
-    SYNC(fmi2SetString, c);
+    SYNC(c);
     return shim_end(s, "fmi2SetString", g_api->fmi2SetString(s->inner, vr, nvr, value));
 }
 
@@ -2372,7 +2373,7 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
     }
     if (s->point) {
         s->time = s->point[1] = time;
-        s->point[0] = (fmi2Real)((int)s->point[0] | POINT_TIME);
+        POINT_PENDING(s, POINT_TIME);
         return fmi2OK;
     }
     fmi2ValueReference control = CONTROL_TIME;
@@ -2399,7 +2400,7 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
         if (nx) {
             memcpy(s->point + POINT_HEADER, x, nx * sizeof *x);
         }
-        s->point[0] = (fmi2Real)((int)s->point[0] | POINT_STATES);
+        POINT_PENDING(s, POINT_STATES);
         s->statesKnown = 1;
         return fmi2OK;
     }

@@ -156,12 +156,10 @@ class ModelExchangeSlave(LeverSlave):
         cls._input_names = tuple(p.name for p in self.INPUTS)
         cls._state_of_physics = {s.physics: k for k, s in enumerate(self.ME_STATES)}
         cls._live_vr = cls._vr_of.get(LIVE_EVENT_INDICATORS)
-        # the channel references of the calls a host makes at every right-hand side, so
-        # that those calls are told apart by one list comparison
+        # the derivatives' channel references, read at every right-hand side: told apart by
+        # one list comparison
         n = len(self.ME_STATES)
-        cls._time_refs = [CHANNEL + (CONTROL << KIND_SHIFT) + SET_TIME]
         cls._state_index = list(range(n))
-        cls._state_refs = [CHANNEL + (STATES << KIND_SHIFT) + k for k in range(n)]
         cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
         cls._state_attributes = tuple(s.attribute for s in self.ME_STATES)
         # Outputs that are states, kept in the attribute of their own name (``_x`` the
@@ -319,8 +317,8 @@ class ModelExchangeSlave(LeverSlave):
         """``[(value reference, state index)]`` of the outputs that are states (kept in the
         attribute of their name): the native entry answers a read of those alone in
         Continuous-Time Mode from the states the host set, without a call into Python."""
-        return sorted((vr, next(k for k, s in enumerate(self.ME_STATES) if self._vr_of[s.name] == vr))
-                      for vr in self._state_outputs)
+        return sorted((self._vr_of[s.name], k) for k, s in enumerate(self.ME_STATES)
+                      if self._vr_of.get(s.name) in self._state_outputs)
 
     def _take_point(self):
         """The time and states the host set through the native entry since the model last
@@ -352,13 +350,12 @@ class ModelExchangeSlave(LeverSlave):
     @guarded(default=_nan_values)
     def get_real(self, vrs):
         point = self._point
-        if point is not None:           # only in Model Exchange
-            if point[0]:
-                self._take_point()
-            if vrs == self._derivative_refs and vrs:      # every right-hand side
-                return self._derivatives()
-            if self._state_outputs.issuperset(vrs) and self._phase == "stepping":
-                return [float(getattr(self, self._real_names[vr])) for vr in vrs]
+        if point is not None and point[0]:
+            self._take_point()
+        if vrs == self._derivative_refs and vrs:          # every right-hand side
+            return self._derivatives()
+        if point is not None and self._phase == "stepping" and self._state_outputs.issuperset(vrs):
+            return [float(getattr(self, self._real_names[vr])) for vr in vrs]
         if vrs and max(vrs) >= self._special_from:
             if self._is_channel(vrs):
                 return self._channel_get(vrs)
@@ -419,10 +416,6 @@ class ModelExchangeSlave(LeverSlave):
     def _channel_set(self, vrs, values):
         if len(vrs) != len(values):
             raise ValueError(f"{len(vrs)} value references but {len(values)} values")
-        if vrs == self._time_refs:
-            return self._set_time(values[0])
-        if vrs == self._state_refs:
-            return self._set_states(self._state_index, values)
         kind, index = self._split(vrs)
         if kind == CONTROL and index == [SET_INTERFACE]:
             if self._phase != "instantiated":
@@ -456,8 +449,6 @@ class ModelExchangeSlave(LeverSlave):
         self._dirty = ALL
 
     def _channel_get(self, vrs):
-        if vrs == self._derivative_refs:
-            return self._derivatives()
         kind, index = self._split(vrs)
         if kind == CONTROL:
             sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS),
@@ -493,7 +484,7 @@ class ModelExchangeSlave(LeverSlave):
 
     def _set_states(self, index, values):
         n = len(self.ME_STATES)
-        if index is not self._state_index and index != self._state_index:
+        if index != self._state_index:
             self._error(f"fmi2SetContinuousStates: {len(index)} states given, this model has {n}; nothing was set")
             return
         total = sum(values)
