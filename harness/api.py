@@ -342,15 +342,15 @@ class Validation:
         return self.findings.passed
 
 
-def fmu_start_values(model: str, assignments, fmu_dir: Path | None = None, fmu_path: Path | None = None) -> dict:
+def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> dict:
     """``name=value`` settings for an FMU run stand-alone: its parameters (and inputs not in
-    the ``_in.csv``), checked against the model description (of ``model`` in ``fmu_dir``, or
-    of the FMU file ``fmu_path``); InputError otherwise."""
+    the ``_in.csv``), checked against the model description (of the FMU file ``fmu_path``,
+    default ``model``'s in build/fmus); InputError otherwise."""
     from fmpy import read_model_description
 
     from harness.description.plan import converted
 
-    path = fmu_path if fmu_path is not None else Path(fmu_dir or FMUS) / f"{model}.fmu"
+    path = fmu_path if fmu_path is not None else FMUS / f"{model}.fmu"
     variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
     values = {}
     for assignment in _assignments(assignments):

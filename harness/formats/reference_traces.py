@@ -506,11 +506,11 @@ class Result:
     failure: str | None = None
 
 
-def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None, fmu_dir: Path = FMUS,
+def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = None,
             fmu_path: Path | None = None) -> Result:
     """The FMU stand-alone under fmpy's ``simulate_fmu``, driven by the reference's inputs,
-    at the ``_ref.opt`` step, recording at every communication point: ``name`` in
-    ``fmu_dir``, or the FMU file ``fmu_path`` (FMI 2.0 or 3.0, as its description says; the
+    at the ``_ref.opt`` step, recording at every communication point: the FMU file
+    ``fmu_path`` (default ``name``'s in build/fmus) (FMI 2.0 or 3.0, as its description says; the
     harness's ``UnsupportedFmu`` for another).  The instance is the harness's own (its
     messages come through the process's one logger, see ``harness.engine.component``), lent
     to ``simulate_fmu`` and freed as its state allows."""
@@ -523,7 +523,7 @@ def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = N
                                                            names=["time"] + list(inputs.signals))
     outputs = list(reference.outputs.signals)
     how = f"fmpy.simulate_fmu, step {opt.step:g} s, {opt.start:g}...{opt.stop:g} s"
-    component = open_component(name, fmu_dir / f"{name}.fmu" if fmu_path is None else fmu_path)
+    component = open_component(name, FMUS / f"{name}.fmu" if fmu_path is None else fmu_path)
     if fmu_path is not None:
         how += f", {fmu_path} (FMI {component.description.fmiVersion})"
     try:
