@@ -585,3 +585,23 @@ def test_a_directional_derivative_after_an_event_is_the_new_modes(unpacked):
         assert da_dtau() > 0.0                  # slipping: 1/I
     finally:
         free(fmu)
+
+
+def test_a_read_in_initialization_mode_is_the_new_parameters_whatever_it_reads(unpacked):
+    """After a parameter is set in Initialization Mode every read comes from the model it
+    makes: a state derivative read alone equals the same derivative read after an output
+    (it read 0.0 alone), and live_event_indicators counts the new model's events."""
+    md, unzipdir = unpacked["EngineShaft"]
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    readings = []
+    for reads in ([vr["der(engine_work)"]], [vr["phi"], vr["der(engine_work)"]]):
+        fmu = FMU2Model(guid=md.guid, unzipDirectory=unzipdir, modelIdentifier="EngineShaft", instanceName="e")
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.setReal([vr["w_start"]], [20.0])
+        readings.append(fmu.getReal(reads)[-1])
+        live = fmu.getInteger([vr["live_event_indicators"]])[0]
+        fmu.freeInstance()
+        assert live == 0                        # a linear characteristic: no point to cross
+    assert readings[0] == readings[1] != 0.0

@@ -349,6 +349,8 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded(default=_nan_values)
     def get_real(self, vrs):
+        if self._model_stale:           # every read, whatever it reads: the model its parameters make
+            self._build_for_reading()
         point = self._point
         if point is not None and point[0]:
             self._take_point()
@@ -364,6 +366,8 @@ class ModelExchangeSlave(LeverSlave):
 
     @guarded(default=lambda self, vrs: [0] * len(vrs))
     def get_integer(self, vrs):
+        if self._model_stale:
+            self._build_for_reading()
         if self._live_vr in vrs:
             return [self._live_event_indicators() if vr == self._live_vr else
                     LeverSlave.get_integer.__wrapped__(self, [vr])[0] for vr in vrs]
