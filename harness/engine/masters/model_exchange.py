@@ -133,6 +133,7 @@ class ModelExchangeCvodeMaster(Master):
                                  np.ctypeslib.as_array(c.dx)[:c.nx]))
             first += c.nx
         self.nx = first
+        self._compile_point()
         self._zslices, first = [], 0
         for c in self._with_indicators:
             n = live[c.name]
@@ -161,6 +162,25 @@ class ModelExchangeCvodeMaster(Master):
         self._restart(self.t, y0)
 
     # -- the right-hand side -------------------------------------------------------------------
+    def _compile_point(self):
+        """The calls a point makes, made once: each FMU's fmi2SetTime; its
+        fmi2SetContinuousStates from, and fmi2GetDerivatives into, its rows of one buffer
+        for the whole system (one copy of CVODE's vector each way, not one per FMU)."""
+        n = max(self.nx, 1)
+        self._x_all, self._dx_all = (ctypes.c_double * n)(), (ctypes.c_double * n)()
+        self._x_view = np.ctypeslib.as_array(self._x_all)[:self.nx]
+        self._dx_view = np.ctypeslib.as_array(self._dx_all)[:self.nx]
+
+        def rows(buffer, first):
+            return ctypes.cast(ctypes.byref(buffer, first * ctypes.sizeof(ctypes.c_double)),
+                               ctypes.POINTER(ctypes.c_double))
+
+        self._time_calls = tuple((c, c.me_counts, c._set_time, c.raw.handle) for c in self._all)
+        self._state_calls = tuple((c, c.me_counts, c._set_states, c.raw.handle, rows(self._x_all, a), c._nx)
+                                  for c, a, _, _, _ in self._slices)
+        self._derivative_calls = tuple((c, c.me_counts, c._get_derivatives, c.raw.handle, rows(self._dx_all, a),
+                                        c._nx) for c, a, _, _, _ in self._slices)
+
     def _set_point(self, t, y):
         """Time and states of every FMU at ``(t, y)``, the values propagated; skipped where
         the system is there already (CVODE asks the Jacobian and the root functions at the
@@ -169,11 +189,19 @@ class ModelExchangeCvodeMaster(Master):
         if t == self._point_t and point == self._point_bytes:
             return
         if t != self._point_t:
-            for c in self._all:
-                c.set_time(t)
-        for c, a, b, x, _ in self._slices:
-            x[:] = y[a:b]
-            c.set_states()
+            time = ctypes.c_double(t)
+            for c, counts, set_time, handle in self._time_calls:
+                counts["time"] += 1
+                status = set_time(handle, time)
+                if status > 1:
+                    c.fail(f"fmi2SetTime(t = {t:.9g})", status)
+                c.time = t
+        self._x_view[:] = y
+        for c, counts, set_states, handle, rows, n in self._state_calls:
+            counts["states"] += 1
+            status = set_states(handle, rows, n)
+            if status > 1:
+                c.fail("fmi2SetContinuousStates", status)
         self.system.propagate_with(self._plan)
         self._point_t = t
         self._point_bytes = point
@@ -184,9 +212,12 @@ class ModelExchangeCvodeMaster(Master):
         if total - total != 0.0 and not np.isfinite(y).all():
             raise MasterFailure(f"{self.name}: CVODE tried non-finite states at t = {t:.9g} s")
         self._set_point(t, y)
-        for c, a, b, _, dx in self._slices:
-            c.derivatives()
-            yp[a:b] = dx
+        for c, counts, derivatives, handle, rows, n in self._derivative_calls:
+            counts["derivatives"] += 1
+            status = derivatives(handle, rows, n)
+            if status > 1:
+                c.fail("fmi2GetDerivatives", status)
+        yp[:] = self._dx_view
 
     def _roots(self, t, y, events):
         self._set_point(t, y)
@@ -204,16 +235,20 @@ class ModelExchangeCvodeMaster(Master):
     # -- the Jacobian from directional derivatives ----------------------------------------------
     def _build_jacobian_plan(self):
         """For each FMU, one fmi2GetDirectionalDerivative per known (state or connected
-        input), its unknowns the state derivatives and the connected outputs: the value
-        references, seeds and result buffers made once."""
+        input), its unknowns the state derivatives and the connected outputs.  Each call
+        writes its row of one result buffer; where each value goes in the blocks
+        ``[[df/dx, df/du], [dg/dx, dg/du]]`` (one matrix, the rows the derivatives and the
+        connections, the columns the states and the connections) is worked out here, so
+        that a Jacobian is the calls and one scatter."""
         system = self.system
         connections = list(system.scene.connections)
-        self._nk = len(connections)
+        nx = self.nx
+        self._nk = nk = len(connections)
         state_column = {}
         for c, a, b, _, _ in self._slices:
             for i, name in enumerate(c.state_names):
                 state_column[(c.name, name)] = a + i
-        self._calls = []
+        plan = []           # (component, unknowns, n, known, rows of the blocks per unknown, column)
         for c in self._all:
             outputs = []            # distinct connected outputs, each with its connections
             for k, conn in enumerate(connections):
@@ -227,36 +262,49 @@ class ModelExchangeCvodeMaster(Master):
             unknowns = [c.vr(n) for n in c.derivative_names] + [c.vr(o) for o, _ in outputs]
             if not unknowns:
                 continue
-            knowns = [(c.vr(n), "x", state_column[(c.name, n)]) for n in c.state_names]
-            knowns += [(c.vr(conn.input), "u", k) for k, conn in enumerate(connections) if conn.target == c.name]
+            knowns = [(c.vr(n), state_column[(c.name, n)]) for n in c.state_names]
+            knowns += [(c.vr(conn.input), nx + k) for k, conn in enumerate(connections) if conn.target == c.name]
+            first = next((a for cc, a, *_ in self._slices if cc is c), 0)
+            rows = [[first + i] for i in range(len(c.derivative_names))] + [[nx + k for k in ks] for _, ks in outputs]
             n = len(unknowns)
-            rows_f = list(range(next((a for cc, a, *_ in self._slices if cc is c), 0),
-                                next((b for cc, _, b, *_ in self._slices if cc is c), 0)))
-            self._calls.append((c, (ctypes.c_uint * n)(*unknowns), ctypes.c_size_t(n),
-                                [((ctypes.c_uint * 1)(vr), kind, column) for vr, kind, column in knowns],
-                                (ctypes.c_double * n)(), rows_f, [ks for _, ks in outputs]))
+            vrs = (ctypes.c_uint * n)(*unknowns)
+            for vr, column in knowns:
+                plan.append((c, vrs, ctypes.c_size_t(n), (ctypes.c_uint * 1)(vr), rows, column))
+        width = max([p[2].value for p in plan] + [1])
+        self._results = np.zeros((max(len(plan), 1), width))
+        row_bytes = width * ctypes.sizeof(ctypes.c_double)
+        base = self._results.ctypes.data
+        self._calls, targets = [], ([], [], [])
+        for i, (c, vrs, n, known, rows, column) in enumerate(plan):
+            out = ctypes.cast(ctypes.c_void_p(base + i * row_bytes), ctypes.POINTER(ctypes.c_double))
+            self._calls.append((c, c.me_counts, c._directional, c.raw.handle, vrs, n, known, out))
+            for j, block_rows in enumerate(rows):
+                for r in block_rows:
+                    targets[0].append(r)
+                    targets[1].append(column)
+                    targets[2].append(i * width + j)
+        self._scatter = tuple(np.array(t, dtype=np.intp) for t in targets)
+        self._blocks = np.zeros((nx + nk, nx + nk))
         self._seed = (ctypes.c_double * 1)(1.0)
         self._one = ctypes.c_size_t(1)
 
     def _jacobian(self, t, y) -> np.ndarray:
         self.n_jacobians += 1
         self._set_point(t, y)
+        one, seed = self._one, self._seed
+        for c, counts, directional, handle, unknowns, n, known, out in self._calls:
+            counts["directional"] += 1
+            status = directional(handle, unknowns, n, known, one, seed, out)
+            if status > 1:
+                c.fail("fmi2GetDirectionalDerivative", status)
+        rows, columns, values = self._scatter
+        blocks = self._blocks
+        blocks[rows, columns] = self._results.ravel()[values]
         nx, nk = self.nx, self._nk
-        a_xx = np.zeros((nx, nx))
-        b_xu = np.zeros((nx, nk))
-        c_ux = np.zeros((nk, nx))
-        d_uu = np.zeros((nk, nk))
-        for c, unknowns, n, knowns, out, rows_f, output_rows in self._calls:
-            nf = len(rows_f)
-            for known, kind, column in knowns:
-                c.directional(unknowns, n, known, self._one, self._seed, out)
-                values = out[:]
-                (a_xx if kind == "x" else b_xu)[rows_f, column] = values[:nf]
-                for m, ks in enumerate(output_rows):
-                    (c_ux if kind == "x" else d_uu)[ks, column] = values[nf + m]
+        a_xx = blocks[:nx, :nx].copy()      # contiguous, as the products below have always been given
         if not nk:
             return a_xx
-        return a_xx + b_xu @ np.linalg.solve(np.eye(nk) - d_uu, c_ux)
+        return a_xx + blocks[:nx, nx:].copy() @ np.linalg.solve(np.eye(nk) - blocks[nx:, nx:], blocks[nx:, :nx].copy())
 
     def _jacobian_callback(self, t, y, yp, matrix):
         matrix[:, :] = self._jacobian(t, y)
