@@ -43,10 +43,10 @@ def solve_reference(plan: plans.Plan, times: np.ndarray, use_cache: bool = True,
     model = plan.rectifier.model.get()
     started = clock.perf_counter()
     rows, n_rhs, events = integrate(model, np.asarray(times, dtype=float), rtol, atol, method)
-    wall = clock.perf_counter() - started
     # ``events`` counts the events the integrator located: bookkeeping of each solver, not
     # a signal a co-simulation could match (the reference's own count is in ``info``).
     traces = {f"{name}.{k}": np.array([r[k] for r in rows]) for k in rows[0] if k != "events"}
+    wall = clock.perf_counter() - started     # the time to the traces, as a master's
     reference = MonolithicSolution(np.asarray(times, dtype=float)[:len(rows)], traces, wall, n_rhs,
                           f"{method} rtol={rtol:g} atol={atol:g}, restarted at {len(events)} located events",
                           info={"events": len(events), "bookkeeping": [f"{name}.events"]})

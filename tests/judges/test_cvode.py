@@ -55,3 +55,23 @@ def test_cvode_refuses_a_load_that_sticks():
     scene = scenes.load("kavz685_stall_resistive")
     with pytest.raises(ReferenceUnavailable, match="stick"):
         monolithic.solve(scene, np.linspace(0.0, 0.1, 11), use_cache=False, method="CVODE-BDF")
+
+
+@pytest.mark.parametrize("method", ["DOP853", "CVODE-Adams"])
+def test_the_unsplit_solutions_time_covers_its_recorded_outputs(method, monkeypatch):
+    """A master's run time covers reading its recorded outputs at every point; the unsplit
+    solution's covers computing them (the benchmark divides one by the other): the shafts'
+    accelerations and torques, computed from the solution, made slow here."""
+    import time
+
+    scene = scenes.load("kavz685")
+    times = np.linspace(0.0, 0.05, 51)
+    rates = monolithic._shaft_rates
+
+    def slow(*args):
+        time.sleep(0.05)
+        return rates(*args)
+
+    monkeypatch.setattr(monolithic, "_shaft_rates", slow)
+    solution = monolithic.solve(scene, times, use_cache=False, rtol=1e-6, atol=1e-8, method=method)
+    assert solution.wall_time >= 2 * 0.05           # both shafts' rates

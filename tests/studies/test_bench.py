@@ -146,6 +146,17 @@ def test_bench_plan_refuses_unknown_masters():
         bench.plan(spec)
 
 
+def test_the_unsplit_solutions_record_on_the_model_exchange_masters_grid():
+    """The price of the FMU boundary is a ratio of like with like: where the plan names the
+    grid the Model Exchange master records on, the monolithic solutions record on it too
+    (not on a fine scene step, whose points CVODE would pay for); elsewhere the scene's step."""
+    spec = scene.load("kavz685_stiff")
+    assert spec.experiment.step < 2e-3
+    assert bench.plan(spec)["monolithic_step"] == bench.plan(spec)["output_steps"]["me-cvode"] == 2e-3
+    spec.bench = {"steps": {"jacobi": [1e-4]}, "output_steps": {"adaptive": 1e-3}}
+    assert bench.plan(spec)["monolithic_step"] == spec.experiment.step
+
+
 def test_bench_records_failed_cases_goes_on_and_resumes(tmp_path, fmu_dir, monkeypatch):
     """A diverging case and a case that raises are recorded with their diagnosis, the
     others complete; a second run takes every case from the case log."""

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.engine import masters as master_family
+from harness.engine.system import MODEL_EXCHANGE
 from harness.paths import FMUS
 from harness.studies.cases import FAILED, CaseLog, case_key
 
@@ -88,6 +89,7 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
         master_family.check(*only)
         steps = {k: v for k, v in steps.items() if k in only}
         tolerances = {k: v for k, v in tolerances.items() if k in only}
+    output_steps = {name: float(h) for name, h in table.get("output_steps", {}).items()}
     return {
         "steps": steps,
         "tolerances": tolerances,
@@ -103,7 +105,13 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
         # the output grid [s] of a master's tolerance runs where it records on a grid (the
         # Model Exchange master; default the scene's step), e.g. the grid the masters it is
         # compared with record on
-        "output_steps": {name: float(h) for name, h in table.get("output_steps", {}).items()},
+        "output_steps": output_steps,
+        # the grid the unsplit solutions record on: the Model Exchange master's, where the
+        # plan names it (the price of the FMU boundary is a ratio of like with like: the same
+        # points recorded, the same outputs computed at them), the scene's step otherwise
+        "monolithic_step": next((h for name, h in output_steps.items()
+                                 if master_family.master_class(name).interface == MODEL_EXCHANGE),
+                                scene.experiment.step),
         "target_error": float(table.get("target_error", 1e-3)),
         "baseline": table.get("baseline", "jacobi"),
         "repeats_limit_s": float(table.get("repeats_limit_s", 5.0)),

@@ -111,13 +111,13 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
                      lambda name=name, tol=tol: timing.run_peer(scene, name, scene.experiment.step, repeats,
                                                                 fmu_dir, limit, tol))
     if monolithic:
+        grid = p["monolithic_step"]
         for rtol in p["monolithic"]:
-            take(Case("monolithic", "monolithic", scene.experiment.step, rtol),
-                 lambda rtol=rtol: timing.run_monolithic(scene, rtol, scene.experiment.step, repeats))
+            take(Case("monolithic", "monolithic", grid, rtol),
+                 lambda rtol=rtol: timing.run_monolithic(scene, rtol, grid, repeats))
         for rtol in p["monolithic_cvode"]:
-            take(Case(timing.MONOLITHIC_CVODE, "monolithic", scene.experiment.step, rtol),
-                 lambda rtol=rtol: timing.run_monolithic(scene, rtol, scene.experiment.step, repeats,
-                                                         timing.MONOLITHIC_CVODE))
+            take(Case(timing.MONOLITHIC_CVODE, "monolithic", grid, rtol),
+                 lambda rtol=rtol: timing.run_monolithic(scene, rtol, grid, repeats, timing.MONOLITHIC_CVODE))
     for case in cases:
         headlines.split_case(case)
     # The headline comparisons, measured side by side: the cases they divide run in turn,
