@@ -129,8 +129,7 @@ class ModelExchangeCvodeMaster(Master):
         self._with_indicators = [c for c in components if live.get(c.name)]
         self._slices, first = [], 0
         for c in self._with_states:
-            self._slices.append((c, first, first + c.nx, np.ctypeslib.as_array(c.x)[:c.nx],
-                                 np.ctypeslib.as_array(c.dx)[:c.nx]))
+            self._slices.append((c, first, first + c.nx, np.ctypeslib.as_array(c.x)[:c.nx]))
             first += c.nx
         self.nx = first
         self._compile_point()
@@ -177,9 +176,9 @@ class ModelExchangeCvodeMaster(Master):
 
         self._time_calls = tuple((c, c.me_counts, c._set_time, c.raw.handle) for c in self._all)
         self._state_calls = tuple((c, c.me_counts, c._set_states, c.raw.handle, rows(self._x_all, a), c._nx)
-                                  for c, a, _, _, _ in self._slices)
+                                  for c, a, _, _ in self._slices)
         self._derivative_calls = tuple((c, c.me_counts, c._get_derivatives, c.raw.handle, rows(self._dx_all, a),
-                                        c._nx) for c, a, _, _, _ in self._slices)
+                                        c._nx) for c, a, _, _ in self._slices)
 
     def _set_point(self, t, y):
         """Time and states of every FMU at ``(t, y)``, the values propagated; skipped where
@@ -227,7 +226,7 @@ class ModelExchangeCvodeMaster(Master):
 
     def _read_states(self) -> np.ndarray:
         y = np.empty(self.nx)
-        for c, a, b, x, _ in self._slices:
+        for c, a, b, x in self._slices:
             c.get_states()
             y[a:b] = x
         return y
@@ -245,7 +244,7 @@ class ModelExchangeCvodeMaster(Master):
         nx = self.nx
         self._nk = nk = len(connections)
         state_column = {}
-        for c, a, b, _, _ in self._slices:
+        for c, a, b, _ in self._slices:
             for i, name in enumerate(c.state_names):
                 state_column[(c.name, name)] = a + i
         plan = []           # (component, unknowns, n, known, rows of the blocks per unknown, column)
