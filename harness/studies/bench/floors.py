@@ -69,9 +69,7 @@ def floors_side_by_side(versions: list[scenes.Scene], n_steps: int, fmu_dir: Pat
     try:
         for scene in versions:
             loops.append(_FloorLoop(scene, fmu_dir, step))
-        while any(loop.done < n_steps for loop in loops):
-            for loop in loops:
-                loop.advance(min(chunk or n_steps, n_steps - loop.done))
+        _in_turns(loops, n_steps, chunk, _FloorLoop.advance)
         interrupt.check()
         return [loop.spent / n_steps for loop in loops]
     finally:
@@ -79,8 +77,22 @@ def floors_side_by_side(versions: list[scenes.Scene], n_steps: int, fmu_dir: Pat
             loop.free()
 
 
-class _FloorLoop:
-    """One scene's system making the floor's steps (``call_floor``) a number at a time."""
+def _in_turns(loops: list, n_steps: int, chunk: int | None, run):
+    """``run(loop, count)`` on each of ``loops`` in turn, ``chunk`` at a time (default all
+    ``n_steps`` at once), until each has had ``n_steps``: side by side, each loop sees the
+    machine the others saw."""
+    given = [0] * len(loops)
+    while any(k < n_steps for k in given):
+        for i, loop in enumerate(loops):
+            count = min(chunk or n_steps, n_steps - given[i])
+            run(loop, count)
+            given[i] += count
+
+
+class _StepLoop:
+    """One scene's system, initialized, its initial states kept to start again from where
+    the motion diverges (``_start_again``), stepping by ``step`` (default the scene's) from
+    the scene's start: what the floor's loop and the prices' loop share."""
 
     def __init__(self, scene: scenes.Scene, fmu_dir: Path, step: float | None):
         self.system = System(scene, fmu_dir, record=recorded_names(scene))
@@ -88,13 +100,30 @@ class _FloorLoop:
         try:
             self.system.initialize()
             self.states = _initial_states(self.system)
-            self.plan = self.system.floor_plan()
+            self._compile()
         except BaseException:
             self.free()
             raise
         self.h = step or scene.experiment.step
         self.start = self.t = scene.experiment.start
-        self.spent, self.done = 0.0, 0
+        self.done = 0
+
+    def _compile(self):
+        """The calls the loop makes, made once (the system is initialized)."""
+        raise NotImplementedError
+
+    def free(self):
+        _free_states(self.states)
+        self.states = None
+        self.system.free()
+
+
+class _FloorLoop(_StepLoop):
+    """One scene's system making the floor's steps (``call_floor``) a number at a time."""
+
+    def _compile(self):
+        self.plan = self.system.floor_plan()
+        self.spent = 0.0
 
     def advance(self, count: int):
         """``count`` more completed steps, their time added to ``spent``."""
@@ -115,11 +144,6 @@ class _FloorLoop:
             done += 1
             t += h
         self.t, self.spent, self.done = t, spent, done
-
-    def free(self):
-        _free_states(self.states)
-        self.states = None
-        self.system.free()
 
 
 #: kinds of FMI call a master makes, as ``System.calls_by_kind`` counts them
@@ -146,9 +170,7 @@ def prices_side_by_side(versions: list[scenes.Scene], fmu_dir: Path = FMUS, n_st
     try:
         for scene in versions:
             loops.append(_PriceLoop(scene, fmu_dir, step))
-        while any(loop.done < n_steps for loop in loops):
-            for loop in loops:
-                loop.advance(min(chunk or n_steps, n_steps - loop.done))
+        _in_turns(loops, n_steps, chunk, _PriceLoop.advance)
         # the timer's own share of an interval, taken from every timed call
         timer = clock.perf_counter
         empty = 0.0
@@ -157,12 +179,7 @@ def prices_side_by_side(versions: list[scenes.Scene], fmu_dir: Path = FMUS, n_st
             empty += timer() - started
         own = empty / n_steps
         prices = [loop.prices(own) for loop in loops]
-        priced = [0] * len(loops)
-        while any(k < n_steps for k in priced):
-            for i, loop in enumerate(loops):
-                count = min(chunk or n_steps, n_steps - priced[i])
-                loop.time_states(count)
-                priced[i] += count
+        _in_turns(loops, n_steps, chunk, _PriceLoop.time_states)
         for loop, found in zip(loops, prices):
             for name, spent in loop.state_spent.items():
                 found[name]["state"] = spent / (3 * n_steps)
@@ -172,19 +189,12 @@ def prices_side_by_side(versions: list[scenes.Scene], fmu_dir: Path = FMUS, n_st
             loop.free()
 
 
-class _PriceLoop:
+class _PriceLoop(_StepLoop):
     """One scene's system making the floor's steps with every call timed on its own
     (``call_prices``), a number of steps at a time."""
 
-    def __init__(self, scene: scenes.Scene, fmu_dir: Path, step: float | None):
-        self.system = system = System(scene, fmu_dir, record=recorded_names(scene))
-        self.states = None
-        try:
-            system.initialize()
-            self.states = _initial_states(system)
-        except BaseException:
-            self.free()
-            raise
+    def _compile(self):
+        system = self.system
         timer = clock.perf_counter
         self.spent = spent = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in system.order}
 
@@ -208,9 +218,6 @@ class _PriceLoop:
                                     for call in plan.steps),
                               [timed_visit(v) for v in plan.propagation], [timed_visit(v) for v in plan.rereads])
         self.made = {name: dict.fromkeys(spent[name], 0) for name in spent}
-        self.h = step or scene.experiment.step
-        self.start = self.t = scene.experiment.start
-        self.done = 0
         self.state_spent = {name: 0.0 for name in system.stateful
                             if system.components[name].description.coSimulation.canGetAndSetFMUstate}
 
@@ -254,11 +261,6 @@ class _PriceLoop:
                 c.restore_state(state, c.time)
                 c.free_state(state)
             self.state_spent[name] += timer() - started
-
-    def free(self):
-        _free_states(self.states)
-        self.states = None
-        self.system.free()
 
 
 def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, dict[str, float]],
