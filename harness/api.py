@@ -393,7 +393,7 @@ def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
 
 def _fmu_file(name) -> Path | None:
     """NAME as an FMU file (``lever validate path/Model.fmu``), or None for a name."""
-    return Path(name) if str(name).lower().endswith(".fmu") else None
+    return Path(name) if scenes.is_fmu_path(name) else None
 
 
 def fmu_file_model(path: Path) -> tuple[str, str]:

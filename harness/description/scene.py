@@ -52,8 +52,9 @@ class ComponentSpec:
 
 
 def is_fmu_path(fmu: str) -> bool:
-    """True when a component's ``fmu`` names a file (``X.fmu``), not one of our FMUs."""
-    return str(fmu).endswith(".fmu")
+    """True when ``fmu`` names a file (``X.fmu``, the extension in any case), not one of our
+    FMUs: a scene component's ``fmu``, a name given to ``lever validate``."""
+    return str(fmu).lower().endswith(".fmu")
 
 
 def fmu_name(fmu: str) -> str:

@@ -70,6 +70,10 @@ def test_an_fmu_by_path_relative_or_absolute(lever, monitored, monitor_fmu, tmp_
     missing.write_text(_monitored_scene_text("NoSuch.fmu"))
     result = lever("run", str(missing), "--out", str(tmp_path / "out"))
     assert result.exit_code == 2 and f"no FMU file {tmp_path / 'NoSuch.fmu'}" in result.output
+    # the extension in any case names a file, as `lever validate` takes it
+    missing.write_text(_monitored_scene_text("NoSuch.FMU"))
+    result = lever("run", str(missing), "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2 and f"no FMU file {tmp_path / 'NoSuch.FMU'}" in result.output
 
 
 def test_the_default_transient_follows_the_length():

@@ -225,7 +225,7 @@ def test_an_fmu_file_that_cannot_be_validated_stand_alone_is_bad_input(lever, fm
 
     not_fmu = tmp_path / "notes.fmu"
     not_fmu.write_text("not a zip")
-    for path, words in ((tmp_path / "missing.fmu", "no such FMU file"),
+    for path, words in ((tmp_path / "missing.fmu", "no such FMU file"), (tmp_path / "MISSING.FMU", "no such FMU file"),
                         (not_fmu, "model description can be read"),
                         (fmi3_dir(fmu_dir) / "FreewheelRectifier.fmu", "experiment.fmi=3")):
         done = lever("validate", path)
