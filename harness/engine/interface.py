@@ -25,6 +25,20 @@ class RawCalls(NamedTuple):
     count: Callable = int
 
 
+class RawModelExchangeCalls(NamedTuple):
+    """A Model Exchange instance's hot-path C functions with FMI 2.0's signatures, each
+    returning an FMI status, arguments as ctypes objects (``RawCalls``' convention):
+    ``set_time(handle, c_double)``, ``set_states(handle, values, nx)``,
+    ``get_derivatives(handle, values, nx)`` and ``directional(handle, unknowns, n_unknowns,
+    knowns, n_knowns, seeds, out)``; ``nx`` is the instance's state count as a ``c_size_t``."""
+    handle: Any
+    set_time: Callable
+    set_states: Callable
+    get_derivatives: Callable
+    directional: Callable
+    nx: Any
+
+
 @runtime_checkable
 class CoSimComponent(Protocol):
     name: str

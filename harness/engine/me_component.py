@@ -15,6 +15,7 @@ import ctypes
 from fmpy.fmi2 import FMU2Model, fmi2EventInfo
 
 from harness.engine.component import Component, log_callbacks, unconverted
+from harness.engine.interface import RawModelExchangeCalls
 
 #: the kinds of Model Exchange call counted, as ``System.calls_by_kind`` reports them
 ME_CALL_KINDS = ("time", "states", "derivatives", "indicators", "directional", "event")
@@ -22,6 +23,11 @@ ME_CALL_KINDS = ("time", "states", "derivatives", "indicators", "directional", "
 #: an FMU's Integer calculated parameter saying how many of its event indicators (the first
 #: ones) can change sign with the parameters set (our FMUs declare it; docs/model-exchange.md)
 LIVE_EVENT_INDICATORS = "live_event_indicators"
+
+
+def set_time_call(t: float) -> str:
+    """How a refused fmi2SetTime is named in its error: the time."""
+    return f"fmi2SetTime(t = {t:.9g})"
 
 
 class NoModelExchange(ValueError):
@@ -44,16 +50,17 @@ class ModelExchangeComponent(Component):
         self.state_names = [u.variable.derivative.name for u in md.derivatives]
         self.derivative_names = [u.variable.name for u in md.derivatives]
         f = self.fmu._functions
-        self._set_time = unconverted(f["fmi2SetTime"])
-        self._set_states = unconverted(f["fmi2SetContinuousStates"])
+        self._nx = ctypes.c_size_t(self.nx)
+        #: the calls at every right-hand side, for a master's compiled point (and ours)
+        self.me_raw = RawModelExchangeCalls(self.raw.handle, unconverted(f["fmi2SetTime"]),
+                                            unconverted(f["fmi2SetContinuousStates"]),
+                                            unconverted(f["fmi2GetDerivatives"]),
+                                            unconverted(f["fmi2GetDirectionalDerivative"]), self._nx)
         self._get_states = unconverted(f["fmi2GetContinuousStates"])
-        self._get_derivatives = unconverted(f["fmi2GetDerivatives"])
         self._get_indicators = unconverted(f["fmi2GetEventIndicators"])
-        self._directional = unconverted(f["fmi2GetDirectionalDerivative"])
         self._enter_event = unconverted(f["fmi2EnterEventMode"])
         self._new_discrete = unconverted(f["fmi2NewDiscreteStates"])
         self._enter_continuous = unconverted(f["fmi2EnterContinuousTimeMode"])
-        self._nx = ctypes.c_size_t(self.nx)
         self._nz = ctypes.c_size_t(self.nz)
         #: buffers the calls fill or read (ctypes arrays; numpy views share them)
         self.x = (ctypes.c_double * max(self.nx, 1))()
@@ -103,15 +110,15 @@ class ModelExchangeComponent(Component):
     # -- the continuous part -------------------------------------------------------------------
     def set_time(self, t: float):
         self.me_counts["time"] += 1
-        status = self._set_time(self.raw.handle, ctypes.c_double(t))
+        status = self.me_raw.set_time(self.raw.handle, ctypes.c_double(t))
         if status > 1:      # the call's text only when it failed: this runs at every right-hand side
-            self.fail(f"fmi2SetTime(t = {t:.9g})", status)
+            self.fail(set_time_call(t), status)
         self.time = t
 
     def set_states(self):
         """fmi2SetContinuousStates from ``self.x``."""
         self.me_counts["states"] += 1
-        self._status("fmi2SetContinuousStates", self._set_states(self.raw.handle, self.x, self._nx))
+        self._status("fmi2SetContinuousStates", self.me_raw.set_states(self.raw.handle, self.x, self._nx))
 
     def get_states(self):
         """fmi2GetContinuousStates into ``self.x``."""
@@ -121,7 +128,7 @@ class ModelExchangeComponent(Component):
     def derivatives(self):
         """fmi2GetDerivatives into ``self.dx``."""
         self.me_counts["derivatives"] += 1
-        self._status("fmi2GetDerivatives", self._get_derivatives(self.raw.handle, self.dx, self._nx))
+        self._status("fmi2GetDerivatives", self.me_raw.get_derivatives(self.raw.handle, self.dx, self._nx))
 
     def indicators(self):
         """fmi2GetEventIndicators into ``self.z``."""
@@ -133,7 +140,8 @@ class ModelExchangeComponent(Component):
         (ctypes arrays and counts, made once by the caller)."""
         self.me_counts["directional"] += 1
         self._status("fmi2GetDirectionalDerivative",
-                     self._directional(self.raw.handle, unknowns, n_unknowns, knowns, n_knowns, seeds, out))
+                     self.me_raw.directional(self.raw.handle, unknowns, n_unknowns, knowns, n_knowns, seeds,
+                                             out))
 
     # -- events ------------------------------------------------------------------------------------
     def enter_event_mode(self):

@@ -50,6 +50,7 @@ import os
 import numpy as np
 
 from harness.engine.masters.base import Master, MasterFailure
+from harness.engine.me_component import set_time_call
 from harness.engine.system import MODEL_EXCHANGE, System
 
 #: internal steps CVODE may take between two output points before it gives up
@@ -174,11 +175,11 @@ class ModelExchangeCvodeMaster(Master):
             return ctypes.cast(ctypes.byref(buffer, first * ctypes.sizeof(ctypes.c_double)),
                                ctypes.POINTER(ctypes.c_double))
 
-        self._time_calls = tuple((c, c.me_counts, c._set_time, c.raw.handle) for c in self._all)
-        self._state_calls = tuple((c, c.me_counts, c._set_states, c.raw.handle, rows(self._x_all, a), c._nx)
-                                  for c, a, _, _ in self._slices)
-        self._derivative_calls = tuple((c, c.me_counts, c._get_derivatives, c.raw.handle, rows(self._dx_all, a),
-                                        c._nx) for c, a, _, _ in self._slices)
+        self._time_calls = tuple((c, c.me_counts, c.me_raw.set_time, c.me_raw.handle) for c in self._all)
+        self._state_calls = tuple((c, c.me_counts, c.me_raw.set_states, c.me_raw.handle, rows(self._x_all, a),
+                                   c.me_raw.nx) for c, a, _, _ in self._slices)
+        self._derivative_calls = tuple((c, c.me_counts, c.me_raw.get_derivatives, c.me_raw.handle,
+                                        rows(self._dx_all, a), c.me_raw.nx) for c, a, _, _ in self._slices)
 
     def _set_point(self, t, y):
         """Time and states of every FMU at ``(t, y)``, the values propagated; skipped where
@@ -193,7 +194,7 @@ class ModelExchangeCvodeMaster(Master):
                 counts["time"] += 1
                 status = set_time(handle, time)
                 if status > 1:
-                    c.fail(f"fmi2SetTime(t = {t:.9g})", status)
+                    c.fail(set_time_call(t), status)
                 c.time = t
         self._x_view[:] = y
         for c, counts, set_states, handle, rows, n in self._state_calls:
@@ -276,7 +277,7 @@ class ModelExchangeCvodeMaster(Master):
         self._calls, targets = [], ([], [], [])
         for i, (c, vrs, n, known, rows, column) in enumerate(plan):
             out = ctypes.cast(ctypes.c_void_p(base + i * row_bytes), ctypes.POINTER(ctypes.c_double))
-            self._calls.append((c, c.me_counts, c._directional, c.raw.handle, vrs, n, known, out))
+            self._calls.append((c, c.me_counts, c.me_raw.directional, c.me_raw.handle, vrs, n, known, out))
             for j, block_rows in enumerate(rows):
                 for r in block_rows:
                     targets[0].append(r)
