@@ -539,7 +539,6 @@ def test_the_model_computes_with_what_the_host_set_in_any_order(unpacked, name):
         free(eager)
 
 
-
 def test_states_read_after_an_event_are_the_models(unpacked):
     """The native entry answers a read of outputs that are states from the states the host
     set in Continuous-Time Mode, and never after an event moved them: a friction stop puts
@@ -562,7 +561,6 @@ def test_states_read_after_an_event_are_the_models(unpacked):
         assert fmu.getReal([vr["phi"], vr["w"]]) == [x[0], 0.0]
     finally:
         free(fmu)
-
 
 
 def test_a_directional_derivative_after_an_event_is_the_new_modes(unpacked):
