@@ -8,6 +8,7 @@ pythonfmu's library returns it as fmi2Error) and leaves the instance usable.
 from __future__ import annotations
 
 import functools
+import inspect
 import traceback
 
 from ..physics.parameters import ParameterError
@@ -19,17 +20,40 @@ def guarded(default=None):
     returned instead."""
 
     def wrap(method):
-        @functools.wraps(method)
-        def call(self, *args):
-            try:
-                return method(self, *args)
-            except ParameterError as error:
+        def refused(self, args, error):
+            if isinstance(error, ParameterError):
                 self._error(f"{method.__name__}: {error}")
-            except Exception as error:  # noqa: BLE001 - the importer must survive anything
+            else:
                 where = traceback.extract_tb(error.__traceback__)[-1]
                 self._error(f"{method.__name__}: internal error {type(error).__name__}: {error} "
                             f"(at {where.name}, line {where.lineno})")
             return default(self, *args) if callable(default) else default
+
+        # The value getters and setters run at every right-hand side of a host's solver:
+        # for them (self and one or two arguments, no defaults) a wrapper without packing.
+        parameters = inspect.signature(method).parameters.values()
+        plain = all(p.kind is p.POSITIONAL_OR_KEYWORD and p.default is p.empty for p in parameters)
+        if plain and len(parameters) == 2:
+            @functools.wraps(method)
+            def call(self, a):
+                try:
+                    return method(self, a)
+                except Exception as error:  # noqa: BLE001 - the importer must survive anything
+                    return refused(self, (a,), error)
+        elif plain and len(parameters) == 3:
+            @functools.wraps(method)
+            def call(self, a, b):
+                try:
+                    return method(self, a, b)
+                except Exception as error:  # noqa: BLE001
+                    return refused(self, (a, b), error)
+        else:
+            @functools.wraps(method)
+            def call(self, *args):
+                try:
+                    return method(self, *args)
+                except Exception as error:  # noqa: BLE001
+                    return refused(self, args, error)
 
         return call
 
