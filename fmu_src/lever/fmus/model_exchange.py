@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import ctypes
 import math
-from typing import NamedTuple, Sequence
+from operator import attrgetter
+from typing import Callable, NamedTuple, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
@@ -75,9 +76,21 @@ class _Layout(NamedTuple):
     physics' model takes, made once per model: attribute and name lookups spelled out."""
     attributes: tuple | None   #: the states' attributes in the physics' order (None: ``_x`` is a subclass's)
     positions: tuple           #: where each of the physics' states sits in ``ME_STATES``
-    identity: bool             #: the physics' states are ``ME_STATES``, in that order
+    padding: list | None       #: the physics' states are the first of ``ME_STATES``, in that order: zeros
+                               #: for the derivatives of the others (None: they are not)
     inputs: tuple              #: the physics' inputs (the FMU's names)
     outputs: tuple | None      #: the physics' outputs (None: ``_me_output_values`` is a subclass's)
+    read_x: Callable | None    #: the states' attributes in the physics' order, as a tuple (None: as ``attributes``)
+    read_u: Callable           #: the inputs' attributes, as a tuple
+
+
+def _reader(names: Sequence[str]) -> Callable:
+    """A function of an object returning the tuple of its attributes ``names``, read in C
+    (``attrgetter`` returns a bare value for one name: wrapped to a tuple)."""
+    if len(names) == 1:
+        one = attrgetter(names[0])
+        return lambda obj: (one(obj),)
+    return attrgetter(*names) if names else (lambda obj: ())
 
 
 class StateVariable(NamedTuple):
@@ -115,7 +128,7 @@ class ModelExchangeSlave(LeverSlave):
     _me_source = None
     _seeds: dict = {}         # known value reference -> seed of a directional derivative
     _event_info = (0.0,) * len(INFO_FIELDS)
-    _point = None             # the native entry's point block (ctypes doubles), once it gave one
+    _point = None             # the native entry's point block (a memoryview of doubles), once it gave one
     _keys_of = None           # (model, known keys, unknown keys) of directional derivatives' references
     _partials_at = None       # (model, t, x, u, partials) of the last directional derivative
     _deferred_names = ()      # the inputs it may hold, in its order
@@ -162,6 +175,7 @@ class ModelExchangeSlave(LeverSlave):
         cls._state_index = list(range(n))
         cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
         cls._state_attributes = tuple(s.attribute for s in self.ME_STATES)
+        cls._plain_states = cls._set_x is ModelExchangeSlave._set_x
         # Outputs that are states, kept in the attribute of their own name (``_x`` the
         # default): read without the model evaluated, as a host reads the angles and speeds
         # it feeds to a coupling at every right-hand side.
@@ -233,26 +247,39 @@ class ModelExchangeSlave(LeverSlave):
         positions = tuple(self._state_of_physics[name] for name in model.STATES)
         attributes = (tuple(self.ME_STATES[k].attribute for k in positions)
                       if cls._x is ModelExchangeSlave._x else None)
-        return _Layout(attributes, positions, positions == tuple(range(len(self.ME_STATES))), tuple(model.INPUTS),
+        padding = [0.0] * (len(self.ME_STATES) - len(positions)) if positions == tuple(range(len(positions))) else None
+        return _Layout(attributes, positions, padding, tuple(model.INPUTS),
                        tuple(model.OUTPUTS) if cls._me_output_values is ModelExchangeSlave._me_output_values
-                       else None)
+                       else None, _reader(attributes) if attributes is not None else None, _reader(model.INPUTS))
 
+    # The states and inputs are kept as floats (``_set_x``, ``set_real``, the point block), so
+    # they are read as they are: at every right-hand side, in one C call each.
     def _x_physics(self) -> list:
         layout = self._me_layout
-        if layout.attributes is not None:
-            return [float(getattr(self, a)) for a in layout.attributes]
+        if layout.read_x is not None:
+            return list(layout.read_x(self))
         x = self._x()
         return [x[k] for k in layout.positions]
 
     def _u(self) -> list:
-        return [float(getattr(self, name)) for name in self._me_layout.inputs]
+        return list(self._me_layout.read_u(self))
+
+    def _current_model(self):
+        """``_me_current()``, with the common case (built, and built from what the model was
+        made from) decided without a call."""
+        model = self._me_model
+        if model is None or self._model_stale or self._build_error is not None \
+                or self._me_source is not self._physics_key():
+            return self._me_current()
+        return model
 
     def _derivatives(self) -> list:
-        model = self._me_current()
-        values = model.derivatives(self._time, self._x_physics(), self._u())
+        model = self._current_model()
         layout = self._me_layout
-        if layout.identity:
-            return list(values)
+        x = list(layout.read_x(self)) if layout.read_x is not None else self._x_physics()
+        values = model.derivatives(self._time, x, list(layout.read_u(self)))
+        if layout.padding is not None:
+            return [*values, *layout.padding]
         out = [0.0] * len(self.ME_STATES)     # a state the physics does not have stays constant
         for k, value in zip(layout.positions, values):
             out[k] = value
@@ -275,7 +302,7 @@ class ModelExchangeSlave(LeverSlave):
             return super()._refresh()
         if self._build_error is not None or self._model_stale:
             return
-        model = self._me_current()
+        model = self._current_model()
         names = self._me_layout.outputs
         if names is not None:
             outputs = model.outputs(self._time, self._x_physics(), self._u())
@@ -327,23 +354,26 @@ class ModelExchangeSlave(LeverSlave):
         point = self._point
         if point is None or not point[0]:
             return
-        block = point[:]                # one copy of the block: cheaper than element by element
+        block = point.tolist()          # one copy of the block: cheaper than element by element
         pending = int(block[0])
         point[0] = 0.0
         if pending & POINT_TIME:
             self._time = block[1]
         if pending & POINT_STATES:
-            self._set_x(block[POINT_HEADER:POINT_HEADER + len(self._state_index)])
+            states = block[POINT_HEADER:POINT_HEADER + len(self._state_index)]
+            if self._plain_states:      # ``_set_x``'s own loop, the values floats already
+                for attribute, value in zip(self._state_attributes, states):
+                    setattr(self, attribute, value)
+            else:
+                self._set_x(states)
         if pending & (POINT_TIME | POINT_STATES):
             self._dirty = ALL
         if pending & POINT_INPUTS:
-            first = POINT_HEADER + max(len(self._state_index), 1)
-            names = self._deferred_names
-            m = len(names)
-            for name, value, flag in zip(names, block[first:first + m], block[first + m:first + 2 * m]):
+            first, flags, end = self._deferred_span
+            for name, value, flag in zip(self._deferred_names, block[first:flags], block[flags:end]):
                 if flag:
                     setattr(self, name, value)
-            point[first + m:first + 2 * m] = self._no_inputs_pending
+            point[flags:end] = self._no_inputs_pending
             if not self._dirty:
                 self._dirty = INPUTS_CHANGED
 
@@ -432,10 +462,14 @@ class ModelExchangeSlave(LeverSlave):
         elif kind == CONTROL and index == [SET_POINT]:
             address = int(values[0])
             deferred = self._deferred_inputs()
-            size = POINT_HEADER + max(len(self.ME_STATES), 1) + 2 * len(deferred)
-            self._point = (ctypes.c_double * size).from_address(address) if address else None
+            first = POINT_HEADER + max(len(self.ME_STATES), 1)
+            m = len(deferred)
+            # a memoryview of the block: its items and slices are read and written in C
+            self._point = (memoryview((ctypes.c_double * (first + 2 * m)).from_address(address)).cast("B").cast("d")
+                           if address else None)
             self._deferred_names = tuple(name for _, (name, _, _) in deferred)
-            self._no_inputs_pending = [0.0] * len(deferred)
+            self._deferred_span = (first, first + m, first + 2 * m)
+            self._no_inputs_pending = memoryview(bytes(8 * m)).cast("d")
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
         elif kind == STATES:
