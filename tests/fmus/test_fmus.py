@@ -621,6 +621,51 @@ def test_the_load_shaft_alone_idles_with_its_defaults(fmu_dir):
     assert result["phi"][-1] == pytest.approx(39.0, rel=1e-6)
 
 
+def test_a_state_with_reals_written_as_integers_restores_them_as_floats():
+    """A serialized state written by hand or by another tool may spell a real as an integer
+    (``"w": 39``); the models keep their reals as floats, which the Model Exchange hot path
+    reads as they are: restored, the values are floats, and the run goes on exactly as
+    from the state written with floats."""
+    import json
+
+    from lever.fmus import shafts
+    from lever.fmus.states import STATE_MAGIC
+
+    def started():
+        slave = shafts.LoadShaft(instance_name="load", resources=None)
+        slave.setup_experiment(0.0)
+        slave.enter_initialization_mode()
+        slave.exit_initialization_mode()
+        return slave
+
+    def with_integers(data: bytes) -> bytes:
+        head, payload = data.split(b"\n", 1)
+        state = json.loads(payload)
+        state["variables"].update(phi=0, w=39, load_work=0)       # the start: 0.0, 39.0, 0.0
+        payload = json.dumps(state).encode()
+        header = json.loads(head[len(STATE_MAGIC) + 1:])
+        header["length"] = len(payload)
+        return STATE_MAGIC + b" " + json.dumps(header).encode() + b"\n" + payload
+
+    cls = shafts.LoadShaft
+    data = cls._fmu_state_to_bytes(started()._get_fmu_state())
+    assert b'"w": 39.0' in data
+    runs = []
+    for blob in (data, with_integers(data)):
+        slave = cls(instance_name="target", resources=None)
+        slave._set_fmu_state(cls._fmu_state_from_bytes(blob))
+        assert not slave.log_queue, [str(m) for m in slave.log_queue]
+        assert all(type(getattr(slave, name)) is float for name in ("phi", "w", "load_work"))
+        outputs = [vr for vr, v in slave.vars.items() if v.name in ("phi", "w", "a", "load_torque", "load_work")]
+        rows = []
+        for k in range(5):
+            slave.set_real([slave._vr_of["tau"]], [10.0 * k])
+            assert slave.do_step(k * 1e-3, 1e-3)
+            rows.append(slave.get_real(outputs))
+        runs.append(rows)
+    assert runs[0] == runs[1]
+
+
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_a_deserialized_state_serializes_to_the_same_bytes(fmu_dir, name, tmp_path):
     """fmi2SerializeFMUstate of a state made by fmi2DeSerializeFMUstate gives the bytes it

@@ -226,6 +226,8 @@ class StateSaving:
         before = dict(self.__dict__)
         try:
             for name, value in state["variables"].items():
+                if type(value) is int and getattr(self._declared[name], "kind", "real") == "real":
+                    value = float(value)    # a real written as an integer: reals are kept as floats
                 setattr(self, name, value)
             self._time = state["time"]
             self._phase = state["phase"]
