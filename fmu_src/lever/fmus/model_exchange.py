@@ -266,7 +266,7 @@ class ModelExchangeSlave(LeverSlave):
 
     def _current_model(self):
         """``_me_current()``, with the common case (built, and built from what the model was
-        made from) decided without a call."""
+        made from) decided here, without its checks' calls: at every right-hand side."""
         model = self._me_model
         if model is None or self._model_stale or self._build_error is not None \
                 or self._me_source is not self._physics_key():
