@@ -308,6 +308,25 @@ def fmu_dir() -> Path:
     return FMUS
 
 
+@pytest.fixture(scope="session")
+def c_importer(tmp_path_factory) -> Path:
+    """The minimal C importer (tests/c_host), compiled once for the tests of every module."""
+    from harness.studies import hosts
+
+    return hosts.compile_c_importer(tmp_path_factory.mktemp("c_host") / "minimal_importer")
+
+
+@pytest.fixture(scope="session")
+def kavz685_in_libcosim_from_ssp(fmu_dir):
+    """The whole KAVZ-685 scene as libcosim assembles it from our SSP export (a child
+    process of some seconds), run once for the tests of every module that judge it."""
+    from harness import peers
+    from harness.description import scene
+
+    spec = scene.load("kavz685")
+    return peers.simulate_peer("libcosim-ssp", spec, spec.experiment.step, fmu_dir)
+
+
 @pytest.fixture(autouse=True)
 def _built_fmus(request):
     if request.path.relative_to(TESTS).as_posix() in RUN_BUILT_FMUS:

@@ -2,11 +2,12 @@
 every admitted real parameter, over step sizes from 1e-300 to 1e300, and prints one line
 before and one after every fmi2DoStep, so that the parent can tell which call hangs.
 
-Usage: step_watchdog_child.py FMU_DIR FIRST_CASE"""
+Usage: step_watchdog_child.py FMU_DIR: prints ``cases N``, then runs each case whose index
+it reads from stdin (one a line) and prints ``case done INDEX`` after it, until stdin ends."""
 from __future__ import annotations
 
-import math
 import sys
+import tempfile
 import time
 
 import fmpy
@@ -37,50 +38,55 @@ def cases(fmu_dir):
     return out
 
 
-def main(fmu_dir, first):
-    from fmpy import extract
-    import tempfile
+def main(fmu_dir):
+    every = cases(fmu_dir)
+    print(f"cases {len(every)}", flush=True)
     unzipped, descriptions = {}, {}
-    for index, (fmu, name, value) in enumerate(cases(fmu_dir)):
-        if index < first:
-            continue
+    for line in sys.stdin:
+        index = int(line)
+        fmu, name, value = every[index]
         if fmu not in unzipped:
             descriptions[fmu] = fmpy.read_model_description(f"{fmu_dir}/{fmu}.fmu")
-            unzipped[fmu] = extract(f"{fmu_dir}/{fmu}.fmu", tempfile.mkdtemp())
-        md = descriptions[fmu]
-        vrs = {v.name: v.valueReference for v in md.modelVariables}
-        for start in STARTS:
-            slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped[fmu], modelIdentifier=fmu, instanceName="watchdog")
-            slave.instantiate(callbacks=log_callbacks(), loggingOn=False)
-            try:
-                if name is not None:
-                    slave.setReal([vrs[name]], [value])
-                slave.setupExperiment(startTime=start)
-                slave.enterInitializationMode()
-                slave.exitInitializationMode()
-            except FMICallException:
-                print(f"{index} {fmu} {name}={value!r}: refused at initialisation", flush=True)
-                slave.freeInstance()
-                continue
-            _said.clear()
-            state = slave.getFMUstate()
-            for h in STEPS:
-                slave.setFMUstate(state)
-                print(f"start {index} {fmu} {name}={value!r} t0={start!r} h={h!r}", flush=True)
-                began = time.perf_counter()
-                try:
-                    slave.doStep(currentCommunicationPoint=start, communicationStepSize=h)
-                    status = 0
-                except FMICallException as error:
-                    status = error.status
-                said = " | ".join(_said).replace("\n", " ")
-                _said.clear()
-                print(f"done {index} {time.perf_counter() - began:.3f} s status {status} {said}", flush=True)
-            slave.freeFMUstate(state)
-            slave.terminate()
-            slave.freeInstance()
+            unzipped[fmu] = fmpy.extract(f"{fmu_dir}/{fmu}.fmu", tempfile.mkdtemp())
+        run_case(index, fmu, name, value, unzipped[fmu], descriptions[fmu])
+        print(f"case done {index}", flush=True)
     print("all done", flush=True)
 
 
+def run_case(index, fmu, name, value, unzipped, md):
+    """Every step size from the FMU's state after initialisation at each start."""
+    vrs = {v.name: v.valueReference for v in md.modelVariables}
+    for start in STARTS:
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=fmu, instanceName="watchdog")
+        slave.instantiate(callbacks=log_callbacks(), loggingOn=False)
+        try:
+            if name is not None:
+                slave.setReal([vrs[name]], [value])
+            slave.setupExperiment(startTime=start)
+            slave.enterInitializationMode()
+            slave.exitInitializationMode()
+        except FMICallException:
+            print(f"{index} {fmu} {name}={value!r}: refused at initialisation", flush=True)
+            slave.freeInstance()
+            continue
+        _said.clear()
+        state = slave.getFMUstate()
+        for h in STEPS:
+            slave.setFMUstate(state)
+            print(f"start {index} {fmu} {name}={value!r} t0={start!r} h={h!r}", flush=True)
+            began = time.perf_counter()
+            try:
+                slave.doStep(currentCommunicationPoint=start, communicationStepSize=h)
+                status = 0
+            except FMICallException as error:
+                status = error.status
+            said = " | ".join(_said).replace("\n", " ")
+            _said.clear()
+            print(f"done {index} {time.perf_counter() - began:.3f} s status {status} {said}", flush=True)
+        slave.freeFMUstate(state)
+        slave.terminate()
+        slave.freeInstance()
+
+
 if __name__ == "__main__":
-    main(sys.argv[1], int(sys.argv[2]))
+    main(sys.argv[1])

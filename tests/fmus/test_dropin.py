@@ -39,6 +39,19 @@ def kavz(extra=()):
     return scene.load("kavz685").with_overrides(SHORT + list(extra))
 
 
+@pytest.fixture(scope="module")
+def kavz_in(fmu_dir):
+    """``kavz_in(engine)``: ``kavz()`` run in ``engine`` at 1 ms, once per module - several
+    tests judge the same run (a peer's run is a child process of about 1.5 s)."""
+    runs = {}
+
+    def get(engine):
+        if engine not in runs:
+            runs[engine] = engines.run_engine(engine, kavz(), 1e-3, fmu_dir)
+        return runs[engine]
+    return get
+
+
 # -- lever compliance ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("fmu", FMU_NAMES)
@@ -142,10 +155,10 @@ def test_osp_ports_are_power_bonds_and_the_ecco_bonds_come_from_them(fmu_dir):
                              ("load", "tau", "w", "coupling", "tau2", "w2")]
 
 
-def test_libcosim_connects_the_osp_ports_as_the_api_connects_the_variables(fmu_dir):
+def test_libcosim_connects_the_osp_ports_as_the_api_connects_the_variables(fmu_dir, kavz_in):
     spec = kavz()
     by_ports = peers.simulate_peer("libcosim-osp", spec, 1e-3, fmu_dir)
-    by_api = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)
+    by_api = kavz_in("libcosim-fixed")
     assert by_ports.ok and by_api.ok, (by_ports.failure, by_api.failure)
     assert np.array_equal(by_ports.times, by_api.times)
     for name in ("engine.w", "load.w", "coupling.tau1", "coupling.tau2"):
@@ -242,9 +255,9 @@ TOLERANCE = {"w1": 5e-3, "tau2": 3e-2}
 
 
 @pytest.mark.parametrize("engine", ["libcosim-ssp", "fmpy-ssp"])
-def test_the_exported_scene_runs_in_another_engine_within_tolerance(engine, fmu_dir):
+def test_the_exported_scene_runs_in_another_engine_within_tolerance(engine, kavz_in):
     spec = kavz()
-    result = engines.run_engine(engine, spec, 1e-3, fmu_dir)
+    result = kavz_in(engine)
     assert result.ok, result.failure
     assert result.times[-1] == pytest.approx(0.3)
     errors = engines.reference_errors(spec, result)
@@ -252,14 +265,13 @@ def test_the_exported_scene_runs_in_another_engine_within_tolerance(engine, fmu_
         assert errors[name]["rms_relative"] < bound, (engine, name, errors[name])
     # ... and the error is the master's, not the FMUs': our first-order jacobi on the same
     # FMUs errs by the same order, and our default master by far less.
-    ours = engines.reference_errors(spec, engines.run_engine("lever", spec, 1e-3, fmu_dir))
+    ours = engines.reference_errors(spec, kavz_in("lever"))
     assert ours["tau2"]["rms_relative"] < 1e-4 < errors["tau2"]["rms_relative"]
 
 
-def test_libcosim_from_ssp_is_libcosim_from_the_api(fmu_dir):
-    spec = kavz()
-    a = peers.simulate_peer("libcosim-ssp", spec, 1e-3, fmu_dir)
-    b = peers.simulate_peer("libcosim-fixed", spec, 1e-3, fmu_dir)
+def test_libcosim_from_ssp_is_libcosim_from_the_api(kavz_in):
+    a = kavz_in("libcosim-ssp")
+    b = kavz_in("libcosim-fixed")
     assert a.ok and b.ok
     assert np.array_equal(a.traces["coupling.tau2"], b.traces["coupling.tau2"])
 
@@ -335,9 +347,9 @@ def test_two_instances_of_each_fmu_in_one_process_do_not_interfere(engine, fmu_d
 # -- a host that is not a Python process --------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def c_host(tmp_path_factory):
+def c_host(c_importer):
     """The minimal C importer (tests/c_host), compiled."""
-    return hosts.compile_c_importer(tmp_path_factory.mktemp("c_host") / "minimal_importer")
+    return c_importer
 
 
 #: A bare environment: no LD_PRELOAD, PYTHONHOME or PYTHONPATH; the FMU finds its Python itself.
@@ -516,11 +528,11 @@ def test_a_wrong_guid_gives_null_and_a_message(fmu_dir, c_host, tmp_path):
     assert "is not this FMU's GUID" in done.stderr
 
 
-def test_kavz_run_in_libcosim_passes_lever_validate(lever, fmu_dir, tmp_path):
+def test_kavz_run_in_libcosim_passes_lever_validate(lever, kavz685_in_libcosim_from_ssp, tmp_path):
     """The KAVZ-685 scene assembled by libcosim from our SSP archive, its traces written
     as another tool would, judged by `lever validate --result` against our reference."""
     spec = scene.load("kavz685")
-    result = peers.simulate_peer("libcosim-ssp", spec, spec.experiment.step, fmu_dir)
+    result = kavz685_in_libcosim_from_ssp
     assert result.ok, result.failure
     names = [n for n in spec.record if n in result.traces]
     table = np.column_stack([result.times] + [result.traces[n] for n in names])

@@ -14,8 +14,8 @@ from lever.fmus.registry import NAMES as FMU_NAMES
 
 
 @pytest.fixture(scope="module")
-def c_host(tmp_path_factory):
-    return me_hosts.compile_c_importer(tmp_path_factory.mktemp("c_host_me") / "minimal_importer")
+def c_host(c_importer):
+    return c_importer
 
 
 def _validate(lever, case, times, traces, tmp_path, tolerance="lever"):

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from harness.description import scene
-from harness import peers
 from harness.formats import reference_traces, ssp
 from harness.judges import validation
 from harness.peers import ecos
@@ -26,7 +25,7 @@ def archive(lever, tmp_path_factory, fmu_dir):
     return path
 
 
-def _run(lever, engine: str, archive, tmp_path, fmu_dir):
+def _run(lever, engine: str, archive, tmp_path, request):
     """(times, traces) of the archive run in ``engine`` as ``ssp.HOW_TO_RUN`` says."""
     spec = scene.load("kavz685")
     e = spec.experiment
@@ -36,8 +35,9 @@ def _run(lever, engine: str, archive, tmp_path, fmu_dir):
         table = reference_traces.read_csv(tmp_path / "run" / "traces.csv")
         return table.times, table.signals
     if engine == "libcosim":
-        # CosimExecution.from_ssp_file on the same export (in a child process, see peers)
-        result = peers.simulate_peer("libcosim-ssp", spec, e.step, fmu_dir)
+        # CosimExecution.from_ssp_file on the same export (in a child process, see peers;
+        # the run tests/fmus/test_dropin.py judges too, made once)
+        result = request.getfixturevalue("kavz685_in_libcosim_from_ssp")
         assert result.ok, result.failure
         return result.times, result.traces
     if engine == "ecos":
@@ -55,8 +55,8 @@ def _run(lever, engine: str, archive, tmp_path, fmu_dir):
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_the_exported_archive_runs_with_its_values_in_every_engine_we_name(lever, engine, archive, tmp_path,
-                                                                           fmu_dir):
-    times, traces = _run(lever, engine, archive, tmp_path, fmu_dir)
+                                                                           request):
+    times, traces = _run(lever, engine, archive, tmp_path, request)
     ref = reference_traces.read("kavz685")
     # fmpy.ssp records no row at the start (its first is after the first step): judged from there
     start = max(ref.opt.start, float(times[0]))
