@@ -219,7 +219,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         step: float | None = None, stop: float | None = None, tolerance: float | None = None,
         strict: bool = False, reference: bool = True, out: Path | str | None = None, progress: bool = False,
         stream: bool = False, notify: Callable[[str, str], None] | None = None, claimed: bool = False,
-        observer=None, latency: bool = False) -> Run:
+        observer=None, latency: bool = False, plots: bool = True) -> Run:
     """Run a scene as ``lever run`` does and return it (``Run``).
 
     ``overrides``: ``{"coupling.misalignment": "20 deg"}`` or ``["coupling.stiffness=900"]``;
@@ -228,7 +228,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     summary.json, traces.csv, plots); ``stream``: write traces.csv while running (needs
     ``out``).  ``notify(kind, message)`` hears the warnings and notes ("warning", "note");
     ``observer`` is told of every step (``harness.engine.observers``); ``latency``: time every
-    step and write latency.md and latency.json to ``out`` (``Run.latency`` summarises them).
+    step and write latency.md and latency.json to ``out`` (``Run.latency`` summarises them);
+    ``plots``: false writes the traces, summary and report without drawing the plots.
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
     from harness.engine import masters
@@ -317,7 +318,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
         result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
     if out is not None:
-        summary = report.write(Path(out), result, solution)
+        summary = report.write(Path(out), result, solution, plots=plots)
     else:
         summary = report.summarize(result, solution)
     done = Run(result, solution, summary, Path(out) if out is not None else None, notes)

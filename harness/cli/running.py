@@ -44,7 +44,10 @@ def list_scenes():
               "the reference (the energy balance, integrated over every row, judges the run).")
 @click.option("--latency", is_flag=True, help="Time every step for real-time use: median, p99, p99.9 and maximum "
               "step time, the start-up steps and why the slowest were slow (latency.md, latency.json).")
-def run(scene, assignments, master, step, stop, tolerance, out, no_reference, strict, progress, stream, latency):
+@click.option("--no-plots", is_flag=True, help="Write the traces, summary.json and report.md without drawing the "
+              "plots (most of a short run's time: for scripts and batches).")
+def run(scene, assignments, master, step, stop, tolerance, out, no_reference, strict, progress, stream, latency,
+        no_plots):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
     write traces, plots, summary.json and report.md."""
     with user_errors():
@@ -53,6 +56,7 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
     try:
         done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference,
                        out=out or RESULTS / spec.name, progress=show_progress, stream=stream, latency=latency,
+                       plots=not no_plots,
                        notify=lambda kind, message: click.echo(f"{kind}: {message}", err=True))
     except api.InputError as error:
         raise UserError(str(error)) from None

@@ -267,5 +267,5 @@ def plot(out, result, reference=None):
         save_figure(fig, out / "vs_reference.png")
 
 
-def write(out, result, reference=None) -> dict:
-    return write_run(out, result, reference, summarize, write_report, plot)
+def write(out, result, reference=None, plots: bool = True) -> dict:
+    return write_run(out, result, reference, summarize, write_report, plot, plots)

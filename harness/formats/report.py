@@ -108,7 +108,8 @@ def write_report(path: Path, summary: dict):
                   f"(**{100 * eb['residual_relative']:.2g} %** of the work in)."]
     spectrum = summary.get("spectrum")
     if spectrum:
-        lines += ["", "## Spectrum (spectrum.png)", "",
+        drawn = " (spectrum.png)" if "spectrum.png" in (summary.get("files") or ()) else ""
+        lines += ["", f"## Spectrum{drawn}", "",
                   f"Amplitudes after the transient at the driven shaft's rotation frequency (mean w2 = "
                   f"{spectrum['rotation_frequency_rad_s']:.4g} rad/s) and in the oscillograms' band 415-425 rad/s "
                   "(docs/physics.md#the-oscillograms-spectrum):", "",
@@ -285,15 +286,16 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     save_figure(fig, out / "spectrum.png")
 
 
-def write_driveline(out: Path, result: RunResult, reference=None) -> dict:
-    return write_run(out, result, reference, summarize, write_report, plot)
+def write_driveline(out: Path, result: RunResult, reference=None, plots: bool = True) -> dict:
+    return write_run(out, result, reference, summarize, write_report, plot, plots)
 
 
 #: the run files' writer of each kind of scene (harness.description.scene_kinds)
 WRITERS = {"driveline": write_driveline, "rectifier": rectifier_report.write}
 
 
-def write(out: Path, result: RunResult, reference=None) -> dict:
+def write(out: Path, result: RunResult, reference=None, plots: bool = True) -> dict:
     """A run's files in ``out`` (see ``harness.formats.run_files.write_run``), written by
-    its kind of scene's writer; a scene of no known kind gets the driveline's."""
-    return WRITERS.get(scene_kinds.kind_of(result.scene), write_driveline)(out, result, reference)
+    its kind of scene's writer; a scene of no known kind gets the driveline's.  ``plots``:
+    false draws none."""
+    return WRITERS.get(scene_kinds.kind_of(result.scene), write_driveline)(out, result, reference, plots)

@@ -65,11 +65,13 @@ def save_figure(fig, path: Path, dpi: int = 110):
         plt.close(fig)
 
 
-def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots) -> dict:
+def write_run(out: Path, result: RunResult, reference, summary_of, write_markdown, make_plots,
+              plots: bool = True) -> dict:
     """A run's files in ``out``, with the summary, report and plots of its kind of scene
     (``summary_of(result, reference)``, ``write_markdown(path, summary)``,
     ``make_plots(out, result, reference)``): traces.csv (unless the run streamed it while
-    running), reference.csv, the plots (scene feature ``plots``), summary.json and
+    running), reference.csv, the plots (scene feature ``plots``; none when ``plots`` is
+    false), summary.json and
     report.md, which list the files written (``summary["files"]``).  An earlier run's
     files are removed first.  Returns the summary.
 
@@ -84,7 +86,7 @@ def write_run(out: Path, result: RunResult, reference, summary_of, write_markdow
             path.unlink()
     planned = (["traces.csv"] if result.stream is None else []) + (["reference.csv"] if reference is not None
                                                                      else [])
-    plots = "plots" in result.scene.features and len(result.times) > 1
+    plots = plots and "plots" in result.scene.features and len(result.times) > 1
     _not_drawn.clear()
     done: list[str] = []
     try:

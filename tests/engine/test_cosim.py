@@ -278,6 +278,23 @@ def test_cli_short_run_writes_the_results(lever, tmp_path, monkeypatch):
     assert "kavz685" in report and "Energy balance" in report
 
 
+def test_cli_no_plots_writes_everything_but_the_plots(lever, tmp_path, monkeypatch):
+    """``--no-plots``: the traces, the reference, the summary and the report as always, no
+    plot, and the report names only the files written."""
+    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")
+    out = tmp_path / "out"
+    result = lever("run", "--set", "experiment.stop=0.5", "--set", "experiment.transient=0.1", "--no-plots",
+                   "--out", out, "--no-progress")
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} - {".lever.lock"} == {"report.md", "summary.json", "traces.csv",
+                                                                  "reference.csv"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ok"] is True and summary["files"] == ["reference.csv", "traces.csv", "summary.json", "report.md"]
+    assert summary["error_vs_reference"]["tau2"]["rms_relative"] < 1e-2
+    report = (out / "report.md").read_text()
+    assert "Traces: reference.csv and traces.csv." in report and ".png" not in report
+
+
 def test_cli_no_reference_run(lever, tmp_path):
     out = tmp_path / "out"
     # 0.1 s: less than one revolution of the driven shaft, so the plots over its angle are not drawn
