@@ -77,7 +77,7 @@ def test_the_command_line_goes_through_the_api(lever, fmu_dir, tmp_path, monkeyp
         calls.append(kwargs.get("fmi_editions"))
         raise api.InputError("stopped by the test")
     monkeypatch.setattr(api, "bench", bench_stops_at_once)
-    assert lever("run", "kavz685", "--stop", "0.2", "--no-reference", "--out", tmp_path / "r").exit_code == 0
+    assert lever("run", "kavz685", "--stop", "0.2", "--no-reference", "--no-plots", "--out", tmp_path / "r").exit_code == 0
     assert lever("validate", "--result", tmp_path / "r" / "traces.csv", "kavz685", "--window", "0:0.2",
                  "--out", tmp_path / "v").exit_code == 0
     assert calls == ["run", "validate"]

@@ -243,7 +243,7 @@ def test_lever_run_and_export_on_the_command_line(lever, tmp_path):
     archive = tmp_path / "k.ssp"
     result = lever("export-ssp", "kavz685", "--out", archive, *[f"--set={s}" for s in SHORT])
     assert result.exit_code == 0, result.output
-    result = lever("run", str(archive), "--out", str(tmp_path / "run"), "--no-progress")
+    result = lever("run", str(archive), "--out", str(tmp_path / "run"), "--no-plots", "--no-progress")
     assert result.exit_code == 0, result.output
     assert "error vs reference" in result.output and (tmp_path / "run" / "traces.csv").exists()
 

@@ -30,7 +30,7 @@ def _run(lever, engine: str, archive, tmp_path, request):
     spec = scene.load("kavz685")
     e = spec.experiment
     if engine == "lever":
-        result = lever("run", archive, "--out", tmp_path / "run", "--no-reference", "--no-progress")
+        result = lever("run", archive, "--out", tmp_path / "run", "--no-reference", "--no-plots", "--no-progress")
         assert result.exit_code == 0, result.output
         table = reference_traces.read_csv(tmp_path / "run" / "traces.csv")
         return table.times, table.signals

@@ -239,7 +239,7 @@ def test_the_run_advice_warns_and_simulate_leaves_it_to_its_caller():
 def test_lever_run_prints_the_advice(lever, tmp_path):
     outcome = lever("run", "kavz685_stiff", "--master", "jacobi", "--step", "1e-4", "--set",
                                         "experiment.stop=0.005", "--set", "experiment.transient=0",
-                                        "--no-reference", "--out", str(tmp_path))
+                                        "--no-reference", "--no-plots", "--out", str(tmp_path))
     assert outcome.exit_code == 0, outcome.output
     assert re.search(r"warning: stability: jacobi at h = 0\.0001 s .* Predicted stable: ", outcome.output)
 

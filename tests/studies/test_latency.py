@@ -61,7 +61,7 @@ def test_the_slowest_steps_are_explained_from_what_was_seen_in_them():
 
 def test_lever_run_latency_writes_the_table(lever, fmu_dir, tmp_path):
     outcome = lever("run", "kavz685", "--set", "experiment.stop=0.05", "--set",
-                                       "experiment.transient=0.01", "--no-reference", "--latency",
+                                       "experiment.transient=0.01", "--no-reference", "--no-plots", "--latency",
                                        "--out", str(tmp_path))
     assert outcome.exit_code == 0, outcome.output
     assert "step latency: median" in outcome.output and "start-up steps:" in outcome.output
