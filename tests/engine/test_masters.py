@@ -11,7 +11,9 @@ from harness.judges import monolithic
 from harness.engine import run
 from harness.description import scene
 
-SMOOTH = ["experiment.stop=1", "experiment.transient=0", "load.load_kind=constant"]
+# 0.4 s: the start-up from 39 rad/s, where the errors are made (the observed orders are
+# those of a 1 s run to the third decimal, within the same margins of at least 0.216)
+SMOOTH = ["experiment.stop=0.4", "experiment.transient=0", "load.load_kind=constant"]
 
 
 def test_extrapolation_weights_are_adams_bashforth_for_uniform_steps():
