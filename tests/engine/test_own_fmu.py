@@ -89,7 +89,7 @@ def test_the_default_transient_follows_the_length():
 
 def test_the_mixed_scene_runs_and_the_driveline_is_untouched(lever, monitored, tmp_path, fmu_dir):
     out = tmp_path / "run"
-    result = lever("run", str(monitored), "--out", str(out))
+    result = lever("run", str(monitored), "--no-plots", "--out", str(out))
     assert result.exit_code == 0, result.output
     import json
     summary = json.loads((out / "summary.json").read_text())
@@ -131,7 +131,7 @@ def archive(monitored, tmp_path_factory, fmu_dir) -> Path:
 
 def test_the_archive_runs_in_lever_run(lever, archive, tmp_path, monitored):
     out = tmp_path / "from_ssp"
-    result = lever("run", str(archive), "--out", str(out), "--no-reference")
+    result = lever("run", str(archive), "--out", str(out), "--no-reference", "--no-plots")
     assert result.exit_code == 0, result.output
     _, from_archive = trace_files.read(out / "traces.csv")
     direct = simulate(scenes.load(monitored))
@@ -219,7 +219,7 @@ def test_a_shortened_run_fits_the_scenes_transient_and_says_so():
 
 def test_lever_run_stop_shortens_the_run_and_the_report_says_what_it_judged(lever, fmu_dir, tmp_path):
     out = tmp_path / "short"
-    result = lever("run", "kavz685", "--stop", "0.5", "--no-reference", "--out", str(out))
+    result = lever("run", "kavz685", "--stop", "0.5", "--no-reference", "--no-plots", "--out", str(out))
     assert result.exit_code == 0, result.output
     import json
     summary = json.loads((out / "summary.json").read_text())
