@@ -348,7 +348,7 @@ def test_a_window_judges_a_shorter_result_and_the_verdict_names_the_span(lever, 
     """A 1 s run of kavz685 fails against the 10 s reference (it ends early) and passes over
     the window 0 ... 1 s, by the same band; the verdict says which span it judged."""
     run = tmp_path / "run"
-    assert lever("run", "kavz685", "--stop", "1", "--no-reference", "--out", str(run)).exit_code == 0
+    assert lever("run", "kavz685", "--stop", "1", "--no-reference", "--no-plots", "--out", str(run)).exit_code == 0
     whole = lever("validate", "--result", str(run / "traces.csv"), "kavz685", "--out", str(tmp_path / "whole"))
     assert whole.exit_code == 1 and "before the stop time" in whole.output
     assert "FAIL over the reference's whole span, t = 0 ... 10 s" in whole.output

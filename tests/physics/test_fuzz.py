@@ -194,7 +194,9 @@ def _steps_stay_finite(make, values, t, phi, w, moves):
     assert all(math.isfinite(x) for x in (shaft.rates(t, phi, w, 0.0, torque) if lagged else shaft.rates(t, phi, w, 0.0)))
 
 
-@fuzz(800)
+# 400 examples: about 300 of them build an engine (three in four); the load below keeps 800,
+# one in six building a load, shared among its kinds (at 400 only five random loads)
+@fuzz(400)
 @given(parameters(component_parameters.ENGINE), st.floats(0.0, 1e3), angle, speed, st.lists(steps, min_size=1, max_size=3))
 def test_engine_shaft_steps_stay_finite(values, t, phi, w, moves):
     _steps_stay_finite(component_parameters.engine_from, values, t, phi, w, moves)
