@@ -1,7 +1,9 @@
 """A monolithic reference solution (``Reference``: traces on the run's grid, how it was
 computed) and its cache: solutions are stored by a hash of everything they depend on -
-the scene's components and values, the time grid, the solver's settings and the physics
-code (``physics_hash``)."""
+the scene's components, values and connections, the time grid, the solver's settings, the
+physics code (``physics_hash``), the reference solver's code (``solver_hash``) and numpy's
+SIMD dispatch in use (its last bits differ between levels, which the dispatch pass of the
+tests must see: docs/testing.md)."""
 from __future__ import annotations
 
 import hashlib
@@ -39,8 +41,9 @@ def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, 
     payload = {
         "components": {n: {"fmu": c.fmu, "parameters": c.parameters} for n, c in sorted(scene.components.items())},
         "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
+        "connections": sorted(str(c) for c in scene.connections),
         "rtol": rtol, "atol": atol, "method": method,
-        "physics": physics_hash(),
+        "physics": physics_hash(), "solver": solver_hash(), "simd": _simd_in_use(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
@@ -51,6 +54,23 @@ def physics_hash() -> str:
     for path in sorted(root.glob("*.py")):
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
+
+
+#: the modules whose code computes a reference: a change to any of them is a new solution
+_SOLVER_MODULES = ("monolithic.py", "rectifier.py", "cvode.py", "solution.py")
+
+
+def solver_hash() -> str:
+    root = Path(__file__).parent
+    digest = hashlib.sha256()
+    for name in _SOLVER_MODULES:
+        digest.update((root / name).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _simd_in_use() -> str:
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    return " ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name))
 
 
 def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:

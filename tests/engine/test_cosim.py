@@ -115,6 +115,35 @@ def test_reference_cache_distinguishes_time_grids_of_the_same_length(tmp_path, m
     assert np.array_equal(again.times, grid_b)
 
 
+def test_reference_cache_keys_hold_the_wiring_the_solvers_code_and_the_simd_level(tmp_path, monkeypatch):
+    """A cached reference is another scene's, or another solver's, unless everything it
+    depends on is in its key: the scene's connections (the same components wired otherwise),
+    the reference solver's code (a fixed solver must not be answered from the old one's
+    cache) and numpy's SIMD dispatch in use (the tests' dispatch pass must solve at its
+    own level, not read the full level's last bits)."""
+    import dataclasses
+    import shutil
+    from pathlib import Path
+
+    spec = scene.load("kavz685_misalignment_ramp")
+    times = np.linspace(0.0, 1.0, 5)
+    key = solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853")
+    assert key == solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853")
+    unwired = dataclasses.replace(spec, connections=[c for c in spec.connections if c.target != "coupling"
+                                                     or c.input != "misalignment"])
+    assert len(unwired.connections) == len(spec.connections) - 1
+    assert solution.cache_key(unwired, times, 1e-10, 1e-10, "DOP853") != key
+    for name in solution._SOLVER_MODULES:
+        shutil.copy(Path(solution.__file__).parent / name, tmp_path / name)
+    monkeypatch.setattr(solution, "__file__", str(tmp_path / "solution.py"))
+    assert solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853") == key
+    (tmp_path / "cvode.py").write_text((tmp_path / "cvode.py").read_text() + "\n# changed\n")
+    assert solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853") != key
+    monkeypatch.undo()
+    monkeypatch.setattr(solution, "_simd_in_use", lambda: "SSE42")
+    assert solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853") != key
+
+
 def test_same_seed_same_traces_other_seed_other_traces():
     spec = kavz(*SHORT)
     a = run.simulate(spec)
