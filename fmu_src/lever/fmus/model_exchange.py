@@ -74,14 +74,12 @@ def _read_by_get_real():
 class _Layout(NamedTuple):
     """Where the hot path (outputs, derivatives at every right-hand side) finds what the
     physics' model takes, made once per model: attribute and name lookups spelled out."""
-    attributes: tuple | None   #: the states' attributes in the physics' order (None: ``_x`` is a subclass's)
     positions: tuple           #: where each of the physics' states sits in ``ME_STATES``
     padding: list | None       #: the physics' states are the first of ``ME_STATES``, in that order: zeros
                                #: for the derivatives of the others (None: they are not)
-    inputs: tuple              #: the physics' inputs (the FMU's names)
     outputs: tuple | None      #: the physics' outputs (None: ``_me_output_values`` is a subclass's)
-    read_x: Callable | None    #: the states' attributes in the physics' order, as a tuple (None: as ``attributes``)
-    read_u: Callable           #: the inputs' attributes, as a tuple
+    read_x: Callable           #: the physics' states of the slave, in the physics' order (a sequence)
+    read_u: Callable           #: the physics' inputs of the slave (a tuple)
 
 
 def _reader(names: Sequence[str]) -> Callable:
@@ -175,7 +173,6 @@ class ModelExchangeSlave(LeverSlave):
         cls._state_index = list(range(n))
         cls._derivative_refs = [CHANNEL + (DERIVATIVES << KIND_SHIFT) + k for k in range(n)]
         cls._state_attributes = tuple(s.attribute for s in self.ME_STATES)
-        cls._plain_states = cls._set_x is ModelExchangeSlave._set_x
         # Outputs that are states, kept in the attribute of their own name (``_x`` the
         # default): read without the model evaluated, as a host reads the angles and speeds
         # it feeds to a coupling at every right-hand side.
@@ -225,6 +222,10 @@ class ModelExchangeSlave(LeverSlave):
 
     # -- the physics' model at the current point ----------------------------------------------------
     def _me_current(self):
+        model = self._me_model
+        if model is not None and not self._model_stale and self._build_error is None \
+                and self._me_source is self._physics_key():
+            return model                # the common case, at every right-hand side
         self._build_for_reading()
         if self._model_stale or self._build_error is not None:
             raise ParameterError("", f"the model is not built: {self._build_error or 'parameters changed since'}")
@@ -245,39 +246,28 @@ class ModelExchangeSlave(LeverSlave):
     def _layout_of(self, model) -> _Layout:
         cls = type(self)
         positions = tuple(self._state_of_physics[name] for name in model.STATES)
-        attributes = (tuple(self.ME_STATES[k].attribute for k in positions)
-                      if cls._x is ModelExchangeSlave._x else None)
+        if cls._x is ModelExchangeSlave._x:
+            # The states and inputs are kept as floats (``_set_x``, ``set_real``, the point
+            # block), so they are read as they are: in one C call at every right-hand side.
+            read_x = _reader([self.ME_STATES[k].attribute for k in positions])
+        else:
+            def read_x(slave):
+                x = slave._x()
+                return [x[k] for k in positions]
         padding = [0.0] * (len(self.ME_STATES) - len(positions)) if positions == tuple(range(len(positions))) else None
-        return _Layout(attributes, positions, padding, tuple(model.INPUTS),
-                       tuple(model.OUTPUTS) if cls._me_output_values is ModelExchangeSlave._me_output_values
-                       else None, _reader(attributes) if attributes is not None else None, _reader(model.INPUTS))
+        return _Layout(positions, padding, tuple(model.OUTPUTS) if cls._me_output_values is
+                       ModelExchangeSlave._me_output_values else None, read_x, _reader(model.INPUTS))
 
-    # The states and inputs are kept as floats (``_set_x``, ``set_real``, the point block), so
-    # they are read as they are: at every right-hand side, in one C call each.
     def _x_physics(self) -> list:
-        layout = self._me_layout
-        if layout.read_x is not None:
-            return list(layout.read_x(self))
-        x = self._x()
-        return [x[k] for k in layout.positions]
+        return list(self._me_layout.read_x(self))
 
     def _u(self) -> list:
         return list(self._me_layout.read_u(self))
 
-    def _current_model(self):
-        """``_me_current()``, with the common case (built, and built from what the model was
-        made from) decided here, without its checks' calls: at every right-hand side."""
-        model = self._me_model
-        if model is None or self._model_stale or self._build_error is not None \
-                or self._me_source is not self._physics_key():
-            return self._me_current()
-        return model
-
     def _derivatives(self) -> list:
-        model = self._current_model()
+        model = self._me_current()
         layout = self._me_layout
-        x = list(layout.read_x(self)) if layout.read_x is not None else self._x_physics()
-        values = model.derivatives(self._time, x, list(layout.read_u(self)))
+        values = model.derivatives(self._time, list(layout.read_x(self)), list(layout.read_u(self)))
         if layout.padding is not None:
             return [*values, *layout.padding]
         out = [0.0] * len(self.ME_STATES)     # a state the physics does not have stays constant
@@ -302,7 +292,7 @@ class ModelExchangeSlave(LeverSlave):
             return super()._refresh()
         if self._build_error is not None or self._model_stale:
             return
-        model = self._current_model()
+        model = self._me_current()
         names = self._me_layout.outputs
         if names is not None:
             outputs = model.outputs(self._time, self._x_physics(), self._u())
@@ -360,12 +350,7 @@ class ModelExchangeSlave(LeverSlave):
         if pending & POINT_TIME:
             self._time = block[1]
         if pending & POINT_STATES:
-            states = block[POINT_HEADER:POINT_HEADER + len(self._state_index)]
-            if self._plain_states:      # ``_set_x``'s own loop, the values floats already
-                for attribute, value in zip(self._state_attributes, states):
-                    setattr(self, attribute, value)
-            else:
-                self._set_x(states)
+            self._set_x(block[POINT_HEADER:POINT_HEADER + len(self._state_index)])
         if pending & (POINT_TIME | POINT_STATES):
             self._dirty = ALL
         if pending & POINT_INPUTS:
