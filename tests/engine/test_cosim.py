@@ -140,7 +140,7 @@ def test_reference_cache_keys_hold_the_wiring_the_solvers_code_and_the_simd_leve
     (tmp_path / "cvode.py").write_text((tmp_path / "cvode.py").read_text() + "\n# changed\n")
     assert solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853") != key
     monkeypatch.undo()
-    monkeypatch.setattr(solution, "_simd_in_use", lambda: "SSE42")
+    monkeypatch.setattr(solution, "simd_in_use", lambda: "SSE42")
     assert solution.cache_key(spec, times, 1e-10, 1e-10, "DOP853") != key
 
 
