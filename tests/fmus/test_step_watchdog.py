@@ -36,7 +36,7 @@ def test_every_step_of_every_fmu_returns_within_the_bound(fmu_dir):
                                  env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
         # the last call it began, since when it has been silent, the part of a line read
         selector.register(child.stdout, selectors.EVENT_READ,
-                          {"child": child, "current": None, "since": time.monotonic(), "text": ""})
+                          {"child": child, "current": None, "since": time.monotonic(), "text": b""})
 
     def hand_on(worker):
         if pending:
@@ -78,16 +78,17 @@ def test_every_step_of_every_fmu_returns_within_the_bound(fmu_dir):
             worker["since"] = now
             # all the pipe holds, read unbuffered: a line left in a reader's buffer would not
             # wake the selector while the child waits for its next case
-            data = os.read(key.fileobj.fileno(), 1 << 16).decode()
+            data = os.read(key.fileobj.fileno(), 1 << 16)
             if not data:
                 selector.unregister(key.fileobj)
                 child, current = worker["child"], worker["current"]
                 child.wait()
                 assert child.returncode == 0 or current is None, f"the child died (rc {child.returncode}) in {current}"
                 continue
-            *lines, worker["text"] = (worker["text"] + data).split("\n")
+            # split into lines before decoding: a read may end inside a character of a message
+            *lines, worker["text"] = (worker["text"] + data).split(b"\n")
             for line in lines:
-                handle(worker, line)
+                handle(worker, line.decode())
         for key in list(selector.get_map().values()):
             worker = key.data
             if now - worker["since"] >= BOUND:
