@@ -110,3 +110,61 @@ def test_a_fingerprint_with_a_set_is_the_same_in_every_process(tmp_path):
                            env={"PYTHONHASHSEED": str(seed), "PATH": "/usr/bin:/bin"}).stdout.strip()
             for seed in range(1, 7)]
     assert seen == ["None"] * 6, seen
+
+
+def _mark_and_sleep(folder, x):
+    import os
+    import time
+    from pathlib import Path
+    (Path(folder) / f"started-{x}").write_text(str(os.getpid()))
+    time.sleep(600)             # a long case: only a terminated worker ends before it
+    return {"status": "ok", "value": x}
+
+
+def _gone(pid: int) -> bool:
+    from pathlib import Path
+    status = Path(f"/proc/{pid}/status")
+    try:
+        return "zombie" in status.read_text().lower()
+    except FileNotFoundError:
+        return True
+
+
+def test_stopping_a_pool_ends_its_workers_under_way_and_logs_their_cases(tmp_path):
+    """Ctrl-C in a study: the workers are terminated at once, not waited for to finish the
+    case they run (a study whose cases take minutes would otherwise ignore Ctrl-C for
+    minutes); the cases under way are logged as interrupted, the queued ones not at all.
+    The pool's ``with`` block is left only after the check: its exit waits for the workers,
+    which would hide a ``stop_pool`` that no longer ends them."""
+    import multiprocessing
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from harness.studies.cases import INTERRUPTED, stop_pool
+
+    log = CaseLog(tmp_path / "log", {"study": "stop"})
+    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork"))
+    workers = []
+    try:
+        futures = {pool.submit(_mark_and_sleep, str(tmp_path), x): x for x in range(5)}
+        deadline = time.monotonic() + 120.0
+        while len(list(tmp_path.glob("started-*"))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        started = sorted(int(p.name.split("-")[1]) for p in tmp_path.glob("started-*"))
+        assert started == [0, 1]
+        workers = [int(p.read_text()) for p in tmp_path.glob("started-*")]
+        stop_pool(pool, futures, log, str)
+        deadline = time.monotonic() + 60.0         # a terminated worker ends in milliseconds
+        while not all(_gone(pid) for pid in workers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert all(_gone(pid) for pid in workers), "the workers were left running their cases"
+        entries = [json.loads(line) for line in log.path.read_text().splitlines()[1:]]
+        assert sorted(e["key"] for e in entries) == ["0", "1"]
+        assert all(e["result"]["status"] == INTERRUPTED for e in entries)
+    finally:
+        import os
+        import signal
+        for pid in workers:         # a failed check must not leave sleepers behind
+            if not _gone(pid):
+                os.kill(pid, signal.SIGKILL)
+        pool.shutdown(wait=True, cancel_futures=True)
