@@ -48,24 +48,21 @@ def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, 
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def physics_hash() -> str:
-    root = Path(component_parameters.__file__).parent
+def _digest(paths) -> str:
     digest = hashlib.sha256()
-    for path in sorted(root.glob("*.py")):
+    for path in paths:
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 
 
-#: the modules whose code computes a reference: a change to any of them is a new solution
-_SOLVER_MODULES = ("monolithic.py", "rectifier.py", "cvode.py", "solution.py")
+def physics_hash() -> str:
+    return _digest(sorted(Path(component_parameters.__file__).parent.glob("*.py")))
 
 
 def solver_hash() -> str:
-    root = Path(__file__).parent
-    digest = hashlib.sha256()
-    for name in _SOLVER_MODULES:
-        digest.update((root / name).read_bytes())
-    return digest.hexdigest()[:16]
+    """The reference solver's code: every module of this package, so that none it uses can be
+    left out (a change to one it does not use costs a re-solve, not a stale solution)."""
+    return _digest(sorted(Path(__file__).parent.glob("*.py")))
 
 
 def simd_in_use() -> str:
