@@ -200,23 +200,35 @@ def plot(out: Path, result: RunResult, reference=None):
     plot_over_angle(out, result.scene, t, tr, title)
     _plot_spectrum(out, result, title, plt)
     if reference is not None:
-        fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
-        n = min(len(t), len(reference.times))
-        for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
+        save_figure(reference_figure(t, tr, reference, names, result.master, title), out / "vs_reference.png")
+
+
+def reference_figure(t, traces, reference, names: dict, master: str, title: str):
+    """vs_reference.png: w1, w2 and tau2 of the co-simulation over the reference's, and the
+    errors of both speeds and both torques (drive side blue, driven side red; a dense error
+    drawn as its envelope)."""
+    plt = plotting.pyplot()
+    fig, axes = plt.subplots(5, 1, figsize=(11, 12), sharex=True, layout="constrained")
+    n = min(len(t), len(reference.times))
+    for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
+        name = names[key]
+        ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
+        ax.plot(t[:n], traces[name][:n], "C1--", lw=0.8, label=f"co-simulation ({master})")
+        ax.set_ylabel(f"{key} [{unit}]")
+    for ax, pair, unit in ((axes[3], ("w1", "w2"), "rad/s"), (axes[4], ("tau1", "tau2"), "N*m")):
+        for key, color in zip(pair, ("C0", "C3")):
             name = names[key]
-            ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
-            ax.plot(t[:n], tr[name][:n], "C1--", lw=0.8, label=f"co-simulation ({result.master})")
-            ax.set_ylabel(f"{key} [{unit}]")
-        for key, style in (("w1", "C0-"), ("w2", "C2-")):
-            name = names[key]
-            axes[3].plot(t[:n], tr[name][:n] - reference.traces[name][:n], style, lw=0.7, label=f"error {key}")
-        axes[3].set_ylabel("error [rad/s]")
-        axes[3].set_xlabel("time [s]")
-        for ax in axes:
-            ax.grid(alpha=0.3)
-            plotting.legend_outside(ax)
-        fig.suptitle(f"{title}: co-simulation vs reference")
-        save_figure(fig, out / "vs_reference.png")
+            if name in traces and name in reference.traces:
+                plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),
+                               color, f"error {key}")
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.set_ylabel(f"error [{unit}]")
+    axes[-1].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        plotting.legend_outside(ax)
+    fig.suptitle(f"{title}: co-simulation vs reference")
+    return fig
 
 
 def plot_over_angle(out: Path, scene, times, traces, title: str):
@@ -224,35 +236,40 @@ def plot_over_angle(out: Path, scene, times, traces, title: str):
     revolution) and ``revolutions.png`` (speeds and accelerations over its last few), over
     the driven shaft's angle as the monograph's figures are; nothing when the run holds
     no whole revolution."""
-    plt = plotting.pyplot()
     views = angle_views(scene, times, traces)
     panels = {"revolution.png": ("revolution", [("U12 [1]", [("U12", "U12")]),
                                                 ("torque [N*m]", [("-tau1", "-tau1 (drive)"), ("tau2", "tau2 (driven)")])]),
               "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", "w1 drive"), ("w2", "w2 driven")]),
                                                   ("acceleration [rad/s^2]",
                                                    [("a1", "a1 drive"), ("a2", "a2 driven")])]),
-              U12_PLOT: ("u12", [("U12 [1]", [("U12", "U12 = dPhi/dphi2, the coupling's transfer function")])])}
+              U12_PLOT: ("u12", [("U12 = dPhi/dphi2 [1]", [("U12", "U12, the coupling's transfer function")])])}
     for filename, (key, rows) in panels.items():
-        view = views[key]
-        if view is None:
-            continue
-        fig, axes = plt.subplots(len(rows), 1, figsize=(11, 1.2 + 2.8 * len(rows)), sharex=True, squeeze=False,
-                                 layout="constrained")
-        for ax, (label, series) in zip(axes[:, 0], rows):
-            for short, legend in series:
-                if short in view:
-                    ax.plot(view["angle"], view[short], "-", lw=0.9, label=legend)
-            if key == "u12":
-                ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="1 (synchronous)")
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
-            plotting.legend_outside(ax)
-        count = view["count"]
-        axes[-1, 0].set_xlabel(f"driven shaft angle phi2 [deg] over its last {'whole revolution' if count == 1 else f'{count} whole revolutions'} "
-                               f"(t = {view['t'][0]:.3f} ... {view['t'][-1]:.3f} s)")
-        axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
-        fig.suptitle(title if key != "u12" else f"{title}: U12 over the driven shaft's angle")
-        save_figure(fig, out / filename)
+        if views[key] is not None:
+            save_figure(angle_figure(views[key], key, rows, title), out / filename)
+
+
+def angle_figure(view: dict, key: str, rows: list, title: str):
+    """One figure over the driven shaft's angle: a panel per (y label, [(short name,
+    legend)]) of ``rows``, drawn from ``view`` (``angle_views``)."""
+    plt = plotting.pyplot()
+    fig, axes = plt.subplots(len(rows), 1, figsize=(11, 1.2 + 2.8 * len(rows)), sharex=True, squeeze=False,
+                             layout="constrained")
+    for ax, (label, series) in zip(axes[:, 0], rows):
+        for short, legend in series:
+            if short in view:
+                ax.plot(view["angle"], view[short], "-", lw=0.9, label=legend)
+        if key == "u12":
+            ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="1 (synchronous)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        # one panel of long labels: its legend above it, so the curve keeps the figure's width
+        (plotting.legend_above if key == "u12" else plotting.legend_outside)(ax)
+    count = view["count"]
+    axes[-1, 0].set_xlabel(f"driven shaft angle phi2 [deg] over its last {'whole revolution' if count == 1 else f'{count} whole revolutions'} "
+                           f"(t = {view['t'][0]:.3f} ... {view['t'][-1]:.3f} s)")
+    axes[-1, 0].set_xticks(np.arange(0.0, 360.0 * count + 1.0, 90.0 if count == 1 else 180.0))
+    fig.suptitle(title if key != "u12" else f"{title}: U12 over the driven shaft's angle")
+    return fig
 
 
 def _plot_spectrum(out: Path, result: RunResult, title: str, plt):

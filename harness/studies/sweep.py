@@ -468,6 +468,10 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
         if reported:
             lines += ["", "Reported by the monograph: " + "; ".join(
                 f"{k} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts) for k, pts in reported.items())]
+            compared = against_monograph(rows, reported)
+            if compared:
+                lines += ["", "The model beside the monograph (its cases interpolated at the printed points):", ""]
+                lines += [f"- {comparison_sentence(c)}" for c in compared]
         _plot(out / f"sweep_{axis.name}.png", axis, rows, reported)
     if failed:
         lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {_cell(r['result'].get('error'))} "
@@ -490,19 +494,87 @@ def _range(v) -> str:
 PLOT_COLUMNS = (("w", "speed", "rad/s"), ("a", "acceleration", "rad/s^2"), ("tau", "torque", "N*m"))
 
 
+def _reported_value(v) -> float:
+    """A printed value, or the middle of a printed range."""
+    return 0.5 * (v[0] + v[1]) if isinstance(v, (tuple, list)) else float(v)
+
+
+def against_monograph(rows: list[dict], reported: dict) -> list[dict]:
+    """The model against each reported amplitude series it can be set beside: per key
+    (``A_w1``, ``dA_tau``, ...), the printed values, the model's at the same points (its
+    cases interpolated, points outside them left out), how many times larger the printed
+    ones are, and whether their signs agree."""
+    ok = sorted((r for r in rows if r["result"].get("status") == "ok"), key=lambda r: r["x"])
+    x = np.array([r["x"] for r in ok], dtype=float)
+    out = []
+    for q, label, unit in PLOT_COLUMNS:
+        for key in (f"A_{q}1", f"A_{q}2", f"dA_{q}"):
+            points = [(px, _reported_value(v)) for px, v in reported.get(key) or ()
+                      if len(x) >= 2 and x[0] <= px <= x[-1] or len(x) == 1 and px == x[0]]
+            if not points:
+                continue
+            model = np.interp([px for px, _ in points], x, [r["result"][key] for r in ok])
+            printed = np.array([v for _, v in points])
+            ratios = np.abs(printed) / np.maximum(np.abs(model), 1e-300)
+            out.append({"key": key, "quantity": label, "unit": unit, "x": [px for px, _ in points],
+                        "printed": printed.tolist(), "model": model.tolist(),
+                        "ratio": (float(ratios.min()), float(ratios.max())),
+                        "opposite_sign_at": [px for (px, _), a, b in zip(points, printed, model)
+                                             if np.sign(a) != np.sign(b)]})
+    return out
+
+
+def comparison_sentence(c: dict) -> str:
+    """One comparison of ``against_monograph`` in words, e.g. 'dA torque: the monograph
+    +11 -> +56 N*m, the model -0.16 -> -2.1 N*m: 17-27x larger, of opposite sign'."""
+    def series(values):
+        return " -> ".join(f"{v:+.3g}" if c["key"].startswith("dA") else f"{v:.3g}" for v in values)
+
+    size = _times(c) + " the model's"
+    sign = _sign_words(c)
+    name = c["key"].split("_")[0] + " " + c["quantity"] + {"1": " drive", "2": " driven"}.get(c["key"][-1], "")
+    return (f"{name}: the monograph {series(c['printed'])} {c['unit']}, the model {series(c['model'])} {c['unit']} "
+            f"(at {', '.join(f'{x:g}' for x in c['x'])}): {size}{sign}")
+
+
+#: printed and model values further apart than this factor share a logarithmic axis
+#: (symmetric-logarithmic for differences, which change sign), so both can be read
+LOG_RATIO = 10.0
+
+
+def _scale_for(ax, values) -> None:
+    """A logarithmic y-axis when ``values`` span more than ``LOG_RATIO`` (symmetric-
+    logarithmic when they change sign), so that the model and the monograph are each
+    readable on one axes."""
+    v = np.abs(np.asarray([x for x in values if np.isfinite(x)], dtype=float))
+    v = v[v > 0]
+    if not len(v):
+        return
+    changes_sign = min(values) < 0 < max(values)
+    if v.max() / v.min() < LOG_RATIO and not changes_sign:
+        return
+    if min(values) > 0:
+        ax.set_yscale("log")
+    else:
+        # the linear part around 0 a decade below the smallest value, on a power of ten: its
+        # ticks (-1, 0, 1 of that power) then stand a decade's height apart, not on each other
+        ax.set_yscale("symlog", linthresh=float(10.0 ** np.floor(np.log10(v.min()))), linscale=1.0)
+    ax.autoscale_view()
+    ax.margins(y=0.12)
+
+
 def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
     """One column per quantity (and the means for the load and inertia axes): the model's
-    amplitudes, its dA = A2 - A1, and what the monograph reports in a row of its own - the
-    printed values are 2-10 times the model's, and on shared axes they flatten its curves."""
+    amplitudes and its dA = A2 - A1, the monograph's points (crosses) on the same axes -
+    logarithmic where they are a decade or more apart - and each panel's comparison in
+    words (how many times the model's, and a sign that differs)."""
     plt = plotting.pyplot()
     ok = sorted((r for r in rows if r["result"].get("status") == "ok"), key=lambda r: r["x"])
     x = np.array([r["x"] for r in ok])
     value = lambda key: [r["result"][key] for r in ok]  # noqa: E731
     columns = list(PLOT_COLUMNS) + ([("mean", "mean", "")] if axis.name in ("load", "inertia") else [])
-    shown_reported = any(reported.get(f"{kind}_{q}{i}") for kind, i in (("A", 1), ("A", 2), ("dA", ""))
-                         for q, _, _ in PLOT_COLUMNS)
-    nrows = 3 if shown_reported else 2
-    fig, grid = plt.subplots(nrows, len(columns), figsize=(4.6 * len(columns), 2.9 * nrows + 0.8), squeeze=False,
+    comparisons = {c["key"]: c for c in against_monograph(rows, reported)}
+    fig, grid = plt.subplots(2, len(columns), figsize=(4.6 * len(columns), 6.6), squeeze=False,
                              sharex=True, layout="constrained")
     for col, (q, label, unit) in enumerate(columns):
         top, middle = grid[0, col], grid[1, col]
@@ -511,39 +583,61 @@ def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
             top.set_ylabel("mean speed [rad/s]")
             middle.plot(x, value("mean_tau"), "-o", color="tab:brown", label="model mean torque")
             middle.set_ylabel("mean torque [N*m]")
-            # the printed means are on the model's scale: drawn on its panels
             _overlay(top, reported.get("mean_w"), "reported mean w", "k")
             _overlay(middle, reported.get("mean_tau"), "reported mean torque", "k")
-            if shown_reported:
-                grid[2, col].axis("off")
             continue
-        for i, style in ((1, "-o"), (2, "--s")):
-            top.plot(x, value(f"A_{q}{i}"), style, label=f"model {('drive', 'driven')[i - 1]}")
+        for i, style, color in ((1, "-o", "C0"), (2, "--s", "C1")):
+            top.plot(x, value(f"A_{q}{i}"), style, color=color, label=f"model {('drive', 'driven')[i - 1]}")
+        _overlay(top, reported.get(f"A_{q}1"), "monograph drive", "C0")
+        _overlay(top, reported.get(f"A_{q}2"), "monograph driven", "C1")
         top.set_ylabel(f"{label} amplitude A [{unit}]")
         middle.plot(x, value(f"dA_{q}"), "-o", color="tab:green", label="model dA = A2 - A1")
+        _overlay(middle, reported.get(f"dA_{q}"), "monograph dA", "tab:green")
         middle.axhline(0, color="0.6", lw=0.8)
         middle.set_ylabel(f"dA {label} [{unit}]")
-        if shown_reported:
-            bottom = grid[2, col]
-            for key, legend, color in ((f"A_{q}1", "reported A drive", "k"),
-                                       (f"A_{q}2", "reported A driven", "tab:red"),
-                                       (f"dA_{q}", "reported dA", "tab:green")):
-                _overlay(bottom, reported.get(key), legend, color)
-            bottom.set_ylabel(f"monograph's {label} [{unit}]")
-    for row, axes_row in enumerate(grid):
+        for ax, keys in ((top, (f"A_{q}1", f"A_{q}2")), (middle, (f"dA_{q}",))):
+            shown = [v for k in keys for v in value(k)] + [_reported_value(v) for k in keys
+                                                           for _, v in reported.get(k) or ()]
+            _scale_for(ax, shown)
+            said = [comparisons[k] for k in keys if k in comparisons]
+            if said:
+                # above the panel, not on it: a box on the data hid the points it spoke of
+                ax.set_title("\n".join(_panel_note(c) for c in said), fontsize=7.5, loc="left")
+    for axes_row in grid:
         for ax in axes_row:
             ax.grid(alpha=0.3)
             if ax.axison and not ax.has_data():
-                ax.text(0.5, 0.5, "nothing reported" if row == 2 else f"no case ran ({len(rows)} failed)",
-                        transform=ax.transAxes, ha="center", va="center", color="0.5")
+                ax.text(0.5, 0.5, f"no case ran ({len(rows)} failed)", transform=ax.transAxes, ha="center",
+                        va="center", color="0.5")
     for row in grid:
         plotting.row_legend(row, fontsize=7)
     for ax in grid[-1]:
         ax.set_xlabel(axis.quantity)
-    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}" + ("" if not shown_reported else
-                 "\nthe monograph's values in the bottom row, on their own scale"), fontsize=9)
+    fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}" + ("" if not comparisons else
+                 "\nthe monograph's points (x) on the model's axes"), fontsize=9)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _panel_note(c: dict) -> str:
+    """A panel's comparison, short: 'monograph dA = 17-27x the model's, opposite sign'."""
+    which = {"1": " drive", "2": " driven"}.get(c["key"][-1], "")
+    return (f"monograph{which} {c['key'].split('_')[0]} = {_times(c)} the model's"
+            + _sign_words(c))
+
+
+def _times(c: dict) -> str:
+    """How many times the model's the printed values are: '26x', '3.1-11x', '17-140x'."""
+    low, high = (f"{r:.2g}" if r < 100 else f"{r:.0f}" for r in c["ratio"])
+    return f"{low}x" if low == high else f"{low}-{high}x"
+
+
+def _sign_words(c: dict) -> str:
+    """', of opposite sign' (everywhere), ', of opposite sign at 35', or nothing."""
+    at = c["opposite_sign_at"]
+    if not at:
+        return ""
+    return ", of opposite sign" + ("" if len(at) == len(c["x"]) else " at " + ", ".join(f"{x:g}" for x in at))
 
 
 def _overlay(ax, points, label, color):
