@@ -202,6 +202,7 @@ def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, t
         panels.append(("C3", difference[0], np.asarray(difference[1], dtype=float)[judged], f"difference [{unit}]"))
     span = detail_span(tj, panels[0][2])
     near = tj >= tj[-1] - span
+    near[-2:] = True            # a run of a few samples: the detail still spans two of them
     axes, details = [], []
     for row, (color, label, v, axis_label) in enumerate(panels, start=1):
         ax = fig.add_subplot(grid[row, 0], sharex=axes[0] if axes else None)

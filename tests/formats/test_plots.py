@@ -213,3 +213,15 @@ def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_
     assert "26-27x the model's, of opposite sign" in torque_dA.get_title(loc="left")
     assert fig.axes[3].get_yscale() == "log" and labels
     plt.close(fig)
+
+
+def test_a_run_of_three_samples_gets_a_detail_of_two_without_a_warning():
+    import warnings
+
+    plt = plotting.pyplot()
+    t, y = np.array([0.0, 0.001, 0.002]), np.array([1.0, 2.0, 1.5])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig = plotting.time_view(t, [("a", y), ("b", y)], "x", "u", 0.0, "t", ("d", y - y))
+    assert fig.axes[2].get_xlim() == (0.001, 0.002)
+    plt.close(fig)
