@@ -163,3 +163,66 @@ def test_the_reference_pages_are_what_the_code_generates(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     stale = stale_pages(REFERENCE, tmp_path)
     assert not stale, "stale reference pages (run `make docs` and commit docs/reference/):\n" + "\n".join(stale)
+
+
+# A Markdown link: [text](target), its target up to the first space or ')'; code spans and
+# fenced blocks are left out (a link there is text, not a link).
+LINK = re.compile(r"\[([^\]]*)\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
+# a link text that names a file: a path with an extension, in backticks or not
+FILE_NAME = re.compile(r"^`?([\w.\-]+/)*[\w\-]+\.(py|md|toml|txt|csv|c|h|json|ipynb|fmu)`?$")
+FENCE = re.compile(r"^(```|~~~).*?^\1\s*$", re.M | re.S)
+CODE_SPAN = re.compile(r"`[^`\n]*`")
+
+
+def links(markdown: str) -> list[tuple[int, str, str]]:
+    """(line number, text, target) of each link of a page outside code (a link that starts
+    inside a code span is text; a code span inside a link's text is its text)."""
+    text = FENCE.sub(lambda m: "\n" * m.group(0).count("\n"), markdown)
+    found = []
+    for number, line in enumerate(text.splitlines(), 1):
+        code = [m.span() for m in CODE_SPAN.finditer(line)]
+        found += [(number, m.group(1), m.group(2)) for m in LINK.finditer(line)
+                  if not any(start < m.start() < end for start, end in code)]
+    return found
+
+
+def broken_links(page: Path, root: Path = ROOT) -> list[str]:
+    """Each relative link of ``page`` whose file does not exist, whose #anchor names no
+    heading of the Markdown page it points into, or whose text names another file than
+    the one it opens ([harness/validate.py](../harness/judges/validation.py))."""
+    found = []
+    for number, label, target in links(page.read_text(encoding="utf-8")):
+        if re.match(r"^[a-z][a-z0-9+.\-]*:", target, re.I):        # http:, https:, mailto: ...
+            continue
+        path, _, anchor = target.partition("#")
+        into = (page.parent / path).resolve() if path else page
+        where = f"{page.relative_to(root)}:{number}: {target}"
+        if not into.exists():
+            found.append(f"{where} (no such file)")
+        elif anchor and into.suffix == ".md" and anchor not in anchors(into.read_text(encoding="utf-8")):
+            found.append(f"{where} (no such heading)")
+        elif FILE_NAME.match(label.strip()) and not into.as_posix().endswith("/" + label.strip().strip("`")):
+            found.append(f"{where} (its text names {label.strip()})")
+    return found
+
+
+def test_a_broken_link_is_named_and_a_good_one_is_not(tmp_path):
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "a.md").write_text("# A page\n\n## The part\n")
+    page = tmp_path / "README.md"
+    page.write_text("[ok](docs/a.md) [ok](docs/a.md#the-part) [ok](#top) [web](https://x.org/y)\n"
+                    "# Top\n`[code](nowhere.md)`\n```\n[fenced](nowhere.md)\n```\n"
+                    "[gone](docs/b.md) [no part](docs/a.md#no-part) [dir](docs/)\n"
+                    "[docs/a.md](docs/a.md) [`a.md`](docs/a.md) [docs/c.md](docs/a.md)\n")
+    assert broken_links(page, tmp_path) == ["README.md:7: docs/b.md (no such file)",
+                                            "README.md:7: docs/a.md#no-part (no such heading)",
+                                            "README.md:8: docs/a.md (its text names docs/c.md)"]
+
+
+def test_every_relative_link_in_the_readme_and_the_docs_resolves():
+    """A link a user follows from the README or a docs page opens a file that exists, at a
+    heading that exists."""
+    pages = [ROOT / name for name in tracked_files()
+             if name == "README.md" or name.startswith("docs/") and name.endswith(".md")]
+    broken = [found for page in pages if page.is_file() for found in broken_links(page)]
+    assert broken == []
