@@ -12,6 +12,9 @@ import numpy as np
 
 #: the face colour of the start-up transient in an overview
 TRANSIENT_SHADE = "0.88"
+#: two curves drawn on one axes where both must be told apart (errors of the drive and the
+#: driven side): blue and red, not two neighbours of the colour cycle (green over blue)
+PAIR_COLOURS = ("C0", "C3")
 
 
 def pyplot():
@@ -242,5 +245,5 @@ def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, t
     return fig
 
 
-__all__ = ["pyplot", "legend_outside", "legend_above", "row_legend", "zoom", "mark_transient", "log_ticks", "turns",
+__all__ = ["PAIR_COLOURS", "pyplot", "legend_outside", "legend_above", "row_legend", "zoom", "mark_transient", "log_ticks", "turns",
            "envelope", "trace", "detail_span", "impulse_limits", "time_view"]

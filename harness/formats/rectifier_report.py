@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
@@ -255,9 +257,9 @@ def plot(out, result, reference=None):
             ax.set_ylabel(f"{var} [{unit}]")
         # the report states the error against the reference: drawn at its own scale
         for ax, unit in zip(axes[3:], ("rad/s", "N*m")):
-            for k, (var, _) in enumerate(v for v in compared if v[1] == unit):
-                ax.plot(t[:n], tr[var][:n] - reference.traces[f"{name}.{var}"][:n], f"C{k}-", lw=0.7,
-                        label=f"error {var}")
+            for color, (var, _) in zip(plotting.PAIR_COLOURS, (v for v in compared if v[1] == unit)):
+                plotting.trace(ax, t[:n], np.asarray(tr[var][:n]) - np.asarray(reference.traces[f"{name}.{var}"][:n]),
+                               color, f"error {var}")
             ax.set_ylabel(f"error [{unit}]")
         for ax in axes:
             ax.grid(alpha=0.3)

@@ -216,7 +216,7 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
         ax.plot(t[:n], traces[name][:n], "C1--", lw=0.8, label=f"co-simulation ({master})")
         ax.set_ylabel(f"{key} [{unit}]")
     for ax, pair, unit in ((axes[3], ("w1", "w2"), "rad/s"), (axes[4], ("tau1", "tau2"), "N*m")):
-        for key, color in zip(pair, ("C0", "C3")):
+        for key, color in zip(pair, plotting.PAIR_COLOURS):
             name = names[key]
             if name in traces and name in reference.traces:
                 plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),

@@ -225,3 +225,11 @@ def test_a_run_of_three_samples_gets_a_detail_of_two_without_a_warning():
         fig = plotting.time_view(t, [("a", y), ("b", y)], "x", "u", 0.0, "t", ("d", y - y))
     assert fig.axes[2].get_xlim() == (0.001, 0.002)
     plt.close(fig)
+
+
+def test_the_pair_colours_are_not_neighbours_in_the_colour_cycle():
+    """Two errors on one axes are told apart: blue and red, not blue and orange or green."""
+    from matplotlib.colors import to_rgb
+
+    a, b = (np.array(to_rgb(c)) for c in plotting.PAIR_COLOURS)
+    assert np.abs(a - b).sum() > 1.0
