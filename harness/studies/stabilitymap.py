@@ -636,6 +636,9 @@ def _plot(path: Path, result: StabilityMap) -> Path:
         ax.axis("off")
     if zetas:
         axes[0, 0].set_ylim(min(zetas) / 1.5, max(zetas) * 1.5)
+    for ax in list(axes.flat)[:len(masters)]:
+        plotting.log_ticks(ax.xaxis)
+        plotting.log_ticks(ax.yaxis)
     handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in legend_classes(statuses)]
     handles.append(Line2D([], [], color="k", lw=0.9, marker="|", ms=10,
                           label="predicted edge (|: swept coupling; line: per stiffness, damping varied)"))
