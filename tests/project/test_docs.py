@@ -186,6 +186,13 @@ def links(markdown: str) -> list[tuple[int, str, str]]:
     return found
 
 
+def _names(text: str, target: Path, here: Path, root: Path) -> bool:
+    """Whether a link text that is a path names ``target``: relative to the page, to the
+    repository, or as the target's trailing folders and name."""
+    return (target in ((here / text).resolve(), (root / text).resolve())
+            or target.as_posix().endswith("/" + text.lstrip("./")))
+
+
 def broken_links(page: Path, root: Path = ROOT) -> list[str]:
     """Each relative link of ``page`` whose file does not exist, whose #anchor names no
     heading of the Markdown page it points into, or whose text names another file than
@@ -201,7 +208,7 @@ def broken_links(page: Path, root: Path = ROOT) -> list[str]:
             found.append(f"{where} (no such file)")
         elif anchor and into.suffix == ".md" and anchor not in anchors(into.read_text(encoding="utf-8")):
             found.append(f"{where} (no such heading)")
-        elif FILE_NAME.match(label.strip()) and not into.as_posix().endswith("/" + label.strip().strip("`")):
+        elif FILE_NAME.match(label.strip()) and not _names(label.strip().strip("`"), into, page.parent, root):
             found.append(f"{where} (its text names {label.strip()})")
     return found
 
