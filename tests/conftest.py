@@ -45,6 +45,7 @@ RUN_BUILT_FMUS = (
     "engine/test_extreme.py",
     "engine/test_fmi3_scenes.py",
     "formats/test_plots.py::test_a_time_view_zooms_the_judged_window_to_its_values",
+    "project/test_docs.py::test_every_command_and_option_the_guide_shows_exists",
     "formats/test_plots.py::test_an_impulse_at_the_start_is_left_off_the_overviews_scale_and_its_peaks_named",
     "formats/test_plots.py::test_log_ticks_are_plain_numbers_that_do_not_run_into_each_other",
     "engine/test_iteration_and_adaptive.py",

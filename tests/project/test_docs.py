@@ -233,3 +233,58 @@ def test_every_relative_link_in_the_readme_and_the_docs_resolves():
              if name == "README.md" or name.startswith("docs/") and name.endswith(".md")]
     broken = [found for page in pages if page.is_file() for found in broken_links(page)]
     assert broken == []
+
+
+# The guide's commands: each `lever COMMAND --option` a guide page shows is one the command
+# line has (a renamed command or option would leave the guide teaching what fails).
+GUIDE = ROOT / "docs" / "guide"
+LEVER_CALL = re.compile(r"(?:^|[\s`/])lever\s+([a-z][\w\-]*)((?:\s+[^\s`#|]+)*)")
+
+
+def lever_calls(markdown: str) -> list[tuple[str, list[str]]]:
+    """(command, [its --options]) of each `lever ...` call on a page, in code or prose."""
+    calls = []
+    for line in markdown.splitlines():
+        for command, rest in LEVER_CALL.findall(line):
+            options = [word.split("=")[0] for word in rest.split() if word.startswith("--")]
+            calls.append((command, options))
+    return calls
+
+
+def unknown_calls(markdown: str, group) -> list[str]:
+    """Each command or option of ``lever_calls`` that ``group`` (the click group) lacks."""
+    found = []
+    for command, options in lever_calls(markdown):
+        known = group.commands.get(command)
+        if known is None:
+            found.append(f"lever {command}: no such command")
+            continue
+        names = {name for param in known.params for name in param.opts + param.secondary_opts}
+        found += [f"lever {command} {option}: no such option" for option in options if option not in names]
+    return found
+
+
+def test_an_unknown_command_or_option_of_the_guide_is_named():
+    import click
+
+    @click.group()
+    def group():
+        pass
+
+    @group.command()
+    @click.option("--stop")
+    def run(stop):
+        pass
+
+    page = "```sh\n.venv/bin/lever run kavz685 --stop 3 --sotp 4\nlever runn x\n```\nthen `lever run --stop=2`\n"
+    assert unknown_calls(page, group) == ["lever run --sotp: no such option", "lever runn: no such command"]
+
+
+def test_every_command_and_option_the_guide_shows_exists():
+    from harness.cli import main
+
+    pages = sorted(GUIDE.glob("*.md"))
+    assert pages, "no guide pages"
+    found = [f"{page.name}: {problem}" for page in pages
+             for problem in unknown_calls(page.read_text(encoding="utf-8"), main)]
+    assert found == []
