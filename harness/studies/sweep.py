@@ -543,9 +543,9 @@ LOG_RATIO = 10.0
 
 
 def _scale_for(ax, values) -> None:
-    """A logarithmic y-axis when ``values`` span more than ``LOG_RATIO`` (symmetric-
-    logarithmic when they change sign), so that the model and the monograph are each
-    readable on one axes."""
+    """A logarithmic y-axis when ``values`` span more than ``LOG_RATIO`` or change sign
+    (symmetric-logarithmic when any is negative), so that the model and the monograph are
+    each readable on one axes."""
     v = np.abs(np.asarray([x for x in values if np.isfinite(x)], dtype=float))
     v = v[v > 0]
     if not len(v):
@@ -561,6 +561,8 @@ def _scale_for(ax, values) -> None:
         ax.set_yscale("symlog", linthresh=float(10.0 ** np.floor(np.log10(v.min()))), linscale=1.0)
     ax.autoscale_view()
     ax.margins(y=0.12)
+    if min(values) > 0:
+        plotting.log_ticks(ax.yaxis)
 
 
 def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
