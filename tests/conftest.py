@@ -48,6 +48,7 @@ RUN_BUILT_FMUS = (
     "project/test_docs.py::test_every_command_and_option_the_guide_shows_exists",
     "formats/test_plots.py::test_an_impulse_at_the_start_is_left_off_the_overviews_scale_and_its_peaks_named",
     "formats/test_plots.py::test_log_ticks_are_plain_numbers_that_do_not_run_into_each_other",
+    "formats/test_plots.py::test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_the_gap",
     "engine/test_iteration_and_adaptive.py",
     "engine/test_masters.py",
     "engine/test_model_exchange_master.py",

@@ -563,6 +563,10 @@ def _scale_for(ax, values) -> None:
     ax.margins(y=0.12)
     if min(values) > 0:
         plotting.log_ticks(ax.yaxis)
+    else:
+        from matplotlib import ticker
+
+        ax.yaxis.set_major_formatter(ticker.FuncFormatter(lambda y, _: f"{y:g}"))      # -10 -1 0 1 10
 
 
 def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):

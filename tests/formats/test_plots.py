@@ -212,6 +212,10 @@ def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_
     assert low < -2.1 and high > 56.0
     assert "26-27x the model's, of opposite sign" in torque_dA.get_title(loc="left")
     assert fig.axes[3].get_yscale() == "log" and labels
+    fig.canvas.draw()
+    for ax in (fig.axes[3], torque_dA):                             # plain numbers, not $10^{1}$
+        shown = [label.get_text() for label in ax.get_yticklabels() if label.get_text()]
+        assert shown and not any("$" in text for text in shown), shown
     plt.close(fig)
 
 
