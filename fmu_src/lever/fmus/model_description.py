@@ -9,6 +9,22 @@ from ..physics.parameters import DISPLAY_UNITS, QUANTITIES, UNITS, Parameter
 from .declarations import Output
 from .values import closed_bounds
 
+#: The tool name of our vendor annotation (FMI 2.0 ``<VendorAnnotations><Tool name=...>``,
+#: FMI 3.0 ``<Annotations><Annotation type=...>``).  It carries the time-derivative relations
+#: that are not state derivatives (docs/fmus.md, "Time derivatives"): importers count a
+#: continuous state for every ``derivative`` attribute, so the attribute marks state
+#: derivatives only.
+ANNOTATION_TOOL = "lever-cosim"
+
+
+def time_derivatives_annotation(relations: dict) -> Element:
+    """``<TimeDerivatives>`` with one ``<TimeDerivative variable=... of=...>`` per item of
+    ``relations`` ({variable: the variable it is the time derivative of})."""
+    element = Element("TimeDerivatives")
+    for name, of in relations.items():
+        SubElement(element, "TimeDerivative", {"variable": name, "of": of})
+    return element
+
 
 def declared_type(spec) -> tuple[str, str, dict]:
     """The FMI type definition a declared variable refers to: (type name, FMI type
@@ -50,6 +66,9 @@ class ModelDescription:
         min/max of parameters and inputs, and the output dependencies (outputs depend on
         the inputs only where the element has direct feedthrough)."""
         root = super().to_xml(model_options or {})
+        # The FMU loads its Python runtime itself (build/shim): no tool has to be started
+        # for it, which is what needsExecutionTool="true" would tell an importer.
+        root.find("CoSimulation").set("needsExecutionTool", "false")
         used = sorted({spec.unit for spec in self._declared.values() if spec.unit not in ("", "1")})
         units = Element("UnitDefinitions")
         for name in used:
@@ -88,8 +107,6 @@ class ModelDescription:
                 typed.set("unit", spec.unit)
                 if spec.unit in DISPLAY_UNITS:
                     typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
-            if getattr(spec, "derivative_of", ""):
-                typed.set("derivative", str(index_of[spec.derivative_of]))
             if isinstance(spec, Parameter):
                 # FMI's min and max are inclusive: an open bound is declared as the nearest
                 # double inside it, so that the declaration says exactly what is accepted
@@ -99,6 +116,13 @@ class ModelDescription:
                     typed.set("min", as_text(low))
                 if math.isfinite(spec.high):
                     typed.set("max", as_text(high))
+
+        relations = {name: spec.derivative_of for name, spec in self._declared.items()
+                     if getattr(spec, "derivative_of", "")}
+        if relations:
+            vendor = Element("VendorAnnotations")
+            SubElement(vendor, "Tool", {"name": ANNOTATION_TOOL}).append(time_derivatives_annotation(relations))
+            root.insert(list(root).index(root.find("ModelVariables")), vendor)
 
         structure = root.find("ModelStructure")
         for child in list(structure):
