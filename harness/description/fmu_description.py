@@ -49,10 +49,16 @@ def annotated_time_derivatives(xml: bytes) -> dict[str, str]:
     ``<VendorAnnotations><Tool>``, FMI 3.0 ``<Annotations><Annotation>``); {} without one."""
     root = ET.fromstring(xml)
     found = {}
-    for path in (f"VendorAnnotations/Tool[@name='{ANNOTATION_TOOL}']/TimeDerivatives/TimeDerivative",
-                 f"Annotations/Annotation[@type='{ANNOTATION_TOOL}']/TimeDerivatives/TimeDerivative"):
-        found.update({e.get("variable"): e.get("of") for e in root.iterfind(path)})
+    for element in lever_annotations(root):
+        found.update({e.get("variable"): e.get("of") for e in element.iterfind("TimeDerivative")})
     return found
+
+
+def lever_annotations(root: ET.Element) -> list[ET.Element]:
+    """The ``<LeverFmu>`` elements of our annotation in the model description ``root`` (FMI
+    2.0 or 3.0; none in a foreign FMU's)."""
+    return (root.findall(f"VendorAnnotations/Tool[@name='{ANNOTATION_TOOL}']/LeverFmu")
+            + root.findall(f"Annotations/Annotation[@type='{ANNOTATION_TOOL}']/LeverFmu"))
 
 
 def _description_xml(path: Path) -> bytes:

@@ -10,17 +10,22 @@ from .declarations import Output
 from .values import closed_bounds
 
 #: The tool name of our vendor annotation (FMI 2.0 ``<VendorAnnotations><Tool name=...>``,
-#: FMI 3.0 ``<Annotations><Annotation type=...>``).  It carries the time-derivative relations
-#: that are not state derivatives (docs/fmus.md, "Time derivatives"): importers count a
-#: continuous state for every ``derivative`` attribute, so the attribute marks state
-#: derivatives only.
+#: FMI 3.0 ``<Annotations><Annotation type=...>``), docs/fmus.md.  It carries the
+#: time-derivative relations that are not state derivatives ("Time derivatives": importers
+#: count a continuous state for every ``derivative`` attribute, so the attribute marks state
+#: derivatives only) and names the resource file of configured start values.
 ANNOTATION_TOOL = "lever-cosim"
+#: The resource (under ``resources/``) from which an FMU takes its parameters' and inputs'
+#: start values when it holds one: ``{name: value}`` in JSON, written with a model
+#: description whose start values and GUID match ("Configured start values", docs/fmus.md).
+START_VALUES_RESOURCE = "lever_start_values.json"
 
 
-def time_derivatives_annotation(relations: dict) -> Element:
-    """``<TimeDerivatives>`` with one ``<TimeDerivative variable=... of=...>`` per item of
-    ``relations`` ({variable: the variable it is the time derivative of})."""
-    element = Element("TimeDerivatives")
+def lever_annotation(relations: dict) -> Element:
+    """The one element of our annotation: ``<LeverFmu startValues=...>`` with a
+    ``<TimeDerivative variable=... of=...>`` for each item of ``relations`` ({variable: the
+    variable it is the time derivative of})."""
+    element = Element("LeverFmu", {"startValues": f"resources/{START_VALUES_RESOURCE}"})
     for name, of in relations.items():
         SubElement(element, "TimeDerivative", {"variable": name, "of": of})
     return element
@@ -119,10 +124,9 @@ class ModelDescription:
 
         relations = {name: spec.derivative_of for name, spec in self._declared.items()
                      if getattr(spec, "derivative_of", "")}
-        if relations:
-            vendor = Element("VendorAnnotations")
-            SubElement(vendor, "Tool", {"name": ANNOTATION_TOOL}).append(time_derivatives_annotation(relations))
-            root.insert(list(root).index(root.find("ModelVariables")), vendor)
+        vendor = Element("VendorAnnotations")
+        SubElement(vendor, "Tool", {"name": ANNOTATION_TOOL}).append(lever_annotation(relations))
+        root.insert(list(root).index(root.find("ModelVariables")), vendor)
 
         structure = root.find("ModelStructure")
         for child in list(structure):
