@@ -148,6 +148,7 @@ SLOW = (
     "fmus/test_dropin.py::test_each_fmu_alone_in_libcosim_matches_our_harness_and_the_physics",
     "fmus/test_dropin.py::test_every_file_uri_form_locates_the_resources",
     "fmus/test_dropin.py::test_kavz_run_in_libcosim_passes_lever_validate",
+    "fmus/test_dropin.py::test_fmpy_ssp_runs_a_string_parameter_the_archives_fmus_carry",
     "fmus/test_dropin.py::test_lever_check_finds_nothing_in_a_built_fmu",
     "fmus/test_dropin.py::test_lever_engines_writes_the_table",
     "fmus/test_dropin.py::test_lever_run_and_export_on_the_command_line",
