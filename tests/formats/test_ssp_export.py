@@ -25,6 +25,10 @@ SCHEMA_OF = {".ssd": "SystemStructureDescription.xsd", ".ssv": "SystemStructureP
 #: what OMSimulator accepts under the SSD's root (oms::Model::importFromSnapshot; any other
 #: element: "wrong xml schema detected")
 OMS_ROOT_CHILDREN = {"System", "Units", "Enumerations", "DefaultExperiment"}
+#: ... under a system (oms::System::importFromSnapshot) and a component
+#: (oms::ComponentFMUCS::NewComponent): anything else is "Wrong xml schema detected"
+OMS_SYSTEM_CHILDREN = {"Connectors", "ElementGeometry", "ParameterBindings", "Elements", "Connections", "Annotations"}
+OMS_COMPONENT_CHILDREN = {"Connectors", "ElementGeometry", "ParameterBindings"}
 
 
 def _export(tmp_path, overrides=(), name="kavz685") -> Path:
@@ -71,6 +75,9 @@ def test_the_ssd_is_what_omsimulator_adds_as_a_weakly_coupled_system(archive):
     root = ET.fromstring(_members(archive)["SystemStructure.ssd"])
     assert {child.tag.split("}")[1] for child in root} <= OMS_ROOT_CHILDREN
     system = root.find(f"{{{ssp.SSD}}}System")
+    assert {child.tag.split("}")[1] for child in system} <= OMS_SYSTEM_CHILDREN
+    for component in system.iterfind(f"{{{ssp.SSD}}}Elements/{{{ssp.SSD}}}Component"):
+        assert {child.tag.split("}")[1] for child in component} <= OMS_COMPONENT_CHILDREN, component.get("name")
     first = system.find(f"{{{ssp.SSD}}}Annotations/{{{ssp.SSC}}}Annotation")
     assert first.get("type") == "org.openmodelica"
     master = first.find(f"{{{ssp.OMS}}}Annotations/{{{ssp.OMS}}}SimulationInformation/{{{ssp.OMS}}}FixedStepMaster")
