@@ -10,7 +10,8 @@ value references, units, ranges and dependencies:
 
 * ``ScalarVariable``/``Real`` -> ``Float64``, ``Integer`` -> ``Int32``, ``Boolean``,
   ``String`` (start as a ``<Start value=...>`` child); ``derivative`` names the value
-  reference instead of the index; ``SimpleType`` -> ``Float64Type``/``Int32Type``/...;
+  reference instead of the index; ``VendorAnnotations``/``Tool`` -> ``Annotations``/``Annotation``
+  (last); ``SimpleType`` -> ``Float64Type``/``Int32Type``/...;
 * FMI 3.0 asks for one independent variable: ``time`` (the next free value reference);
 * event indicators are variables in FMI 3.0: ``event_indicator_<k>``, after ``time``, local
   and readable in both interfaces (FMI 3.0 ignores only the ``EventIndicator`` elements in
@@ -54,7 +55,7 @@ def translate(fmi2_xml: bytes) -> tuple[str, str]:
         "generationTool": f"lever-cosim build/fmi3.py from {src.get('generationTool')}",
         "generationDateAndTime": src.get("generationDateAndTime", ""),
         "variableNamingConvention": src.get("variableNamingConvention", "structured")})
-    common = {"modelIdentifier": identifier, "needsExecutionTool": "true",
+    common = {"modelIdentifier": identifier, "needsExecutionTool": cs2.get("needsExecutionTool", "false"),
               "canBeInstantiatedOnlyOncePerProcess": "false", "providesDirectionalDerivatives": "true",
               "providesAdjointDerivatives": "true", "providesPerElementDependencies": "false"}
     if me2 is not None:
@@ -163,6 +164,15 @@ def translate(fmi2_xml: bytes) -> tuple[str, str]:
         add("InitialUnknown", unknown, initial)
     for k in range(n_indicators):
         ET.SubElement(structure, "EventIndicator", {"valueReference": str(indicator_vr + k)})
+
+    # FMI 2.0's <VendorAnnotations><Tool name=...> is FMI 3.0's <Annotations><Annotation
+    # type=...>, the last element of the description
+    tools = src.findall("VendorAnnotations/Tool")
+    if tools:
+        annotations = ET.SubElement(root, "Annotations")
+        for tool in tools:
+            ET.SubElement(annotations, "Annotation", {"type": tool.get("name")}).extend(
+                ET.fromstring(ET.tostring(child)) for child in tool)
 
     config += [f"states={len(derivatives)}", f"event_indicators={n_indicators} {indicator_vr}"]
     config += [f"run={' '.join([vr, *deps])}" for vr, deps in run.items()]

@@ -820,30 +820,33 @@ def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts
 
 
 def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overrides=None, *,
-           out: Path | str | None = None) -> tuple[Path, dict[str, str]]:
+           out: Path | str | None = None) -> tuple[Path, dict[str, str], list[str]]:
     """``lever export-ssp`` (``to="ssp"``: an SSP archive) and ``lever export-container``
     (``to="container"``: one FMU holding the scene's FMUs): the scene with ``overrides``
-    written to ``out`` (default results/<to>/<scene>.<suffix>).  Returns the file and what
-    each engine needs to run it with its values (engine -> how)."""
+    written to ``out`` (default results/<to>/<scene>.<suffix>).  Returns the file, what each
+    engine needs to run it with its values (engine -> a command line) and what some engines
+    would run otherwise than the scene says (sentences; none when the file carries every
+    value)."""
     from harness.engine.system import SceneInvalid
     from harness.paths import RESULTS
 
     if to == "ssp":
         from harness.formats import ssp
-        write, suffix, how_to_run = ssp.export, "ssp", ssp.HOW_TO_RUN
+        write, suffix, how_to_run = ssp.export, "ssp", ssp.how_to_run
     elif to == "container":
         from harness.formats import container
-        write, suffix, how_to_run = container.build_container, "fmu", {}
+        write, suffix, how_to_run = container.build_container, "fmu", lambda *_: ({}, [])
     else:
         raise InputError(f"export to {to!r}: ssp or container")
     spec = load(scene, overrides)
     build()
     out = Path(out) if out else RESULTS / to / f"{spec.name}.{suffix}"
+    fmu_dir = spec.fmu_dir or FMUS
     try:
-        path = write(spec, out, spec.fmu_dir or FMUS)
+        path = write(spec, out, fmu_dir)
     except SceneInvalid as error:
         raise InputError(str(error)) from None
-    return path, {engine: how.replace("ARCHIVE", str(path)) for engine, how in how_to_run.items()}
+    return (path, *how_to_run(spec, path, fmu_dir))
 
 
 def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:

@@ -26,24 +26,27 @@ def _export(scene, assignments, out, to: str):
     """Write SCENE (with the --set overrides) as ``to`` to OUT; then say what each engine
     needs to run it."""
     with user_errors():
-        path, how_to_run = api.export(scene, to, list(assignments), out=out)
+        path, how_to_run, notes = api.export(scene, to, list(assignments), out=out)
     click.echo(f"written: {path}")
     if how_to_run:
         click.echo("runs with its parameter values in:")
         for engine, how in how_to_run.items():
             click.echo(f"  {engine + ':':10s} {how}")
+    for note in notes:
+        click.echo(f"warning: {note}", err=True)
 
 
 @_export_command("export-ssp", "archive", "results/ssp/<scene>.ssp")
 def export_ssp(scene, assignments, out):
     """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
     descriptions), each component's parameter set (.ssv, bound to it) and all of them in
-    one set with qualified names (resources/qualified/parameters.ssv).  With its values it
-    runs in `lever run ARCHIVE` and libcosim (they read the bindings), in ecos with
-    `--parameterSet scene` (ecos applies only the set it is told to), and in fmpy.ssp
-    only with `parameter_set=read_ssv(ARCHIVE, resource='resources/qualified/parameters.ssv')`:
-    fmpy 0.3's simulate_ssp applies no binding of the SSD and, without that argument, runs
-    every FMU on its defaults without a word."""
+    one set with qualified names (resources/qualified/parameters.ssv).  The FMUs in it are
+    configured to start at the scene's values (their model descriptions' start values, and
+    a GUID of their own), so it runs the scene also in an engine that applies no binding
+    (fmpy.ssp's simulate_ssp without parameter_set) or drops some (OMSimulator: Strings);
+    where an FMU cannot carry its values (a foreign one, or one used by two components with
+    different values) the command says so.  Prints the command line that runs it in each
+    engine we name."""
     _export(scene, assignments, out, "ssp")
 
 

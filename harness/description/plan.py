@@ -19,11 +19,11 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
-from fmpy import read_model_description
 
 from lever.physics import component_parameters
 
 from harness.description import scene_kinds, typed_values
+from harness.description.fmu_description import read_description
 from harness.description import scene as scenes
 from harness.paths import FMUS, fmi3_dir
 
@@ -125,7 +125,7 @@ def descriptions_for(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict:
     for spec in scene.components.values():
         path = fmu_path(spec.fmu, fmu_dir, scene.experiment.fmi)
         if spec.fmu not in out and path.exists():
-            out[spec.fmu] = read_model_description(str(path))
+            out[spec.fmu] = read_description(path)
     return out
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from harness.description import typed_values, units
+from harness.description.fmu_description import time_derivatives
 from harness.description.tables import MeasuredDataError, load_series, read_table
 from harness.paths import DATA, SCENES
 
@@ -567,16 +568,17 @@ def connection_findings(c: Connection, variables: dict) -> list[str]:
 def unconnected_inputs(scene: Scene, descriptions: dict) -> list[str]:
     """The inputs (``component.input``) that no connection drives and the scene gives no
     value: they stay at their start value for the whole run.  An input that is the time
-    derivative of another input (a shaft's ``tau_rate``: FMI ``derivative``) follows that
-    one and is not counted."""
+    derivative of another input (a shaft's ``tau_rate``: ``fmu_description.time_derivatives``)
+    follows that one and is not counted."""
     driven = {(c.target, c.input) for c in scene.connections}
     found = []
     for name, spec in scene.components.items():
         md = descriptions.get(spec.fmu)
         if md is None:
             continue
+        rates = time_derivatives(md)
         for v in md.modelVariables:
-            if (v.causality == "input" and v.derivative is None and (name, v.name) not in driven
+            if (v.causality == "input" and v.name not in rates and (name, v.name) not in driven
                     and v.name not in spec.parameters):
                 found.append(f"{name}.{v.name}")
     return found

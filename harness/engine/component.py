@@ -19,13 +19,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from fmpy import extract, read_model_description
+from fmpy import extract
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
     fmi2CallbackFreeMemoryTYPE
 from fmpy.fmi1 import FMICallException
 from fmpy.logging import addLoggerProxy
 
 from harness.description import typed_values
+from harness.description.fmu_description import read_description
 from harness.engine.interface import RawCalls
 
 _STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
@@ -204,7 +205,7 @@ class Component:
         """What a component holds before its FMU is instantiated (every FMI version)."""
         self.name = name
         self.fmu_path = Path(fmu_path)
-        self.description = description or read_model_description(str(self.fmu_path))
+        self.description = description or read_description(self.fmu_path)
         self.variables = {v.name: v for v in self.description.modelVariables}
         self._unzipped = unzipped(self.fmu_path)
         self.messages: deque[str] = deque(maxlen=50)

@@ -18,10 +18,10 @@ import ctypes
 import itertools
 from pathlib import Path
 
-from fmpy import read_model_description
 from fmpy.fmi3 import FMU3Slave, fmi3IntermediateUpdateCallback, fmi3LogMessageCallback
 
 from harness.description import typed_values
+from harness.description.fmu_description import read_description
 from harness.engine import component as fmi2
 from harness.engine.component import INITIALIZATION, STEPPING, Component, FmuCallError, step_call
 from harness.engine.interface import RawCalls
@@ -78,7 +78,7 @@ def open_component(name: str, fmu_path: Path | str, logging_on: bool = False) ->
     """The component for the FMU file ``fmu_path``: FMI 2.0 or 3.0 Co-Simulation, as its
     model description says; ``UnsupportedFmu`` for another version or an FMU without
     Co-Simulation."""
-    description = read_model_description(str(fmu_path))
+    description = read_description(fmu_path)
     if description.coSimulation is None:
         raise UnsupportedFmu(f"{name}: {Path(fmu_path).name} (FMI {description.fmiVersion}) has no Co-Simulation "
                              "interface; lever's co-simulation masters step FMUs with doStep")

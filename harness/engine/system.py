@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 from harness.description import plan as plans
 from harness.description import scene as scenes
+from harness.description.fmu_description import time_derivatives
 # the formats layer (SSP, OSP, the container, the peers) finds these here too
 from harness.engine.component import Component, step_call
 from harness.engine.fmi3_component import open_component
@@ -204,9 +205,8 @@ class System:
 
     def derivative_chain(self, component: str, output: str) -> list[str]:
         """``[output, d/dt output, d2/dt2 output, ...]`` as far as the component's model
-        description declares them (FMI's ``derivative`` attribute)."""
-        of = {v.derivative.name: v.name for v in self.components[component].description.modelVariables
-              if v.derivative is not None}
+        description declares them (``fmu_description.time_derivatives``)."""
+        of = {of: name for name, of in time_derivatives(self.components[component].description).items()}
         chain = [output]
         while chain[-1] in of and len(chain) < 4:
             chain.append(of[chain[-1]])

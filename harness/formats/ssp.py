@@ -7,8 +7,15 @@ An exported archive holds
 * ``SystemStructure.ssd``: the components (``resources/<Fmu>.fmu``) with a connector for
   each output and each connected input, the scene's connections, the units, and the default
   experiment (start, stop; its step as OSP's ``FixedStepAlgorithm`` annotation, which
-  libcosim reads);
-* ``resources/<Fmu>.fmu`` and ``resources/<Fmu>_OspModelDescription.xml``;
+  libcosim reads).  The system's annotations: first OpenModelica's (``org.openmodelica``:
+  a weakly coupled system, OMSimulator's fixed-step master at the scene's step - OMSimulator
+  reads the first annotation only, and adds no system without it), then ours (below);
+* ``resources/<Fmu>.fmu``, each configured to start at the scene's values
+  (``harness.formats.configured_fmu``): an engine that applies no parameter binding (fmpy.ssp
+  without a parameter set) or drops some (OMSimulator: Strings) still runs the scene.  An FMU
+  that cannot carry them (a foreign one, or one two components use with different values)
+  is copied as it is, and the export says which components then need the bindings;
+* ``resources/<Fmu>_OspModelDescription.xml``;
 * ``resources/<component>.ssv``: each component's parameter set (the values the scene
   gives, in SI), bound to its component (variable names relative to the component, as
   libcosim reads them), every one named ``PARAMETER_SET``: ecos gathers the sets of one
@@ -18,18 +25,25 @@ An exported archive holds
   ``component.parameter`` and bound to nothing: what an engine that ignores the SSD's
   bindings and takes one parameter set as an argument applies - fmpy.ssp 0.3.x, whose
   ``simulate_ssp`` reads the bindings but applies only its ``parameter_set`` argument
-  (``QUALIFIED_SET``; a String equal to the FMU's default is left out of it, as there is
+  (``QUALIFIED_SET``; a String the archive's FMU starts at is left out of it, as there is
   nothing to set and fmpy.ssp cannot set Strings);
-* an annotation ``org.lever-cosim.scene`` with what SSP has no place for (master,
-  transient, recorded variables, features, notes), so an exported scene loads back
-  as the same scene.  An SSP from elsewhere loads too: it records its connected outputs
-  and asks for no features.
+* the system's annotation ``org.lever-cosim.scene`` with what SSP has no place for (master,
+  transient, recorded variables, features, notes), so an exported scene loads back as the
+  same scene (an archive from before, with it at the top level, loads too; OMSimulator
+  refuses an SSD with an annotation there: "wrong xml schema detected").  An SSP from
+  elsewhere loads too: it records its connected outputs and asks for no features.
+
+Every SSD and SSV file of an export is valid against the SSP 1.0 XML schemas (tested).
 """
 from __future__ import annotations
 
+import json
+import shlex
 import shutil
+import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
+from decimal import Decimal
 from pathlib import Path
 
 from lever.physics.parameters import UNITS
@@ -40,29 +54,29 @@ from harness.paths import FMUS
 from harness.engine.component import scratch_folder
 from harness.description.plan import converted, descriptions_for, fmu_path
 from harness.engine.system import SceneInvalid
+from harness.formats.configured_fmu import can_carry_values, configure
 
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+#: OMSimulator's annotation namespace; it reads its elements by the prefix ``oms:``
+OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+OMS_ANNOTATION = "org.openmodelica"
+#: the relative tolerance OMSimulator's fixed-step master is given (its schema requires one; it
+#: passes it to fmi2SetupExperiment, and our FMUs, stepping by closed forms and fixed
+#: substeps, take none): OMSimulator's own default
+OMS_TOLERANCE = 1e-4
 LEVER = "https://lever-cosim.org/ssp/scene"
 LEVER_ANNOTATION = "org.lever-cosim.scene"
 #: the name of every component's parameter set in an exported archive (see above)
 PARAMETER_SET = "scene"
 #: the member holding every component's values with qualified names (see above)
 QUALIFIED_SET = "resources/qualified/parameters.ssv"
-#: what each engine we name needs to run an exported archive with its values (the export
-#: command and docs/hosts.md say it)
-HOW_TO_RUN = {
-    "lever": "lever run ARCHIVE (reads the bindings)",
-    "libcosim": "CosimExecution.from_ssp_file('ARCHIVE', step_ns) (reads the bindings)",
-    "ecos": f"ecos simulate ARCHIVE --parameterSet {PARAMETER_SET} (ecos applies only the set it is told to)",
-    "fmpy.ssp": f"simulate_ssp('ARCHIVE', ..., parameter_set=fmpy.ssp.ssd.read_ssv('ARCHIVE', "
-                f"resource='{QUALIFIED_SET}')) (simulate_ssp applies no binding of the SSD, only this argument)",
-}
 OSP_ANNOTATION = "com.opensimulationplatform"
-# libcosim reads the SSD with fixed prefixes (boost property trees know no namespaces).
-PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "lever": LEVER}
+# libcosim and OMSimulator read the SSD with fixed prefixes (boost property trees and
+# pugixml know no namespaces).
+PREFIXES = {"ssd": SSD, "ssc": SSC, "ssv": SSV, "osp": OSP, "oms": OMS, "lever": LEVER}
 for _prefix, _uri in PREFIXES.items():
     ET.register_namespace(_prefix, _uri)
 
@@ -88,6 +102,71 @@ def _number(x: float) -> str:
 
 def is_ssp(path) -> bool:
     return str(path).endswith(".ssp")
+
+
+def _decimal(x: float) -> str:
+    """``x`` as an xs:decimal (no exponent), as OMSimulator's schema types its step."""
+    return format(Decimal(repr(float(x))), "f")
+
+
+# -- what the archive's FMUs carry, and how each engine runs it --------------------------------
+
+def carried_values(scene: scenes.Scene, descriptions: dict, fmu_dir: Path = FMUS) -> tuple[dict, list[str]]:
+    """``({FMU: {variable: value}}, notes)``: the values (in the FMU's units) the archive's
+    copy of each FMU starts at, and a sentence for each FMU that cannot carry its components'
+    values (its components then run at the FMU's defaults in an engine that applies no
+    binding, and their Strings at the default in one that drops String bindings)."""
+    users: dict[str, list[str]] = {}
+    for name, spec in scene.components.items():
+        users.setdefault(spec.fmu, []).append(name)
+    carried, notes = {}, []
+    for fmu, names in users.items():
+        md = descriptions[fmu]
+        variables = {v.name: v for v in md.modelVariables}
+        sets = [{p: converted(variables[p], raw, f"{n}.{p}") for p, raw in scene.components[n].parameters.items()}
+                for n in names]
+        if not any(sets):
+            continue
+        strings = [f"{n}.{p}" for n, values in zip(names, sets) for p in values if variables[p].type == "String"]
+        then = ("engines that apply no parameter binding (fmpy.ssp without parameter_set) run "
+                f"{', '.join(names)} at the FMU's defaults")
+        if strings:
+            then += f", and engines that drop String bindings (OMSimulator) run {', '.join(strings)} at the default"
+        if any(values != sets[0] for values in sets[1:]):
+            notes.append(f"components {', '.join(names)} use {fmu} with different values, so its one copy in the "
+                         f"archive keeps its defaults: {then}")
+        elif not can_carry_values(fmu_path(fmu, fmu_dir, scene.experiment.fmi)):
+            notes.append(f"{fmu} takes no configured start values (not one of lever's FMUs): {then}")
+        else:
+            carried[fmu] = sets[0]
+    return carried, notes
+
+
+def how_to_run(scene: scenes.Scene, archive: Path, fmu_dir: Path = FMUS) -> tuple[dict[str, str], list[str]]:
+    """What each engine we name needs to run ``archive``, the export of ``scene``, with its
+    values - engine -> a command line, its comment saying why - and the notes of
+    ``carried_values`` (the export command and docs/hosts.md say both)."""
+    _, notes = carried_values(scene, descriptions_for(scene, fmu_dir), fmu_dir)
+    e = scene.experiment
+    path = json.dumps(str(archive))
+    result = json.dumps(str(Path(archive).with_name(f"{Path(archive).stem}-fmpy-ssp.csv")))
+    values = "" if not notes else f", parameter_set=read_ssv({path}, resource={json.dumps(QUALIFIED_SET)})"
+    code = ("from fmpy.ssp.simulation import simulate_ssp; "
+            + ("from fmpy.ssp.ssd import read_ssv; " if notes else "")
+            + f"from fmpy.util import write_csv; r = simulate_ssp({path}, start_time={e.start!r}, "
+            f"stop_time={e.stop!r}, step_size={e.step!r}{values}); r[\"time\"] += {e.step!r}; write_csv({result}, r)")
+    why = ("the FMUs carry the scene's values" if not notes else
+           "simulate_ssp applies no binding of the SSD, only its parameter_set")
+    return {
+        "lever": f"lever run {shlex.quote(str(archive))}  # reads the bindings",
+        "libcosim": f"CosimExecution.from_ssp_file({path}, step_ns)  # reads the bindings",
+        "ecos": f"ecos simulate {shlex.quote(str(archive))} --parameterSet {PARAMETER_SET}  # ecos applies only the "
+                "set it is told to",
+        "fmpy.ssp": f"python -c {shlex.quote(code)} && lever validate --result {shlex.quote(json.loads(result))} "
+                    f"{shlex.quote(scene.name)} --window {e.start + e.step!r}:  # {why}; simulate_ssp labels each "
+                    "row with the start of the step that made it (+ step_size puts it at the end, where lever's "
+                    "results have it) and writes none at the start time (judged from the first step)",
+    }, notes
 
 
 # -- export -------------------------------------------------------------------------------------
@@ -117,17 +196,22 @@ def export(scene: scenes.Scene, out: Path, fmu_dir: Path = FMUS) -> Path:
         raise SceneInvalid(scene.name, findings)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    carried, _ = carried_values(scene, descriptions, fmu_dir)
     files = {"SystemStructure.ssd": _ssd(scene, descriptions, sources)}
     for name, spec in scene.components.items():
         files[f"resources/{name}.ssv"] = _ssv(spec.parameters, descriptions[spec.fmu], name)
-    files[QUALIFIED_SET] = _qualified_ssv(scene, descriptions)
+    files[QUALIFIED_SET] = _qualified_ssv(scene, descriptions, carried)
     tmp = out.with_name(out.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
+    with tempfile.TemporaryDirectory(prefix="lever-ssp-export-") as scratch, \
+            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as archive:
         for member, text in files.items():
             archive.writestr(member, text)
         for fmu, member in sources.items():
             source = fmu_path(fmu, fmu_dir, fmi)
-            archive.write(source, member)
+            if fmu in carried:
+                archive.write(configure(source, carried[fmu], Path(scratch) / source.name), member)
+            else:
+                archive.write(source, member)
             osp = source.with_name(f"{source.stem}_OspModelDescription.xml")
             if osp.exists():
                 archive.write(osp, f"resources/{osp.name}")
@@ -182,21 +266,32 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
     for c in scene.connections:
         ET.SubElement(connections, _q("ssd", "Connection"), {
             "startElement": c.source, "startConnector": c.output, "endElement": c.target, "endConnector": c.input})
+    e = scene.experiment
+    annotations = ET.SubElement(system, _q("ssd", "Annotations"))
+    # OpenModelica's first: OMSimulator reads the first annotation of a system only, and
+    # adds no system it cannot tell weakly or strongly coupled
+    oms = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": OMS_ANNOTATION})
+    information = ET.SubElement(ET.SubElement(oms, _q("oms", "Annotations")), _q("oms", "SimulationInformation"))
+    ET.SubElement(information, _q("oms", "FixedStepMaster"), {
+        "description": "oms-ma", "stepSize": _decimal(e.step), "relativeTolerance": _decimal(OMS_TOLERANCE)})
+    _lever_annotation(ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": LEVER_ANNOTATION}), scene)
     if used_units:
         units = ET.SubElement(root, _q("ssd", "Units"))
         for name in sorted(used_units):
             exponents, factor = UNITS[name]
             unit = ET.SubElement(units, _q("ssc", "Unit"), {"name": name})
             ET.SubElement(unit, _q("ssc", "BaseUnit"), {k: str(v) for k, v in exponents.items()})
-    e = scene.experiment
     experiment = ET.SubElement(root, _q("ssd", "DefaultExperiment"),
                                {"startTime": _number(e.start), "stopTime": _number(e.stop)})
     annotation = ET.SubElement(ET.SubElement(experiment, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
                                {"type": OSP_ANNOTATION})
     ET.SubElement(ET.SubElement(annotation, _q("osp", "Algorithm")), _q("osp", "FixedStepAlgorithm"),
                   {"baseStepSize": _number(e.step)})
-    annotation = ET.SubElement(ET.SubElement(root, _q("ssd", "Annotations")), _q("ssc", "Annotation"),
-                               {"type": LEVER_ANNOTATION})
+    return _xml(root)
+
+
+def _lever_annotation(annotation: ET.Element, scene: scenes.Scene) -> None:
+    e = scene.experiment
     lever = ET.SubElement(annotation, _q("lever", "Scene"), {
         "master": e.master, "step": _number(e.step), "transient": _number(e.transient),
         "features": " ".join(sorted(scene.features))})
@@ -204,17 +299,19 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
         ET.SubElement(lever, _q("lever", "Record"), {"variable": item})
     if scene.notes:
         ET.SubElement(lever, _q("lever", "Notes")).text = scene.notes
-    return _xml(root)
 
 
-def _qualified_ssv(scene: scenes.Scene, descriptions: dict) -> bytes:
-    """Every component's values in one set named ``component.parameter`` (``QUALIFIED_SET``)."""
+def _qualified_ssv(scene: scenes.Scene, descriptions: dict, carried: dict) -> bytes:
+    """Every component's values in one set named ``component.parameter`` (``QUALIFIED_SET``),
+    but the Strings the archive's FMU starts at (``carried``: ``carried_values``)."""
     root = _parameter_set("qualified")
     for name, spec in scene.components.items():
         md = descriptions[spec.fmu]
         variables = {v.name: v for v in md.modelVariables}
+        starts = {v.name: v.start for v in md.modelVariables}
+        starts.update(carried.get(spec.fmu, {}))
         values = {param: raw for param, raw in spec.parameters.items()
-                  if not (variables[param].type == "String" and str(raw) == (variables[param].start or ""))}
+                  if not (variables[param].type == "String" and str(raw) == str(starts[param] or ""))}
         _parameters(root, values, md, name, qualify=True)
     return _xml(root)
 
@@ -345,8 +442,10 @@ def _scene_from(path: Path, where: Path) -> scenes.Scene:
         fixed = default.find(f".//{_q('osp', 'FixedStepAlgorithm')}")
         if fixed is not None:
             experiment.step = float(fixed.get("baseStepSize"))
-    lever = root.find(f"{_q('ssd', 'Annotations')}/{_q('ssc', 'Annotation')}[@type='{LEVER_ANNOTATION}']/"
-                      f"{_q('lever', 'Scene')}")
+    # the system's annotation; an archive exported before has it at the top level
+    lever = next((found for owner in (system, root) if (found := owner.find(
+        f"{_q('ssd', 'Annotations')}/{_q('ssc', 'Annotation')}[@type='{LEVER_ANNOTATION}']/{_q('lever', 'Scene')}"))
+        is not None), None)
     if lever is not None:
         experiment.master = lever.get("master", experiment.master)
         experiment.step = float(lever.get("step", experiment.step))

@@ -31,7 +31,7 @@ approximation.)
 
 The one-step map of each master is not written out by hand: ``LinearDriveline`` is a
 stand-in for ``harness.engine.system.System`` whose three components carry the FMUs' own model
-descriptions (ports, derivative attributes, output dependencies) but compute the linear
+descriptions (ports, time-derivative relations, output dependencies) but compute the linear
 model above in Python, with the same exact shaft integrators the FMUs use.  The real
 master classes step it, so the map is the one of the masters as implemented: zero-order
 hold, the ramp (``tau_rate``) of the extrapolating masters with their torque history in
@@ -56,7 +56,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from fmpy import read_model_description
 
 from lever.physics import component_parameters
 from lever.physics.coupling import build_coupling, coupling_mode
@@ -67,6 +66,7 @@ from lever.physics.parameters import check_all
 from lever.physics.shaft import LaggedShaft, Shaft
 
 from harness.description import scene_kinds
+from harness.description.fmu_description import read_description
 from harness.engine import masters as master_family
 from harness.description import scene as scenes
 from harness.paths import FMUS
@@ -167,7 +167,7 @@ def model_of(scene: scenes.Scene) -> TwoInertia:
 
 @lru_cache(maxsize=8)
 def _description(path: str, mtime: float):
-    return read_model_description(path)
+    return read_description(path)
 
 
 def _descriptions(fmu_dir: Path) -> dict:

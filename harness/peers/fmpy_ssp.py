@@ -5,10 +5,11 @@ the scene exported as an SSP archive (``harness.formats.ssp``), as an fmpy user 
 "Unsupported type: String"), ignores the SSD's parameter bindings (only a
 ``parameter_set`` argument is applied), starts every connected input at 0.0 instead of
 propagating the initial outputs, and labels each row with the start time of the step that
-produced it.  These are worked around where that is honest and refused where not: the
-parameters are the archive's qualified set (``harness.formats.ssp.QUALIFIED_SET``) passed as
-its ``parameter_set``; a String parameter that differs from the FMU's default is refused (it
-cannot be set); the zero start of the connected inputs stays (the first step sees no
+produced it.  It is run as `lever export-ssp` prints (``harness.formats.ssp.how_to_run``):
+the archive's FMUs start at the scene's values, so ``simulate_ssp`` is called without a
+parameter set; where an FMU cannot carry its values, with the archive's qualified set
+(``harness.formats.ssp.QUALIFIED_SET``), and a String parameter such an FMU would have to be
+set to is refused.  The zero start of the connected inputs stays (the first step sees no
 torque); rows are labelled with the end of the step that produced them.  Each component's
 outputs are read right after its own ``doStep``, so the coupling's torques lag one step as
 under libcosim.  Its wall time includes unpacking and instantiating the FMUs
@@ -42,12 +43,18 @@ class FmpySsp(Peer):
         return None
 
     def scene_problem(self, setup: SceneSetup) -> str | None:
+        from harness.formats import ssp
+
+        carried, _ = ssp.carried_values(setup.scene, {spec.fmu: setup.descriptions[name] for name, spec
+                                                      in setup.scene.components.items()}, setup.fmu_dir)
         refused = []
         for comp, values in setup.parameters.items():
+            starts = carried.get(setup.scene.components[comp].fmu, {})
             for name, value in values.items():
                 var = setup.variables[comp][name]
-                if var.type == "String" and str(value) != (var.start or ""):
-                    refused.append(f"{comp}.{name} = {value!r} (the FMU's default is {var.start!r})")
+                start = starts.get(name, var.start or "")
+                if var.type == "String" and str(value) != start:
+                    refused.append(f"{comp}.{name} = {value!r} (the archive's FMU starts at {start!r})")
         if refused:
             return f"{self.name}: fmpy.ssp cannot set String parameters, and the scene sets " + ", ".join(refused)
         for item in setup.record:
@@ -67,9 +74,10 @@ class FmpySsp(Peer):
         failure = None
         with tempfile.TemporaryDirectory(prefix="lever-fmpy-ssp-") as scratch:
             archive = ssp.export(scene, Path(scratch) / f"{scene.name}.ssp", setup.fmu_dir)
-            # as an fmpy user runs our export: the values from its qualified set, the one form
-            # simulate_ssp applies
-            values = read_ssv(str(archive), resource=ssp.QUALIFIED_SET)
+            # as `lever export-ssp` tells an fmpy user to run it: plain where the FMUs carry
+            # every value, else with the archive's qualified set, the one form simulate_ssp applies
+            _, notes = ssp.how_to_run(scene, archive, setup.fmu_dir)
+            values = read_ssv(str(archive), resource=ssp.QUALIFIED_SET) if notes else None
             started = clock.perf_counter()
             try:
                 table = simulate_ssp(str(archive), start_time=e.start, stop_time=e.stop, step_size=step,

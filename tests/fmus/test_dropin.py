@@ -276,9 +276,14 @@ def test_libcosim_from_ssp_is_libcosim_from_the_api(kavz_in):
     assert np.array_equal(a.traces["coupling.tau2"], b.traces["coupling.tau2"])
 
 
-def test_fmpy_ssp_refuses_a_string_parameter_it_cannot_set(fmu_dir):
-    with pytest.raises(ValueError, match="transfer_mode"):
-        peers.simulate_peer("fmpy-ssp", kavz(["coupling.transfer_mode=scaled"]), 1e-3, fmu_dir)
+def test_fmpy_ssp_runs_a_string_parameter_the_archives_fmus_carry(fmu_dir, kavz_in):
+    """fmpy.ssp cannot set a String; the exported LeverCoupling starts at the scene's
+    transfer_mode itself, so the scaled transfer function reaches the coupling (it was
+    refused before the archive's FMUs carried their values)."""
+    scaled = peers.simulate_peer("fmpy-ssp", kavz(["coupling.transfer_mode=scaled"]), 1e-3, fmu_dir)
+    kinematic = kavz_in("fmpy-ssp")
+    assert scaled.ok and kinematic.ok, (scaled.failure, kinematic.failure)
+    assert not np.allclose(scaled.traces["coupling.U12"], kinematic.traces["coupling.U12"])
 
 
 def test_the_container_fmu_is_the_driveline_as_one_block(fmu_dir, tmp_path):

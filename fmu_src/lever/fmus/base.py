@@ -7,8 +7,10 @@ when they are read.  Its entry points never raise (``guard``); set values are ju
 """
 from __future__ import annotations
 
+import json
 import math
 import operator
+from pathlib import Path
 from typing import Sequence
 
 from pythonfmu import Boolean, Fmi2Slave, Real, Integer, String, Fmi2Causality, Fmi2Variability, Fmi2Initial
@@ -19,7 +21,7 @@ from ..physics.parameters import Parameter, ParameterError
 from .. import __version__
 from .declarations import MechanicalPort, Output
 from .guard import guarded
-from .model_description import ModelDescription
+from .model_description import START_VALUES_RESOURCE, ModelDescription
 from .recompute import ALL, CLEAN, INPUTS_CHANGED
 from .states import StateSaving
 from .values import ValueChecks, closed_bounds
@@ -94,6 +96,23 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
             if p.kind == "real" and not p.fixed:
                 self._fast_inputs[vr] = (p.name, *closed_bounds(p))
         self._outputs_of = operator.attrgetter(*(o.name for o in self.OUTPUTS)) if self.OUTPUTS else None
+        self._take_configured_start_values()
+
+    def _take_configured_start_values(self):
+        """The start values of ``resources/lever_start_values.json`` where the FMU holds one
+        (an FMU configured for a scene, e.g. in an SSP export: its model description's start
+        values and GUID say the same).  A value that does not fit is refused here, so the
+        instance is not made, rather than starting from something else."""
+        path = Path(self.resources) / START_VALUES_RESOURCE if self.resources else None
+        if path is None or not path.is_file():
+            return
+        values = json.loads(path.read_text(encoding="utf-8"))
+        for name, value in values.items():
+            p = self._declared.get(name)
+            if not isinstance(p, Parameter):
+                raise ParameterError(name, f"{START_VALUES_RESOURCE} sets '{name}', which is no parameter or "
+                                           f"input of {type(self).__name__}")
+            setattr(self, name, p.check(value))
 
     # -- declaration ----------------------------------------------------------------------
     def _declare(self, p: Parameter, causality):

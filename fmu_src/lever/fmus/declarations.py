@@ -9,8 +9,9 @@ class Output(NamedTuple):
     name: str
     unit: str
     description: str
-    #: the output this one is the time derivative of (FMI's ``derivative`` attribute):
-    #: lets a master predict connected outputs by Taylor expansion
+    #: the output this one is the time derivative of (our vendor annotation; FMI's
+    #: ``derivative`` attribute where it is a state derivative): lets a master predict
+    #: connected outputs by Taylor expansion
     derivative_of: str = ""
     #: inputs this output depends on directly; None: all inputs if the model has direct
     #: feedthrough (``FEEDTHROUGH``), else none

@@ -9,6 +9,27 @@ from ..physics.parameters import DISPLAY_UNITS, QUANTITIES, UNITS, Parameter
 from .declarations import Output
 from .values import closed_bounds
 
+#: The tool name of our vendor annotation (FMI 2.0 ``<VendorAnnotations><Tool name=...>``,
+#: FMI 3.0 ``<Annotations><Annotation type=...>``), docs/fmus.md.  It carries the
+#: time-derivative relations that are not state derivatives ("Time derivatives": importers
+#: count a continuous state for every ``derivative`` attribute, so the attribute marks state
+#: derivatives only) and names the resource file of configured start values.
+ANNOTATION_TOOL = "lever-cosim"
+#: The resource (under ``resources/``) from which an FMU takes its parameters' and inputs'
+#: start values when it holds one: ``{name: value}`` in JSON, written with a model
+#: description whose start values and GUID match ("Configured start values", docs/fmus.md).
+START_VALUES_RESOURCE = "lever_start_values.json"
+
+
+def lever_annotation(relations: dict) -> Element:
+    """The one element of our annotation: ``<LeverFmu startValues=...>`` with a
+    ``<TimeDerivative variable=... of=...>`` for each item of ``relations`` ({variable: the
+    variable it is the time derivative of})."""
+    element = Element("LeverFmu", {"startValues": f"resources/{START_VALUES_RESOURCE}"})
+    for name, of in relations.items():
+        SubElement(element, "TimeDerivative", {"variable": name, "of": of})
+    return element
+
 
 def declared_type(spec) -> tuple[str, str, dict]:
     """The FMI type definition a declared variable refers to: (type name, FMI type
@@ -50,6 +71,9 @@ class ModelDescription:
         min/max of parameters and inputs, and the output dependencies (outputs depend on
         the inputs only where the element has direct feedthrough)."""
         root = super().to_xml(model_options or {})
+        # The FMU loads its Python runtime itself (build/shim): no tool has to be started
+        # for it, which is what needsExecutionTool="true" would tell an importer.
+        root.find("CoSimulation").set("needsExecutionTool", "false")
         used = sorted({spec.unit for spec in self._declared.values() if spec.unit not in ("", "1")})
         units = Element("UnitDefinitions")
         for name in used:
@@ -88,8 +112,6 @@ class ModelDescription:
                 typed.set("unit", spec.unit)
                 if spec.unit in DISPLAY_UNITS:
                     typed.set("displayUnit", DISPLAY_UNITS[spec.unit])
-            if getattr(spec, "derivative_of", ""):
-                typed.set("derivative", str(index_of[spec.derivative_of]))
             if isinstance(spec, Parameter):
                 # FMI's min and max are inclusive: an open bound is declared as the nearest
                 # double inside it, so that the declaration says exactly what is accepted
@@ -99,6 +121,12 @@ class ModelDescription:
                     typed.set("min", as_text(low))
                 if math.isfinite(spec.high):
                     typed.set("max", as_text(high))
+
+        relations = {name: spec.derivative_of for name, spec in self._declared.items()
+                     if getattr(spec, "derivative_of", "")}
+        vendor = Element("VendorAnnotations")
+        SubElement(vendor, "Tool", {"name": ANNOTATION_TOOL}).append(lever_annotation(relations))
+        root.insert(list(root).index(root.find("ModelVariables")), vendor)
 
         structure = root.find("ModelStructure")
         for child in list(structure):

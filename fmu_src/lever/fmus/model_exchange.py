@@ -724,7 +724,7 @@ class ModelExchangeSlave(LeverSlave):
         cs = root.find("CoSimulation")
         cs.set("providesDirectionalDerivative", "true")
         me = Element("ModelExchange", {
-            "modelIdentifier": cs.get("modelIdentifier"), "needsExecutionTool": "true",
+            "modelIdentifier": cs.get("modelIdentifier"), "needsExecutionTool": "false",
             "completedIntegratorStepNotNeeded": "true", "canBeInstantiatedOnlyOncePerProcess": "false",
             "canNotUseMemoryManagementFunctions": "true", "canGetAndSetFMUstate": "false",
             "canSerializeFMUstate": "false", "providesDirectionalDerivative": "true"})

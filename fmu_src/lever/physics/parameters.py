@@ -96,7 +96,8 @@ class Parameter:
     kind: str = "real"
     choices: Optional[tuple[str, ...]] = None
     fixed: bool = True  # structural: may not change after initialisation
-    #: for an input: the input this one is the time derivative of (FMI ``derivative``)
+    #: for an input: the input this one is the time derivative of (the FMUs' vendor
+    #: annotation, docs/fmus.md)
     derivative_of: str = ""
     #: for a string holding a table: parses a non-empty value, raising ParameterError when
     #: it is malformed, so a bad table is refused when it is set, like a bad number

@@ -8,6 +8,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
+from harness.description.fmu_description import time_derivatives
 from harness.engine.masters.base import Master
 from harness.engine.component import Component
 from harness.engine.system import Inputs, System
@@ -164,13 +165,14 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
 
     def _derivative_inputs(self, inputs) -> list[list]:
         """For each ``Inputs`` of ``inputs``: the value references of their declared time
-        derivatives (FMI ``derivative``), first, second, ... as far as every input of the
-        component has one (``[]`` where one has none)."""
+        derivatives (``fmu_description.time_derivatives``), first, second, ... as far as every
+        input of the component has one (``[]`` where one has none)."""
         out = []
         for each in inputs:
-            rate_of = {v.derivative.valueReference: v.valueReference
-                       for v in each.component.description.modelVariables
-                       if v.derivative is not None and v.causality == "input"}
+            variables = each.component.variables
+            rate_of = {variables[of].valueReference: variables[name].valueReference
+                       for name, of in time_derivatives(each.component.description).items()
+                       if variables[name].causality == "input"}
             chain, current = [], list(each.vrs)
             while all(vr in rate_of for vr in current) and len(chain) < 3:
                 current = [rate_of[vr] for vr in current]

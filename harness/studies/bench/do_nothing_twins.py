@@ -3,9 +3,11 @@
 A do-nothing twin is a pythonfmu FMU with the same variables as the FMU it stands for (names,
 types, causality, variability, start values and units, in the same order, so the same value
 references and a scene's values with units are judged alike) and the same output
-dependencies and ``derivative`` attributes in its model description, so that a ``System``
-wires it exactly as the real one and every master makes the same calls (an extrapolating
-master sends a shaft's ramp only where ``tau_rate`` is declared the derivative of ``tau``); its ``do_step``
+dependencies and time-derivative relations (``fmu_description.time_derivatives``; the twin,
+read by our harness only, declares them all as ``derivative`` attributes) in its model
+description, so that a ``System`` wires it exactly as the real one and every master makes the
+same calls (an extrapolating master sends a shaft's ramp only where ``tau_rate`` is declared
+the derivative of ``tau``); its ``do_step``
 returns at once and its getters and setters are pythonfmu's own.  What a call into it costs
 is the price of crossing from the host into pythonfmu's Python and back: the part of a
 master's time no slave can save.
@@ -24,6 +26,7 @@ import tempfile
 from pathlib import Path
 
 from harness.description import scene as scenes
+from harness.description.fmu_description import read_description, time_derivatives
 from harness.paths import FMUS, RESULTS
 
 DEFAULT_CACHE = RESULTS / "bench" / "do-nothing-twins"
@@ -101,8 +104,7 @@ def _variables(description) -> tuple[list, dict, dict]:
         unit = (v.unit or (v.declaredType.unit if v.declaredType is not None else None)) if v.type == "Real" else None
         variables.append((v.name, v.type, v.causality, v.variability, initial, start, unit))
     dependencies = {u.variable.name: [d.name for d in (u.dependencies or [])] for u in description.outputs}
-    derivatives = {v.name: v.derivative.name for v in description.modelVariables if v.derivative is not None}
-    return variables, dependencies, derivatives
+    return variables, dependencies, time_derivatives(description)
 
 
 def twin_key(description) -> str:
@@ -116,10 +118,9 @@ def twin_key(description) -> str:
 
 def build_twin(fmu: Path, dest: Path) -> Path:
     """Build the do-nothing twin of ``fmu`` as ``dest`` (an .fmu path)."""
-    from fmpy import read_model_description
     from pythonfmu.builder import FmuBuilder
 
-    description = read_model_description(str(fmu))
+    description = read_description(fmu)
     model = description.coSimulation.modelIdentifier
     variables, dependencies, derivatives = _variables(description)
     key = twin_key(description)
@@ -142,12 +143,10 @@ def build_twin(fmu: Path, dest: Path) -> Path:
 def twins(scene: scenes.Scene, fmu_dir: Path = FMUS, cache: Path = DEFAULT_CACHE) -> Path:
     """A folder with a do-nothing twin of each of the scene's FMUs under the FMU's own file
     name (so ``System(scene, folder)`` runs the scene on them), built where missing."""
-    from fmpy import read_model_description
-
     keys = {}
     for spec in scene.components.values():
         if spec.fmu not in keys:
-            keys[spec.fmu] = twin_key(read_model_description(str(Path(fmu_dir) / f"{spec.fmu}.fmu")))
+            keys[spec.fmu] = twin_key(read_description(Path(fmu_dir) / f"{spec.fmu}.fmu"))
     folder = Path(cache) / hashlib.sha256(json.dumps(sorted(keys.items())).encode()).hexdigest()[:16]
     for fmu, key in keys.items():
         dest = folder / f"{fmu}.fmu"

@@ -1,0 +1,70 @@
+"""An FMU's model description as the harness reads it: fmpy's, with the time-derivative
+relations the FMU declares (``time_derivatives``).
+
+FMI's ``derivative`` attribute marks state derivatives: importers (FMIL, so OMSimulator and
+PyFMI) count a continuous state for each variable that has one.  The other relations our
+masters use - an input that is the rate of another input (a shaft's ``tau_rate`` of
+``tau``), an output that is the rate of another output (``misalignment_rate``) - our FMUs
+declare in their vendor annotation (docs/fmus.md, "Time derivatives").  A foreign FMU's
+``derivative`` attributes still count, whatever they are on.
+"""
+from __future__ import annotations
+
+import weakref
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+from fmpy import read_model_description
+from lever.fmus.model_description import ANNOTATION_TOOL
+
+#: the relations of each description ``read_description`` read (fmpy's descriptions are
+#: slotted attrs classes: nothing can be added to them)
+_RELATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def read_description(path: Path | str):
+    """fmpy's model description of the FMU ``path`` (an ``.fmu``, an unpacked FMU's folder
+    or its ``modelDescription.xml``), whose ``time_derivatives`` are those of the ``derivative``
+    attributes and of our annotation."""
+    md = read_model_description(str(path))
+    _RELATIONS[md] = {**_attributed(md), **annotated_time_derivatives(_description_xml(Path(path)))}
+    return md
+
+
+def time_derivatives(md) -> dict[str, str]:
+    """{variable: the variable it is the time derivative of} of a description
+    ``read_description`` read; of another (fmpy's own reader): its ``derivative``
+    attributes."""
+    relations = _RELATIONS.get(md)
+    return dict(relations) if relations is not None else _attributed(md)
+
+
+def _attributed(md) -> dict[str, str]:
+    return {v.name: v.derivative.name for v in md.modelVariables if v.derivative is not None}
+
+
+def annotated_time_derivatives(xml: bytes) -> dict[str, str]:
+    """The relations of our annotation in the model description ``xml`` (FMI 2.0
+    ``<VendorAnnotations><Tool>``, FMI 3.0 ``<Annotations><Annotation>``); {} without one."""
+    root = ET.fromstring(xml)
+    found = {}
+    for element in lever_annotations(root):
+        found.update({e.get("variable"): e.get("of") for e in element.iterfind("TimeDerivative")})
+    return found
+
+
+def lever_annotations(root: ET.Element) -> list[ET.Element]:
+    """The ``<LeverFmu>`` elements of our annotation in the model description ``root`` (FMI
+    2.0 or 3.0; none in a foreign FMU's)."""
+    return (root.findall(f"VendorAnnotations/Tool[@name='{ANNOTATION_TOOL}']/LeverFmu")
+            + root.findall(f"Annotations/Annotation[@type='{ANNOTATION_TOOL}']/LeverFmu"))
+
+
+def _description_xml(path: Path) -> bytes:
+    if path.is_dir():
+        return (path / "modelDescription.xml").read_bytes()
+    if zipfile.is_zipfile(path):
+        with zipfile.ZipFile(path) as z:
+            return z.read("modelDescription.xml")
+    return path.read_bytes()
