@@ -65,6 +65,7 @@ SLOW = (
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
     "cli/test_api.py::test_the_example_script_runs",
     "cli/test_api.py::test_validate_judges_given_traces_over_a_window",
+    "cli/test_api.py::test_numpy_scalars_are_numbers",
     "cli/test_input_safety.py::test_a_bad_set_value_is_exit_2_and_a_sentence",
     "cli/test_input_safety.py::test_a_value_of_the_wrong_type_in_a_scene_file_is_refused",
     "cli/test_input_safety.py::test_an_unconnected_input_is_named_in_the_output_and_the_report",

@@ -83,11 +83,10 @@ def _print_summary(summary: dict, out: Path):
     stats = summary.get("statistics") or {}
     if stats and not any(stats.values()):
         click.echo(f"  no statistics: the run ended before the start-up transient did (t < {summary['transient_s']:g} s)")
-    for short in ("w1", "w2", "tau1", "tau2"):
-        s = stats.get(short)
-        if s:
+    for name, s in stats.items():
+        if s and name.split(".")[-1] in ("w", "tau1", "tau2"):      # the speeds and torques
             extra = f", unevenness {s['unevenness']:.4f}" if "unevenness" in s else ""
-            click.echo(f"  {short:5s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
+            click.echo(f"  {name:14s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
     errs = summary.get("error_vs_reference") or {}
     if errs:
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
