@@ -43,7 +43,8 @@ from harness.description import scene as scene_files
 from harness.paths import BUILD, FMUS
 
 __all__ = ["InputError", "UnknownSignal", "BuildError", "StudyInterrupted", "RunNote", "Run", "Validation",
-           "BenchResult", "ReferenceCheck", "Signals", "build", "fmu_path", "scenes", "load", "run", "validate",
+           "BenchResult", "ReferenceCheck", "Signals", "build", "fmu_path", "scenes", "masters", "load", "run",
+           "validate",
            "validate_each", "bench", "stability_map", "sweep", "study", "measured", "engines", "hosts", "export",
            "compliance", "references", "fingerprints", "bad_inputs", "scenes_list"]
 
@@ -186,6 +187,17 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
         return spec.with_overrides(assignments)
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
+
+
+def masters(fixed_step: bool = False) -> dict[str, str]:
+    """The co-simulation masters: name -> what it does (docs/reference/masters.md);
+    ``fixed_step``: only those ``stability_map`` sweeps (no adaptive step, no Model Exchange)."""
+    from harness.engine.masters import MASTERS
+
+    if fixed_step:
+        from harness.studies.stabilitymap import FIXED_STEP_MASTERS
+        return {name: MASTERS[name].description for name in FIXED_STEP_MASTERS}
+    return {name: cls.description for name, cls in MASTERS.items()}
 
 
 def check_masters(*names: str):

@@ -109,7 +109,7 @@ def test_the_example_script_runs(fmu_dir, tmp_path, capsys):
     assert (tmp_path / "tau2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-# -- what a notebook user holds (issue 45) and what the command line refuses (issue 42) ------------
+# -- what a notebook user holds, and what the command line refuses, refused here too ----------------------
 
 QUIET = {"reference": False, "notify": lambda kind, message: None}
 
