@@ -44,7 +44,7 @@ from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
-from harness.studies.cases import FAILED, CaseLog, case_key, collect
+from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -272,7 +272,8 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     if log.set_aside:
         say(f"the case log belonged to another set-up: moved to {log.set_aside}")
     todo = [c for c in cases if c.key not in log]
-    estimate = f"; {duration_text(estimated_seconds(scene, plan, todo, jobs, fmu_dir))}" if todo and progress else ""
+    estimate = f"; {duration_text(estimated_seconds(scene, plan, todo, jobs, fmu_dir), NARROW)}" \
+        if todo and progress else ""
     say(f"{len(cases)} cases ({len(cases) - len(todo)} already done), {jobs} process(es){estimate}")
     done = 0
 
@@ -296,6 +297,9 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
                           reused=len(cases) - len(todo), wall_s=clock.perf_counter() - started)
     return result
 
+
+#: how to make the study shorter, said with its estimate when it is long
+NARROW = "--master, --stiffness, --damping or --h-omega narrow the grid"
 
 #: communication steps of the two runs that time each master before a study
 CALIBRATION_STEPS = (50, 250)
@@ -326,15 +330,6 @@ def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: i
         cost[master] = (max(0.0, short - few * per_step), per_step)
     total = sum(cost[c.master][0] + cost[c.master][1] * c.steps for c in todo)
     return total / max(1, min(jobs, len(todo)))
-
-
-def duration_text(seconds: float) -> str:
-    """An estimate in words: "about 40 s", "about 6 min", with what to do when it is long."""
-    said = f"about {seconds:.0f} s" if seconds < 90 else f"about {seconds / 60:.0f} min"
-    if seconds <= 60:
-        return f"{said} (estimated)"
-    return (f"{said} (estimated from runs of each master timed just now; Ctrl-C stops it and "
-            "the same command resumes; --master, --stiffness, --damping or --h-omega narrow the grid)")
 
 
 def _failed(error: BaseException, where: str) -> dict:

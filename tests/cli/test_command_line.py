@@ -69,12 +69,19 @@ def test_scenes_are_listed_in_two_aligned_columns(lever):
 
 
 def test_a_study_says_how_long_it_will_take_before_it_runs(lever, fmu_dir, tmp_path):
-    from harness.studies.stabilitymap import duration_text
+    from harness.studies.cases import duration_text
 
     said = lever("stability", "--master", "jacobi", "--stiffness", "1e4", "--damping", "0", "--h-omega", "0.5",
                  "--no-refine", "--min-steps", "16", "--jobs", "1", "--out", tmp_path).output
     first = said.splitlines()[0]
     assert re.fullmatch(r"1 cases \(0 already done\), 1 process\(es\); about \d+ s \(estimated\)", first), first
-    assert duration_text(30) == "about 30 s (estimated)"
-    assert duration_text(600).startswith("about 10 min (estimated from runs of each master") and "resumes" in \
-        duration_text(600)
+    assert duration_text(30, "narrow it") == "about 30 s (estimated)"
+    assert duration_text(600, "narrow it") == ("about 10 min (estimated from runs timed just now; Ctrl-C stops it "
+                                               "and the same command resumes; narrow it)")
+
+
+def test_a_sweep_says_how_long_it_will_take_before_it_runs(lever, fmu_dir, tmp_path):
+    said = lever("sweep", "kavz685", "--axis", "inertia", "--thin", "100", "--stop", "2.2", "--progress",
+                 "--workers", "1", "--out", tmp_path)
+    assert said.exit_code in (0, 1), said.output
+    assert re.search(r"^sweep: 2 cases to run; about \d+ s \(estimated\)$", said.stderr, re.M), said.stderr
