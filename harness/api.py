@@ -474,15 +474,17 @@ class Validation:
         span = f", judged {f.describe_span()}" if f.span else ""
         lines = [f"Validation({self.name}: {verdict}{span}; {len(f.signals)} signals, "
                  f"{sum(s.passed for s in f.signals)} within the band ({f.tolerance.describe()})"]
-        for s in f.signals:
-            if not s.passed:
-                lines.append(f"  FAIL {s.name}: {100 * s.fraction_outside:.3g} % of the samples outside "
-                             f"+-{s.band_width:.4g}, max error {s.max_error:.4g} at t = {s.max_error_time:.4g} s")
-        lines += [f"  problem: {p}" for p in f.problems[:5]]
-        if len(f.problems) > 5:
-            lines.append(f"  ... {len(f.problems) - 5} more problems in .findings.problems")
+        failed = [s for s in f.signals if not s.passed]
+        for s in failed[:8]:
+            lines.append(f"  FAIL {s.name}: {100 * s.fraction_outside:.3g} % of the samples outside "
+                         f"+-{s.band_width:.4g}, max error {s.max_error:.4g} at t = {s.max_error_time:.4g} s")
+        if len(failed) > 8:
+            lines.append(f"  ... {len(failed) - 8} more failing signals in .findings.signals")
+        lines += [f"  problem: {p}" for p in f.problems[:4]]
+        if len(f.problems) > 4:
+            lines.append(f"  ... {len(f.problems) - 4} more problems in .findings.problems")
         lines[-1] += f"; files in {self.out})" if self.out else ")"
-        return "\n".join(lines[:16])
+        return "\n".join(lines)
 
 
 def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> dict:
