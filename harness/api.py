@@ -102,7 +102,7 @@ def build(force: bool = False, fmu_dir: Path | None = None, log: Callable[[str],
     """Build the FMUs into ``fmu_dir`` (default ``harness.paths.FMUS``) when they are
     missing or older than their sources; return the folder.  BuildError when the build
     fails (no C compiler: the message says what to install)."""
-    fmu_dir = Path(fmu_dir or FMUS) if fmu_dir is None or fmu_dir == FMUS else _inputs.folder(fmu_dir, "fmu_dir")
+    fmu_dir = _inputs.folder(fmu_dir, "fmu_dir") or Path(FMUS)
     module = _build_module()
     if force or not module.is_current(fmu_dir):
         try:
