@@ -527,17 +527,18 @@ def _window(window) -> tuple[float | None, float | None] | None:
 
 
 def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
-    """``--window START:STOP`` (either side may be left empty: the reference's own end)."""
+    """``--window START:STOP`` (either side may be left empty: the reference's own end; a
+    side may carry a time unit, ``0:500 ms``)."""
     if text is None:
         return None
     parts = str(text).split(":")
     try:
         if len(parts) != 2:
             raise ValueError
-        low, high = (float(p) if p.strip() else None for p in parts)
-    except ValueError:
-        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 (an empty side: "
-                         "the reference's own start or stop)") from None
+        low, high = (_inputs.seconds(p, "--window") if p.strip() else None for p in parts)
+    except (ValueError, InputError):
+        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 or 0:500 ms (an empty "
+                         "side: the reference's own start or stop)") from None
     for v in (low, high):
         if v is not None and not _math.isfinite(v):
             raise InputError(f"--window {text}: the times must be finite")

@@ -170,7 +170,7 @@ def reference(names, update):
                    "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
                    "the model-vs-measurement check (as lever measured; default: the monograph's grades).")
 @click.option("--window", default=None, metavar="START:STOP",
-              help="Judge only this span of the reference [s] (e.g. 0:1 for a 1 s result, 2:10 for the steady "
+              help="Judge only this span of the reference [s] (e.g. 0:1 or 0:500 ms for a short result, 2:10 for the steady "
                    "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")

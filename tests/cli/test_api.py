@@ -146,6 +146,9 @@ def test_times_take_units_as_overrides_do(fmu_dir):
         api.run("kavz685", step="2 kg", stop=0.1, **QUIET)
     with pytest.raises(api.InputError, match=r"^stop=inf: expected a finite time"):
         api.load("kavz685", stop=float("inf"))
+    assert api.parse_window("0:500 ms") == (0.0, 0.5) and api.parse_window(":2 s") == (None, 2.0)
+    with pytest.raises(api.InputError, match=r"^--window 0:2 kg: expected START:STOP in seconds"):
+        api.parse_window("0:2 kg")
     with pytest.raises(api.InputError, match=r"^window stop='x'"):
         api.validate("kavz685", result=(np.arange(3.0), {}), window=(0, "x"))
 
