@@ -1,12 +1,14 @@
 """The reference pages, generated from the code: ``python build/docs.py`` (or ``make docs``).
 
-Four pages under ``docs/reference/`` and their index, each read from what the code
+Five pages under ``docs/reference/`` and their index, each read from what the code
 declares rather than written by hand:
 
 * ``fmus.md``: every built FMU's variables, read from its modelDescription.xml with
   fmpy (the XML is generated from the adapters' declarations when the FMUs are built);
 * ``cli.md``: every ``lever`` command with its arguments and options, from the click
   objects of ``harness.cli.main``;
+* ``api.md``: every public name of ``harness.api`` (its ``__all__``) with its signature and
+  docstring, and the documented members of its classes;
 * ``masters.md``: the masters of the registry ``harness.engine.masters.MASTERS``;
 * ``scene-format.md``: the keys, tables and units a scene file may have, from
   ``harness.description.scene``.
@@ -174,7 +176,7 @@ def _type(param) -> str:
         return "flag"
     kind = param.type
     if isinstance(kind, click.Choice):
-        return " \\| ".join(str(choice) for choice in kind.choices)
+        return " | ".join(str(choice) for choice in kind.choices)     # (cell() escapes the pipes)
     if isinstance(kind, (click.IntRange, click.FloatRange)):
         low = "" if kind.min is None else f"{kind.min} {'<' if kind.min_open else '<='} "
         high = "" if kind.max is None else f" {'<' if kind.max_open else '<='} {kind.max}"
@@ -231,10 +233,16 @@ def cli_page() -> str:
            f"Usage: `{_usage(['lever'], main)}`; `lever COMMAND --help` prints the same as below for one "
            "command. Exit codes: 0 success, 1 the run or check failed, 2 bad input (a message naming the "
            "parameter and what is allowed), 130 Ctrl-C.\n\n"]
+    from harness.cli import DEVELOPER_COMMANDS
+
     commands = list(_commands(main, ["lever"]))
     out.append(table(["command", "what it does"],
                      [[f"[`{' '.join(p)}`](#{'-'.join(p)})", _summary(c)]
-                      for p, c in commands]) + "\n")
+                      for p, c in commands if p[1] not in DEVELOPER_COMMANDS]) + "\n")
+    out.append("Developer commands (checks of the project itself, listed apart by `lever --help`):\n\n")
+    out.append(table(["command", "what it does"],
+                     [[f"[`{' '.join(p)}`](#{'-'.join(p)})", _summary(c)]
+                      for p, c in commands if p[1] in DEVELOPER_COMMANDS]) + "\n")
     for path, command in commands:
         out.append(f"## {' '.join(path)}\n\n`{_usage(path, command)}`\n\n")
         out.append(paragraphs((command.help or "").split("\f")[0]) + "\n")
@@ -253,6 +261,88 @@ def cli_page() -> str:
         if rows:
             out.append(table(["name", "kind", "value", "default", "what it does"], rows) + "\n")
     return "".join(out).rstrip() + "\n"
+
+
+# -- the Python API ------------------------------------------------------------------------------
+
+def _signature(obj) -> str:
+    """``name(arguments)`` as Python shows it, defaults that are this machine's paths put as a
+    checkout names them."""
+    from harness import paths
+
+    try:
+        text = str(inspect.signature(obj))
+    except (TypeError, ValueError):
+        return ""
+    for folder, name in ((paths.FMUS, "build/fmus"), (paths.RESULTS, "results"), (paths.ROOT, ".")):
+        text = text.replace(repr(Path(folder)), name).replace(str(folder), name)
+    return text
+
+
+def _members(cls) -> list[tuple[str, object]]:
+    """A class's own public properties, methods and documented fields."""
+    out = []
+    for name, value in vars(cls).items():
+        if name.startswith("_"):
+            continue
+        if isinstance(value, property) or inspect.isfunction(value):
+            out.append((name, value))
+    return out
+
+
+def api_page() -> str:
+    from harness import api
+
+    out = [HEADER.format(source="the docstrings of `harness.api` (its `__all__`)"),
+           "# Reference: the Python API (`harness.api`)\n\n",
+           paragraphs(api.__doc__ or "") + "\n"]
+    names = list(api.__all__)
+    kinds = {name: ("class" if inspect.isclass(getattr(api, name)) else "function") for name in names}
+    out.append(table(["name", "kind", "what it is"],
+                     [[f"[`{n}`](#{'class-' if kinds[n] == 'class' else ''}{n.lower()})", kinds[n],
+                       inspect.cleandoc(getattr(api, n).__doc__ or "").split("\n\n")[0].split(". ")[0].rstrip(".")
+                       + "."] for n in names]) + "\n")
+    for name in names:
+        obj = getattr(api, name)
+        if inspect.isclass(obj):
+            bases = ", ".join(b.__name__ for b in obj.__bases__ if b is not object)
+            out.append(f"## class {name}\n\n`class {name}({bases})`\n\n" if bases else
+                       f"## class {name}\n\n`class {name}`\n\n")
+            out.append(paragraphs(inspect.getdoc(obj) or "") + "\n")
+            rows = []
+            if dataclasses.is_dataclass(obj):
+                source = inspect.getsource(obj)
+                for f in dataclasses.fields(obj):
+                    said = [line.strip()[3:] for line in _field_comment(source, f.name)]
+                    rows.append([f"`{f.name}`", "field", " ".join(said)])
+            for member, value in _members(obj):
+                doc = inspect.getdoc(value.fget if isinstance(value, property) else value) or ""
+                label = f"`{member}`" if isinstance(value, property) else f"`{member}{_signature(value)}`"
+                rows.append([label, "property" if isinstance(value, property) else "method",
+                             " ".join(doc.split())])
+            if rows:
+                out.append(table(["member", "kind", "what it is"], rows) + "\n")
+        else:
+            out.append(f"## {name}()\n\n`{name}{_signature(obj)}`\n\n")
+            if obj.__name__ != name:
+                out.append(f"The same function as [`{obj.__name__}`](#{obj.__name__.lower()}) (its former name).\n\n")
+            else:
+                out.append(paragraphs(inspect.getdoc(obj) or "") + "\n")
+    return "".join(out).rstrip() + "\n"
+
+
+def _field_comment(source: str, name: str) -> list[str]:
+    """The ``#:`` comment lines right above a dataclass field's line in ``source``."""
+    lines = source.splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().startswith(f"{name}:"):
+            above = []
+            j = i - 1
+            while j >= 0 and lines[j].strip().startswith("#:"):
+                above.insert(0, lines[j])
+                j -= 1
+            return above
+    return []
 
 
 # -- the masters ---------------------------------------------------------------------------------
@@ -387,7 +477,7 @@ def scene_page() -> str:
     return "".join(out).rstrip() + "\n"
 
 
-PAGES = {"fmus.md": "the FMUs' variables", "cli.md": "the `lever` command line",
+PAGES = {"fmus.md": "the FMUs' variables", "cli.md": "the `lever` command line", "api.md": "the Python API",
          "masters.md": "the co-simulation masters", "scene-format.md": "the scene file"}
 
 
@@ -403,7 +493,7 @@ def generate(out_dir: Path, fmu_dir: Path | None = None) -> list[Path]:
 
     fmu_dir = api.build(fmu_dir=fmu_dir)
     pages = {"README.md": index_page(), "fmus.md": fmus_page(Path(fmu_dir)), "cli.md": cli_page(),
-             "masters.md": masters_page(), "scene-format.md": scene_page()}
+             "api.md": api_page(), "masters.md": masters_page(), "scene-format.md": scene_page()}
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in pages.items():

@@ -5,40 +5,53 @@ their results instead of printing them (the command line calls these)::
 
     from harness import api
 
-    run = api.run("kavz685", {"coupling.stiffness": 900}, stop=3.0)
-    run.array()                  # numpy structured array: 'time' and every recorded signal
-    run.summary["statistics"]    # means and amplitudes after the start-up transient
-    api.validate("EngineShaft").passed
+    api.scenes()                         # the committed scenes: name -> description
+    run = api.run("kavz685", {"coupling.stiffness": 900}, stop="3 s")
+    run                                  # Run(kavz685, master ..., ok, ...): one screen
+    run.array(["coupling.tau2"])         # numpy structured array, 'time' first, as fmpy's
+    run.summary["statistics"]["coupling.tau2"]   # mean and amplitude after the transient
+    api.validate("kavz685", result=run, window=("0 s", "3 s")).passed
 
-Bad input (an unknown scene, parameter or master, a value out of its range) raises
-``InputError`` with the message the command line prints; nothing is written unless an
-output folder is given (``out=``).  Notes the command line prints before a run (the
-stability advisor, a shortened run's transient, unconnected inputs) go to ``notify``
-(default: Python's ``warnings``) and are kept in ``Run.notes``.
+Signals are named as the traces name them, ``component.variable`` (``coupling.tau2``),
+everywhere: traces, arrays, summary statistics, validation; a short name is taken where
+only one signal ends with it (``tau2``).  Times take units as scene overrides do
+(``step="1 ms"``), numbers may be numpy scalars.  Bad input (an unknown scene, parameter
+or master, a value out of its range, an argument of the wrong type) raises
+``InputError`` naming the argument, with the message the command line prints; nothing is
+written unless an output folder is given (``out=``).  Notes the command line prints
+before a run (the stability advisor, a shortened run's transient, unconnected inputs) go
+to ``notify`` (default: Python's ``warnings``, shown at the caller's line) and are kept in
+``Run.notes``.
 """
 from __future__ import annotations
 
-import contextlib
-import importlib.util
-import math
-import warnings
-from dataclasses import dataclass, field
+import contextlib as _contextlib
+import importlib.util as _importlib_util
+import math as _math
+import os as _os
+import warnings as _warnings
+from dataclasses import dataclass as _dataclass, field as _field
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Mapping
 
-import numpy as np
+import numpy as _np
 
-from harness.description import plan as plans
-from harness.description import scene as scenes
+from harness import api_inputs as _inputs
+from harness.api_inputs import InputError, Signals, UnknownSignal
+from harness.description import plan as _plans
+from harness.description import scene as scene_files
 from harness.paths import BUILD, FMUS
 
-__all__ = ["InputError", "BuildError", "StudyInterrupted", "RunNote", "Run", "Validation", "ReferenceCheck", "build",
-           "load", "run", "validate", "validate_each", "bench", "scenes_list", "stability_map", "sweep", "study",
-           "measured", "engines", "hosts", "export", "compliance", "references", "fingerprints", "bad_inputs"]
+__all__ = ["InputError", "UnknownSignal", "BuildError", "StudyInterrupted", "RunNote", "Run", "Validation",
+           "BenchResult", "ReferenceCheck", "Signals", "build", "fmu_path", "scenes", "masters", "load", "run",
+           "validate",
+           "validate_each", "bench", "stability_map", "sweep", "study", "measured", "engines", "hosts", "export",
+           "compliance", "references", "fingerprints", "bad_inputs", "scenes_list"]
 
 
-class InputError(ValueError):
-    """Bad input: the message names the parameter and what is allowed (``lever``: exit 2)."""
+def __dir__():
+    """``dir(api)``: the public names, not the modules it uses."""
+    return sorted(__all__)
 
 
 class BuildError(RuntimeError):
@@ -50,7 +63,7 @@ class StudyInterrupted(KeyboardInterrupt):
     kept (``lever``: exit status 130)."""
 
 
-@contextlib.contextmanager
+@_contextlib.contextmanager
 def _resumable(out: Path):
     try:
         yield
@@ -75,12 +88,12 @@ class RunNote(UserWarning):
 
 
 def _warn(kind: str, message: str):
-    warnings.warn(f"{kind}: {message}", RunNote, stacklevel=3)
+    _warnings.warn(f"{kind}: {message}", RunNote, stacklevel=_inputs.user_stacklevel())
 
 
 def _build_module():
-    spec = importlib.util.spec_from_file_location("_lever_build_fmus", BUILD / "fmus.py")
-    module = importlib.util.module_from_spec(spec)
+    spec = _importlib_util.spec_from_file_location("_lever_build_fmus", BUILD / "fmus.py")
+    module = _importlib_util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
@@ -89,7 +102,7 @@ def build(force: bool = False, fmu_dir: Path | None = None, log: Callable[[str],
     """Build the FMUs into ``fmu_dir`` (default ``harness.paths.FMUS``) when they are
     missing or older than their sources; return the folder.  BuildError when the build
     fails (no C compiler: the message says what to install)."""
-    fmu_dir = Path(fmu_dir or FMUS)
+    fmu_dir = _inputs.folder(fmu_dir, "fmu_dir") or Path(FMUS)
     module = _build_module()
     if force or not module.is_current(fmu_dir):
         try:
@@ -99,17 +112,40 @@ def build(force: bool = False, fmu_dir: Path | None = None, log: Callable[[str],
     return fmu_dir
 
 
-def scenes_list() -> dict[str, str]:
-    """The committed scenes: name -> description (an unreadable one: its error)."""
+def fmu_path(model: str, fmi: int = 2) -> Path:
+    """The built FMU file of ``model`` (``"EngineShaft"``, ``"LeverCoupling"``, ...), built
+    first when missing or stale: what fmpy's ``simulate_fmu`` or another host takes, in a
+    checkout (build/fmus) and in a pip installation (the user's cache folder) alike.
+    ``fmi=3``: its FMI 3.0 edition."""
+    from harness.paths import fmi3_dir
+
+    if fmi not in (2, 3) or isinstance(fmi, bool):
+        raise InputError(f"fmi={fmi!r}: 2 or 3 (the FMI edition)")
+    folder = build()
+    folder = folder if fmi == 2 else fmi3_dir(folder)
+    known = sorted(p.stem for p in folder.glob("*.fmu"))
+    if model not in known:
+        hint = scene_files.did_you_mean(model, known) if isinstance(model, str) else ""
+        raise InputError(f"model={model!r}{hint}: one of {', '.join(known)}")
+    return folder / f"{model}.fmu"
+
+
+def scenes() -> dict[str, str]:
+    """The committed scenes (resources/scenes): name -> description (an unreadable one:
+    its error), as ``lever scenes`` lists them."""
     from harness.paths import SCENES
 
     out = {}
     for path in sorted(SCENES.glob("*.toml")):
         try:
-            out[path.stem] = scenes.load(path).description
-        except scenes.SceneError as error:
+            out[path.stem] = scene_files.load(path).description
+        except scene_files.SceneError as error:
             out[path.stem] = f"(invalid: {error})"
     return out
+
+
+#: the former name of ``scenes()``
+scenes_list = scenes
 
 
 def _assignments(overrides) -> list[str]:
@@ -117,78 +153,117 @@ def _assignments(overrides) -> list[str]:
     if overrides is None:
         return []
     if isinstance(overrides, Mapping):
-        return [f"{k}={v}" for k, v in overrides.items()]
+        return [f"{k}={_plain(v)}" for k, v in overrides.items()]
     if isinstance(overrides, str):
         return [overrides]
-    return [str(a) for a in overrides]
+    return _inputs.names(overrides, "overrides")
 
 
-def load(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, stop: float | None = None,
-         strict: bool = False) -> scenes.Scene:
+def _plain(value):
+    """A numpy scalar as the Python number it is (``--set`` reads its text)."""
+    return value.item() if isinstance(value, _np.generic) else value
+
+
+def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, stop: float | None = None,
+         strict: bool = False) -> scene_files.Scene:
     """The scene (a name in resources/scenes, a .toml file, an SSP archive .ssp, or a Scene)
     with ``overrides`` (a dict ``{"component.parameter": value}`` or ``--set`` strings) and
     ``stop``; InputError on bad input."""
+    scene = _inputs.scene_argument(scene)
     assignments = _assignments(overrides)
+    stop = _inputs.seconds(stop, "stop")
     if stop is not None:
-        if not (isinstance(stop, (int, float)) and math.isfinite(stop)):
-            raise InputError(f"--stop {stop}: expected a time in seconds")
-        assignments.append(f"experiment.stop={float(stop)!r}")
+        assignments.append(f"experiment.stop={stop!r}")
     if strict:
         assignments.append("experiment.strict=true")
     try:
-        if isinstance(scene, scenes.Scene):
+        if isinstance(scene, scene_files.Scene):
             spec = scene
         elif str(scene).endswith(".ssp"):
             from harness.formats import ssp
             spec = ssp.read_scene(scene)
         else:
-            spec = scenes.load(scene)
+            spec = scene_files.load(scene)
         return spec.with_overrides(assignments)
-    except scenes.SceneError as error:
+    except scene_files.SceneError as error:
         raise InputError(str(error)) from None
+
+
+def masters(fixed_step: bool = False) -> dict[str, str]:
+    """The co-simulation masters: name -> what it does (docs/reference/masters.md);
+    ``fixed_step``: only those ``stability_map`` sweeps (no adaptive step, no Model Exchange)."""
+    from harness.engine.masters import MASTERS
+
+    if fixed_step:
+        from harness.studies.stabilitymap import FIXED_STEP_MASTERS
+        return {name: MASTERS[name].description for name in FIXED_STEP_MASTERS}
+    return {name: cls.description for name, cls in MASTERS.items()}
 
 
 def check_masters(*names: str):
     """InputError when one of ``names`` is not a master."""
     from harness.engine import masters
 
+    _inputs.names(names, "master")
     try:
         masters.check(*names)
     except masters.UnknownMaster as error:
         raise InputError(str(error)) from None
 
 
-@dataclass
+@_dataclass
 class Run:
     """One run: the result (times, traces, failure), the reference and the summary (what
-    summary.json holds), and where the files went (``out``; None: none written)."""
+    summary.json holds), and where the files went (``out``; None: none written).
+    ``repr(run)`` (a notebook cell's output) says in a few lines how it ended and its
+    main figures."""
+    #: what the engine returned (``harness.engine.run.RunResult``)
     result: object
+    #: the monolithic reference solution (None: not solved, ``reference=False``)
     reference: object | None
+    #: what summary.json holds: statistics, error against the reference, energy balance
+    #: (signals by their full names; a short one is taken where unambiguous)
     summary: dict
+    #: where the files went (None: none written)
     out: Path | None = None
     #: the warnings and notes said about this run (also sent to ``notify``)
-    notes: list[str] = field(default_factory=list)
+    notes: list[str] = _field(default_factory=list)
     #: the step latency's summary (``latency=True``; the tables are in ``out``)
     latency: list[str] | None = None
 
+    def __post_init__(self):
+        aliases = _driveline_aliases(self.result.scene)
+        if isinstance(getattr(self.result, "traces", None), dict) and not isinstance(self.result.traces, Signals):
+            self.result.traces = Signals(self.result.traces, aliases)
+        for key in ("statistics", "error_vs_reference"):
+            if isinstance(self.summary.get(key), dict):
+                self.summary[key] = Signals(self.summary[key], aliases)
+
     @property
-    def scene(self) -> scenes.Scene:
+    def scene(self) -> scene_files.Scene:
+        """The scene as run (with the overrides)."""
         return self.result.scene
 
     @property
-    def times(self) -> np.ndarray:
+    def times(self) -> _np.ndarray:
+        """The communication points [s], one per row of the traces."""
         return self.result.times
 
     @property
-    def traces(self) -> dict[str, np.ndarray]:
+    def traces(self) -> Signals:
+        """The recorded signals by their names, ``component.variable`` (``coupling.tau2``):
+        one array a signal, a value per time; a short name (``tau2``) is taken where only
+        one signal ends with it."""
         return self.result.traces
 
     @property
     def ok(self) -> bool:
+        """Whether the run reached its stop time without a failure."""
         return self.result.ok
 
     @property
     def failure(self) -> str | None:
+        """Why the run failed or was interrupted, in a sentence (None: it did not)."""
         return self.result.failure
 
     @property
@@ -202,28 +277,68 @@ class Run:
             return "ok"
         return "refused" if self.result.failure_stage == "initialisation" else "failed"
 
-    def array(self, names: Iterable[str] | None = None) -> np.ndarray:
+    def array(self, names: Iterable[str] | str | None = None) -> _np.ndarray:
         """The traces as one numpy structured array, ``time`` first (as fmpy's
-        ``simulate_fmu`` returns): ``a["time"]``, ``a["coupling.tau2"]``."""
-        names = list(self.traces) if names is None else list(names)
-        return np.rec.fromarrays([np.asarray(self.times, float)] + [np.asarray(self.traces[n], float) for n in names],
-                                 names=["time"] + names)
+        ``simulate_fmu`` returns): ``a["time"]``, ``a["coupling.tau2"]``; ``names``: only
+        these signals (full or unambiguous short names; the fields are the full names)."""
+        chosen = list(self.traces) if names is None else [self.traces.full_name(n)
+                                                           for n in _inputs.names(names, "names")]
+        return _np.rec.fromarrays([_np.asarray(self.times, float)]
+                                  + [_np.asarray(self.traces[n], float) for n in chosen], names=["time"] + chosen)
+
+    def __repr__(self) -> str:
+        s = self.summary
+        span = f"{self.times[0]:g} ... {self.times[-1]:g} s" if len(self.times) else "no rows"
+        head = (f"Run({s.get('scene')}: {self.outcome.upper() if self.outcome != 'ok' else 'ok'}, master "
+                f"{s.get('master')}, step {s.get('step_s', 0):g} s, {span}, {len(self.times)} rows x "
+                f"{len(self.traces)} signals, wall time {s.get('wall_time_s') or 0:.2f} s")
+        lines = [head]
+        if self.failure:
+            lines.append(f"  failure: {self.failure}")
+        errors = s.get("error_vs_reference") or {}
+        for name, stats in list((s.get("statistics") or {}).items())[:6]:
+            if stats:
+                error = errors.get(name)
+                lines.append(f"  {name:16s} mean {stats['mean']:11.5g}  amplitude {stats['amplitude']:10.4g}"
+                             + (f"  error vs reference {100 * error['rms_relative']:.2g} % RMS" if error else ""))
+        if (balance := s.get("energy_balance")):
+            lines.append(f"  energy residual {100 * balance['residual_relative']:.2g} % of the work in")
+        tail = [f"{len(self.notes)} note{'s' if len(self.notes) != 1 else ''} in .notes"] if self.notes else []
+        tail.append(f"files in {self.out}" if self.out else "no files written")
+        lines.append("  " + "; ".join(tail) + ")")
+        return "\n".join(lines)
 
 
-def _step_problem(step, label="--step"):
-    if step is not None and (problem := scenes.step_problem(step, label)):
+def _driveline_aliases(scene) -> dict[str, str]:
+    """A driveline's short names (``w1``, ``tau2``, ...) -> its signals; none for other scenes."""
+    from harness.description import scene_kinds
+    from harness.judges import metrics
+
+    try:
+        return metrics.signals(scene)
+    except (scene_kinds.NotADriveline, KeyError, ValueError, AttributeError):
+        return {}
+
+
+def _step(step, label="step") -> float | None:
+    """``step`` as seconds (units taken), checked as every communication step is."""
+    step = _inputs.seconds(step, label)
+    if step is not None and (problem := scene_files.step_problem(step, label)):
         raise InputError(problem)
+    return step
 
 
-def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master: str | None = None,
-        step: float | None = None, stop: float | None = None, tolerance: float | None = None,
+def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, master: str | None = None,
+        step: float | str | None = None, stop: float | str | None = None, tolerance: float | None = None,
         strict: bool = False, reference: bool = True, out: Path | str | None = None, progress: bool = False,
         stream: bool = False, notify: Callable[[str, str], None] | None = None, claimed: bool = False,
         observer=None, latency: bool = False, plots: bool = True) -> Run:
     """Run a scene as ``lever run`` does and return it (``Run``).
 
     ``overrides``: ``{"coupling.misalignment": "20 deg"}`` or ``["coupling.stiffness=900"]``;
-    ``stop``: a shorter (or longer) run; ``reference``: solve the monolithic reference
+    ``master``: one of ``lever run --help``'s (default: the scene's); ``step``, ``stop``:
+    the communication step and a shorter (or longer) run, in seconds or with a time unit
+    (``"1 ms"``); ``reference``: solve the monolithic reference
     (its error is in the summary); ``out``: write the run's files there (report.md,
     summary.json, traces.csv, plots); ``stream``: write traces.csv while running (needs
     ``out``).  ``notify(kind, message)`` hears the warnings and notes ("warning", "note");
@@ -249,14 +364,16 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     spec = load(scene, overrides, stop=stop, strict=strict)
     chosen = master or spec.experiment.master
     check_masters(chosen)
-    _step_problem(step)
+    step = _step(step)
+    out = _inputs.folder(out)
     options = {}
     if tolerance is not None:
+        tolerance = _inputs.number(tolerance, "tolerance")
         if "tolerance" not in masters.MASTERS[chosen].options:
             raise InputError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
                              + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
-        if not (math.isfinite(tolerance) and 0 < tolerance < 1):
-            raise InputError(f"--tolerance {tolerance}: must lie in (0, 1)")
+        if not (_math.isfinite(tolerance) and 0 < tolerance < 1):
+            raise InputError(f"tolerance={tolerance}: must lie in (0, 1)")
         options["tolerance"] = tolerance
     if stream and out is None:
         raise InputError("stream: name the output folder (out=...) the traces are streamed to")
@@ -270,7 +387,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     build()
     fmu_dir = spec.fmu_dir or FMUS
     # the scene's names and values first: the stability advisor reads a sound scene only
-    plan = plans.check(spec, fmu_dir=fmu_dir)
+    plan = _plans.check(spec, fmu_dir=fmu_dir)
     if plan.refusals:
         raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
     if spec.experiment.transient_note:
@@ -305,7 +422,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
                          if isinstance(error, NoModelExchange) else str(error)) from None
     result.warnings = advice
     if result.unconnected_inputs:
-        say("warning", scenes.unconnected_message(result.unconnected_inputs))
+        say("warning", scene_files.unconnected_message(result.unconnected_inputs))
     solution = None
     try:
         if "reference" in spec.features and reference and not stream and result.ok:
@@ -327,20 +444,47 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     return done
 
 
-@dataclass
+@_dataclass(repr=False)
 class Validation:
     """The verdict on one NAME (``lever validate NAME``): per signal (``findings.signals``),
-    the problems that fail it, the span judged, and the result that was judged."""
+    the problems that fail it (``findings.problems``), the span judged, and the result that
+    was judged.  ``repr()`` says PASS or FAIL, the failing signals and the problems in a
+    few lines."""
+    #: what was judged: a reference's name or an FMU file
     name: str
+    #: the verdict in detail (``harness.judges.validation.Findings``)
     findings: object
+    #: the tolerance band per signal
     bands: dict
+    #: the result judged (``.times``, ``.traces``, ``.how``)
     result: object
+    #: the committed reference traces
     reference: object
+    #: where validation.json and the plots went (None: none written)
     out: Path | None = None
 
     @property
     def passed(self) -> bool:
+        """Whether every signal passes and nothing fails the whole result."""
         return self.findings.passed
+
+    def __repr__(self) -> str:
+        f = self.findings
+        verdict = "PASS" if f.passed else "FAIL"
+        span = f", judged {f.describe_span()}" if f.span else ""
+        lines = [f"Validation({self.name}: {verdict}{span}; {len(f.signals)} signals, "
+                 f"{sum(s.passed for s in f.signals)} within the band ({f.tolerance.describe()})"]
+        failed = [s for s in f.signals if not s.passed]
+        for s in failed[:8]:
+            lines.append(f"  FAIL {s.name}: {100 * s.fraction_outside:.3g} % of the samples outside "
+                         f"+-{s.band_width:.4g}, max error {s.max_error:.4g} at t = {s.max_error_time:.4g} s")
+        if len(failed) > 8:
+            lines.append(f"  ... {len(failed) - 8} more failing signals in .findings.signals")
+        lines += [f"  problem: {p}" for p in f.problems[:4]]
+        if len(f.problems) > 4:
+            lines.append(f"  ... {len(f.problems) - 4} more problems in .findings.problems")
+        lines[-1] += f"; files in {self.out})" if self.out else ")"
+        return "\n".join(lines)
 
 
 def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> dict:
@@ -362,30 +506,41 @@ def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> d
         var = variables.get(name)
         if var is None or var.causality not in ("parameter", "input"):
             known = [v.name for v in variables.values() if v.causality == "parameter"]
-            raise InputError(f"--set {key}: {model} has no parameter '{name}'{scenes.did_you_mean(name, known)} "
+            raise InputError(f"--set {key}: {model} has no parameter '{name}'{scene_files.did_you_mean(name, known)} "
                              f"(parameters: {', '.join(known)})")
-        value = scenes.coerce(raw)
-        problems = scenes.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
+        value = scene_files.coerce(raw)
+        problems = scene_files.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
         if problems:
             raise InputError("; ".join(problems))
         values[name] = converted(var, value, key)
     return values
 
 
+def _window(window) -> tuple[float | None, float | None] | None:
+    """``window`` as ``(start, stop)`` in seconds: from ``"START:STOP"`` or a pair whose
+    sides are times (units taken) or None."""
+    if window is None or isinstance(window, str):
+        return parse_window(window)
+    if not (isinstance(window, (tuple, list)) and len(window) == 2):
+        raise InputError(f"window={window!r}: expected (start, stop) in seconds or 'START:STOP'")
+    return _inputs.seconds(window[0], "window start"), _inputs.seconds(window[1], "window stop")
+
+
 def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
-    """``--window START:STOP`` (either side may be left empty: the reference's own end)."""
+    """``--window START:STOP`` (either side may be left empty: the reference's own end; a
+    side may carry a time unit, ``0:500 ms``)."""
     if text is None:
         return None
     parts = str(text).split(":")
     try:
         if len(parts) != 2:
             raise ValueError
-        low, high = (float(p) if p.strip() else None for p in parts)
-    except ValueError:
-        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 (an empty side: "
-                         "the reference's own start or stop)") from None
+        low, high = (_inputs.seconds(p, "--window") if p.strip() else None for p in parts)
+    except (ValueError, InputError):
+        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 or 0:500 ms (an empty "
+                         "side: the reference's own start or stop)") from None
     for v in (low, high):
-        if v is not None and not math.isfinite(v):
+        if v is not None and not _math.isfinite(v):
             raise InputError(f"--window {text}: the times must be finite")
     if low is not None and high is not None and not high > low:
         raise InputError(f"--window {text}: STOP must be > START")
@@ -394,7 +549,7 @@ def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
 
 def _fmu_file(name) -> Path | None:
     """NAME as an FMU file (``lever validate path/Model.fmu``), or None for a name."""
-    return Path(name) if scenes.is_fmu_path(name) else None
+    return Path(name) if scene_files.is_fmu_path(name) else None
 
 
 def fmu_file_model(path: Path) -> tuple[str, str]:
@@ -425,47 +580,55 @@ def fmu_file_model(path: Path) -> tuple[str, str]:
     return model, version
 
 
-def validate(name: str, *, overrides=None, master: str | None = None, step: float | None = None,
-             result: Path | str | tuple | None = None, tolerance: str = "lever",
-             window: tuple[float | None, float | None] | str | None = None, out: Path | str | None = None) -> Validation:
+def validate(name: str, *, overrides=None, master: str | None = None, step: float | str | None = None,
+             result=None, tolerance: str = "lever",
+             window: tuple[float | str | None, float | str | None] | str | None = None,
+             out: Path | str | None = None) -> Validation:
     """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
-    ``result`` instead - a CSV another tool wrote, or ``(times, {signal: values})``.  NAME
-    may be an FMU file (``.fmu``, FMI 2.0 or 3.0, such as an FMI 3.0 edition in
-    build/fmus3): it runs stand-alone as its model's name does, judged by that model's
-    reference.  ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a
-    shorter run); ``out``: write validation.json, the result and a plot per failing signal
-    there."""
+    ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
+    with a ``time`` field (``Run.array()``, fmpy's ``simulate_fmu``), a ``(times, {signal:
+    values})`` pair, a pandas DataFrame with a ``time`` column, or the path of a CSV another
+    tool wrote; signals named like the reference's (``component.variable`` for a scene,
+    the FMU's variable names for an FMU).  NAME may be an FMU file (``.fmu``, FMI 2.0 or
+    3.0, such as an FMI 3.0 edition in build/fmus3): it runs stand-alone as its model's
+    name does, judged by that model's reference.  ``tolerance``: "lever" or "cross-check"
+    (the band's figures).  ``window``: judge only ``(start, stop)`` of the reference's span
+    (e.g. a shorter run; seconds or with a time unit, ``("0 s", "500 ms")``, or
+    ``"START:STOP"``); ``out``: write validation.json, the result and a plot per failing
+    signal there.  ``repr()`` of what it returns says PASS or FAIL and why."""
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
     from harness.judges import validation
 
+    if not isinstance(name, (str, _os.PathLike)):
+        raise InputError(f"name={name!r}: expected a reference's name (a scene or an FMU, e.g. 'kavz685' or "
+                         "'EngineShaft') or an FMU file's path")
     fmu_file = _fmu_file(name)
-    label, name = (str(name), fmu_file_model(fmu_file)[0]) if fmu_file is not None else (name, name)
+    label, name = (str(name), fmu_file_model(fmu_file)[0]) if fmu_file is not None else (str(name), str(name))
     known = reference_traces.all_names()
     if name not in known:
         raise InputError(reference_traces.why_no_reference(name)
-                         or f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
-    if tolerance not in validation.TOLERANCES:
-        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(validation.TOLERANCES)}")
-    _step_problem(step)
-    if isinstance(window, str):
-        window = parse_window(window)
+                         or f"no reference '{name}'{scene_files.did_you_mean(name, known)} (known: {', '.join(known)})")
+    _inputs.choice(tolerance, "tolerance", validation.TOLERANCES)
+    step = _step(step)
+    out = _inputs.folder(out)
+    window = _window(window)
+    given = _inputs.result_traces(result) if result is not None else None
     try:
         ref = reference_traces.read(name)
     except reference_traces.TraceFileError as error:
         raise InputError(str(error)) from None
-    if isinstance(result, (str, Path)):
+    if isinstance(given, Path):
         try:
-            other = reference_traces.read_csv(Path(result))
+            other = reference_traces.read_csv(given)
         except reference_traces.TraceFileError as error:
             raise InputError(str(error)) from None
-        judged = reference_traces.Result(other.times, other.signals, f"from {result}")
-    elif result is not None:
-        times, traces = result
-        judged = reference_traces.Result(np.asarray(times, float), {k: np.asarray(v, float) for k, v in traces.items()},
-                                   "given")
+        judged = reference_traces.Result(other.times, other.signals, f"from {given}")
+    elif given is not None:
+        times, traces, how = given
+        judged = reference_traces.Result(times, traces, how, failure=getattr(result, "failure", None))
     else:
         if fmu_file is None:
             build()
@@ -497,7 +660,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
-        reference_traces.write_validation(Path(out), findings, bands, judged, ref, write_result=result is None)
+        reference_traces.write_validation(out, findings, bands, judged, ref, write_result=result is None)
     return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
 
 
@@ -525,13 +688,12 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
     and the FMUs built before the first."""
     from harness.paths import RESULTS
 
-    chosen = reference_names(names)
+    chosen = reference_names(_inputs.names(names, "names"))
     if result is not None and len(chosen) != 1:
         raise InputError("--result: name exactly one reference the CSV is to be compared with "
                          "(e.g. lever validate --result run.csv kavz685)")
-    span = parse_window(window)
-    if step is not None and (problem := scenes.step_problem(step, "--step")):
-        raise InputError(problem)
+    span = _window(window)
+    step = _step(step)
     if result is None and any(_fmu_file(name) is None for name in chosen):
         build()
     for name in chosen:
@@ -544,16 +706,16 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
                        tolerance=tolerance, window=span, out=target)
 
 
-@dataclass
+@_dataclass
 class ReferenceCheck:
     """One committed reference trace against what the project computes now."""
     name: str
     #: "current", "stale" (not current, left), "updated" (not current, rewritten) or
     #: "unavailable" (no reference can be computed: ``reason``)
     status: str
-    problems: list[str] = field(default_factory=list)
+    problems: list[str] = _field(default_factory=list)
     #: per signal: ``signal``, ``max_change``, ``relative``, ``at_time``
-    changes: list = field(default_factory=list)
+    changes: list = _field(default_factory=list)
     reason: str = ""
     folder: Path | None = None
 
@@ -567,7 +729,7 @@ def references(names: Iterable[str] = (), update: bool = False) -> Iterator[Refe
     for name in reference_names(names):
         try:
             fresh = reference_traces.generate(name)
-        except (ReferenceUnavailable, scenes.SceneError) as error:
+        except (ReferenceUnavailable, scene_files.SceneError) as error:
             yield ReferenceCheck(name, "unavailable", reason=str(error))
             continue
         try:
@@ -584,7 +746,7 @@ def references(names: Iterable[str] = (), update: bool = False) -> Iterator[Refe
                              folder=reference_traces.paths(name)["ref"].parent)
 
 
-def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, only: Iterable[str] = (),
+def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3, only: Iterable[str] = (),
           peers: bool = True, monolithic: bool = True, out: Path | str | None = None, resume: bool = True,
           progress: Callable[[str], None] | None = None, claimed: bool = False, fmi_editions: bool = True) -> dict:
     """The work-precision benchmark of ``lever bench``: every master (``only``: these), the
@@ -597,6 +759,9 @@ def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, onl
     from harness.studies import bench as benchmark
 
     spec = load(scene)
+    repeats = _inputs.count(repeats, "repeats", 1, 20)
+    only = _inputs.names(only, "only")
+    out = _inputs.folder(out)
     try:
         benchmark.plan(spec, list(only))      # refuses unknown masters before anything runs
     except ValueError as error:
@@ -614,7 +779,26 @@ def bench(scene: str | Path | scenes.Scene = "kavz685", *, repeats: int = 3, onl
                                  fmi_editions=fmi_editions)
         result["written"] = benchmark.write(out, result)
     result["summary"] = benchmark.summary_lines(result)
-    return result
+    return BenchResult(result)
+
+
+class BenchResult(dict):
+    """What ``bench`` returns: the benchmark's result as a dict (``["claims"]``, ``["cases"]``,
+    ``["summary"]``, ``["written"]``, ...); ``repr()`` says in a screen how many cases ran
+    and failed, the claims' lines ``lever bench`` prints and where the files are."""
+
+    def __repr__(self) -> str:
+        cases = self.get("cases") or []
+        failed = [c for c in cases if getattr(c, "failure", None)]
+        lines = [f"BenchResult({self.get('scene')}: {len(cases) - len(failed)} of {len(cases)} cases ran"
+                 + (f", {len(failed)} FAILED ({', '.join(c.label for c in failed[:4])}"
+                    f"{', ...' if len(failed) > 4 else ''})" if failed else ", none failed")]
+        summary = list(self.get("summary") or [])
+        lines += summary[:14] + ([f"  ... {len(summary) - 14} more lines in ['summary']"] if len(summary) > 14 else [])
+        written = self.get("written") or []
+        lines.append(f"  written: {Path(written[0]).parent}/ ({', '.join(Path(w).name for w in written)}))"
+                     if written else "  nothing written)")
+        return "\n".join(lines)
 
 
 def _claim(out: Path) -> Path:
@@ -628,7 +812,7 @@ def _claim(out: Path) -> Path:
         raise InputError(str(error)) from None
 
 
-def stability_map(scene: str | Path | scenes.Scene = "kavz685", *, stiffnesses: Iterable[float] = (),
+def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnesses: Iterable[float] = (),
                   dampings: Iterable[float] = (), h_omegas: Iterable[float] = (), masters: Iterable[str] = (),
                   dense: bool = False, min_steps: int = 500, refine: bool = True, jobs: int = 1,
                   resume: bool = True, out: Path | str | None = None,
@@ -641,10 +825,16 @@ def stability_map(scene: str | Path | scenes.Scene = "kavz685", *, stiffnesses: 
     from harness.description import scene_kinds
     from harness.studies import stabilitymap
 
+    out = _inputs.folder(out)
+    min_steps = _inputs.count(min_steps, "min_steps", 16, 100000)
+    jobs = _inputs.count(jobs, "jobs", 1, 64)
+    stiffnesses, dampings, h_omegas = ([_inputs.number(v, label) for v in values] for label, values in (
+        ("stiffnesses", stiffnesses), ("dampings", dampings), ("h_omegas", h_omegas)))
+    masters = _inputs.names(masters, "masters")
     try:
         spec = load(scene)
         plan = stabilitymap.default_plan(spec, dense)
-    except (scenes.SceneError, scene_kinds.NotADriveline, ValueError) as error:
+    except (scene_files.SceneError, scene_kinds.NotADriveline, ValueError) as error:
         raise InputError(str(error)) from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
@@ -652,9 +842,9 @@ def stability_map(scene: str | Path | scenes.Scene = "kavz685", *, stiffnesses: 
         raise InputError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "
                          f"{', '.join(stabilitymap.FIXED_STEP_MASTERS)})")
     for name, values, low in (("--stiffness", stiffnesses, 0.0), ("--h-omega", h_omegas, 0.0)):
-        if any(not (math.isfinite(v) and v > low) for v in values):
+        if any(not (_math.isfinite(v) and v > low) for v in values):
             raise InputError(f"{name}: values must be finite and > {low:g}")
-    if any(not (math.isfinite(v) and v >= 0) for v in dampings):
+    if any(not (_math.isfinite(v) and v >= 0) for v in dampings):
         raise InputError("--damping: values must be finite and >= 0")
     plan.stiffnesses = sorted(set(stiffnesses)) or plan.stiffnesses
     plan.dampings = sorted(set(dampings), reverse=True) or plan.dampings
@@ -683,16 +873,22 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     from harness.studies import sweep as sweeps
 
     extra = _assignments(overrides)
+    _inputs.scene_argument(scene)
+    axes = _inputs.names(axes, "axes")
+    thin = _inputs.count(thin, "thin", 1, 100)
+    workers = None if workers is None else _inputs.count(workers, "workers", 1, 256)
+    stop = _inputs.seconds(stop, "stop")
+    out = _inputs.folder(out)
     try:
         chosen = sweeps.thin(sweeps.select(list(axes)), thin)
         load(scene).with_overrides(extra)
-    except (ValueError, scenes.SceneError) as error:
+    except (ValueError, scene_files.SceneError) as error:
         raise InputError(str(error)) from None
-    if stop is not None and not (math.isfinite(stop) and stop > 0):
-        raise InputError(f"--stop {stop}: must be > 0 s")
+    if stop is not None and not stop > 0:
+        raise InputError(f"stop={stop}: must be > 0 s")
     try:
         sweeps.check(chosen, scene, stop, extra)
-    except scenes.SceneError as error:
+    except scene_files.SceneError as error:
         raise InputError(str(error)) from None
     build()
     out = Path(out or RESULTS / "sweep")
@@ -701,7 +897,7 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
         with _resumable(out):
             return sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers, dask=dask,
                                 progress=progress, resume=resume)
-    except scenes.SceneError as error:
+    except scene_files.SceneError as error:
         raise InputError(str(error)) from None
 
 
@@ -718,13 +914,13 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
     the file it was written to in ``out`` (default results/studies)."""
     from harness.paths import RESULTS
 
-    out = Path(out or RESULTS / "studies")
-    lags = list(lags)
+    out = _inputs.folder(out) or RESULTS / "studies"
+    lags = [_inputs.seconds(lag, "lags") for lag in lags]
     if name == "runup":
         from harness.studies import runup
 
         for lag in lags:
-            if not (math.isfinite(lag) and 0.0 <= lag <= 100.0):
+            if not (_math.isfinite(lag) and 0.0 <= lag <= 100.0):
                 raise InputError(f"--scan {lag}: engine.torque_lag must be in [0, 100] s")
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
@@ -751,8 +947,9 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     from harness.paths import RESULTS
     from harness.studies import measured as measurement
 
-    out = Path(out or RESULTS / "measured")
-    if stiffness is not None and not (math.isfinite(stiffness) and stiffness > 0):
+    out = _inputs.folder(out) or RESULTS / "measured"
+    stiffness = None if stiffness is None else _inputs.number(stiffness, "stiffness")
+    if stiffness is not None and not (_math.isfinite(stiffness) and stiffness > 0):
         raise InputError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
     files = list(files) or measurement.default_files()
     _, unusable = measurement.pair_tables(files)
@@ -764,7 +961,7 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     return {"grades": grades, "findings": findings, "report": out / "measured.md"}
 
 
-def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, engines: Iterable[str] = (),
+def engines(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, engines: Iterable[str] = (),
             step: float | None = None, repeats: int = 3, out: Path | str | None = None,
             progress: Callable[[str], None] | None = None) -> list[Path]:
     """``lever engines``: the scene in every engine that runs our FMUs (``engines``: these),
@@ -774,7 +971,8 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     from harness.studies import engines as comparison
 
     spec = load(scene, overrides)
-    chosen = list(engines) or list(comparison.ENGINES)
+    step, repeats, out = _step(step), _inputs.count(repeats, "repeats", 1, 20), _inputs.folder(out)
+    chosen = _inputs.names(engines, "engines") or list(comparison.ENGINES)
     unknown = [n for n in chosen if n not in comparison.ENGINES]
     if unknown:
         raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
@@ -785,7 +983,7 @@ def engines(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, eng
     return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
 
 
-def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts: Iterable[str] = (),
+def hosts(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, hosts: Iterable[str] = (),
           step: float = 1e-3, repeats: int = 3, fmu_dir: Path | None = None, native_env: str = "bare",
           out: Path | str | None = None, log: Callable[[str], None] | None = None) -> dict:
     """``lever hosts``: the scene in hosts we did not write and in our harness at one fixed
@@ -798,7 +996,8 @@ def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts
     from harness.studies import hosts as comparison
 
     spec = load(scene, overrides)
-    chosen = tuple(hosts) or comparison.HOSTS
+    step, repeats, out = _step(step), _inputs.count(repeats, "repeats", 1, 20), _inputs.folder(out)
+    chosen = tuple(_inputs.names(hosts, "hosts")) or comparison.HOSTS
     unknown = [n for n in chosen if n not in comparison.HOSTS]
     if unknown:
         raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
@@ -819,7 +1018,7 @@ def hosts(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, hosts
     return {"report": report, "table": table, "written": [folder / "hosts.md", folder / "hosts.json"]}
 
 
-def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overrides=None, *,
+def export(scene: str | Path | scene_files.Scene = "kavz685", to: str = "ssp", overrides=None, *,
            out: Path | str | None = None) -> tuple[Path, dict[str, str], list[str]]:
     """``lever export-ssp`` (``to="ssp"``: an SSP archive) and ``lever export-container``
     (``to="container"``: one FMU holding the scene's FMUs): the scene with ``overrides``
@@ -837,8 +1036,9 @@ def export(scene: str | Path | scenes.Scene = "kavz685", to: str = "ssp", overri
         from harness.formats import container
         write, suffix, how_to_run = container.build_container, "fmu", lambda *_: ({}, [])
     else:
-        raise InputError(f"export to {to!r}: ssp or container")
+        raise InputError(f"to={to!r}: ssp or container")
     spec = load(scene, overrides)
+    out = _inputs.folder(out)
     build()
     out = Path(out) if out else RESULTS / to / f"{spec.name}.{suffix}"
     fmu_dir = spec.fmu_dir or FMUS
@@ -878,14 +1078,16 @@ def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: f
     ``stop`` seconds (0 or None: its own length)."""
     from harness.studies import fingerprint
 
-    masters = list(masters)
+    masters = _inputs.names(masters, "masters")
+    names = _inputs.names(names, "names")
     check_masters(*masters)
-    if stop is not None and not (math.isfinite(stop) and stop >= 0):
-        raise InputError(f"--stop {stop}: must be >= 0 s (0: each scene's own length)")
+    stop = _inputs.seconds(stop, "stop")
+    if stop is not None and not stop >= 0:
+        raise InputError(f"stop={stop}: must be >= 0 s (0: each scene's own length)")
     build()
     try:
         yield from fingerprint.fingerprints(list(names) or None, masters or None, stop or None)
-    except scenes.SceneError as error:
+    except scene_files.SceneError as error:
         raise InputError(str(error)) from None
 
 

@@ -8,13 +8,31 @@ import click
 from harness.cli import exports, fmus, running, studies
 from harness.cli.common import INTERRUPTED_EXIT, UserError, ensure_fmus
 
-__all__ = ["main", "entry", "ensure_fmus", "UserError", "INTERRUPTED_EXIT"]
+__all__ = ["main", "entry", "ensure_fmus", "UserError", "INTERRUPTED_EXIT", "DEVELOPER_COMMANDS"]
+
+
+#: the commands for the project's own developers (checks of the FMUs and references, the
+#: numbers behind its documents), listed apart from the user's in ``lever --help``
+DEVELOPER_COMMANDS = ("badinputs", "compliance", "fingerprint", "reference", "study")
 
 
 class _Lever(click.Group):
-    """The command group: Ctrl-C anywhere a command does not take it itself ends with
-    "interrupted" (or what the interrupted study kept) and exit status 130, not click's
-    "Aborted!" and 1."""
+    """The command group: the user's commands listed apart from the developers'; Ctrl-C
+    anywhere a command does not take it itself ends with "interrupted" (or what the
+    interrupted study kept) and exit status 130, not click's "Aborted!" and 1."""
+
+    def format_commands(self, ctx, formatter):
+        listed = [(name, self.get_command(ctx, name)) for name in self.list_commands(ctx)]
+        listed = [(name, command) for name, command in listed if command is not None and not command.hidden]
+        if not listed:
+            return
+        limit = formatter.width - 6 - max(len(name) for name, _ in listed)
+        for title, developers in (("Commands", False), ("Developer commands (checks of the project itself)", True)):
+            rows = [(name, command.get_short_help_str(limit)) for name, command in listed
+                    if (name in DEVELOPER_COMMANDS) == developers]
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
 
     def invoke(self, ctx):
         try:

@@ -9,7 +9,7 @@ from harness import api
 from harness.cli.common import user_errors
 
 
-def _export_command(name: str, written: str, default: str):
+def _export_command(name: str, written: str, default: str, short_help: str):
     """A ``lever export-*`` command: SCENE, ``--set`` overrides and ``--out`` (the
     ``written`` file; ``default``: where it goes without one)."""
     def wrap(function):
@@ -18,7 +18,7 @@ def _export_command(name: str, written: str, default: str):
         function = click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
                                 help="Override a parameter before exporting (as for `lever run`).")(function)
         function = click.argument("scene", default="kavz685")(function)
-        return click.command(name)(function)
+        return click.command(name, short_help=short_help)(function)
     return wrap
 
 
@@ -36,7 +36,7 @@ def _export(scene, assignments, out, to: str):
         click.echo(f"warning: {note}", err=True)
 
 
-@_export_command("export-ssp", "archive", "results/ssp/<scene>.ssp")
+@_export_command("export-ssp", "archive", "results/ssp/<scene>.ssp", "Write a scene as an SSP archive.")
 def export_ssp(scene, assignments, out):
     """Write SCENE as an SSP archive: SystemStructure.ssd, the FMUs (with their OSP model
     descriptions), each component's parameter set (.ssv, bound to it) and all of them in
@@ -50,7 +50,8 @@ def export_ssp(scene, assignments, out):
     _export(scene, assignments, out, "ssp")
 
 
-@_export_command("export-container", "FMU", "results/container/<scene>.fmu")
+@_export_command("export-container", "FMU", "results/container/<scene>.fmu",
+                 "Write a scene as one container FMU.")
 def export_container(scene, assignments, out):
     """Write SCENE as one FMU (fmpy's container FMU holding the scene's FMUs): its
     parameters are the scene's values, its outputs the scene's recorded variables, its

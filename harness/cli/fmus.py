@@ -7,30 +7,37 @@ from pathlib import Path
 import click
 
 from harness import api
-from harness.cli.common import ensure_fmus
-from harness.paths import FMUS
+from harness.paths import FMUS, fmi3_dir
 
 
-@click.command("build")
+@click.command("build", short_help="Build the FMUs and say where they are.")
 @click.option("--force", is_flag=True, help="Rebuild even when the sources did not change.")
 @click.option("--out", type=click.Path(path_type=Path), default=FMUS, show_default=True,
               help="Where the FMUs go: build/fmus in a checkout; for a package installed with pip, the user's "
                    "cache folder; LEVER_FMU_DIR chooses another.")
 def build(force, out):
     """Build the FMUs (LeverCoupling, EngineShaft, LoadShaft, FreewheelRectifier,
-    MisalignmentSource)."""
+    MisalignmentSource) when they are missing or older than their sources, and say where
+    they are (FMI 2.0 and FMI 3.0 editions), built now or not."""
+    said = []
+
+    def log(line):
+        said.append(line)
+        click.echo(line)
     try:
-        ensure_fmus(out, force)
+        folder = api.build(force, out, log=log)
     except RuntimeError as error:
         raise click.ClickException(str(error)) from None
+    state = "built now" if said else "up to date, nothing to build"
+    click.echo(f"FMUs ({state}): {folder} (FMI 2.0), {fmi3_dir(folder)} (FMI 3.0)")
 
 
-@click.command("compliance")
+@click.command("compliance", short_help="Compliance checks on FMU files (fmpy's and ours).")
 @click.argument("fmus", nargs=-1, type=click.Path(path_type=Path))
 def compliance(fmus):
     """Compliance checks on FMU files, or the FMU files in a folder (default: the built ones,
-    FMI 2.0 and 3.0 editions): fmpy's validation plus ours (types, units, ranges, documentation, requirements, OSP ports).  Exit code 1
-    when there are findings."""
+    FMI 2.0 and 3.0 editions): fmpy's validation plus ours (types, units, ranges,
+    documentation, requirements, OSP ports).  Exit code 1 when there are findings."""
     total = 0
     for path, findings in api.compliance(fmus):
         total += len(findings)
@@ -41,7 +48,7 @@ def compliance(fmus):
         sys.exit(1)
 
 
-@click.command("badinputs")
+@click.command("badinputs", short_help="The bad-input corpus through fmpy on the built FMUs.")
 @click.option("--verbose", is_flag=True, help="Also print every case with the message the FMU logged.")
 def bad_inputs(verbose):
     """Run the bad-input corpus (harness/formats/badinputs/) through fmpy's FMU2Slave and FMU2Model on

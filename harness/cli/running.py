@@ -13,19 +13,26 @@ from harness.cli.studies import print_measured
 from harness.paths import RESULTS
 
 
-@click.command("scenes")
+@click.command("scenes", short_help="List the committed scenes.")
 def list_scenes():
-    """List the committed scenes (resources/scenes)."""
-    for name, description in api.scenes_list().items():
-        click.echo(f"{name:24s} {description}")
+    """List the committed scenes (resources/scenes): each name, then its description."""
+    listed = api.scenes()
+    width = max(map(len, listed), default=0)
+    for name, description in listed.items():
+        click.echo(f"{name:{width}s}  {description}")
 
 
-@click.command("run")
+#: the masters, listed in --help and checked by click
+MASTER_CHOICE = click.Choice(list(api.masters()))
+
+
+@click.command("run", short_help="Run a scene and write its traces, plots and report.")
 @click.argument("scene", default="kavz685")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
               help="Override a parameter: component.parameter=value (e.g. coupling.stiffness=900, "
                    "coupling.misalignment='20 deg') or experiment.stop=5.")
-@click.option("--master", type=str, default=None, help="Co-simulation master (default: the scene's).")
+@click.option("--master", type=MASTER_CHOICE, default=None,
+              help="Co-simulation master (default: the scene's; what each does: docs/reference/masters.md).")
 @click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
 @click.option("--stop", type=float, default=None,
               help="Stop time [s] (as --set experiment.stop=S); a scene's start-up transient that does not fit the "
@@ -83,11 +90,10 @@ def _print_summary(summary: dict, out: Path):
     stats = summary.get("statistics") or {}
     if stats and not any(stats.values()):
         click.echo(f"  no statistics: the run ended before the start-up transient did (t < {summary['transient_s']:g} s)")
-    for short in ("w1", "w2", "tau1", "tau2"):
-        s = stats.get(short)
-        if s:
+    for name, s in stats.items():
+        if s and name.split(".")[-1] in ("w", "tau1", "tau2"):      # the speeds and torques
             extra = f", unevenness {s['unevenness']:.4f}" if "unevenness" in s else ""
-            click.echo(f"  {short:5s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
+            click.echo(f"  {name:14s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
     errs = summary.get("error_vs_reference") or {}
     if errs:
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
@@ -102,10 +108,18 @@ def _print_summary(summary: dict, out: Path):
         click.echo(f"  streamed {s['rows_written']} rows to {s['trace_file']} (1 in {s['stride']} kept for the "
                    f"report); resident memory {s.get('resident_MB_after_first_chunk', 0):.0f} MB after the first "
                    f"chunk, {s.get('resident_MB_at_end', 0):.0f} MB at the end, peak {s['peak_resident_MB']:.0f} MB")
-    click.echo(f"  results: {out}/ (report.md, summary.json, traces.csv, *.png)")
+    click.echo(f"  results: {out}/ ({files_written(summary)})")
 
 
-@click.command("reference")
+def files_written(summary: dict) -> str:
+    """The files a run wrote, as summary.json lists them: the plots counted, not named."""
+    files = summary.get("files") or ["report.md", "summary.json", "traces.csv"]
+    plots = [f for f in files if f.endswith(".png")]
+    named = [f for f in files if not f.endswith(".png")]
+    return ", ".join(named + ([f"{len(plots)} plots (*.png)"] if plots else []))
+
+
+@click.command("reference", short_help="Check the committed reference traces are current.")
 @click.argument("names", nargs=-1, metavar="[NAMES]...")
 @click.option("--update", is_flag=True, help="Regenerate the traces (all, or NAMES) and write them.")
 def reference(names, update):
@@ -137,12 +151,12 @@ def reference(names, update):
         sys.exit(1)
 
 
-@click.command("validate")
+@click.command("validate", short_help="Judge a result against its reference traces.")
 @click.argument("names", nargs=-1, metavar="[NAMES]...")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE",
               help="Change a parameter of the run under test, not of the reference: component.parameter=value "
                    "for a scene, parameter=value for an FMU (e.g. --set coupling.stiffness=800).")
-@click.option("--master", type=str, default=None, help="Master for a scene (default: the scene's).")
+@click.option("--master", type=MASTER_CHOICE, default=None, help="Master for a scene (default: the scene's).")
 @click.option("--step", type=float, default=None, help="Communication step for a scene [s] (default: the scene's).")
 @click.option("--result", "result_csv", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Validate this CSV from another tool's run of NAME instead of running it: a 'time' column and "
@@ -156,7 +170,7 @@ def reference(names, update):
                    "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
                    "the model-vs-measurement check (as lever measured; default: the monograph's grades).")
 @click.option("--window", default=None, metavar="START:STOP",
-              help="Judge only this span of the reference [s] (e.g. 0:1 for a 1 s result, 2:10 for the steady "
+              help="Judge only this span of the reference [s] (e.g. 0:1 or 0:500 ms for a short result, 2:10 for the steady "
                    "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")

@@ -9,15 +9,16 @@ from pathlib import Path
 import click
 
 from harness import api
-from harness.cli.common import user_errors
+from harness.cli.common import UserError, user_errors
 from harness.paths import RESULTS
 
 
-@click.command("bench")
+@click.command("bench", short_help="Error against run time of every master and peer.")
 @click.argument("scene", default="kavz685")
 @click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Runs per case; the median run time is quoted.")
-@click.option("--only", "only", multiple=True, metavar="MASTER", help="Bench only these masters (repeatable).")
+@click.option("--only", "only", multiple=True, type=click.Choice(list(api.masters())),
+              help="Bench only these masters (repeatable).")
 @click.option("--no-peers", is_flag=True, help="Leave out fmpy and libcosim.")
 @click.option("--no-monolithic", is_flag=True, help="Leave out the monolithic scipy solutions.")
 @click.option("--no-fmi-editions", is_flag=True, help="Leave out the FMUs' FMI 2.0 and FMI 3.0 editions side by "
@@ -39,7 +40,7 @@ def bench(scene, repeats, only, no_peers, no_monolithic, no_fmi_editions, out, f
     click.echo("written: " + ", ".join(str(p) for p in result["written"]))
 
 
-@click.command("stability")
+@click.command("stability", short_help="The stability map: which master at which step is stable.")
 @click.argument("scene", default="kavz685")
 @click.option("--stiffness", "stiffnesses", type=float, multiple=True, metavar="C",
               help="Coupling stiffness [N*m/rad] to sweep (repeatable; default: the scene's, 1e4, 1e5, 1e6).")
@@ -47,7 +48,7 @@ def bench(scene, repeats, only, no_peers, no_monolithic, no_fmi_editions, out, f
               help="Coupling damping [N*m*s/rad] to sweep (repeatable; default: the scene's, a tenth, 0).")
 @click.option("--h-omega", "h_omegas", type=float, multiple=True, metavar="X",
               help="Communication step as h*omega_n (repeatable; default 0.05 ... 5, 7 values).")
-@click.option("--master", "masters", multiple=True, metavar="MASTER",
+@click.option("--master", "masters", multiple=True, type=click.Choice(list(api.masters(fixed_step=True))),
               help="Fixed-step master to sweep (repeatable; default: all).")
 @click.option("--dense", is_flag=True, help="Denser default grids (7 stiffnesses, 5 dampings, 19 steps).")
 @click.option("--min-steps", type=click.IntRange(16, 100000), default=500, show_default=True,
@@ -64,7 +65,8 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
               progress):
     """The stability map of SCENE: every case classified (stable / energy-drifting /
     divergent) against the edges the linear analysis predicts; writes stability.md,
-    stability.csv, stability_map.png and the resumable case log cases.jsonl."""
+    stability.csv, stability_map.png and the resumable case log cases.jsonl.  Before the
+    cases run it says how long they will take, about (each master timed on the scene)."""
     with user_errors():
         done = api.stability_map(scene, stiffnesses=stiffnesses, dampings=dampings, h_omegas=h_omegas,
                                  masters=masters, dense=dense, min_steps=min_steps, refine=not no_refine, jobs=jobs,
@@ -78,7 +80,7 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     click.echo("written: " + ", ".join(str(p) for p in done["written"]))
 
 
-@click.command("study")
+@click.command("study", short_help="The numbers behind a documented decision or statement.")
 @click.argument("name", type=click.Choice(["transfer-modes", "runup"]))
 @click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "studies", show_default=True)
 @click.option("--scan", "lags", multiple=True, type=float,
@@ -109,7 +111,7 @@ def print_measured(files, out: Path, stiffness: float | None = None, cycles: boo
         sys.exit(1)
 
 
-@click.command("measured")
+@click.command("measured", short_help="The model against measured torque tables.")
 @click.argument("files", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option("--stiffness", type=float, default=None,
               help="Torsional stiffness of the grade [N*m/rad], when the files do not state it (overrides them).")
@@ -123,11 +125,12 @@ def measured(files, stiffness, no_cycles, out):
     print_measured(files, out, stiffness, not no_cycles)
 
 
-@click.command("sweep")
+@click.command("sweep", short_help="The monograph's parameter studies against its points.")
+@click.argument("scene", required=False, default=None)
 @click.option("--axis", "axes", multiple=True, metavar="NAME",
               help="Sweep only these axes (repeatable): load, inertia, stiffness, damping, misalignment, "
                    "stiffness_measured, load_alpha0, load_alpha5 (default: all).")
-@click.option("--scene", default="kavz685", show_default=True, help="Base scene.")
+@click.option("--scene", "scene_option", default=None, hidden=True, help="Deprecated: the base scene is SCENE.")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override the base scene.")
 @click.option("--stop", type=float, default=None, help="Simulated time per case [s] (default: the scene's).")
 @click.option("--thin", type=click.IntRange(1, 100), default=1, help="Every n-th value of each axis (ends kept).")
@@ -137,11 +140,16 @@ def measured(files, stiffness, no_cycles, out):
 @click.option("--no-resume", is_flag=True, help="Start afresh instead of reusing finished cases.")
 @click.option("--out", type=click.Path(path_type=Path), default=RESULTS / "sweep", show_default=True)
 @click.option("--progress/--no-progress", default=None, help="Progress bar (default: on a terminal).")
-def sweep(axes, scene, assignments, stop, thin, workers, dask_address, no_resume, out, progress):
-    """The monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12): amplitude and mean
-    curves with its reported points overlaid, and a trend report (sweep.md, sweep.json,
-    sweep_<axis>.png).  Finished and failed cases are kept in OUT/cases.jsonl; a re-run
-    resumes."""
+def sweep(scene, axes, scene_option, assignments, stop, thin, workers, dask_address, no_resume, out, progress):
+    """The monograph's parameter studies (Figs. 3.15-3.18, 4.8, 4.12) on SCENE (default
+    kavz685): amplitude and mean curves with its reported points overlaid, and a trend
+    report (sweep.md, sweep.json, sweep_<axis>.png).  Finished and failed cases are kept in
+    OUT/cases.jsonl; a re-run resumes."""
+    if scene_option is not None:
+        if scene is not None and scene != scene_option:
+            raise UserError(f"SCENE {scene} and --scene {scene_option}: name the scene once, as SCENE")
+        click.echo("note: --scene is deprecated; name the scene as SCENE (lever sweep SCENE)", err=True)
+    scene = scene or scene_option or "kavz685"
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
         with user_errors():
@@ -162,7 +170,7 @@ def sweep(axes, scene, assignments, stop, thin, workers, dask_address, no_resume
         sys.exit(1)
 
 
-@click.command("engines")
+@click.command("engines", short_help="A scene in every engine that runs our FMUs.")
 @click.argument("scene", default="kavz685")
 @click.option("--engine", "engine_names", multiple=True, metavar="ENGINE",
               help="Only these engines (repeatable; default all: lever, lever-jacobi, container, fmpy-ssp, "
@@ -183,7 +191,7 @@ def engines(scene, engine_names, assignments, step, repeats, out):
     click.echo("written: " + ", ".join(str(p) for p in paths))
 
 
-@click.command("hosts")
+@click.command("hosts", short_help="A scene in hosts we did not write, timed against ours.")
 @click.argument("scene", default="kavz685")
 @click.option("--host", "host_names", multiple=True, metavar="HOST",
               help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos, ecos-serial, "
@@ -210,9 +218,10 @@ def hosts(scene, host_names, assignments, step, repeats, fmu_dir, native_env, ou
     click.echo("written: " + ", ".join(str(p) for p in done["written"]))
 
 
-@click.command("fingerprint")
+@click.command("fingerprint", short_help="SHA-256 of every scene's traces with every master.")
 @click.argument("names", nargs=-1, metavar="[SCENES]...")
-@click.option("--master", "masters", multiple=True, help="Only this master (repeatable; default: every master).")
+@click.option("--master", "masters", multiple=True, type=click.Choice(list(api.masters())),
+              help="Only this master (repeatable; default: every master).")
 @click.option("--stop", type=float, default=0.2, show_default=True,
               help="Run each scene for at most this many seconds (0: each scene's own length).")
 def fingerprint(names, masters, stop):

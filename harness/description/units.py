@@ -127,10 +127,24 @@ def convert(text: str, target: str | None = None) -> float:
     if parsed is None:
         raise UnitProblem(f"{text!r} is not a number with a unit (e.g. '15 deg')")
     number, unit = parsed
-    scale = factor(unit, target)
+    try:
+        scale = factor(unit, target)
+    except UnitProblem as problem:
+        if target is None or not _known(target) or "cannot be a value in" not in str(problem):
+            raise
+        # what to write instead, in the variable's own unit as pint reads it
+        raise UnitProblem(f"{problem}; write it in {target}, e.g. '{number:g} {pint_syntax(target)}'") from None
     # the same arithmetic as a table of factors: number * factor (bit for bit what
     # "15 deg" gave before the units were checked)
     return number * scale if scale != 1.0 else number
+
+
+def _known(unit: str) -> bool:
+    try:
+        parse_unit(unit)
+    except UnitProblem:
+        return False
+    return True
 
 
 def is_number(value) -> bool:

@@ -39,9 +39,10 @@ def summarize(result: RunResult, reference=None) -> dict:
         summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
                                          "note": scenes.unconnected_message(result.unconnected_inputs)}
     if len(result.times) > 1:
-        summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
-                                                           scene.experiment.transient).get(full)
-                                 for short, full in names.items() if full in result.traces}
+        # by the traces' own names (component.variable): one naming of a signal everywhere
+        summary["statistics"] = {full: metrics.statistics(result.times, result.traces, [full],
+                                                          scene.experiment.transient).get(full)
+                                 for full in names.values() if full in result.traces}
     if "energy_balance" in scene.features and result.ok:
         if (problem := scene_kinds.driveline_problem(scene)) is None:
             summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
@@ -52,8 +53,8 @@ def summarize(result: RunResult, reference=None) -> dict:
         summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
                                                           names["w2"], scene.experiment.transient)
     if reference is not None and len(result.times):
-        summary["error_vs_reference"] = metrics.driveline_errors(scene, result.times, result.traces,
-                                                                 reference.times, reference.traces)
+        summary["error_vs_reference"] = {names[short]: e for short, e in metrics.driveline_errors(
+            scene, result.times, result.traces, reference.times, reference.traces).items()}
         summary["reference"] = {"method": reference.method, "wall_time_s": reference.wall_time,
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
@@ -89,12 +90,13 @@ def write_report(path: Path, summary: dict):
                       f"{summary['transient_s']:g} s), so there are no statistics.", ""]
         lines += ["| signal | mean | amplitude A = (max-min)/2 | unevenness (w_max-w_min)/w_mean |",
                   "|---|---|---|---|"]
-        for short, s in stats.items():
+        for name, s in stats.items():
             if s:
-                lines.append(f"| {short} | {fmt(s['mean'])} | {fmt(s['amplitude'])} | "
+                lines.append(f"| {name} | {fmt(s['mean'])} | {fmt(s['amplitude'])} | "
                              f"{fmt(s.get('unevenness'))} |")
         lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
-                  "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
+                  "(negative: it brakes the engine), tau2 the torque on the driven shaft; each signal is "
+                  "named as in traces.csv."]
     lines += reference_error_lines(summary, "Error against the monolithic reference",
                                    "torques relative to the mean transmitted torque, speeds to the mean speed")
     if summary.get("energy_balance_unavailable"):

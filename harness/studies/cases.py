@@ -201,3 +201,13 @@ def _jsonable(value):
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def duration_text(seconds: float, narrow: str) -> str:
+    """A study's estimated time in words ("about 40 s", "about 6 min"); when it is longer
+    than a minute, with how to stop and resume it and ``narrow``, how to make it shorter."""
+    said = f"about {seconds:.0f} s" if seconds < 90 else f"about {seconds / 60:.0f} min"
+    if seconds <= 60:
+        return f"{said} (estimated)"
+    return (f"{said} (estimated from runs timed just now; Ctrl-C stops it and the same command resumes; "
+            f"{narrow})")

@@ -44,7 +44,7 @@ from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
-from harness.studies.cases import FAILED, CaseLog, case_key, collect
+from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -272,7 +272,9 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     if log.set_aside:
         say(f"the case log belonged to another set-up: moved to {log.set_aside}")
     todo = [c for c in cases if c.key not in log]
-    say(f"{len(cases)} cases ({len(cases) - len(todo)} already done), {jobs} process(es)")
+    estimate = f"; {duration_text(estimated_seconds(scene, plan, todo, jobs, fmu_dir), NARROW)}" \
+        if todo and progress else ""
+    say(f"{len(cases)} cases ({len(cases) - len(todo)} already done), {jobs} process(es){estimate}")
     done = 0
 
     def record(case, result):
@@ -294,6 +296,40 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
                           {c: log.get(c.key) for c in cases if log.get(c.key) is not None},
                           reused=len(cases) - len(todo), wall_s=clock.perf_counter() - started)
     return result
+
+
+#: how to make the study shorter, said with its estimate when it is long
+NARROW = "--master, --stiffness, --damping or --h-omega narrow the grid"
+
+#: communication steps of the two runs that time each master before a study
+CALIBRATION_STEPS = (50, 250)
+
+
+def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: int, fmu_dir: Path = FMUS) -> float:
+    """How long ``todo`` will take, about: each master's cost of a case (set-up) and of a
+    step, from two runs of the scene (``CALIBRATION_STEPS``, at h*omega_n = 0.5) timed now,
+    summed over the steps its cases plan and shared among ``jobs`` processes.  A case that
+    diverges ends early and an implicit master iterates more on a stiffer coupling: an
+    estimate, not a promise."""
+    def timed(master: str, steps: int) -> float:
+        case = Case(master, plan.stiffnesses[0], plan.dampings[0], 0.5, steps)
+        started = clock.perf_counter()
+        try:
+            run_case(scene, case, plan, fmu_dir)
+        except Exception:     # noqa: BLE001 - the study itself records what a case raises
+            pass
+        return clock.perf_counter() - started
+
+    few, many = CALIBRATION_STEPS
+    masters = list(dict.fromkeys(c.master for c in todo))
+    timed(masters[0], few)          # the first run pays for imports and loading the FMUs
+    cost = {}
+    for master in masters:
+        short, long = timed(master, few), timed(master, many)
+        per_step = max(0.0, (long - short) / (many - few))
+        cost[master] = (max(0.0, short - few * per_step), per_step)
+    total = sum(cost[c.master][0] + cost[c.master][1] * c.steps for c in todo)
+    return total / max(1, min(jobs, len(todo)))
 
 
 def _failed(error: BaseException, where: str) -> dict:

@@ -26,7 +26,7 @@ from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
 from harness.engine import interrupt
-from harness.studies.cases import FAILED, CaseLog, case_key, collect
+from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
 from harness.paths import DATA, FMUS, RESULTS
 
 SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
@@ -182,6 +182,10 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     log = CaseLog(out, fingerprint, resume=resume)
     pending = [c for c in cases if c["key"] not in log]
     pending = list({c["key"]: c for c in pending}.values())         # one run per distinct case
+    if pending and progress and not dask:
+        import sys
+        print(f"sweep: {len(pending)} cases to run; {duration_text(estimated_seconds(pending, workers), NARROW)}",
+              file=sys.stderr, flush=True)
     bar = _bar(len(cases), len(cases) - len(pending), dask) if progress else None
     if pending:
         if dask:
@@ -199,6 +203,45 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
     write(out, axes, report)
     return report
+
+
+#: how to make a sweep shorter, said with its estimate when it is long
+NARROW = "--axis, --thin or --stop make it shorter"
+
+#: communication steps of the runs that time a case before a sweep
+CALIBRATION_STEPS = (50, 250)
+
+
+def estimated_seconds(pending: list[dict], workers: int | None = None) -> float:
+    """How long the ``pending`` cases will take on ``workers`` local processes, about: the
+    first case's set-up and its time a step, from two short runs of it timed now, times
+    every case's steps.  A case that fails ends early: an estimate, not a promise."""
+    import os
+
+    from harness.engine.run import simulate
+
+    first = pending[0]
+    base = scenes.load(first["scene"])
+    spec = base.with_overrides(first["overrides"])
+
+    def timed(steps: int) -> float:
+        e = spec.experiment
+        short = spec.with_overrides([f"experiment.stop={e.start + steps * e.step!r}", "experiment.transient=0"])
+        started = clock.perf_counter()
+        simulate(short, fmu_dir=Path(first.get("fmu_dir", FMUS)))
+        return clock.perf_counter() - started
+
+    few, many = CALIBRATION_STEPS
+    timed(few)                       # the first run pays for imports and loading the FMUs
+    short, long = timed(few), timed(many)
+    per_step = max(0.0, (long - short) / (many - few))
+    setup = max(0.0, short - few * per_step)
+    total = 0.0
+    for case in pending:
+        e = base.with_overrides(case["overrides"]).experiment
+        total += setup + per_step * (e.stop - e.start) / e.step
+    workers = workers or max(1, min(len(pending), os.cpu_count() or 1))
+    return total / max(1, min(workers, len(pending)))
 
 
 def check(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, extra: list[str] | None = None,

@@ -298,7 +298,7 @@ def test_cli_short_run_writes_the_results(lever, tmp_path, monkeypatch):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["ok"] is True and summary["scene"] == "kavz685"
-    assert summary["error_vs_reference"]["tau2"]["rms_relative"] < 1e-2
+    assert summary["error_vs_reference"]["coupling.tau2"]["rms_relative"] < 1e-2
     assert abs(summary["energy_balance"]["residual_relative"]) < 1e-3
     rows = (out / "traces.csv").read_text().splitlines()
     assert len(rows) == 1 + 501    # header + 0 ... 0.5 s at the scene's 1e-3 s
@@ -319,7 +319,7 @@ def test_cli_no_plots_writes_everything_but_the_plots(lever, tmp_path, monkeypat
                                                                   "reference.csv"}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["ok"] is True and summary["files"] == ["reference.csv", "traces.csv", "summary.json", "report.md"]
-    assert summary["error_vs_reference"]["tau2"]["rms_relative"] < 1e-2
+    assert summary["error_vs_reference"]["coupling.tau2"]["rms_relative"] < 1e-2
     report = (out / "report.md").read_text()
     assert "Traces: reference.csv and traces.csv." in report and ".png" not in report
 
