@@ -327,6 +327,11 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     return done
 
 
+#: ``lever validate --tolerance``: the engineer's verdict (harness.judges.verdict) or fmpy's
+#: cross-check band (harness.judges.validation)
+VERDICTS = ("lever", "cross-check")
+
+
 @dataclass
 class Validation:
     """The verdict on one NAME (``lever validate NAME``): per signal (``findings.signals``),
@@ -427,7 +432,8 @@ def fmu_file_model(path: Path) -> tuple[str, str]:
 
 def validate(name: str, *, overrides=None, master: str | None = None, step: float | None = None,
              result: Path | str | tuple | None = None, tolerance: str = "lever",
-             window: tuple[float | None, float | None] | str | None = None, out: Path | str | None = None) -> Validation:
+             window: tuple[float | None, float | None] | str | None = None, out: Path | str | None = None,
+             rtol=None, signals=None) -> Validation:
     """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
     ``result`` instead - a CSV another tool wrote, or ``(times, {signal: values})``.  NAME
@@ -439,7 +445,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
-    from harness.judges import validation
+    from harness.judges import validation, verdict
 
     fmu_file = _fmu_file(name)
     label, name = (str(name), fmu_file_model(fmu_file)[0]) if fmu_file is not None else (name, name)
@@ -447,8 +453,12 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     if name not in known:
         raise InputError(reference_traces.why_no_reference(name)
                          or f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
-    if tolerance not in validation.TOLERANCES:
-        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(validation.TOLERANCES)}")
+    if tolerance not in VERDICTS:
+        raise InputError(f"tolerance {tolerance!r}: one of {', '.join(VERDICTS)}")
+    try:
+        rules = verdict.parse_rtol(_assignments(rtol), "--rtol")
+    except ValueError as error:
+        raise InputError(str(error)) from None
     _step_problem(step)
     if isinstance(window, str):
         window = parse_window(window)
@@ -491,9 +501,21 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
                              f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
-    findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
-                                              ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
-                                              (ref.opt.start, ref.opt.stop))
+    if tolerance == "lever":
+        try:
+            settings = verdict.settings_of(ref)
+            findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
+                                     window=(start, stop), transient=settings.transient,
+                                     rtol=verdict.Tolerances([settings.rules, rules]), signals=_assignments(signals),
+                                     kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label)
+        except ValueError as error:
+            raise InputError(str(error)) from None
+        bands = {}
+        findings.notes += reference_traces.provenance_notes(ref, result, overrides, master, step)
+    else:
+        findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
+                                                  ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
+                                                  (ref.opt.start, ref.opt.stop))
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
@@ -519,7 +541,7 @@ def reference_names(names: Iterable[str] = ()) -> list[str]:
 
 def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
                   result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
-                  out: Path | str | None = None) -> Iterator[Validation]:
+                  out: Path | str | None = None, rtol=None, signals=None) -> Iterator[Validation]:
     """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
     ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
     and the FMUs built before the first."""
@@ -541,7 +563,7 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
             folder = f"{model}-fmi{version.split('.')[0]}"
         target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_assignments(overrides), master=master, step=step, result=result,
-                       tolerance=tolerance, window=span, out=target)
+                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals)
 
 
 @dataclass
