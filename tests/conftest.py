@@ -59,6 +59,8 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "judges/test_verdict.py::test_verdict_json_is_standard_and_carries_the_power",
+    "judges/test_verdict.py::test_a_result_with_some_signals_is_judged_on_those_and_lists_the_rest",
     "fmus/test_fmi3.py",
     "engine/test_fmi3_scenes.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",

@@ -218,7 +218,7 @@ def _print_verdict(name, verdict, result, out: Path):
         if s.power is not None:
             click.echo(f"    {'pass' if s.passed else 'power'}: {s.power.describe()}")
     if verdict.not_judged:
-        click.echo(f"  not judged (not in the result{' or not chosen' if verdict.signals else ''}): "
+        click.echo(f"  not judged (not in the result{' or not chosen' if verdict.chosen else ''}): "
                    f"{', '.join(verdict.not_judged)}")
     for problem in verdict.problems:
         click.echo(f"  problem: {problem}")

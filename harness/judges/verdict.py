@@ -177,15 +177,23 @@ class Power:
     by: dict = field(default_factory=dict)
 
     def describe(self) -> str:
-        def num(x, fmt):
-            return "none" if x is None else format(x, fmt)
-        phase = (f"phase +-{self.phase_deg:.2g} deg ({1e3 * self.shift_s:.3g} ms)" if self.phase_deg is not None
-                 else f"time shift +-{num(None if self.shift_s is None else 1e3 * self.shift_s, '.3g')} ms")
+        """"band +-0.566; catches mean +-0.107 (by mean), amplitude +-2 % (by amplitude), phase ..."."""
         def by(kind):
-            return f" (by {', '.join(self.by[kind])})" if self.by.get(kind) else ""
-        return (f"band +-{self.band:.3g}; catches mean +-{num(self.mean, '.3g')}{by('mean')}, amplitude "
-                f"+-{num(None if self.amplitude is None else 100 * self.amplitude, '.2g')} %{by('amplitude')}, "
-                f"{phase}{by('shift')}")
+            return f"by {', '.join(self.by[kind])}" if self.by.get(kind) else ""
+
+        def said(value, text, kind):
+            return "none" if value is None else f"{text} ({by(kind)})" if by(kind) else text
+
+        mean = said(self.mean, f"+-{self.mean:.3g}" if self.mean is not None else "", "mean")
+        amplitude = said(self.amplitude, f"+-{100 * self.amplitude:.2g} %" if self.amplitude is not None else "",
+                         "amplitude")
+        if self.shift_s is None:
+            shift = "time shift none"
+        else:
+            at = f"{1e3 * self.shift_s:.3g} ms" + (f"; {by('shift')}" if by("shift") else "")
+            shift = (f"phase +-{self.phase_deg:.2g} deg at the rotation ({at})" if self.phase_deg is not None
+                     else f"time shift +-{at}")
+        return f"band +-{self.band:.3g}; catches mean {mean}, amplitude {amplitude}, {shift}"
 
 
 @dataclass
@@ -214,8 +222,9 @@ class Verdict:
     """The verdict on one result: per judged signal, and about the result as a whole."""
     name: str
     signals: list[SignalVerdict] = field(default_factory=list)
-    #: reference signals not judged (absent from the result, or not chosen)
+    #: reference signals not judged (absent from the result, or not chosen: ``chosen``)
     not_judged: list[str] = field(default_factory=list)
+    chosen: bool = False
     #: what fails the whole result (span not covered, NaN, ...)
     problems: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
@@ -450,6 +459,7 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
         raise NothingToJudge(f"the result has none of the reference's signals ({', '.join(reference)}); its columns: "
                              f"{', '.join(map(str, traces)) or 'none'} (a scene's signals are component.variable)")
     verdict.not_judged = [s for s in reference if s not in mapping]
+    verdict.chosen = bool(signals)
     unknown_targets = rtol.unknown_targets(list(reference))
     if unknown_targets:
         raise ValueError(f"tolerance for {', '.join(unknown_targets)}: neither a signal of the reference nor a kind "
