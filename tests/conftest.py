@@ -59,6 +59,7 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "formats/test_run_identity.py",
     "judges/test_verdict.py::test_verdict_json_is_standard_and_carries_the_power",
     "judges/test_verdict.py::test_a_result_with_some_signals_is_judged_on_those_and_lists_the_rest",
     "fmus/test_fmi3.py",

@@ -656,7 +656,7 @@ def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, s
     plt = plotting.pyplot()
     t_ref, y_ref = reference.outputs.times, np.asarray(reference.outputs.signals[signal.name], dtype=float)
     t, y = result.times, np.asarray(result.traces[signal.column], dtype=float)
-    start, stop = verdict.window
+    start, stop = verdict.window or verdict.transient       # the steady window, or a start-up-only span
     inside = (t_ref >= start) & (t_ref <= stop)
     width = signal.power.band if signal.power else 0.0
     close = (2 * 2 * math.pi / verdict.rotation) if verdict.rotation else 0.1 * (stop - start)
