@@ -678,8 +678,8 @@ def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, s
     plotting.legend_outside(axes[0])
     failed = "; ".join(f"{c.quantity} {c.detail}" for c in signal.failed)
     axes[0].set_title(f"{reference.name}: {signal.name} FAIL - {failed}", fontsize=8, wrap=True)
-    axes[1].set_title(f"the judged window's end; a pass would have meant: {signal.power.describe() if signal.power else '-'}",
-                      fontsize=8)
+    axes[1].set_title("the judged window's end" + (f"; a pass would have meant:\n{signal.power.describe()}"
+                                                   if signal.power else ""), fontsize=8)
     fig.suptitle(f"result: {result.how}", fontsize=9)
     path = out / f"{signal.name}.png"
     fig.savefig(path, dpi=110)

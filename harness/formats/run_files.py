@@ -195,10 +195,11 @@ def _project_version() -> str:
 
 
 def run_title(summary: dict) -> str:
-    """A plot's title: scene, master, step and the values the run changed (``--set``)."""
+    """A plot's title: scene, master, step and, on a second line, the values the run changed
+    (``--set``), so that no plot of a changed run reads as the scene file's."""
     changed = "; ".join(f"{k} = {v}" for k, v in (summary.get("overrides") or {}).items())
     return (f"{summary['scene']} - {summary['master']}, h = {summary['step_s']:g} s"
-            + (f"; {changed} (--set)" if changed else ""))
+            + (f"\n--set {changed}" if changed else ""))
 
 
 def identity_lines(summary: dict) -> list[str]:

@@ -39,7 +39,7 @@ def test_the_report_never_quotes_the_scene_files_value_of_an_overridden_paramete
     assert "Changed with --set: **coupling.misalignment = 20 deg**" in report
     title = run_title({"scene": "kavz685", "master": "jacobi", "step_s": 1e-3,
                        "overrides": {"coupling.misalignment": "20 deg"}})
-    assert title == "kavz685 - jacobi, h = 0.001 s; coupling.misalignment = 20 deg (--set)"
+    assert title == "kavz685 - jacobi, h = 0.001 s\n--set coupling.misalignment = 20 deg"
 
 
 def test_validate_says_a_result_was_made_with_other_values_than_its_reference(lever, misaligned, tmp_path):
