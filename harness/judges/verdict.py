@@ -277,12 +277,20 @@ def _percent(x: float) -> str:
     return f"{100 * x:+.3g} %"
 
 
-def _allowed_scale(*values: float) -> float:
+#: a quantity smaller than this share of the signal's largest magnitude over the reference is
+#: judged against that share instead: below it a reference's figures are the solver's noise
+#: (a stalled shaft's speed, 1e-11 rad/s, is no ripple to hold a result to 2 % of)
+NOISE_FLOOR = 1e-3
+
+
+def _allowed_scale(*values: float, magnitude: float = 0.0) -> float:
     """What a relative tolerance is taken of: the first of ``values`` that is not zero (a
-    constant signal's amplitude is judged against its mean, a signal zero in the window
-    against its largest magnitude anywhere), else 1 in the signal's unit (a signal zero
-    throughout, as the FMI cross-check takes one)."""
-    return next((abs(v) for v in values if v != 0 and math.isfinite(v)), 1.0)
+    constant signal's amplitude is judged against its mean), at least ``NOISE_FLOOR`` of the
+    signal's largest ``magnitude``; 1 in the signal's unit for a signal zero throughout (as
+    the FMI cross-check takes one)."""
+    first = next((abs(v) for v in values if v != 0 and math.isfinite(v)), 0.0)
+    scale = max(first, NOISE_FLOOR * abs(magnitude))
+    return scale if scale > 0 else 1.0
 
 
 @dataclass
@@ -317,12 +325,12 @@ def _checks(frame: _Frame, t_res: np.ndarray, y_res: np.ndarray, rtol: dict) -> 
     at = np.interp(frame.t, t_res, y_res)
     checks = []
     mean = float(np.mean(at))
-    allowed = rtol["mean"][0] * _allowed_scale(max(abs(frame.mean), frame.amplitude), frame.magnitude)
+    allowed = rtol["mean"][0] * _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
     d = mean - frame.mean
     checks.append(Check("mean", frame.mean, mean, d, allowed, abs(d) <= allowed,
                         f"{mean:.6g} vs {frame.mean:.6g} ({d:+.3g}, allowed +-{allowed:.3g})"))
     amplitude = float((np.max(at) - np.min(at)) / 2)
-    scale = _allowed_scale(frame.amplitude, frame.mean, frame.magnitude)
+    scale = _allowed_scale(frame.amplitude, frame.mean, magnitude=frame.magnitude)
     allowed = rtol["amplitude"][0] * scale
     d = amplitude - frame.amplitude
     checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, abs(d) <= allowed,
@@ -338,7 +346,7 @@ def _checks(frame: _Frame, t_res: np.ndarray, y_res: np.ndarray, rtol: dict) -> 
             checks.append(Check(f"order {k}", abs(ref), abs(got), d, allowed, d <= allowed,
                                 f"amplitude {_percent(abs(got) / abs(ref) - 1)}, phase {phase:+.2g} deg: off by "
                                 f"{100 * d / abs(ref):.3g} % of the component (allowed {100 * rtol['order'][0]:.3g} %)"))
-    checks.append(_tube("tube", frame.t, frame.y, t_res, y_res, rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, frame.magnitude),
+    checks.append(_tube("tube", frame.t, frame.y, t_res, y_res, rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude),
                         rtol["tube"][0]))
     return checks
 
@@ -395,7 +403,7 @@ def power(frame: _Frame, judged, t_all: np.ndarray, y_all: np.ndarray, t_grid: n
     def failing(kind, x):
         return [c.quantity for c in judged(t_grid, perturbed[kind](x)) if not c.passed]
 
-    scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), frame.magnitude)
+    scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
     dt = float(np.median(np.diff(frame.t))) if len(frame.t) > 1 else 1.0
     span = float(frame.t[-1] - frame.t[0])
     found, by = {}, {}
@@ -406,7 +414,7 @@ def power(frame: _Frame, judged, t_all: np.ndarray, y_all: np.ndarray, t_grid: n
             by[kind] = sorted(set(failing(kind, found[kind])) | set(failing(kind, -found[kind])))
     shift = found["shift"]
     phase = None if (shift is None or not rotation) else math.degrees(rotation * shift)
-    return Power(rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, frame.magnitude), found["mean"], found["amplitude"], shift,
+    return Power(rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude), found["mean"], found["amplitude"], shift,
                  phase, by)
 
 
@@ -531,7 +539,7 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
 def _start_up_tube(t_part: np.ndarray, y_part: np.ndarray, t_res: np.ndarray, y_res: np.ndarray, rtol: dict,
                    magnitude: float) -> Check:
     """The start-up transient's tube: as wide as the tube's tolerance of its own range."""
-    width = rtol["tube"][0] * _allowed_scale(float(np.ptp(y_part)), float(np.mean(y_part)), magnitude)
+    width = rtol["tube"][0] * _allowed_scale(float(np.ptp(y_part)), float(np.mean(y_part)), magnitude=magnitude)
     return _tube("transient tube", t_part, y_part, t_res, y_res, width, rtol["tube"][0])
 
 

@@ -153,3 +153,16 @@ def test_verdict_json_is_standard_and_carries_the_power(kavz, tmp_path):
                       parse_constant=lambda c: pytest.fail(f"validation.json holds {c}"))
     assert data["passed"] is False and data["signals"]["coupling.tau2"]["power"]["amplitude"] > 0
     assert any(p.name == "coupling.tau2.png" for p in written)
+
+
+def test_a_stalled_signals_solver_noise_is_not_held_to_a_relative_tolerance():
+    """A shaft stalled in the window: the reference's speed there is solver noise (1e-11 rad/s
+    after a 39 rad/s start), judged against a thousandth of the largest speed, not to 2 % of
+    the noise; a real speed there still fails."""
+    t = np.linspace(0.0, 3.0, 301)
+    reference = np.where(t < 1.0, 39.0 * (1.0 - t), 1e-11 * np.sin(50 * t))
+    stalled = np.where(t < 1.0, 39.0 * (1.0 - t), 1e-14)
+    judged = verdict.judge(t, {"w": stalled}, t, {"w": reference}, transient=1.5)
+    assert judged.passed, judged.failures()
+    moving = np.where(t < 1.0, 39.0 * (1.0 - t), 0.5)
+    assert not verdict.judge(t, {"w": moving}, t, {"w": reference}, transient=1.5).passed
