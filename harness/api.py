@@ -455,6 +455,9 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
                          or f"no reference '{name}'{scenes.did_you_mean(name, known)} (known: {', '.join(known)})")
     if tolerance not in VERDICTS:
         raise InputError(f"tolerance {tolerance!r}: one of {', '.join(VERDICTS)}")
+    if tolerance != "lever" and (_assignments(rtol) or _assignments(signals)):
+        raise InputError(f"--rtol and --signals set the 'lever' verdict; --tolerance {tolerance} is fmpy's band, "
+                         "which has its own figures and judges every signal")
     try:
         rules = verdict.parse_rtol(_assignments(rtol), "--rtol")
     except ValueError as error:

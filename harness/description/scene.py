@@ -123,8 +123,9 @@ class Scene:
     #: ``lever validate``'s tolerances for this scene's reference (``[validation]``: quantity =
     #: relative tolerance, sub-tables by kind or signal; see harness.judges.verdict)
     validation: dict = field(default_factory=dict)
-    #: the ``--set`` assignments applied (``with_overrides``): name -> the value as given
-    overrides: dict = field(default_factory=dict)
+    #: the ``--set`` assignments applied (``with_overrides``): name -> the value as given;
+    #: where the values came from, not what the scene is (equal scenes compare equal)
+    overrides: dict = field(default_factory=dict, compare=False)
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""

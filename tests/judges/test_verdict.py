@@ -166,3 +166,10 @@ def test_a_stalled_signals_solver_noise_is_not_held_to_a_relative_tolerance():
     assert judged.passed, judged.failures()
     moving = np.where(t < 1.0, 39.0 * (1.0 - t), 0.5)
     assert not verdict.judge(t, {"w": moving}, t, {"w": reference}, transient=1.5).passed
+
+
+def test_tolerances_of_the_verdict_are_refused_with_the_cross_check_band(kavz):
+    t, signals, _ = kavz
+    with pytest.raises(api.InputError, match="--rtol and --signals set the 'lever' verdict"):
+        api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4),
+                     tolerance="cross-check", rtol=["amplitude=0.1"])
