@@ -392,8 +392,7 @@ def power(frame: _Frame, judged, t_all: np.ndarray, y_all: np.ndarray, t_grid: n
           rotation: float | None) -> Power:
     """The smallest shift of the mean, scaling of the ripple and shift in time of the
     reference (``y_all(t_all)``, put on the result's grid ``t_grid``) that the checks
-    ``judged(t, values)`` fail:
-    what a pass of this signal rules out.  Either sign counts (the larger of the two is
+    ``judged(t, values)`` fail: what a pass of this signal rules out.  Either sign counts (the larger of the two is
     stated, so a change beyond it fails whichever its sign)."""
     base = np.interp(t_grid, t_all, y_all)
     perturbed = {"mean": lambda d: base + d,
@@ -414,8 +413,8 @@ def power(frame: _Frame, judged, t_all: np.ndarray, y_all: np.ndarray, t_grid: n
             by[kind] = sorted(set(failing(kind, found[kind])) | set(failing(kind, -found[kind])))
     shift = found["shift"]
     phase = None if (shift is None or not rotation) else math.degrees(rotation * shift)
-    return Power(rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude), found["mean"], found["amplitude"], shift,
-                 phase, by)
+    band = rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude)
+    return Power(band, found["mean"], found["amplitude"], shift, phase, by)
 
 
 def _rotation(reference: dict, t: np.ndarray, keep: np.ndarray, rotation_signal: str | None) -> tuple[float | None, str]:
@@ -452,7 +451,7 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
     start, stop = (float(t_ref[0]), float(t_ref[-1])) if window is None else map(float, window)
     steady_start = start if transient is None else min(max(start, float(transient)), stop)
     verdict.span, verdict.whole_span = (start, stop), (float(t_ref[0]), float(t_ref[-1]))
-    mapping, missing = match_columns(list(reference), [str(c) for c in traces])
+    mapping, _ = match_columns(list(reference), [str(c) for c in traces])
     if signals:
         unknown = [s for s in signals if s not in reference]
         if unknown:
@@ -468,6 +467,9 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
                              f"{', '.join(map(str, traces)) or 'none'} (a scene's signals are component.variable)")
     verdict.not_judged = [s for s in reference if s not in mapping]
     verdict.chosen = bool(signals)
+    extra = sorted(set(map(str, traces)) - set(match_columns(list(reference), [str(c) for c in traces])[0].values()))
+    if extra:
+        verdict.notes.append("not in the reference (not compared): " + ", ".join(extra))
     unknown_targets = rtol.unknown_targets(list(reference))
     if unknown_targets:
         raise ValueError(f"tolerance for {', '.join(unknown_targets)}: neither a signal of the reference nor a kind "
