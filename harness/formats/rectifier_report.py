@@ -8,15 +8,15 @@ import math
 from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
-from harness.formats.run_files import (files_line, identity_lines, reference_error_lines, report_heading, run_identity,
-                                       run_title, save_figure, write_run)
+from harness.formats.run_files import (description_of, files_line, identity_lines, reference_error_lines,
+                                       report_heading, run_identity, run_title, save_figure, write_run)
 from harness.judges.rectifier import analyse, errors
 
 
 def summarize(result, reference=None) -> dict:
     scene = result.scene
     summary = {
-        "scene": scene.name, "description": scene.description, "master": result.master, "step_s": result.step,
+        "scene": scene.name, "description": description_of(scene), "master": result.master, "step_s": result.step,
         "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient, "ok": result.ok,
         "failure": result.failure, "diagnosis": result.diagnosis, "wall_time_s": result.wall_time,
         "counters": result.counters,

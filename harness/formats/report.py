@@ -12,7 +12,8 @@ from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
-from harness.formats.run_files import files_line, identity_lines, report_heading, run_identity, run_title, fmt, reference_error_lines, save_figure, write_run
+from harness.formats.run_files import (description_of, files_line, fmt, identity_lines, reference_error_lines,
+                                       report_heading, run_identity, run_title, save_figure, write_run)
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -20,7 +21,7 @@ def summarize(result: RunResult, reference=None) -> dict:
     names = metrics.signals(result.scene)
     summary = {
         "scene": scene.name,
-        "description": scene.description,
+        "description": description_of(scene),
         "master": result.master,
         "step_s": result.step,
         "stop_s": scene.experiment.stop,

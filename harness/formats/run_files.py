@@ -229,3 +229,13 @@ def report_heading(summary: dict) -> list[str]:
     return [f"# {summary['scene']} with " + ", ".join(f"{k} = {overrides[k]}" for k in changed), "",
             "(The scene file's description is of its own values, not this run's: see "
             "[What this run ran](#what-this-run-ran).)", ""]
+
+
+def description_of(scene) -> str:
+    """The scene's description for a run's summary: the scene file's, unless the run changed a
+    component's parameter with ``--set`` - the description quotes the scene's own values."""
+    changed = [k for k in scene.overrides if k.split(".", 1)[0] in scene.components]
+    if not changed:
+        return scene.description
+    return (f"{scene.name} with " + ", ".join(f"{k} = {scene.overrides[k]}" for k in changed)
+            + " (the scene file's description is of its own values, not shown)")

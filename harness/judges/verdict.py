@@ -345,9 +345,10 @@ def _checks(frame: _Frame, t_res: np.ndarray, y_res: np.ndarray, rtol: dict) -> 
             phase = math.degrees(np.angle(got / ref)) if got != 0 else math.nan
             checks.append(Check(f"order {k}", abs(ref), abs(got), d, allowed, d <= allowed,
                                 f"amplitude {_percent(abs(got) / abs(ref) - 1)}, phase {phase:+.2g} deg: off by "
-                                f"{100 * d / abs(ref):.3g} % of the component (allowed {100 * rtol['order'][0]:.3g} %)"))
-    checks.append(_tube("tube", frame.t, frame.y, t_res, y_res, rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude),
-                        rtol["tube"][0]))
+                                f"{100 * d / abs(ref):.3g} % of the component "
+                                f"(allowed {100 * rtol['order'][0]:.3g} %)"))
+    width = rtol["tube"][0] * _allowed_scale(frame.span, frame.mean, magnitude=frame.magnitude)
+    checks.append(_tube("tube", frame.t, frame.y, t_res, y_res, width, rtol["tube"][0]))
     return checks
 
 
@@ -417,7 +418,8 @@ def power(frame: _Frame, judged, t_all: np.ndarray, y_all: np.ndarray, t_grid: n
     return Power(band, found["mean"], found["amplitude"], shift, phase, by)
 
 
-def _rotation(reference: dict, t: np.ndarray, keep: np.ndarray, rotation_signal: str | None) -> tuple[float | None, str]:
+def _rotation(reference: dict, t: np.ndarray, keep: np.ndarray,
+              rotation_signal: str | None) -> tuple[float | None, str]:
     """The driven shaft's mean speed over the window and a sentence on the orders (why none)."""
     if not rotation_signal or rotation_signal not in reference:
         return None, "no rotation orders (no shaft speed in the reference)"
@@ -486,8 +488,8 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
     early = (t_ref >= start - slack) & (t_ref < steady_start - slack)
     steady = np.count_nonzero(keep) >= 2
     if not steady and np.count_nonzero(early) < 2:
-        verdict.problems.append(f"the window t = {start:g} ... {stop:g} s holds {np.count_nonzero(keep | early)} of the "
-                                "reference's samples; at least two are needed")
+        verdict.problems.append(f"the window t = {start:g} ... {stop:g} s holds {np.count_nonzero(keep | early)} "
+                                "of the reference's samples; at least two are needed")
         return verdict
     if steady:
         verdict.window = (steady_start, stop)
@@ -507,7 +509,8 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
     high = min(int(np.searchsorted(t, stop + slack, "right")) + 1, len(t))
     t_res = t[low:high]
     judged_from = float(t_ref[keep][0])
-    grid = t_res[(t_res >= judged_from - slack - _step_at(t, judged_from)) & (t_res <= stop + slack + _step_at(t, stop))]
+    grid = t_res[(t_res >= judged_from - slack - _step_at(t, judged_from))
+                 & (t_res <= stop + slack + _step_at(t, stop))]
     for signal, column in mapping.items():
         y_all = np.asarray(reference[signal], dtype=float)
         y_res = np.asarray(traces[column], dtype=float)
@@ -607,7 +610,8 @@ def settings_of(reference) -> ReferenceSettings:
         spec = scene.components.get(component)
         description = descriptions.get(spec.fmu) if spec else None
         var = next((v for v in description.modelVariables if v.name == variable), None) if description else None
-        kinds[signal] = kind_of_unit((var.unit or (var.declaredType.unit if var.declaredType else None)) if var else None)
+        unit = (var.unit or (var.declaredType.unit if var.declaredType else None)) if var else None
+        kinds[signal] = kind_of_unit(unit)
     load = scene_kinds.roles(scene)[2]
     rotation = f"{load}.w" if load and f"{load}.w" in signals else None
     try:

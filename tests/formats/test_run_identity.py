@@ -53,3 +53,9 @@ def test_validate_says_a_result_was_made_with_other_values_than_its_reference(le
     lone.write_text((misaligned / "traces.csv").read_text())
     outcome = lever("validate", "--result", str(lone), "kavz685", "--window", "0:0.3", "--out", str(tmp_path / "v"))
     assert "what the result was made with is not known" in outcome.output
+
+
+def test_the_summary_never_quotes_the_scene_files_description_of_a_changed_run(misaligned):
+    summary = json.loads((misaligned / "summary.json").read_text())
+    assert "15 deg" not in json.dumps(summary)
+    assert summary["description"].startswith("kavz685 with coupling.misalignment = 20 deg")
