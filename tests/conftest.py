@@ -59,6 +59,7 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "judges/test_verdict.py::test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives",
     "formats/test_run_identity.py",
     "judges/test_verdict.py::test_verdict_json_is_standard_and_carries_the_power",
     "judges/test_verdict.py::test_a_result_with_some_signals_is_judged_on_those_and_lists_the_rest",

@@ -173,3 +173,22 @@ def test_tolerances_of_the_verdict_are_refused_with_the_cross_check_band(kavz):
     with pytest.raises(api.InputError, match="--rtol and --signals set the 'lever' verdict"):
         api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4),
                      tolerance="cross-check", rtol=["amplitude=0.1"])
+
+
+@pytest.mark.parametrize("change, failed", [
+    ({"coupling.misalignment": "20 deg"}, "coupling.tau2: amplitude"),
+    ({"coupling.damping": 7.62}, "coupling.tau2: amplitude"),
+    ({}, None),
+])
+def test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives(lever, fmu_dir, tmp_path, change, failed):
+    """The issue's runs, shortened to 3 s (the steady window t = 2 ... 3 s holds 5.8
+    revolutions): misalignment 20 deg and damping +20 % fail naming tau2's amplitude, the
+    scene as it is passes."""
+    run = api.run("kavz685", change, stop=3.0, reference=False, notify=lambda *_: None)
+    path = tmp_path / "five.csv"
+    reference_traces.write_csv(path, reference_traces.Traces(run.times, {f: run.traces[f] for f in FIVE}))
+    outcome = lever("validate", "--result", str(path), "kavz685", "--window", "0:3", "--out", str(tmp_path / "v"))
+    if failed:
+        assert outcome.exit_code == 1 and failed in outcome.output.splitlines()[-1], outcome.output
+    else:
+        assert outcome.exit_code == 0, outcome.output
