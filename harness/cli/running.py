@@ -172,15 +172,17 @@ def reference(names, update):
               help="Output folder (default results/validate/<NAME>).")
 def validate(names, assignments, master, step, result_csv, tolerance, rtol, signals, window, measured, out):
     """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
-    or a scene, with its master) and compare every recorded output with its committed
-    reference trace: RMS and max error, fraction of samples outside the tolerance band,
-    pass/fail per signal; a plot per failing signal.  NAMES default: every reference.
+    or a scene, with its master), or take --result, and judge each signal the result has
+    against its committed reference trace: over the window after the start-up transient,
+    its mean, ripple amplitude, leading rotation orders and a tube, each against a relative
+    tolerance (--rtol); beside each verdict the smallest change it catches, and one line on
+    what it cannot see; a plot per failing signal.  NAMES default: every reference.
     A NAME may be an FMU file (FMI 2.0 or 3.0, e.g. build/fmus3/EngineShaft.fmu): run
     stand-alone as its model's name is, judged by that model's reference (results in
     results/validate/<Model>-fmi<version>).
 
-    Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
-    2 on bad input."""
+    Exit code: 0 only when every judged signal of every NAME passes; 1 when one fails;
+    2 on bad input (a result with none of the reference's signals among it)."""
     if measured:
         print_measured([Path(n) for n in names], out or RESULTS / "validate" / "measured")
         return
