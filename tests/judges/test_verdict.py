@@ -192,3 +192,22 @@ def test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives(lever, 
         assert outcome.exit_code == 1 and failed in outcome.output.splitlines()[-1], outcome.output
     else:
         assert outcome.exit_code == 0, outcome.output
+
+
+def test_a_scenes_validation_table_sets_its_tolerances_and_a_bad_one_is_refused(kavz, monkeypatch):
+    from dataclasses import replace
+
+    from harness.description import scene as scenes
+
+    t, signals, ref = kavz
+    real = scenes.load
+    table = {"torque": {"amplitude": 0.1}}
+    monkeypatch.setattr(scenes, "load", lambda name: replace(real(name), validation=table))
+    settings = verdict.settings_of(ref)
+    assert settings.transient == 2.0 and settings.rotation_signal == "load.w"
+    assert settings.kinds["coupling.tau2"] == "torque" and settings.kinds["load.w"] == "speed"
+    judged = api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4))
+    assert judged.findings.signals[0].rtol["amplitude"] == (0.1, "scene file (kavz685.toml)")
+    table["torque"] = {"ripple": 0.1}
+    with pytest.raises(api.InputError, match=r"scene kavz685: \[validation\] tolerance torque:ripple: no such quantity"):
+        api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4))
