@@ -444,6 +444,11 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     return done
 
 
+#: ``lever validate --tolerance``: the engineer's verdict (harness.judges.verdict) or fmpy's
+#: cross-check band (harness.judges.validation)
+VERDICTS = ("lever", "cross-check")
+
+
 @_dataclass(repr=False)
 class Validation:
     """The verdict on one NAME (``lever validate NAME``): per signal (``findings.signals``),
@@ -583,7 +588,7 @@ def fmu_file_model(path: Path) -> tuple[str, str]:
 def validate(name: str, *, overrides=None, master: str | None = None, step: float | str | None = None,
              result=None, tolerance: str = "lever",
              window: tuple[float | str | None, float | str | None] | str | None = None,
-             out: Path | str | None = None) -> Validation:
+             out: Path | str | None = None, rtol=None, signals=None) -> Validation:
     """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
     ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
@@ -600,7 +605,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
-    from harness.judges import validation
+    from harness.judges import validation, verdict
 
     if not isinstance(name, (str, _os.PathLike)):
         raise InputError(f"name={name!r}: expected a reference's name (a scene or an FMU, e.g. 'kavz685' or "
@@ -611,7 +616,14 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     if name not in known:
         raise InputError(reference_traces.why_no_reference(name)
                          or f"no reference '{name}'{scene_files.did_you_mean(name, known)} (known: {', '.join(known)})")
-    _inputs.choice(tolerance, "tolerance", validation.TOLERANCES)
+    _inputs.choice(tolerance, "tolerance", VERDICTS)
+    if tolerance != "lever" and (_assignments(rtol) or _assignments(signals)):
+        raise InputError(f"--rtol and --signals set the 'lever' verdict; --tolerance {tolerance} is fmpy's band, "
+                         "which has its own figures and judges every signal")
+    try:
+        rules = verdict.parse_rtol(_assignments(rtol), "--rtol")
+    except ValueError as error:
+        raise InputError(str(error)) from None
     step = _step(step)
     out = _inputs.folder(out)
     window = _window(window)
@@ -654,9 +666,22 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
                              f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
-    findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
-                                              ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
-                                              (ref.opt.start, ref.opt.stop))
+    if tolerance == "lever":
+        try:
+            settings = verdict.settings_of(ref)
+            findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
+                                     window=(start, stop), transient=settings.transient,
+                                     rtol=verdict.Tolerances([settings.rules, rules]), signals=_assignments(signals),
+                                     kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label)
+        except ValueError as error:
+            raise InputError(str(error)) from None
+        bands = {}
+        findings.notes += reference_traces.provenance_notes(
+            ref, given if isinstance(given, Path) else None if result is not None else result, overrides, master, step)
+    else:
+        findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
+                                                  ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
+                                                  (ref.opt.start, ref.opt.stop))
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
@@ -682,7 +707,7 @@ def reference_names(names: Iterable[str] = ()) -> list[str]:
 
 def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
                   result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
-                  out: Path | str | None = None) -> Iterator[Validation]:
+                  out: Path | str | None = None, rtol=None, signals=None) -> Iterator[Validation]:
     """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
     ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
     and the FMUs built before the first."""
@@ -703,7 +728,7 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
             folder = f"{model}-fmi{version.split('.')[0]}"
         target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_assignments(overrides), master=master, step=step, result=result,
-                       tolerance=tolerance, window=span, out=target)
+                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals)
 
 
 @_dataclass

@@ -163,8 +163,18 @@ def reference(names, update):
                    "columns named like the reference's signals (component.variable for a scene, the FMU's "
                    "variable names for an FMU; 'anything.variable' also matches an FMU's variable).")
 @click.option("--tolerance", type=click.Choice(["lever", "cross-check"]), default="lever", show_default=True,
-              help="The band's figures: 'lever' (1 % of each signal's range, one result step, at most 1 % of the "
-                   "samples outside) or the FMI cross-check's (10 %, 2 % of the span, at most 10 % outside).")
+              help="The verdict: 'lever' (per signal over the window after the start-up transient: mean, ripple "
+                   "amplitude, leading rotation orders and a tube, each against a tolerance relative to it, with "
+                   "the verdict's power; docs/validation.md) or the FMI cross-check's band (fmpy's: 10 % of the "
+                   "range, 2 % of the span, at most 10 % outside).")
+@click.option("--rtol", multiple=True, metavar="[SIGNAL|KIND:]QUANTITY=VALUE",
+              help="A relative tolerance of the 'lever' verdict (repeatable): QUANTITY mean, amplitude, order or "
+                   "tube, for every signal, a kind (speed, torque, acceleration, angle, ...) or one signal, e.g. "
+                   "amplitude=0.05, torque:mean=0.002, coupling.tau2:order=0.1.  Defaults: mean 0.001, amplitude "
+                   "0.02, order 0.05, tube 0.05; a scene's [validation] table sets its own.")
+@click.option("--signals", default=None, metavar="NAME,NAME...",
+              help="Judge only these of the reference's signals (default: every one the result has; those it "
+                   "lacks are listed as not judged).")
 @click.option("--measured", is_flag=True,
               help="Model vs measurement instead (lever validate --measured GRADE_FILES...): NAMES are "
                    "measurement files (drive and driven torque tables of a rubber grade), handed with --out to "
@@ -174,17 +184,19 @@ def reference(names, update):
                    "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")
-def validate(names, assignments, master, step, result_csv, tolerance, window, measured, out):
+def validate(names, assignments, master, step, result_csv, tolerance, rtol, signals, window, measured, out):
     """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
-    or a scene, with its master) and compare every recorded output with its committed
-    reference trace: RMS and max error, fraction of samples outside the tolerance band,
-    pass/fail per signal; a plot per failing signal.  NAMES default: every reference.
+    or a scene, with its master), or take --result, and judge each signal the result has
+    against its committed reference trace: over the window after the start-up transient,
+    its mean, ripple amplitude, leading rotation orders and a tube, each against a relative
+    tolerance (--rtol); beside each verdict the smallest change it catches, and one line on
+    what it cannot see; a plot per failing signal.  NAMES default: every reference.
     A NAME may be an FMU file (FMI 2.0 or 3.0, e.g. build/fmus3/EngineShaft.fmu): run
     stand-alone as its model's name is, judged by that model's reference (results in
     results/validate/<Model>-fmi<version>).
 
-    Exit code: 0 only when every signal of every NAME passes; 1 when one fails;
-    2 on bad input."""
+    Exit code: 0 only when every judged signal of every NAME passes; 1 when one fails;
+    2 on bad input (a result with none of the reference's signals among it)."""
     if measured:
         print_measured([Path(n) for n in names], out or RESULTS / "validate" / "measured")
         return
@@ -192,12 +204,47 @@ def validate(names, assignments, master, step, result_csv, tolerance, window, me
     try:
         with user_errors():
             for verdict in api.validate_each(names, overrides=list(assignments), master=master, step=step,
-                                             result=result_csv, tolerance=tolerance, window=window, out=out):
-                _print_validation(verdict.name, verdict.findings, verdict.result, verdict.out)
+                                             result=result_csv, tolerance=tolerance, window=window, out=out,
+                                             rtol=list(rtol),
+                                             signals=[x.strip() for x in signals.split(",") if x.strip()]
+                                             if signals else None):
+                if hasattr(verdict.findings, "blind_spots"):
+                    _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out)
+                else:
+                    _print_validation(verdict.name, verdict.findings, verdict.result, verdict.out)
                 all_passed &= verdict.passed
     except api.BuildError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     sys.exit(0 if all_passed else 1)
+
+
+def _print_verdict(name, verdict, result, out: Path):
+    """The engineer's verdict: per signal its verdict, the checks that failed, and its power;
+    the window, what the verdict cannot see, the signals not judged."""
+    click.echo(f"{name}: {result.how}")
+    if verdict.window:
+        click.echo(f"  judged: t = {verdict.window[0]:g} ... {verdict.window[1]:g} s (mean, ripple amplitude, "
+                   "rotation orders, tube)" + (f"; the start-up t = {verdict.transient[0]:g} ... "
+                                               f"{verdict.transient[1]:g} s by its own tube" if verdict.transient else ""))
+    for s in verdict.signals:
+        tolerances = ", ".join(f"{q} {v:g}" + ("" if src == "default" else f" ({src})") for q, (v, src) in s.rtol.items())
+        click.echo(f"  {s.name:22s} {'pass' if s.passed else 'FAIL'}  rtol {tolerances}")
+        for check in s.failed:
+            click.echo(f"    FAIL {check.quantity}: {check.detail}")
+        if s.power is not None:
+            click.echo(f"    {'pass' if s.passed else 'power'}: {s.power.describe()}")
+    if verdict.not_judged:
+        click.echo(f"  not judged (not in the result{' or not chosen' if verdict.chosen else ''}): "
+                   f"{', '.join(verdict.not_judged)}")
+    for problem in verdict.problems:
+        click.echo(f"  problem: {problem}")
+    for note in verdict.notes:
+        click.echo(f"  note: {note}")
+    if verdict.blind_spots:
+        click.echo(f"  {verdict.blind_spots}")
+    failed = "; ".join(f"{s.name}: {', '.join(c.quantity for c in s.failed)}" for s in verdict.signals if not s.passed)
+    summary = "PASS" if verdict.passed else "FAIL" + (f" ({failed})" if failed else "")
+    click.echo(f"  {name}: {summary} over {verdict.describe_span()}; written to {out}/")
 
 
 def _print_validation(name, findings, result, out: Path):

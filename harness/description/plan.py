@@ -192,3 +192,54 @@ def _driveline(scene: scenes.Scene) -> DrivelinePlan:
 
     return DrivelinePlan(names, _build(lambda: scene_kinds.physics(scene)), _build(start),
                          driver, _build(misalignment))
+
+
+#: where a run's parameter value came from (``parameter_record``)
+FROM_SET, FROM_SCENE, FROM_DEFAULT = "--set", "scene file", "default"
+
+
+def _shown(value) -> str:
+    """A parameter's value as a report shows it: a number as written, a quantity with its
+    unit ("20 deg"), a table (a Fourier series, measured samples) by what it is."""
+    if isinstance(value, dict):
+        return "table (" + ", ".join(sorted(value)) + ")"
+    if isinstance(value, float):
+        return f"{value:.9g}"
+    return str(value)
+
+
+def parameter_record(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, dict]:
+    """Every parameter a run of ``scene`` sets or leaves to its FMU, by ``component.name``:
+    its ``value`` (as given, with its unit), and where it came from (``source``: ``--set``,
+    the scene file, or the FMU's default, its start value in the model description), and
+    the experiment's fields the run changed with ``--set`` (``experiment.stop``, ...)."""
+    record = {}
+    descriptions = descriptions_for(scene, fmu_dir)
+    for name, spec in scene.components.items():
+        description = descriptions.get(spec.fmu)
+        parameters = [v for v in description.modelVariables if v.causality == "parameter"] if description else []
+        for var in parameters:
+            key = f"{name}.{var.name}"
+            unit = var.unit or (var.declaredType.unit if var.declaredType else None)
+            if var.name in spec.parameters:
+                source = FROM_SET if key in scene.overrides else FROM_SCENE
+                value = spec.parameters[var.name]
+                shown = _shown(value) + (f" {unit}" if unit and isinstance(value, (int, float))
+                                         and not isinstance(value, bool) else "")
+                record[key] = {"value": shown, "source": source}
+            else:
+                record[key] = {"value": f"{var.start}{' ' + unit if unit and var.start is not None else ''}",
+                               "source": FROM_DEFAULT}
+        for param, value in spec.parameters.items():        # a value the description does not list
+            record.setdefault(f"{name}.{param}", {"value": _shown(value),
+                                                   "source": FROM_SET if f"{name}.{param}" in scene.overrides
+                                                   else FROM_SCENE})
+    for key, raw in scene.overrides.items():
+        if not key.split(".", 1)[0] in scene.components:
+            record[key] = {"value": raw, "source": FROM_SET}
+    return record
+
+
+def overridden(record: dict) -> dict[str, str]:
+    """The ``--set`` values of a ``parameter_record``: name -> value."""
+    return {k: v["value"] for k, v in record.items() if v["source"] == FROM_SET}

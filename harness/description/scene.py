@@ -121,6 +121,12 @@ class Scene:
     #: overrides of the divergence guard's physical bounds (``[limits]``: speed, torque,
     #: margin; see harness.engine.guard)
     limits: dict = field(default_factory=dict)
+    #: ``lever validate``'s tolerances for this scene's reference (``[validation]``: quantity =
+    #: relative tolerance, sub-tables by kind or signal; see harness.judges.verdict)
+    validation: dict = field(default_factory=dict)
+    #: the ``--set`` assignments applied (``with_overrides``): name -> the value as given;
+    #: where the values came from, not what the scene is (equal scenes compare equal)
+    overrides: dict = field(default_factory=dict, compare=False)
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
@@ -132,17 +138,20 @@ class Scene:
         components = {n: ComponentSpec(c.fmu, dict(c.parameters)) for n, c in self.components.items()}
         experiment = replace(self.experiment)
         limits = dict(self.limits)
+        overrides = dict(self.overrides)
         for assignment in assignments:
             if "=" not in assignment:
                 raise SceneError(f"--set {assignment!r}: expected name=value")
             key, raw = (s.strip() for s in assignment.split("=", 1))
             value = coerce(raw)
             if key.startswith("limits."):
+                overrides[key] = raw
                 limits[key.split(".", 1)[1]] = value
                 continue
             if key.startswith("experiment."):
                 attr = key.split(".", 1)[1]
                 setattr(experiment, attr, experiment_value(attr, value, f"--set {key}"))
+                overrides[key] = raw
                 continue
             if "." in key:
                 comp, param = key.split(".", 1)
@@ -150,12 +159,14 @@ class Scene:
                     raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name}"
                                      f"{did_you_mean(comp, components)} (components: {', '.join(components)})")
                 components[comp].parameters[param] = value
+                overrides[key] = raw
             else:
                 components_with = [n for n, c in components.items() if key in c.parameters]
                 if len(components_with) != 1:
                     raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
                                      f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
                 components[components_with[0]].parameters[key] = value
+                overrides[f"{components_with[0]}.{key}"] = raw
         transient_set = any(a.split("=", 1)[0].strip() == "experiment.transient" for a in assignments)
         if self.experiment.transient_follows_length and not transient_set:
             experiment.transient = default_transient(experiment.start, experiment.stop)
@@ -165,7 +176,7 @@ class Scene:
             if (experiment.start, experiment.stop) == (self.experiment.start, self.experiment.stop):
                 experiment.transient_note = self.experiment.transient_note
             _fit_transient(self.experiment, experiment)
-        return replace(self, components=components, experiment=experiment, limits=limits)
+        return replace(self, components=components, experiment=experiment, limits=limits, overrides=overrides)
 
 
 def _fit_transient(scene: Experiment, run: Experiment):
@@ -303,7 +314,7 @@ OWN = ("name", "description", "extends")
 #: tables a variant merges key by key into its base's (components: each one's ``fmu`` and
 #: ``parameters``); any other table or value a variant states replaces its base's whole
 #: (an empty ``[bench]`` says: no benchmark plan)
-MERGED = ("experiment", "limits")
+MERGED = ("experiment", "limits", "validation")
 
 
 def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
@@ -381,7 +392,7 @@ def load(name_or_path: str | Path) -> Scene:
                  components=components, connections=connections, experiment=experiment,
                  record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
                  notes=data.get("notes", ""), bench=dict(data.get("bench", {})),
-                 limits=dict(data.get("limits", {})))
+                 limits=dict(data.get("limits", {})), validation=dict(data.get("validation", {})))
 
 
 #: the shape of a scene file: key -> (what it must be, in words; test)
@@ -397,6 +408,8 @@ _SHAPE = {
     "experiment": ("a table", lambda v: isinstance(v, dict)),
     "limits": ("a table", lambda v: isinstance(v, dict)),
     "bench": ("a table", lambda v: isinstance(v, dict)),
+    "validation": ("a table of relative tolerances (mean, amplitude, order, tube), sub-tables by kind or signal",
+                   lambda v: isinstance(v, dict)),
     "components": ("a table of components, each a table with fmu = \"<FMU name>\" and a [parameters] table",
                    lambda v: isinstance(v, dict) and all(
                        isinstance(c, dict) and isinstance(c.get("fmu", ""), str)

@@ -45,6 +45,8 @@ class RunResult:
     #: inputs no connection drives and the scene gives no value (``Plan.unconnected``):
     #: held at their start values; named in the run's output and report
     unconnected_inputs: list[str] = field(default_factory=list)
+    #: the master's options in effect (its defaults filled in: a tolerance, iterations, ...)
+    options: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -250,8 +252,11 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
         system.free()
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
+    in_effect = {key: getattr(driver, key, default) if driver else options.get(key, default)
+                 for key, default in master_family.master_class(master).options.items()}
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected))
+                     [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected),
+                     in_effect)
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:

@@ -10,18 +10,20 @@ import numpy as np
 from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
-from harness.formats.run_files import files_line, reference_error_lines, save_figure, write_run
+from harness.formats.run_files import (description_of, files_line, identity_lines, reference_error_lines,
+                                       report_heading, run_identity, run_title, save_figure, write_run)
 from harness.judges.rectifier import analyse, errors
 
 
 def summarize(result, reference=None) -> dict:
     scene = result.scene
     summary = {
-        "scene": scene.name, "description": scene.description, "master": result.master, "step_s": result.step,
+        "scene": scene.name, "description": description_of(scene), "master": result.master, "step_s": result.step,
         "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient, "ok": result.ok,
         "failure": result.failure, "diagnosis": result.diagnosis, "wall_time_s": result.wall_time,
         "counters": result.counters,
     }
+    summary.update(run_identity(result))
     if result.unconnected_inputs:
         summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
                                          "note": scenes.unconnected_message(result.unconnected_inputs)}
@@ -45,7 +47,7 @@ def _f(x, digits=4):
 
 
 def write_report(path, summary: dict):
-    lines = [f"# {summary['scene']}: {summary['description']}", "",
+    lines = report_heading(summary) + [
              f"Master **{summary['master']}**, communication step {summary['step_s']:g} s, 0 ... {summary['stop_s']:g} s; "
              f"wall time {summary['wall_time_s']:.2f} s.  One FMU (`FreewheelRectifier`) holds the whole chain "
              "(docs/decisions.md: why one FMU)."]
@@ -97,6 +99,8 @@ def write_report(path, summary: dict):
         lines += ["", "## Kinematics beside the source's description", ""] + _comparison(fw)
     lines += reference_error_lines(summary, "Against the monolithic reference",
                                    "speeds relative to the rocker's peak speed, torques to the reference's peak torque")
+    if "parameters" in summary:
+        lines += identity_lines(summary)
     lines += ["", files_line(summary) + (" (kinematics.png: elements 1-4, as the paper's Figs. 8-11)"
                                          if "kinematics.png" in summary.get("files", []) else "")]
     path.write_text("\n".join(lines) + "\n")
@@ -181,7 +185,8 @@ def plot(out, result, reference=None):
     name = scene_kinds.rectifier(scene)
     t = result.times
     tr = {k.split(".", 1)[1]: v for k, v in result.traces.items() if k.startswith(name + ".")}
-    title = f"{scene.name} - {result.master}, h = {result.step:g} s"
+    title = run_title({"scene": scene.name, "master": result.master, "step_s": result.step,
+                       "overrides": scene.overrides})
     elements = (("rocker", "1 rocker"), ("half_coupling", "2 half-couplings"), ("driven", "3 driven parts"),
                 ("torsion_end", "4 torsion output end"))
 

@@ -554,6 +554,47 @@ def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None
     return Result(run.times, {n: run.traces[n] for n in scene.record}, how, run.failure)
 
 
+# -- what a result was made with, against what its reference was made with ------------------
+
+def provenance_notes(reference: ReferenceTraces, result, overrides, master: str | None, step: float | None) -> list[str]:
+    """Sentences saying when the judged result was made with other values than its
+    reference (a scene's reference is made at the scene file's values, by the monolithic
+    solver): a run ``lever validate`` made with ``--set``, or a ``--result`` CSV with a
+    lever run's summary.json beside it (what it ran); a CSV without one is said to be of
+    unknown making."""
+    import json
+
+    from harness.description import plan
+
+    if reference.kind != "scene":
+        changed = {k: v for k, v in (a.split("=", 1) for a in overrides or () if "=" in a)}
+        return ([f"the run under test was made with other values than its reference (the FMU's defaults and the "
+                 f"reference's inputs): {', '.join(f'{k} = {v.strip()}' for k, v in changed.items())} (--set)"]
+                if changed else [])
+    made = plan.parameter_record(scenes.load(reference.name))
+    if isinstance(result, (str, Path)):
+        summary_path = Path(result).parent / "summary.json"
+        try:
+            summary = json.loads(summary_path.read_text())
+            used = summary["parameters"]
+        except (OSError, ValueError, KeyError, TypeError):
+            return [f"what the result was made with is not known (no lever summary.json with its parameters beside "
+                    f"{Path(result).name}): it is judged as traces only"]
+        said = f"{summary_path} (master {summary.get('master')}, step {summary.get('step_s')} s, lever " \
+               f"{summary.get('lever_version')})"
+    elif result is None and overrides:
+        used = plan.parameter_record(scenes.load(reference.name).with_overrides(list(overrides)))
+        said = "this run (--set)"
+    else:
+        return []
+    differ = [f"{k} = {v['value']} ({v['source']}; the reference: {made[k]['value'] if k in made else 'not set'})"
+              for k, v in used.items() if not k.startswith("experiment.")
+              and (k not in made or v["value"] != made[k]["value"])]
+    if not differ:
+        return [f"the result was made with its reference's parameter values ({said})"]
+    return [f"the result was made with other values than its reference ({said}): " + "; ".join(differ)]
+
+
 # -- writing a validation's results -----------------------------------------------------------
 
 def write_validation(out: Path, findings, bands: dict, result: Result, reference: ReferenceTraces,
@@ -565,6 +606,8 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob("*.png"):
         stale.unlink()
+    if hasattr(findings, "blind_spots"):           # the engineer's verdict (harness.judges.verdict)
+        return write_verdict(out, findings, result, reference, write_result)
     written = []
     if write_result and len(result.times):
         path = out / f"{reference.name}_out.csv"
@@ -581,6 +624,67 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
             if not signal.passed:
                 written.append(plot_signal(out, reference, result, signal, bands[signal.name], findings.tolerance))
     return written
+
+
+def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces, write_result: bool = True) -> list[Path]:
+    """``write_validation`` for the engineer's verdict: ``validation.json`` (every check, the
+    tolerances and their sources, the power), the result, and a plot per failing signal."""
+    import json
+
+    written = []
+    if write_result and len(result.times):
+        path = out / f"{reference.name}_out.csv"
+        write_csv(path, Traces(result.times, {n: result.traces[n] for n in reference.outputs.signals
+                                             if n in result.traces}))
+        written.append(path)
+    summary = verdict.to_dict()
+    summary["run"] = {"how": result.how, "failure": result.failure}
+    path = out / "validation.json"
+    path.write_text(json.dumps(summary, indent=2, default=float))
+    written.append(path)
+    if len(result.times):
+        written += [plot_verdict_signal(out, reference, result, s, verdict) for s in verdict.signals if not s.passed]
+    return written
+
+
+def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, signal, verdict) -> Path:
+    """One failing signal: the reference, its tube over the judged window and the result over
+    the whole span above; the window's last revolutions (its last tenth without a shaft)
+    below, where a changed mean, ripple or phase shows."""
+    from harness.formats import plotting
+
+    plt = plotting.pyplot()
+    t_ref, y_ref = reference.outputs.times, np.asarray(reference.outputs.signals[signal.name], dtype=float)
+    t, y = result.times, np.asarray(result.traces[signal.column], dtype=float)
+    start, stop = verdict.window or verdict.transient       # the steady window, or a start-up-only span
+    inside = (t_ref >= start) & (t_ref <= stop)
+    width = signal.power.band if signal.power else 0.0
+    close = (2 * 2 * math.pi / verdict.rotation) if verdict.rotation else 0.1 * (stop - start)
+    fig, axes = plt.subplots(2, 1, figsize=(11, 7), layout="constrained")
+    for ax, (low, high) in zip(axes, ((t_ref[0], t_ref[-1]), (max(start, stop - close), stop))):
+        ax.fill_between(t_ref[inside], y_ref[inside] - width, y_ref[inside] + width, color="tab:green", alpha=0.25,
+                        lw=0, label=f"tube +-{width:.3g} (judged window)")
+        ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
+        ax.plot(t, y, color="tab:blue", lw=0.8, label="result")
+        ax.set_xlim(low, high)
+        shown = np.concatenate([y_ref[(t_ref >= low) & (t_ref <= high)], y[(t >= low) & (t <= high)]])
+        shown = shown[np.isfinite(shown)]
+        if shown.size and shown.max() > shown.min():
+            pad = 0.05 * (shown.max() - shown.min())
+            ax.set_ylim(shown.min() - pad - width, shown.max() + pad + width)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(signal.name)
+        ax.grid(alpha=0.3)
+    plotting.legend_outside(axes[0])
+    failed = "; ".join(f"{c.quantity} {c.detail}" for c in signal.failed)
+    axes[0].set_title(f"{reference.name}: {signal.name} FAIL - {failed}", fontsize=8, wrap=True)
+    axes[1].set_title("the judged window's end" + (f"; a pass would have meant:\n{signal.power.describe()}"
+                                                   if signal.power else ""), fontsize=8)
+    fig.suptitle(f"result: {result.how}", fontsize=9)
+    path = out / f"{signal.name}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _finite_limits(*arrays) -> tuple[float, float] | None:

@@ -12,7 +12,8 @@ from harness.description import scene as scenes
 from harness.judges import metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
-from harness.formats.run_files import files_line, fmt, reference_error_lines, save_figure, write_run
+from harness.formats.run_files import (description_of, files_line, fmt, identity_lines, reference_error_lines,
+                                       report_heading, run_identity, run_title, save_figure, write_run)
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -20,7 +21,7 @@ def summarize(result: RunResult, reference=None) -> dict:
     names = metrics.signals(result.scene)
     summary = {
         "scene": scene.name,
-        "description": scene.description,
+        "description": description_of(scene),
         "master": result.master,
         "step_s": result.step,
         "stop_s": scene.experiment.stop,
@@ -33,6 +34,7 @@ def summarize(result: RunResult, reference=None) -> dict:
         "counters": result.counters,
         "python": platform.python_version(),
     }
+    summary.update(run_identity(result))
     if result.stream:
         summary["stream"] = result.stream
     if result.unconnected_inputs:
@@ -64,7 +66,7 @@ def summarize(result: RunResult, reference=None) -> dict:
 
 
 def write_report(path: Path, summary: dict):
-    lines = [f"# {summary['scene']}: {summary['description']}", ""]
+    lines = report_heading(summary)
     lines.append(f"Master **{summary['master']}**, communication step {summary['step_s']:g} s, "
                  f"0 ... {summary['stop_s']:g} s; wall time {summary['wall_time_s']:.2f} s "
                  f"({summary['counters'].get('fmu_calls', 0)} FMI calls).")
@@ -121,6 +123,8 @@ def write_report(path: Path, summary: dict):
                 cells = [f"{entry[k]['amplitude']:.3g} N*m at {entry[k]['frequency_rad_s']:.4g} rad/s"
                          if k in entry else "-" for k in ("rotation", "band")]
                 lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
+    if "parameters" in summary:
+        lines += identity_lines(summary)
     lines += ["", files_line(summary)]
     if "revolution.png" in (summary.get("files") or []):
         lines.append(f"revolution.png, revolutions.png and {U12_PLOT} are over the driven shaft's angle, as the "
@@ -185,7 +189,8 @@ def plot(out: Path, result: RunResult, reference=None):
     t = result.times
     tr = result.traces
     transient = result.scene.experiment.transient
-    title = f"{result.scene.name} - {result.master}, h = {result.step:g} s"
+    title = run_title({"scene": result.scene.name, "master": result.master, "step_s": result.step,
+                       "overrides": result.scene.overrides})
 
     # The drive side's torque is plotted as the torque it transmits, -tau1, so both curves share a sign.
     for filename, quantity, unit, a, b, sign in (("speeds.png", "speed", "rad/s", "w1", "w2", 1.0),

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.description import plan as plans
 from harness.engine.run import RunResult
+from harness.paths import FMUS
 from harness.engine import interrupt
 from harness.engine.traces import replaced as write_whole
 from harness.engine.traces import write as write_traces     # one writer: a streamed and a plain run write the same file
@@ -170,3 +172,70 @@ def fmt(x, digits=4):
     if isinstance(x, float) and (abs(x) >= 1e4 or (0 < abs(x) < 1e-3)):
         return f"{x:.{digits - 1}e}"
     return f"{x:.{digits}g}"
+
+
+def run_identity(result: RunResult) -> dict:
+    """What a run ran, for its summary.json, report and plots: every parameter with where its
+    value came from, the ``--set`` overrides, the master and its options in effect (the
+    tolerance of one that has one), the FMI edition and the project's version."""
+    scene = result.scene
+    record = plans.parameter_record(scene, scene.fmu_dir or FMUS)
+    return {"parameters": record, "overrides": plans.overridden(record),
+            "master_options": {k: v for k, v in (getattr(result, "options", None) or {}).items()},
+            "tolerance": (getattr(result, "options", None) or {}).get("tolerance"),
+            "fmi_edition": scene.experiment.fmi, "lever_version": _project_version()}
+
+
+def _project_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("lever-cosim")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def run_title(summary: dict) -> str:
+    """A plot's title: scene, master, step and, on a second line, the values the run changed
+    (``--set``), so that no plot of a changed run reads as the scene file's."""
+    changed = "; ".join(f"{k} = {v}" for k, v in (summary.get("overrides") or {}).items())
+    return (f"{summary['scene']} - {summary['master']}, h = {summary['step_s']:g} s"
+            + (f"\n--set {changed}" if changed else ""))
+
+
+def identity_lines(summary: dict) -> list[str]:
+    """The report's account of what the run ran: the overrides first, then every parameter
+    with its source (scene file, --set, the FMU's default)."""
+    options = ", ".join(f"{k} {v}" for k, v in (summary.get("master_options") or {}).items())
+    lines = ["", "## What this run ran", "",
+             f"lever {summary.get('lever_version')}, FMI {summary.get('fmi_edition')}.0 FMUs, master "
+             f"{summary['master']} ({options or 'no options'}), step {summary['step_s']:g} s.", ""]
+    overrides = summary.get("overrides") or {}
+    lines.append("Changed with --set: " + (", ".join(f"**{k} = {v}**" for k, v in overrides.items())
+                                           if overrides else "nothing (the scene file's values)") + ".")
+    lines += ["", "| parameter | value | from |", "|---|---|---|"]
+    for name, entry in (summary.get("parameters") or {}).items():
+        lines.append(f"| {name} | {entry['value'] or '(empty)'} | {entry['source']} |")
+    return lines
+
+
+def report_heading(summary: dict) -> list[str]:
+    """A report's title: the scene and its file's description, or, when the run changed a
+    parameter with ``--set``, the scene and the changed values (the description quotes the
+    scene file's own values, which this run did not use)."""
+    overrides = summary.get("overrides") or {}
+    changed = [k for k in overrides if not k.startswith("experiment.")]
+    if not changed:
+        return [f"# {summary['scene']}: {summary['description']}", ""]
+    return [f"# {summary['scene']} with " + ", ".join(f"{k} = {overrides[k]}" for k in changed), "",
+            "(The scene file's description is of its own values, not this run's: see "
+            "[What this run ran](#what-this-run-ran).)", ""]
+
+
+def description_of(scene) -> str:
+    """The scene's description for a run's summary: the scene file's, unless the run changed a
+    component's parameter with ``--set`` - the description quotes the scene's own values."""
+    changed = [k for k in scene.overrides if k.split(".", 1)[0] in scene.components]
+    if not changed:
+        return scene.description
+    return (f"{scene.name} with " + ", ".join(f"{k} = {scene.overrides[k]}" for k in changed)
+            + " (the scene file's description is of its own values, not shown)")

@@ -110,28 +110,44 @@ def errors(times: np.ndarray, traces: dict, reference_times: np.ndarray, referen
 OSCILLOGRAM_BAND = (415.0, 425.0)
 
 
-def amplitude_spectrum(times: np.ndarray, y: np.ndarray, transient: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided amplitude spectrum of ``y`` after ``transient``: angular frequencies
-    [rad/s] and the amplitude of a sinusoid at each (Hann window, its coherent gain
-    divided out; the mean removed).  A variable-step trace is first put on a uniform grid
-    of its median step."""
+def spectrum(times: np.ndarray, y: np.ndarray, transient: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided complex spectrum of ``y`` after ``transient``: angular frequencies [rad/s]
+    and the complex amplitude of a sinusoid at each (``abs``: its amplitude, ``angle``: its
+    phase against the window's first sample; Hann window, its coherent gain divided out;
+    the mean removed).  A variable-step trace is first put on a uniform grid of its median
+    step."""
     keep = times >= times[0] + transient
     t, v = times[keep], np.asarray(y, dtype=float)[keep]
     if len(t) < 8:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0, dtype=complex)
     dt = float(np.median(np.diff(t)))
     if not np.allclose(np.diff(t), dt, rtol=1e-6, atol=0):
         grid = np.arange(t[0], t[-1], dt)
         v, t = np.interp(grid, t, v), grid
     window = np.hanning(len(v))
-    amplitude = 2.0 * np.abs(np.fft.rfft((v - v.mean()) * window)) / window.sum()
-    return 2.0 * np.pi * np.fft.rfftfreq(len(v), dt), amplitude
+    return 2.0 * np.pi * np.fft.rfftfreq(len(v), dt), 2.0 * np.fft.rfft((v - v.mean()) * window) / window.sum()
+
+
+def amplitude_spectrum(times: np.ndarray, y: np.ndarray, transient: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The amplitudes of ``spectrum``: of a sinusoid at each angular frequency [rad/s]."""
+    omega, components = spectrum(times, y, transient)
+    return omega, np.abs(components)
+
+
+def peak_index(omega: np.ndarray, amplitude: np.ndarray, low: float, high: float) -> int | None:
+    """The index of the largest amplitude with ``low <= omega <= high``; None when none lies there."""
+    inside = np.flatnonzero((omega >= low) & (omega <= high))
+    return int(inside[np.argmax(amplitude[inside])]) if inside.size else None
+
+
+#: a shaft order's peak is looked for within this share of its nominal frequency
+ORDER_SEARCH = 0.1
 
 
 def spectral_components(times: np.ndarray, traces: dict, names: list[str], shaft_speed: str,
                         transient: float = 0.0, band: tuple[float, float] = OSCILLOGRAM_BAND) -> dict:
     """The two components the monograph's oscillograms show, in each signal of ``names``:
-    the peak amplitude within 10 % of the mean speed of ``shaft_speed`` (the shaft's rotation
+    the peak amplitude within ``ORDER_SEARCH`` (10 %) of the mean speed of ``shaft_speed`` (the shaft's rotation
     frequency) and the peak in ``band``, with their frequencies."""
     keep = times >= times[0] + transient
     rotation = float(np.mean(traces[shaft_speed][keep]))
@@ -141,10 +157,10 @@ def spectral_components(times: np.ndarray, traces: dict, names: list[str], shaft
             continue
         omega, amplitude = amplitude_spectrum(times, traces[name], transient)
         entry = {}
-        for label, (low, high) in (("rotation", (0.9 * abs(rotation), 1.1 * abs(rotation))), ("band", band)):
-            inside = np.flatnonzero((omega >= low) & (omega <= high))
-            if inside.size:
-                k = inside[np.argmax(amplitude[inside])]
+        for label, (low, high) in (("rotation", ((1 - ORDER_SEARCH) * abs(rotation), (1 + ORDER_SEARCH) * abs(rotation))),
+                                   ("band", band)):
+            k = peak_index(omega, amplitude, low, high)
+            if k is not None:
                 entry[label] = {"frequency_rad_s": float(omega[k]), "amplitude": float(amplitude[k])}
         out[name] = entry
     return out

@@ -118,13 +118,7 @@ class Findings:
     whole_span: tuple[float, float] | None = None
 
     def describe_span(self) -> str:
-        """"t = 0 ... 1 s of the reference's 0 ... 10 s" (or "the reference's whole span, ...")."""
-        if self.span is None:
-            return ""
-        if self.whole_span is None or tuple(self.span) == tuple(self.whole_span):
-            return f"the reference's whole span, t = {self.span[0]:g} ... {self.span[1]:g} s"
-        return (f"t = {self.span[0]:g} ... {self.span[1]:g} s of the reference's "
-                f"{self.whole_span[0]:g} ... {self.whole_span[1]:g} s")
+        return describe_span(self.span, self.whole_span)
 
     @property
     def passed(self) -> bool:
@@ -141,6 +135,15 @@ class Findings:
                 "problems": list(self.problems), "notes": list(self.notes),
                 "signals": {s.name: {k: _json_number(v) for k, v in vars(s).items() if k not in ("name", "outside_times")}
                             for s in self.signals}}
+
+
+def describe_span(span, whole) -> str:
+    """"t = 0 ... 1 s of the reference's 0 ... 10 s" (or "the reference's whole span, ...")."""
+    if span is None:
+        return ""
+    if whole is None or tuple(span) == tuple(whole):
+        return f"the reference's whole span, t = {span[0]:g} ... {span[1]:g} s"
+    return f"t = {span[0]:g} ... {span[1]:g} s of the reference's {whole[0]:g} ... {whole[1]:g} s"
 
 
 def _json_number(value):

@@ -533,7 +533,7 @@ def test_a_wrong_guid_gives_null_and_a_message(fmu_dir, c_host, tmp_path):
     assert "is not this FMU's GUID" in done.stderr
 
 
-def test_kavz_run_in_libcosim_passes_lever_validate(lever, kavz685_in_libcosim_from_ssp, tmp_path):
+def test_kavz_run_in_libcosim_passes_lever_validate_at_its_stated_tolerance(lever, kavz685_in_libcosim_from_ssp, tmp_path):
     """The KAVZ-685 scene assembled by libcosim from our SSP archive, its traces written
     as another tool would, judged by `lever validate --result` against our reference."""
     spec = scene.load("kavz685")
@@ -543,14 +543,19 @@ def test_kavz_run_in_libcosim_passes_lever_validate(lever, kavz685_in_libcosim_f
     table = np.column_stack([result.times] + [result.traces[n] for n in names])
     csv_path = tmp_path / "libcosim.csv"
     np.savetxt(csv_path, table, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
+    # libcosim couples one step behind our masters: the default verdict names the larger
+    # ripple; at the tolerances docs/hosts.md states for such a host it passes
     outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v"))
+    assert outcome.exit_code == 1 and "coupling.tau2: amplitude" in outcome.output, outcome.output
+    stated = ("--rtol", "amplitude=0.1", "--rtol", "order=0.2", "--rtol", "tube=0.1")
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", *stated, "--out", str(tmp_path / "u"))
     assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
     # and a torque shifted by 10 ms (what a master lagging ten steps would give) fails
     shifted = table.copy()
     shifted[10:, 1 + names.index("coupling.tau1")] = table[:-10, 1 + names.index("coupling.tau1")]
     np.savetxt(csv_path, shifted, delimiter=",", header=",".join(["time"] + names), comments="", fmt="%.17g")
-    outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "w"))
-    assert outcome.exit_code == 1 and "coupling.tau1" in outcome.output
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", *stated, "--out", str(tmp_path / "w"))
+    assert outcome.exit_code == 1 and "coupling.tau1: " in outcome.output
 
 
 def test_the_documents_name_the_python_the_fmus_native_entry_accepts(fmu_dir):

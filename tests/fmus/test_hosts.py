@@ -51,8 +51,13 @@ def test_ecos_runs_each_fmu_alone_in_a_bare_environment(fmu, fmu_dir, ecos_bin, 
         assert np.allclose(theirs, expected, rtol=1e-6, atol=1e-6), (fmu, variable)
 
 
+#: the tolerances at which a result of a host that couples one step behind our masters (ecos,
+#: libcosim's fixed step, PyFMI's Master) passes at 1 ms (docs/hosts.md)
+ONE_STEP_BEHIND = ("--rtol", "amplitude=0.1", "--rtol", "order=0.2", "--rtol", "tube=0.1")
+
+
 @pytest.mark.parametrize("fmi", [2, 3])
-def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmi, lever, fmu_dir, ecos_bin, tmp_path):
+def test_the_kavz685_scene_in_ecos_passes_lever_validate_at_its_stated_tolerance(fmi, lever, fmu_dir, ecos_bin, tmp_path):
     """The whole scene (10 s at 1 ms) from our SSP export, with the FMI 2.0 FMUs or the FMI
     3.0 editions (the export of ``experiment.fmi = 3`` carries those), in a bare environment."""
     spec = scene.load("kavz685").with_overrides([f"experiment.fmi={fmi}"])
@@ -64,7 +69,11 @@ def test_the_kavz685_scene_in_ecos_passes_lever_validate(fmi, lever, fmu_dir, ec
     assert sorted(traces) == sorted(spec.record)          # ecos logged what its CSV configuration names
     names = list(spec.record)
     csv_path = hosts.write_result_csv(tmp_path / "ecos.csv", times, traces, names)
+    # ecos couples one step behind our masters: its ripple is 4-5 % larger, which the default
+    # verdict names; at the tolerances docs/hosts.md states for it, it passes
     outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / "v"))
+    assert outcome.exit_code == 1 and "coupling.tau2: amplitude" in outcome.output, outcome.output
+    outcome = lever("validate", "--result", str(csv_path), "kavz685", *ONE_STEP_BEHIND, "--out", str(tmp_path / "w"))
     assert outcome.exit_code == 0 and "kavz685: PASS" in outcome.output, outcome.output
 
 

@@ -18,9 +18,17 @@ def c_host(c_importer):
     return c_importer
 
 
+#: tolerances stated for a host's result: LeverCoupling's dissipated power, b*(w1 - U12*w2)^2,
+#: reads its input speeds at the same instant, which a Model Exchange host interpolates
+#: between the input rows and our co-simulation reference holds: its mean over the second
+#: is 0.37 % lower (the same in fmpy and the C importer), beyond the 0.1 % default
+STATED = {"LeverCoupling": ("dissipated_power:mean=0.005",)}
+
+
 def _validate(lever, case, times, traces, tmp_path, tolerance="lever"):
     csv_path = me_hosts.write_result(tmp_path / f"{case.fmu}_me.csv", times, traces)
-    return lever("validate", "--result", str(csv_path), case.reference, "--tolerance", tolerance,
+    stated = [x for r in STATED.get(case.fmu, ()) for x in ("--rtol", r)] if tolerance == "lever" else []
+    return lever("validate", "--result", str(csv_path), case.reference, "--tolerance", tolerance, *stated,
                  "--out", str(tmp_path / f"validate-{tolerance}"))
 
 
@@ -33,7 +41,9 @@ def _judge(lever, case, times, traces, tmp_path):
     if not odd:
         assert outcome.exit_code == 0 and f"{case.reference}: PASS" in outcome.output, outcome.output
         return
-    assert outcome.exit_code == 1 and f"{case.reference}: FAIL ({', '.join(odd)})" in outcome.output, outcome.output
+    verdict = __import__("json").loads((tmp_path / "validate-lever" / "validation.json").read_text())
+    assert outcome.exit_code == 1 and f"{case.reference}: FAIL (" in outcome.output, outcome.output
+    assert {n for n, s in verdict["signals"].items() if not s["passed"]} == set(odd), outcome.output
     outcome = _validate(lever, case, times, traces, tmp_path, "cross-check")
     assert outcome.exit_code == 0 and f"{case.reference}: PASS" in outcome.output, outcome.output
     exact = me_hosts.exact_engine_acceleration(times)
