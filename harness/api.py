@@ -306,6 +306,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     result.warnings = advice
     if result.unconnected_inputs:
         say("warning", scenes.unconnected_message(result.unconnected_inputs))
+    if result.unchecked_connections:
+        say("note", scenes.unchecked_message(result.unchecked_connections))
     solution = None
     try:
         if "reference" in spec.features and reference and not stream and result.ok:

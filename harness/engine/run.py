@@ -45,6 +45,8 @@ class RunResult:
     #: inputs no connection drives and the scene gives no value (``Plan.unconnected``):
     #: held at their start values; named in the run's output and report
     unconnected_inputs: list[str] = field(default_factory=list)
+    #: connections not checked for dimension, a side declaring no unit (``Plan.unchecked``)
+    unchecked_connections: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -251,7 +253,8 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
     times, traces = recorder.traces() if recorder else (np.empty(0), {n: np.empty(0) for n in names})
     # wall_time: the stepping loop (master, FMU calls, recording), not instantiation.
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
-                     [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected))
+                     [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected),
+                     list(plan.unchecked))
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:

@@ -38,6 +38,9 @@ def summarize(result: RunResult, reference=None) -> dict:
     if result.unconnected_inputs:
         summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
                                          "note": scenes.unconnected_message(result.unconnected_inputs)}
+    if result.unchecked_connections:
+        summary["unchecked_connections"] = {"connections": list(result.unchecked_connections),
+                                            "note": scenes.unchecked_message(result.unchecked_connections)}
     if len(result.times) > 1:
         summary["statistics"] = {short: metrics.statistics(result.times, result.traces, [full],
                                                            scene.experiment.transient).get(full)
@@ -75,6 +78,8 @@ def write_report(path: Path, summary: dict):
                   "The traces up to the failure are in traces.csv."]
     if summary.get("unconnected_inputs"):
         lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
+    if summary.get("unchecked_connections"):
+        lines += ["", f"**Units not checked:** {summary['unchecked_connections']['note']}."]
     if summary.get("stream"):
         st = summary["stream"]
         lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
@@ -197,9 +202,10 @@ def plot(out: Path, result: RunResult, reference=None):
                                        transient, title,
                                        (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
                     out / filename)
-    plot_over_angle(out, result.scene, t, tr, title)
-    _plot_spectrum(out, result, title, plt)
-    if reference is not None:
+    if names["w2"] in tr:       # a driven shaft of ours (a user's FMU in its place: no angle to plot over)
+        plot_over_angle(out, result.scene, t, tr, title)
+        _plot_spectrum(out, result, title, plt)
+    if reference is not None and all(names[k] in tr for k in ("w1", "w2", "tau2")):
         fig, axes = plt.subplots(4, 1, figsize=(11, 10), sharex=True, layout="constrained")
         n = min(len(t), len(reference.times))
         for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
