@@ -90,6 +90,8 @@ def _print_summary(summary: dict, out: Path):
             click.echo(f"  {short:5s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
     errs = summary.get("error_vs_reference") or {}
     if errs:
+        ref = summary.get("reference") or {}
+        click.echo(f"  reference: {ref.get('source', 'monolithic')} - {ref.get('quality', ref.get('method'))}")
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
             f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
     eb = summary.get("energy_balance")

@@ -9,7 +9,7 @@ import numpy as np
 
 from harness.description import scene_kinds
 from harness.description import scene as scenes
-from harness.judges import metrics, revolutions
+from harness.judges import fmu_reference, metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
 from harness.formats.run_files import files_line, fmt, reference_error_lines, save_figure, write_run
@@ -54,10 +54,12 @@ def summarize(result: RunResult, reference=None) -> dict:
     if len(result.times) > 1 and result.ok and names.get("w2") in result.traces:
         summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
                                                           names["w2"], scene.experiment.transient)
-    if reference is not None and len(result.times):
+    if reference is not None and len(result.times) and reference.info.get("source", "monolithic") != "monolithic":
+        summary.update(fmu_reference.summary(scene, result.times, result.traces, reference))
+    elif reference is not None and len(result.times):
         summary["error_vs_reference"] = metrics.driveline_errors(scene, result.times, result.traces,
                                                                  reference.times, reference.traces)
-        summary["reference"] = {"method": reference.method, "wall_time_s": reference.wall_time,
+        summary["reference"] = {"source": "monolithic", "method": reference.method, "wall_time_s": reference.wall_time,
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
                                     scene, reference.times, reference.traces,
@@ -100,8 +102,10 @@ def write_report(path: Path, summary: dict):
                              f"{fmt(s.get('unevenness'))} |")
         lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
                   "(negative: it brakes the engine), tau2 the torque on the driven shaft."]
-    lines += reference_error_lines(summary, "Error against the monolithic reference",
-                                   "torques relative to the mean transmitted torque, speeds to the mean speed")
+    source = (summary.get("reference") or {}).get("source", "monolithic")
+    lines += reference_error_lines(summary, f"Error against the {source} reference",
+                                   "torques relative to the mean transmitted torque, speeds to the mean speed"
+                                   if source == "monolithic" else "each signal relative to its RMS in the reference")
     if summary.get("energy_balance_unavailable"):
         lines += ["", "## Energy balance", "", f"Not computed: {summary['energy_balance_unavailable']}."]
     eb = summary.get("energy_balance")

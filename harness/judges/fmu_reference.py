@@ -264,29 +264,48 @@ class Judged:
     reference_figure: float | None
 
 
-def errors(plan: plans.Plan, times, traces, ref: MonolithicSolution, after: float | None = None) -> dict:
+def errors(scene, times, traces, ref: MonolithicSolution, after: float | None = None) -> dict:
     """The run's errors against ``ref`` as the scene's kind judges them: the driveline's
-    speeds and torques, the rectifier's main signals, else every recorded signal relative to
-    its RMS in the reference."""
-    scene = plan.scene
+    speeds and torques, the rectifier's main signals, else every signal both record,
+    relative to its RMS in the reference."""
     kind = scene_kinds.kind_of(scene)
     if kind == "rectifier":
         return rectifier.errors(scene, times, traces, ref)
     if kind == "driveline" and all(n in traces and n in ref.traces for n in metrics.signals(scene).values()):
         return metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
-    names = [n for n in plan.recorded if n in traces and n in ref.traces]
+    names = [n for n in traces if n in ref.traces]
     scales = {n: float(np.sqrt(np.mean(np.asarray(ref.traces[n], float) ** 2))) or 1.0 for n in names}
     return metrics.errors(np.asarray(times, float), traces, ref.times, ref.traces, names, scales, after)
 
 
-def judge(plan: plans.Plan, times, traces, ref: MonolithicSolution) -> Judged:
-    found = errors(plan, times, traces, ref)
-    figure = max((e["rms_relative"] for e in found.values()), default=float("nan"))
-    own = None
-    if "check" in ref.info:
-        checked = errors(plan, ref.times, ref.info["check"], ref)
-        own = max((e["rms_relative"] for e in checked.values()), default=float("nan"))
-    return Judged(found, figure, own)
+def judge(scene, times, traces, ref: MonolithicSolution) -> Judged:
+    """``errors``, the run's error figure and the reference's own (None: not estimated)."""
+    found = errors(scene, times, traces, ref)
+    return Judged(found, figure(found), own_error(scene, ref))
+
+
+def figure(found: dict) -> float:
+    """The error figure of ``errors``: the largest relative RMS error of any signal."""
+    return max((e["rms_relative"] for e in found.values()), default=float("nan"))
+
+
+def own_error(scene, ref: MonolithicSolution) -> float | None:
+    """The reference's own error figure (its check's distance from it); None when it has no check."""
+    if "check" not in ref.info:
+        return None
+    return figure(errors(scene, ref.times, ref.info["check"], ref))
+
+
+def summary(scene, times, traces, ref: MonolithicSolution) -> dict:
+    """What a run's summary holds of its error against a made reference (``error_vs_reference``,
+    ``reference``: its source, method and own error)."""
+    own = own_error(scene, ref)
+    return {"error_vs_reference": errors(scene, times, traces, ref),
+            "reference": {"source": label(ref), "method": ref.method, "wall_time_s": ref.wall_time,
+                          "rhs_evaluations": ref.n_rhs, "own_error_relative": own,
+                          "estimated_by": ref.info.get("estimate_by"), "quality": quality(ref, own),
+                          "observed_orders": ref.info.get("observed_orders"),
+                          "why_not_monolithic": ref.info.get("why_not_monolithic")}}
 
 
 def quality(ref: MonolithicSolution, own: float | None) -> str:
