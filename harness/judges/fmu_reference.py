@@ -74,6 +74,21 @@ def grid_step(plan: plans.Plan) -> float:
     return span / rows
 
 
+def monolithic_knows(plan: plans.Plan) -> bool:
+    """Whether the monolithic solver has the scene's equations (``monolithic.SOLVERS``)."""
+    return plan.kind == "rectifier" or plan.driveline_problem is None
+
+
+def described(plan: plans.Plan, times) -> str:
+    """The reference ``plan``'s runs are judged against, in a sentence (its source, method and
+    own error), or why there is none."""
+    try:
+        ref = reference(plan, np.asarray(times, dtype=float))
+    except ReferenceUnavailable as error:
+        return f"no reference, so no errors: {error}"
+    return f"the {label(ref)} reference ({quality(ref, own_error(plan.scene, ref))})"
+
+
 def offers_model_exchange(plan: plans.Plan) -> bool:
     return all(getattr(md, "modelExchange", None) is not None for md in plan.descriptions.values())
 
@@ -268,10 +283,10 @@ def errors(scene, times, traces, ref: MonolithicSolution, after: float | None = 
     """The run's errors against ``ref`` as the scene's kind judges them: the driveline's
     speeds and torques, the rectifier's main signals, else every signal both record,
     relative to its RMS in the reference."""
-    kind = scene_kinds.kind_of(scene)
-    if kind == "rectifier":
+    if scene_kinds.kind_of(scene) == "rectifier":
         return rectifier.errors(scene, times, traces, ref)
-    if kind == "driveline" and all(n in traces and n in ref.traces for n in metrics.signals(scene).values()):
+    judged = [metrics.signals(scene)[short] for short in metrics.JUDGED]
+    if all(n in traces and n in ref.traces for n in judged):
         return metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
     names = [n for n in traces if n in ref.traces]
     scales = {n: float(np.sqrt(np.mean(np.asarray(ref.traces[n], float) ** 2))) or 1.0 for n in names}
