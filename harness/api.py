@@ -731,7 +731,8 @@ def sweep_verdict(trend: dict) -> str:
 
 def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) -> tuple[str, Path]:
     """``lever study NAME``: the numbers behind a documented decision ("transfer-modes") or
-    statement ("runup"; ``lags``: scan these engine torque lags [s]); returns the table and
+    statement ("runup"; ``lags``: scan these engine torque lags [s]; "reference-agreement": the
+    references made from the FMUs against the monolithic one); returns the table and
     the file it was written to in ``out`` (default results/studies)."""
     from harness.paths import RESULTS
 
@@ -747,10 +748,18 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
         out.mkdir(parents=True, exist_ok=True)
         (out / "runup.md").write_text(text + "\n")
         return text, out / "runup.md"
-    if name != "transfer-modes":
-        raise InputError(f"no study '{name}' (known: transfer-modes, runup)")
+    if name not in ("transfer-modes", "reference-agreement"):
+        raise InputError(f"no study '{name}' (known: transfer-modes, runup, reference-agreement)")
     if lags:
         raise InputError("--scan applies to the runup study only")
+    if name == "reference-agreement":
+        from harness.studies import reference_agreement
+
+        build()
+        text = reference_agreement.study()
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "reference_agreement.md").write_text(text + "\n")
+        return text, out / "reference_agreement.md"
     from harness.studies import decisions
 
     build()

@@ -37,8 +37,8 @@ from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.engine.run import simulate
 from harness.judges import metrics, monolithic, rectifier
-from harness.judges.solution import (CACHE, MonolithicSolution, ReferenceUnavailable, cache_key, load_cached,
-                                     store)
+from harness.judges import solution as solutions
+from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, cache_key, load_cached, store
 
 #: where a reference comes from -> how a report names it
 SOURCES = {"monolithic": "monolithic", "model-exchange": "converged Model Exchange",
@@ -218,7 +218,7 @@ def _cached(plan, source, master, use_cache, make) -> MonolithicSolution:
     grid = np.array([e.start, e.stop, grid_step(plan)])
     key = hashlib.sha256(json.dumps([cache_key(plan.scene, grid, 0.0, 0.0, f"{source} {master}"), _fmu_hash(plan),
                                      _code_hash(), list(plan.recorded)]).encode()).hexdigest()[:16]
-    path = CACHE / f"fmu-reference-{plan.name}-{key}.npz"
+    path = solutions.CACHE / f"fmu-reference-{plan.name}-{key}.npz"
     if use_cache and (cached := load_cached(path)) is not None:
         check = {k[len(CHECK):]: v for k, v in cached.traces.items() if k.startswith(CHECK)}
         traces = {k: v for k, v in cached.traces.items() if not k.startswith(CHECK)}
