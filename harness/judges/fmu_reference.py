@@ -111,15 +111,26 @@ def reference(plan: plans.Plan, times: np.ndarray, use_cache: bool = True, sourc
             if source == "monolithic":
                 raise
             problems.append(str(error))
+    made = None
     if source in (None, "model-exchange") and offers_model_exchange(plan):
-        made = _cached(plan, "model-exchange", None, use_cache, _model_exchange)
+        try:
+            made = _cached(plan, "model-exchange", None, use_cache, _model_exchange)
+        except ReferenceUnavailable as error:
+            if source == "model-exchange":
+                raise
+            problems.append(str(error))         # the extrapolated co-simulation may still be had
     elif source == "model-exchange":
         bare = [name for name, md in plan.descriptions.items() if getattr(md, "modelExchange", None) is None]
         raise ReferenceUnavailable(f"{', '.join(bare)} offer{'s' if len(bare) == 1 else ''} co-simulation only: "
                                    "no Model Exchange reference")
-    else:
-        made = _cached(plan, "extrapolated", master or EXTRAPOLATED_MASTER, use_cache, _extrapolated)
-    made.info.setdefault("why_not_monolithic", "; ".join(problems))
+    if made is None:
+        try:
+            made = _cached(plan, "extrapolated", master or EXTRAPOLATED_MASTER, use_cache, _extrapolated)
+        except ReferenceUnavailable as error:
+            if problems and source is None:
+                raise ReferenceUnavailable(f"{'; '.join(problems[1:] + [str(error)])}") from None
+            raise
+    made.info.setdefault("why_not_monolithic", problems[0] if problems else "")
     return _at(made, np.asarray(times, dtype=float))
 
 
@@ -168,8 +179,6 @@ def _extrapolated(plan: plans.Plan, master: str) -> MonolithicSolution:
         said = ", ".join(f"{k} {o:.2f}" for k, o in sorted(off.items()))
         raise ReferenceUnavailable(f"no extrapolated reference: {master} at steps {steps} s does not show its "
                                    f"order {p} (observed: {said}); the runs are not in their asymptotic range")
-    if all(o is None for o in orders.values()):
-        pass        # every signal converged to round-off: the finest run is its own reference
     return MonolithicSolution(runs[0].times, extrapolated, sum(r.wall_time for r in runs),
                               sum(int(r.counters.get("steps", 0)) for r in runs),
                               f"{master} at steps {steps} s, Richardson-extrapolated with order {p}",
