@@ -341,7 +341,9 @@ def _made_reference(plan, times, why: str, say):
         return fmu_reference.reference(plan, times)
     except fmu_reference.ReferenceUnavailable as error:
         say("note", f"no reference for this scene, so no error: {error}")
-        return None
+    except (ValueError, RuntimeError, OSError) as error:     # the run's own results are kept whatever the reference did
+        say("note", f"no reference for this scene, so no error: making it failed ({type(error).__name__}: {error})")
+    return None
 
 
 @dataclass
