@@ -206,7 +206,7 @@ def plot(out: Path, result: RunResult, reference=None):
                                        transient, title,
                                        (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
                     out / filename)
-    if names["w2"] in tr:       # a driven shaft of ours (a user's FMU in its place: no angle to plot over)
+    if scene_kinds.roles(result.scene)[2] is not None:   # our load shaft (a user's FMU in its place: no angle to plot over)
         plot_over_angle(out, result.scene, t, tr, title)
         _plot_spectrum(out, result, title, plt)
     if reference is not None and all(names[k] in tr for k in ("w1", "w2", "tau2")):
@@ -214,7 +214,7 @@ def plot(out: Path, result: RunResult, reference=None):
         n = min(len(t), len(reference.times))
         for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
             name = names[key]
-            ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
+            ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label=f"reference ({fmu_reference.label(reference)})")
             ax.plot(t[:n], tr[name][:n], "C1--", lw=0.8, label=f"co-simulation ({result.master})")
             ax.set_ylabel(f"{key} [{unit}]")
         for key, style in (("w1", "C0-"), ("w2", "C2-")):

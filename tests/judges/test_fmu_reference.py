@@ -101,7 +101,7 @@ def user_scene(tmp_path_factory) -> Path:
 def test_a_users_fmu_without_units_connects_and_is_judged_against_the_extrapolated_reference(
         user_scene, fmu_dir, tmp_path):
     heard = []
-    done = api.run(user_scene, master="jacobi", step=1e-3, out=tmp_path / "run", plots=False,
+    done = api.run(user_scene, master="jacobi", step=1e-3, out=tmp_path / "run",
                    notify=lambda kind, message: heard.append(message))
     assert done.ok
     unchecked = [m for m in heard if "not checked for dimension" in m]
@@ -116,6 +116,7 @@ def test_a_users_fmu_without_units_connects_and_is_judged_against_the_extrapolat
     report = (tmp_path / "run" / "report.md").read_text()
     assert "**Units not checked:** 3 connections" in report
     assert "## Error against the extrapolated co-simulation reference" in report
+    assert {"speeds.png", "torques.png", "vs_reference.png"} <= {p.name for p in (tmp_path / "run").iterdir()}
 
 
 def test_a_run_with_no_reference_to_be_had_says_so_in_one_line(user_scene, fmu_dir, tmp_path, monkeypatch):
