@@ -8,12 +8,12 @@ say - so that a run's error can be measured for any scene.
 * ``monolithic``: the scene's equations solved unsplit (when the monolithic solver knows them);
 * ``model-exchange``: every FMU offers Model Exchange - the ``me-cvode`` master at
   ``ME_TOLERANCE``, far below any error a co-simulation is run for; its own error estimated
-  by the same run at ``ME_CHECK_TOLERANCE`` (100 times looser: the estimate is an upper bound);
+  by the same run at ``ME_CHECK_TOLERANCE`` (100 times looser: the looser run's error, on the high side while CVODE converges);
 * ``extrapolated``: a co-simulation master (``EXTRAPOLATED_MASTER``, or the one asked for) at
   three steps, each half the one before, and Richardson's extrapolation of the finest two with
   the master's order - taken only when the three show that order (the observed order of each
   signal within ``ORDER_SLACK`` of it); its own error estimated by the extrapolation from the
-  coarser two (an upper bound).
+  coarser two (that extrapolation's error: on the high side in the asymptotic range).
 
 Both kinds are computed once on a uniform grid (``grid_step``) and cached by the scene, the FMU
 files, the grid and the code of the engine and of this package (as the monolithic reference
