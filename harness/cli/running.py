@@ -96,6 +96,11 @@ def _print_summary(summary: dict, out: Path):
             click.echo(f"  {name:14s} mean {s['mean']:10.4f}  amplitude {s['amplitude']:9.4f}{extra}")
     errs = summary.get("error_vs_reference") or {}
     if errs:
+        ref = summary.get("reference") or {}
+        balance = (ref.get("energy_balance") or {}).get("residual_relative")
+        quality = ref.get("quality") or (f"{ref.get('method')}; its own energy residual {balance:.1e}"
+                                         if balance is not None else ref.get("method"))
+        click.echo(f"  reference: {ref.get('source', 'monolithic')} - {quality}")
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
             f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
     eb = summary.get("energy_balance")

@@ -107,6 +107,9 @@ class Plan:
     driveline_problem: str | None
     #: the freewheel rectifier, when the scene has one
     rectifier: RectifierPlan | None
+    #: connections whose dimension could not be checked: a side declares no unit
+    #: (``scenes.unchecked_connections``; a note, not a refusal)
+    unchecked: tuple[str, ...] = ()
 
 
 
@@ -167,6 +170,7 @@ def check(scene: scenes.Scene, overrides=(), fmu_dir: Path = FMUS) -> Plan:
                 descriptions=MappingProxyType(descriptions), start_values=MappingProxyType(start_values),
                 connections=tuple(scene.connections), recorded=tuple(recorded_names(scene)), refusals=refusals,
                 unconnected=tuple(scenes.unconnected_inputs(scene, descriptions)),
+                unchecked=tuple(scenes.unchecked_connections(scene, descriptions)),
                 limits=_build(lambda: MappingProxyType({k: float(scenes.quantity(v, f"limits.{k}"))
                                                         for k, v in scene.limits.items()})), kind=scene_kinds.kind_of(scene), roles=scene_kinds.roles(scene),
                 driveline=_driveline(scene) if scene_kinds.is_driveline(scene) else None,

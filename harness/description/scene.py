@@ -557,8 +557,10 @@ _WIRE = {"Real": "Real", "Float64": "Real", "Integer": "Integer", "Int32": "Inte
 
 
 def connection_findings(c: Connection, variables: dict) -> list[str]:
-    """A connection between variables of different quantities (their units' dimensions
-    differ: a torque into a speed) is a finding; so is one between different types."""
+    """A connection between variables of different quantities (both declare units, of
+    different dimensions: a torque into a speed) is a finding; so is one between different
+    types.  A side that declares no unit has an unknown unit (FMI): the connection is made
+    and ``unchecked_connections`` names it."""
     try:
         out, into = variables[c.source][c.output], variables[c.target][c.input]
     except KeyError:
@@ -567,15 +569,43 @@ def connection_findings(c: Connection, variables: dict) -> list[str]:
         return [f"connection '{c}': {c.source}.{c.output} is a {out.type}, {c.target}.{c.input} a {into.type}"]
     if _WIRE.get(out.type) != "Real":
         return []
+    if units.declared_unit(out) is None or units.declared_unit(into) is None:
+        return []           # an unknown unit: connected, and named by ``unchecked_connections``
     try:
-        same = units.same_dimension(out.unit, into.unit)
+        same = units.same_dimension(units.declared_unit(out), units.declared_unit(into))
     except units.UnitProblem as problem:
         return [f"connection '{c}': {problem}"]
     if same:
         return []
-    what = lambda mv: f"{mv.unit or '1'}, {units.dimension(mv.unit or '')}"
+    what = lambda mv: f"{units.declared_unit(mv)}, {units.dimension(units.declared_unit(mv))}"
     return [f"connection '{c}': {c.source}.{c.output} is a different quantity ({what(out)}) from "
             f"{c.target}.{c.input} ({what(into)}); only variables of the same dimension are connected"]
+
+
+def unchecked_connections(scene: Scene, descriptions: dict) -> list[str]:
+    """The Real connections whose dimension cannot be checked because a side declares no
+    unit (an unknown unit in FMI), each as ``"a.x -> b.y (a.x declares no unit)"``."""
+    variables = {name: {v.name: v for v in descriptions[spec.fmu].modelVariables}
+                 for name, spec in scene.components.items() if spec.fmu in descriptions}
+    found = []
+    for c in scene.connections:
+        try:
+            sides = ((f"{c.source}.{c.output}", variables[c.source][c.output]),
+                     (f"{c.target}.{c.input}", variables[c.target][c.input]))
+        except KeyError:
+            continue        # a missing variable is a finding of ``validate``
+        if any(_WIRE.get(v.type) != "Real" for _, v in sides):
+            continue
+        bare = [label for label, v in sides if units.declared_unit(v) is None]
+        if bare:
+            found.append(f"{c} ({' and '.join(bare)} declare{'s' if len(bare) == 1 else ''} no unit)")
+    return found
+
+
+def unchecked_message(connections: list[str]) -> str:
+    """The one sentence naming the connections whose dimension could not be checked."""
+    return (f"{len(connections)} connection{'s' if len(connections) > 1 else ''} not checked for dimension, "
+            f"a side declaring no unit (an unknown unit in FMI): {'; '.join(connections)}")
 
 
 def unconnected_inputs(scene: Scene, descriptions: dict) -> list[str]:

@@ -72,6 +72,16 @@ def dimension(unit: str) -> str:
     return str(dims) if dims else "dimensionless"
 
 
+def declared_unit(variable) -> str | None:
+    """The unit a model variable declares: its own ``unit``, else its declared type's (fmpy
+    leaves a type's unit on the type); None when neither declares one - in FMI an unknown
+    unit, not unit 1 ("1" declared is dimensionless)."""
+    unit = getattr(variable, "unit", None)
+    if not unit:
+        unit = getattr(getattr(variable, "declaredType", None), "unit", None)
+    return unit or None
+
+
 def same_dimension(a: str | None, b: str | None) -> bool:
     """Whether units ``a`` and ``b`` measure the same kind of quantity (None: dimensionless)."""
     return parse_unit(a or "").dimensionality == parse_unit(b or "").dimensionality

@@ -47,6 +47,8 @@ class RunResult:
     unconnected_inputs: list[str] = field(default_factory=list)
     #: the master's options in effect (its defaults filled in: a tolerance, iterations, ...)
     options: dict = field(default_factory=dict)
+    #: connections not checked for dimension, a side declaring no unit (``Plan.unchecked``)
+    unchecked_connections: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -256,7 +258,7 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
                  for key, default in master_family.master_class(master).options.items()}
     return RunResult(scene, master, step, times, traces, ended - stepping, counters, failure, stage, diagnosis,
                      [], recorder.stream.report() if recorder and recorder.stream else None, list(plan.unconnected),
-                     in_effect)
+                     in_effect, list(plan.unchecked))
 
 
 def _diagnosis(error: Exception, scene: scenes.Scene, master: str, step: float, driver) -> dict:

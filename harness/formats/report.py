@@ -9,7 +9,7 @@ import numpy as np
 
 from harness.description import scene_kinds
 from harness.description import scene as scenes
-from harness.judges import metrics, revolutions
+from harness.judges import fmu_reference, metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
 from harness.formats.run_files import (description_of, files_line, fmt, identity_lines, reference_error_lines,
@@ -40,6 +40,9 @@ def summarize(result: RunResult, reference=None) -> dict:
     if result.unconnected_inputs:
         summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
                                          "note": scenes.unconnected_message(result.unconnected_inputs)}
+    if result.unchecked_connections:
+        summary["unchecked_connections"] = {"connections": list(result.unchecked_connections),
+                                            "note": scenes.unchecked_message(result.unchecked_connections)}
     if len(result.times) > 1:
         # by the traces' own names (component.variable): one naming of a signal everywhere
         summary["statistics"] = {full: metrics.statistics(result.times, result.traces, [full],
@@ -54,10 +57,14 @@ def summarize(result: RunResult, reference=None) -> dict:
     if len(result.times) > 1 and result.ok and names.get("w2") in result.traces:
         summary["spectrum"] = metrics.spectral_components(result.times, result.traces, [names["tau2"], load_torque],
                                                           names["w2"], scene.experiment.transient)
-    if reference is not None and len(result.times):
+    if reference is not None and len(result.times) and reference.info.get("source", "monolithic") != "monolithic":
+        made = fmu_reference.summary(scene, result.times, result.traces, reference)
+        made["error_vs_reference"] = {names.get(k, k): e for k, e in made["error_vs_reference"].items()}
+        summary.update(made)
+    elif reference is not None and len(result.times):
         summary["error_vs_reference"] = {names[short]: e for short, e in metrics.driveline_errors(
             scene, result.times, result.traces, reference.times, reference.traces).items()}
-        summary["reference"] = {"method": reference.method, "wall_time_s": reference.wall_time,
+        summary["reference"] = {"source": "monolithic", "method": reference.method, "wall_time_s": reference.wall_time,
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
                                     scene, reference.times, reference.traces,
@@ -78,6 +85,8 @@ def write_report(path: Path, summary: dict):
                   "The traces up to the failure are in traces.csv."]
     if summary.get("unconnected_inputs"):
         lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
+    if summary.get("unchecked_connections"):
+        lines += ["", f"**Units not checked:** {summary['unchecked_connections']['note']}."]
     if summary.get("stream"):
         st = summary["stream"]
         lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
@@ -99,8 +108,10 @@ def write_report(path: Path, summary: dict):
         lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
                   "(negative: it brakes the engine), tau2 the torque on the driven shaft; each signal is "
                   "named as in traces.csv."]
-    lines += reference_error_lines(summary, "Error against the monolithic reference",
-                                   "torques relative to the mean transmitted torque, speeds to the mean speed")
+    source = (summary.get("reference") or {}).get("source", "monolithic")
+    lines += reference_error_lines(summary, f"Error against the {source} reference",
+                                   "torques relative to the mean transmitted torque, speeds to the mean speed"
+                                   if source == "monolithic" else "each signal relative to its RMS in the reference")
     if summary.get("energy_balance_unavailable"):
         lines += ["", "## Energy balance", "", f"Not computed: {summary['energy_balance_unavailable']}."]
     eb = summary.get("energy_balance")
@@ -204,9 +215,10 @@ def plot(out: Path, result: RunResult, reference=None):
                                        transient, title,
                                        (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
                     out / filename)
-    plot_over_angle(out, result.scene, t, tr, title)
-    _plot_spectrum(out, result, title, plt)
-    if reference is not None:
+    if scene_kinds.roles(result.scene)[2] is not None:   # our load shaft (a user's FMU in its place: no angle to plot over)
+        plot_over_angle(out, result.scene, t, tr, title)
+        _plot_spectrum(out, result, title, plt)
+    if reference is not None and all(names[k] in tr for k in ("w1", "w2", "tau2")):
         save_figure(reference_figure(t, tr, reference, names, result.master, title), out / "vs_reference.png")
 
 
@@ -219,7 +231,7 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
     n = min(len(t), len(reference.times))
     for ax, key, unit in zip(axes, ("w1", "w2", "tau2"), ("rad/s", "rad/s", "N*m")):
         name = names[key]
-        ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label="reference (monolithic)")
+        ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label=f"reference ({fmu_reference.label(reference)})")
         ax.plot(t[:n], traces[name][:n], "C1--", lw=0.8, label=f"co-simulation ({master})")
         ax.set_ylabel(f"{key} [{unit}]")
     for ax, pair, unit in ((axes[3], ("w1", "w2"), "rad/s"), (axes[4], ("tau1", "tau2"), "N*m")):

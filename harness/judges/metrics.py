@@ -19,8 +19,15 @@ def _trapezoid(y, x):
 def signals(scene: scenes.Scene) -> dict[str, str]:
     """Short names of the driveline's main signals -> the scene's variable names."""
     engine, coupling, load = roles(scene)
-    return {"w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
-            "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12"}
+    names = {"w1": f"{engine}.w", "w2": f"{load}.w", "a1": f"{engine}.a", "a2": f"{load}.a",
+             "tau1": f"{coupling}.tau1", "tau2": f"{coupling}.tau2", "U12": f"{coupling}.U12"}
+    if coupling is not None and (engine is None or load is None):
+        # a shaft of the user's own in a role: its speed is what drives the coupling's speed input
+        driving = {(c.target, c.input): f"{c.source}.{c.output}" for c in scene.connections}
+        for short, taken in (("w1", engine), ("w2", load)):
+            if taken is None and (coupling, short) in driving:
+                names[short] = driving[(coupling, short)]
+    return names
 
 
 def inertias(scene: scenes.Scene) -> tuple[float, float]:

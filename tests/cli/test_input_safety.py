@@ -189,10 +189,12 @@ def test_an_unconnected_input_is_named_in_the_output_and_the_report(lever, fmu_d
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert summary["unconnected_inputs"]["inputs"] == ["load.tau"]
     assert "load.tau" in (tmp_path / "o" / "report.md").read_text()
-    # ... and the driveline's reference and energy balance say why they do not apply
-    assert "error_vs_reference" not in summary and "energy_balance" not in summary
+    # ... the driveline's energy balance and monolithic reference say why they do not apply, and the
+    # error is measured against the reference made from the FMUs (every one offers Model Exchange)
+    assert "energy_balance" not in summary
     assert "no connection coupling.tau2 -> load.tau" in summary["energy_balance_unavailable"]
-    assert "no reference for this scene" in result.output
+    assert "no monolithic reference" in result.output and "no connection coupling.tau2 -> load.tau" in result.output
+    assert summary["reference"]["source"] == "converged Model Exchange" and summary["error_vs_reference"]
 
 
 def test_an_unconnected_input_is_refused_where_the_scene_is_strict(lever, fmu_dir, tmp_path):

@@ -240,3 +240,19 @@ def test_a_run_that_ends_before_its_transient_says_there_is_no_steady_window(fmu
     report.write_report(tmp_path / "report.md", summary)
     assert "No steady window: the run ended before the start-up transient did (t < 0.06 s)" in \
         (tmp_path / "report.md").read_text()
+
+
+def test_a_c_fmu_with_units_is_checked_for_dimension(monitor_fmu, fmu_dir, tmp_path):
+    """TorqueMonitor declares N.m: a torque into it connects, checked (not listed as
+    unchecked); a speed into it is refused, both sides declaring their units."""
+    from harness.description import plan as plans
+
+    path = tmp_path / "monitored.toml"
+    path.write_text(_monitored_scene_text(str(monitor_fmu)))
+    checked = plans.check(scenes.load(path))
+    assert checked.refusals == () and checked.unchecked == ()
+    path.write_text(_monitored_scene_text(str(monitor_fmu)).replace('"coupling.tau1 -> monitor.torque"',
+                                                                     '"engine.w -> monitor.torque"'))
+    refused = plans.check(scenes.load(path))
+    assert [f for f in refused.refusals if "engine.w -> monitor.torque" in f and "different quantity" in f
+            and "(rad/s, [angle] / [time])" in f and "(N.m," in f]

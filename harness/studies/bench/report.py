@@ -114,8 +114,9 @@ def markdown(result: dict, rows: list[dict]) -> str:
     floor = result.get("floor_spread") or trust.spread([result["floor_per_step_s"]])
     hollow_floor = result.get("hollow_floor_spread")
     lines = [f"# Work-precision benchmark: {result['scene']}", "",
-             f"Median [min-max] of up to {result['repeats']} repeats of the stepping loop; errors against the "
-             f"monolithic reference (DOP853, rtol 1e-10), relative to the mean torque / speed, time-averaged RMS.  "
+             f"Median [min-max] of up to {result['repeats']} repeats of the stepping loop; errors against "
+             f"{result.get('reference') or 'the monolithic reference (DOP853, rtol 1e-10)'}, relative to the mean "
+             "torque / speed, time-averaged RMS.  "
              f"FMU-call floor: {trust.spread_text(floor)} per communication step"
              + (f"; the same calls into do-nothing FMUs: {trust.spread_text(hollow_floor)}"
                 if hollow_floor and hollow_floor.get("n") else "") + ".", "",

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from harness.description import scene as scenes
 from harness.engine import interrupt
+from harness.judges import fmu_reference
 from harness.paths import FMUS
 from harness.studies import trust
 from harness.studies.bench import do_nothing_twins, editions, floors, headlines, report, schedule, timing
@@ -89,6 +92,10 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
         else:
             say(f"do-nothing FMU floor not measured ({hollow_case.failure}): no split of the run times")
             twins = hollow_case = None
+    e = scene.experiment
+    against = fmu_reference.described(timing.monolithic.planned(scene),
+                                      np.linspace(e.start, e.stop, int(round((e.stop - e.start) / e.step)) + 1))
+    say(f"errors against {against}")
     limit = p["repeats_limit_s"]
     for name, steps in p["steps"].items():
         for h in steps:
@@ -110,6 +117,10 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
                 take(Case(name, "peer", scene.experiment.step, tol),
                      lambda name=name, tol=tol: timing.run_peer(scene, name, scene.experiment.step, repeats,
                                                                 fmu_dir, limit, tol))
+    plan = timing.monolithic.planned(scene)
+    if monolithic and not fmu_reference.monolithic_knows(plan):
+        monolithic = False
+        say("monolithic cases not run: the monolithic solver has no equations for this scene")
     if monolithic:
         grid = p["monolithic_step"]
         for rtol in p["monolithic"]:
@@ -133,7 +144,8 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     compared = _compare_editions(scene, p, repeats, fmu_dir, log, say) if fmi_editions else None
     if compared is not None:
         machine.samples += [x for x in compared.get("load", []) if x is not None]
-    return {"scene": scene.name, "plan": p, "repeats": repeats, "floor_per_step_s": floor_per_step,
+    return {"scene": scene.name, "plan": p, "repeats": repeats, "reference": against,
+            "floor_per_step_s": floor_per_step,
             "floor_spread": trust.spread(ours_case.wall_times),
             "hollow_floor_per_step_s": hollow_case.wall if hollow_case else None,
             "hollow_floor_spread": trust.spread(hollow_case.wall_times) if hollow_case else None,
