@@ -62,7 +62,7 @@ MAX_ROWS = 400_001
 
 def label(reference) -> str:
     """How a report names the reference ``reference`` came from ("monolithic", ...)."""
-    return SOURCES[reference.info.get("source", "monolithic")]
+    return SOURCES[(getattr(reference, "info", None) or {}).get("source", "monolithic")]
 
 
 def grid_step(plan: plans.Plan) -> float:
