@@ -524,7 +524,7 @@ class ModelExchangeSlave(LeverSlave):
         self._partials_at = None        # the modes may change
         model = self._me_current()
         t, u = self._time, self._u()
-        before = self._x()
+        before, modes = self._x(), model.modes()
         after = model.event_update(t, self._x_physics(), u)
         x = list(before)
         for name, value in zip(model.STATES, after):
@@ -532,7 +532,10 @@ class ModelExchangeSlave(LeverSlave):
         self._set_x(x)
         self._events_settled(t, self._x_physics(), u)
         upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
-        self._event_info = (0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
+        # a mode changed: the right-hand side jumped, the host's integrator must restart here
+        # (me_base: ``modes``), as where a state changed
+        changed = x != before or model.modes() != modes
+        self._event_info = (0.0, 0.0, 0.0, float(changed), float(upcoming is not None),
                             float(upcoming) if upcoming is not None else 0.0)
         self._dirty = ALL
 
