@@ -436,6 +436,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     reference.  ``window``: judge only ``(start, stop)`` [s] of the reference's span (e.g. a
     shorter run); ``out``: write validation.json, the result and a plot per failing signal
     there."""
+    from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
@@ -472,8 +473,11 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         if ref.kind == "fmu":
             if master or step:
                 raise InputError(f"--master/--step: {label} is an FMU run stand-alone at its _ref.opt step")
-            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
-                                              fmu_path=fmu_file)
+            try:
+                judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
+                                                  fmu_path=fmu_file)
+            except FmuUnusable as error:     # no binary here, or it refused to instantiate: bad input
+                raise InputError(f"{label}: {error}") from None
         else:
             spec = load(name, overrides)
             if master:
