@@ -19,6 +19,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave
 from fmpy.validation import validate_fmu
+from lever.physics.me_base import SPEED_BAND
 
 from harness.compliance import check_fmu
 
@@ -434,11 +435,12 @@ def test_an_indicator_read_in_initialization_mode_follows_the_parameters_set_the
     try:
         fmu.enterInitializationMode(startTime=0.0)
         assert fmu.getFloat64(indicator) == [1.0]          # a linear characteristic: no event
-        # points at 0, 38.5 and 80 rad/s around w_start = 39 rad/s: 0.5 rad/s to the nearest
+        # points at 0, 38.5 and 80 rad/s around w_start = 39 rad/s: 0.5 rad/s to the nearest,
+        # above it, so banded by + SPEED_BAND (me_base.banded)
         fmu.setString([variables["characteristic"].valueReference], ["0:600; 38.5:620; 80:0"])
-        assert fmu.getFloat64(indicator) == [0.5]
+        assert fmu.getFloat64(indicator) == [0.5 + SPEED_BAND]
         fmu.exitInitializationMode()
-        assert fmu.getFloat64(indicator) == [0.5]
+        assert fmu.getFloat64(indicator) == [0.5 + SPEED_BAND]
         assert not [m for s, m in log if s >= FMI3_ERROR], log
     finally:
         fmu.terminate()
