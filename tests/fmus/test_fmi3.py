@@ -425,6 +425,41 @@ def test_a_co_simulation_instance_reads_the_event_indicators_of_model_exchange_a
         me.freeInstance()
 
 
+@pytest.mark.parametrize("start", [1e3, 1e6])
+def test_output_derivatives_are_right_at_large_times(unpacked, start):
+    """The explicit time part of dy/dt (a load's tones up to 450 rad/s) takes a step that
+    does not grow with |t|: at t = 1e6 s a step of 1e-6 |t| gave d load_torque / dt 995.6
+    against 298.2 (issue 42).  Against a central difference of fmi3DoStep outputs over
+    1e-5 s and 2e-5 s from a saved state (second order)."""
+    fmu, md, variables = slave(unpacked, "LoadShaft")
+    try:
+        fmu.enterInitializationMode(startTime=start)
+        fmu.setString([variables["load_kind"].valueReference], ["random"])
+        for name, value in (("random_amplitude", 40.0), ("order_share", 0.5)):
+            fmu.setFloat64([variables[name].valueReference], [value])
+        fmu.exitInitializationMode()
+        t, h = start, 1e-3
+        for _ in range(5):
+            fmu.doStep(t, h)
+            t += h
+        outputs = [variables[n].valueReference for n in ("load_torque", "a", "w")]
+        rates = np.array(fmu.getOutputDerivatives(outputs, [1] * len(outputs)))
+        state = fmu.getFMUState()
+        y0 = np.array(fmu.getFloat64(outputs))
+        d = 1e-5
+        fmu.doStep(t, d)
+        y1 = np.array(fmu.getFloat64(outputs))
+        fmu.doStep(t + d, d)
+        y2 = np.array(fmu.getFloat64(outputs))
+        fmu.setFMUState(state)
+        fmu.freeFMUState(state)
+        slope = (4 * y1 - y2 - 3 * y0) / (2 * d)        # second order, one-sided
+        assert np.all(np.abs(rates - slope) <= 2e-3 * np.abs(slope) + 1e-6), list(zip(rates, slope))
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+
+
 @pytest.mark.parametrize("make", [slave, model])
 def test_an_indicator_read_in_initialization_mode_follows_the_parameters_set_there(unpacked, make):
     """A parameter set in Initialization Mode makes the model the indicators are read from

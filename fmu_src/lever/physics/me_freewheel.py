@@ -93,6 +93,14 @@ class FreewheelME(ModelExchange):
         deps.update({"phi": ("phi5",), "w": ("w5",), "a": deps[der("w5")]})
         return deps
 
+    def named_partials(self, t, x, u) -> dict:
+        """``{output: {state or input: value}}`` for every output of the FMU
+        (``FreewheelRectifier.named_outputs``), analytic (``output_gradients``), the zeros
+        left out."""
+        columns = STATE + ("tau",)
+        return {name: {c: v for c, v in zip(columns, g) if v != 0.0}
+                for name, g in self.model.output_gradients(t, x, self.disc, self.fly, u[0]).items()}
+
     def partials(self, t, x, u):
         rows = self.model.jacobian(t, x, self.disc, self.fly, u[0])
         columns = STATE + ("tau",)
