@@ -1,5 +1,5 @@
 """A run whose energy residual says its traces cannot be trusted says so - in the summary
-printed, summary.json, report.md - and ends with exit code 3 (issue 42 item 7); a run within
+printed, summary.json, report.md - and ends with exit code 3; a run within
 the bound ends with 0 and says nothing of the kind."""
 from __future__ import annotations
 

@@ -429,7 +429,7 @@ def test_a_co_simulation_instance_reads_the_event_indicators_of_model_exchange_a
 def test_output_derivatives_are_right_at_large_times(unpacked, start):
     """The explicit time part of dy/dt (a load's tones up to 450 rad/s) takes a step that
     does not grow with |t|: at t = 1e6 s a step of 1e-6 |t| gave d load_torque / dt 995.6
-    against 298.2 (issue 42).  Against a central difference of fmi3DoStep outputs over
+    against 298.2.  Against a central difference of fmi3DoStep outputs over
     1e-5 s and 2e-5 s from a saved state (second order)."""
     fmu, md, variables = slave(unpacked, "LoadShaft")
     try:

@@ -43,7 +43,7 @@ def test_the_freewheel_scene_runs_through_cvode_root_finding_and_passes_lever_va
 
 
 #: the scene's resistance lowered below the largest mesh torque: the flywheel slides at each
-#: stroke and sticks again between strokes (issue 47: an event update that switched only
+#: stroke and sticks again between strokes (an event update that switched only
 #: the discs left the flywheel sliding for good)
 SLIDING = {"resistance_torque": 200.0}
 

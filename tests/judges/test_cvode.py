@@ -77,7 +77,7 @@ def test_the_unsplit_solutions_time_covers_its_recorded_outputs(method, monkeypa
     assert solution.wall_time >= 2 * 0.05           # both shafts' rates
 
 
-# -- the reference of a scene too stiff for DOP853 (issue 42 item 4) -----------------------------
+# -- the reference of a scene too stiff for DOP853 ----------------------------------------------
 
 STIFF = ["coupling.stiffness=1e9", "coupling.damping=1e7"]
 

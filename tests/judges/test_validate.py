@@ -253,7 +253,7 @@ def _damaged_copy(source, target, drop=None, description=None):
 def test_a_damaged_fmu_file_is_bad_input_with_the_fmus_own_message(lever, fmu_dir, tmp_path):
     """Without its binary for this platform, or with a model description of another build
     (FMI 2.0 guid, FMI 3.0 instantiationToken), an FMU file is refused with exit code 2: what
-    is missing, or the FMU's own message - never a traceback (issue 42 item 5)."""
+    is missing, or the FMU's own message - never a traceback."""
     import re
 
     from harness.paths import fmi3_dir

@@ -4,10 +4,11 @@ discrete state.  Its event indicators are ``FreewheelRectifier.event_values`` (t
 reference and the co-simulation edition locate) with hysteresis (``me_base.banded``): the
 six gap edges (sign changes both ways; no state changes there, the right-hand side's
 branch follows the deflection), each ``ANGLE_BAND`` off its edge on the side the state was
-at the last event, and the two mode functions (positive while the mode holds;
-``FreewheelRectifier.switch`` once they are a band below zero): a slip's or a sliding
-flywheel's by ``SPEED_BAND`` (a slip starts at equal speeds), a stuck one's by
-``TORQUE_BAND`` (it may be entered with the torque at the capacity).  The start state sits
+at the last event, and the two mode functions (positive while the mode holds), a slip's
+or a sliding flywheel's plus ``SPEED_BAND`` (a slip starts at equal speeds), a stuck one's
+plus ``TORQUE_BAND`` (it may be entered with the torque at the capacity); at the event the
+update switches (``FreewheelRectifier.switch``) each mode the rectifier's own unbanded rule
+says has ended (``ended``).  The start state sits
 on every gap's back edge and at rest: without the bands a host's root finding meets
 indicators that are zero, or round-off around zero, from the first step on.
 
