@@ -233,6 +233,7 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
     from harness.engine import masters
+    from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
@@ -298,7 +299,8 @@ def run(scene: str | Path | scenes.Scene = "kavz685", overrides=None, *, master:
         result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
                           observer=observer)
-    except (SceneInvalid, NoModelExchange) as error:
+    except (SceneInvalid, NoModelExchange, FmuUnusable) as error:
+        # FmuUnusable: an FMU file without its binary here, or of another build
         if out is not None:
             outputs.abandon(Path(out))           # refused before the run: no empty folder left
         raise InputError(f"{error}: run it with a co-simulation master (e.g. jacobi-quadratic)"

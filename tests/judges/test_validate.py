@@ -278,6 +278,23 @@ def test_a_damaged_fmu_file_is_bad_input_with_the_fmus_own_message(lever, fmu_di
         assert words in done.output and "Traceback" not in done.output, done.output
 
 
+def test_a_scene_with_a_damaged_fmu_file_is_bad_input_for_lever_run(lever, fmu_dir, tmp_path):
+    """The same refusal where a scene names the file: exit code 2 with the FMU's message, no
+    traceback, no results folder left."""
+    import re
+
+    from harness.paths import SCENES
+
+    damaged = _damaged_copy(fmu_dir / "EngineShaft.fmu", tmp_path / "guid2.fmu", description=lambda d: re.sub(
+        rb'guid="[^"]*"', b'guid="{00000000-0000-0000-0000-000000000000}"', d, count=1))
+    scene = tmp_path / "damaged.toml"
+    scene.write_text((SCENES / "kavz685.toml").read_text().replace('fmu = "EngineShaft"', f'fmu = "{damaged}"'))
+    done = lever("run", scene, "--stop", "0.01", "--no-reference", "--no-plots", "--out", tmp_path / "out")
+    assert done.exit_code == 2, done.output
+    assert "refused to instantiate (fmi2Instantiate returned NULL); FMU said: [error] fmi2Instantiate" in done.output
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.fixture(scope="module")
 def kavz685_run(fmu_dir):
     return reference_traces.run_scene(scenes.load("kavz685"))
