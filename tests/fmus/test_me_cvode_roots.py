@@ -10,7 +10,9 @@ flywheel sticks and slides), a load with Coulomb friction and stiction under a r
 that swings across the drive (stops and breakaways), and an engine on its table.  Each run
 reaches its final time and is judged: the freewheel against its monolithic reference
 (``lever validate`` for the scene, ``validation.compare`` for the variant), the load and
-the engine against their co-simulation editions in fmpy."""
+the engine against their co-simulation editions in fmpy.  The flywheel's stick and slide
+is also run through the co-simulation edition (the other interface), against the same
+reference."""
 from __future__ import annotations
 
 import numpy as np
@@ -105,3 +107,26 @@ def test_a_load_with_stiction_and_an_engine_on_its_table_run_through_cvode_root_
     if fmu == "LoadShaft":
         held = cs["w"] == 0.0
         assert held.sum() >= 5 and np.all(w[held] == 0.0)     # held at rest exactly, as the co-simulation edition
+
+
+def test_the_co_simulation_edition_sticks_and_slides_the_flywheel_as_the_reference_does(fmu_dir):
+    """The other interface on the same scene: the co-simulation edition (its own RK4 with
+    located events) through the flywheel's stick and slide, against the monolithic reference."""
+    from harness import api
+
+    scene = api.load("freewheel_rectifier", [f"rectifier.{k}={v}" for k, v in SLIDING.items()], stop=0.45)
+    done = api.run(scene, reference=False, plots=False)
+    assert done.ok, done.failure
+    stuck, w = done.traces["rectifier.flywheel_stuck"], done.traces["rectifier.w"]
+    assert np.count_nonzero(np.diff(stuck)) >= 6
+    assert np.all(w[stuck == 1.0] == 0.0)
+    from harness.judges import monolithic
+
+    model = monolithic.planned(scene).rectifier.model.get()       # the scene's values, checked
+    assert model.mc == SLIDING["resistance_torque"]
+    rows, _, _ = rectifier.integrate(model, done.times)
+    reference = {f"rectifier.{n}": np.array([r[n] for r in rows]) for n in rows[0] if n != "events"}
+    findings, _ = validation.compare("freewheel sliding, co-simulation", done.times,
+                                     {k: v for k, v in done.traces.items() if k in reference}, done.times, reference)
+    failing = [(s.name, s.problem) for s in findings.signals if not s.passed]
+    assert not findings.problems and not failing, (findings.problems, failing)
