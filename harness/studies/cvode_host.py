@@ -15,7 +15,6 @@ and the time.
 from __future__ import annotations
 
 import contextlib
-import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,8 +177,7 @@ def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_
     k = 1
     while k <= n_out:
         target = k * step
-        with contextlib.redirect_stdout(io.StringIO()):
-            result = solver.step(target, method="normal")
+        result = solver.step(target, method="normal")
         if not result.success:
             raise HostFailure(f"CVODE stopped after t = {t:.9g} s: {result.message} (status {result.status}; "
                               f"after {run.events} events)")
