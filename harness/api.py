@@ -348,6 +348,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
     bad input raises InputError before anything runs."""
     from harness.engine import masters
+    from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
@@ -415,7 +416,8 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
                           observer=observer)
-    except (SceneInvalid, NoModelExchange) as error:
+    except (SceneInvalid, NoModelExchange, FmuUnusable) as error:
+        # FmuUnusable: an FMU file without its binary here, or of another build
         if out is not None:
             outputs.abandon(Path(out))           # refused before the run: no empty folder left
         raise InputError(f"{error}: run it with a co-simulation master (e.g. jacobi-quadratic)"
@@ -629,6 +631,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     (e.g. a shorter run; seconds or with a time unit, ``("0 s", "500 ms")``, or
     ``"START:STOP"``); ``out``: write validation.json, the result and a plot per failing
     signal there.  ``repr()`` of what it returns says PASS or FAIL and why."""
+    from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
     from harness.formats import reference_traces
@@ -674,8 +677,11 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         if ref.kind == "fmu":
             if master or step:
                 raise InputError(f"--master/--step: {label} is an FMU run stand-alone at its _ref.opt step")
-            judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
-                                              fmu_path=fmu_file)
+            try:
+                judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
+                                                  fmu_path=fmu_file)
+            except FmuUnusable as error:     # no binary here, or it refused to instantiate: bad input
+                raise InputError(f"{label}: {error}") from None
         else:
             spec = load(name, overrides)
             if master:

@@ -193,6 +193,8 @@ SLOW = (
     "fmus/test_hosts.py::test_lever_hosts_refuses_the_hosts_that_cannot_run_an_fmi3_scene_before_anything_runs",
     "fmus/test_hosts.py::test_the_kavz685_scene_in_ecos_passes_lever_validate_at_its_stated_tolerance",
     "fmus/test_me_hosts.py::test_fmpy_model_exchange_cvode_passes_lever_validate",
+    "fmus/test_me_cvode_roots.py",
+    "cli/test_untrusted_runs.py::test_an_untrusted_run_says_so_and_exits_3",
     "fmus/test_me_hosts.py::test_the_c_importers_model_exchange_loop_passes_lever_validate",
     "fmus/test_me_hosts.py::test_the_c_importers_fmi3_model_exchange_loop_passes_lever_validate",
     "fmus/test_me_hosts.py::test_the_c_importers_fmi3_co_simulation_passes_lever_validate_as_fmi2",

@@ -2127,6 +2127,15 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
     if (!(st & ANY_STATE) || (st & (st - 1)) || !isfinite(time)) {
         return shim_error(s, "fmi2DeSerializeFMUstate: malformed header (state %u, time %g)", st, time);
     }
+    /* Our models never end a step with fmi2Discard, so no instance of theirs is ever in
+     * 'step failed' to save a state there: such a header is crafted or damaged, and the
+     * instance restored from it could take no further step. */
+    if (st == ST_STEP_FAILED) {
+        return shim_error(s, "fmi2DeSerializeFMUstate: the header says the state was saved in 'step failed', "
+                             "which this FMU never enters (a step either completes or is refused with fmi2Error): "
+                             "a crafted or damaged state, not restored (the instance would be left where no "
+                             "step is allowed)");
+    }
     if (length != size - SERIAL_HEADER) {
         return shim_error(s, "fmi2DeSerializeFMUstate: the header announces %llu bytes of state, "
                              "%zu follow: the state is %s", (unsigned long long)length, size - SERIAL_HEADER,

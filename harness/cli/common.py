@@ -12,6 +12,8 @@ from harness.paths import FMUS
 
 #: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
 INTERRUPTED_EXIT = 130
+#: a run that completed but whose energy residual says its traces cannot be trusted
+UNTRUSTED_EXIT = 3
 
 
 class UserError(click.ClickException):

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from harness import api
-from harness.cli.common import INTERRUPTED_EXIT, UserError, user_errors
+from harness.cli.common import INTERRUPTED_EXIT, UNTRUSTED_EXIT, UserError, user_errors
 from harness.cli.studies import print_measured
 from harness.paths import RESULTS
 
@@ -56,7 +56,12 @@ MASTER_CHOICE = click.Choice(list(api.masters()))
 def run(scene, assignments, master, step, stop, tolerance, out, no_reference, strict, progress, stream, latency,
         no_plots):
     """Run SCENE (a name in resources/scenes, a .toml path or an SSP archive .ssp) and
-    write traces, plots, summary.json and report.md."""
+    write traces, plots, summary.json and report.md.
+
+    Exit code: 0 for a run to be trusted; 3 for a run that completed but whose energy
+    residual exceeds 5 % of the work in (summary.json's "untrusted" and the report say so:
+    the traces are not the system's motion); 1 when the run failed part-way; 2 on bad
+    input (or values the FMUs refused at initialisation); 130 on Ctrl-C."""
     with user_errors():
         spec = api.load(scene, list(assignments), stop=stop, strict=strict)
     show_progress = sys.stderr.isatty() if progress is None else progress
@@ -82,6 +87,8 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
             sys.exit(UserError.exit_code)
         click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
         sys.exit(1)
+    if done.summary.get("untrusted"):
+        sys.exit(UNTRUSTED_EXIT)
 
 
 def _print_summary(summary: dict, out: Path):
@@ -106,6 +113,8 @@ def _print_summary(summary: dict, out: Path):
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
+    if summary.get("untrusted"):
+        click.echo(f"  NOT TO BE TRUSTED: {summary['untrusted']}")
     if summary.get("energy_balance_unavailable"):
         click.echo(f"  energy balance: not computed: {summary['energy_balance_unavailable']}")
     if summary.get("stream"):

@@ -177,6 +177,30 @@ class FmuCallError(RuntimeError):
                          f"at t = {time:.6g} s{said}")
 
 
+class FmuUnusable(FmuCallError):
+    """The FMU file cannot be used here: its binary for this platform is missing or does not
+    load, or it refused to instantiate (its own message says why: a model description of
+    another build, a missing resource).  Bad input, not a run that failed: a command ends
+    with exit code 2 and this message."""
+
+    def __init__(self, component: str, what: str, messages: Sequence[str], call: str = "fmi2Instantiate"):
+        self.component, self.call, self.status, self.time = component, call, 3, 0.0
+        self.messages = [m for m in messages if not m.startswith("[ok]")][-5:]
+        said = ("; FMU said: " + " | ".join(self.messages)) if self.messages else ""
+        RuntimeError.__init__(self, f"{component}: {what}{said}")
+
+
+def library_problem(name: str, fmu_path: Path, error: Exception) -> FmuUnusable:
+    """``FmuUnusable`` for an FMU whose binary fmpy could not load (``error``)."""
+    text = str(error)
+    if "Cannot find shared library" in text:
+        library = text.split("Cannot find shared library ")[-1].rstrip(".")
+        inside = library[library.find("binaries/"):] if "binaries/" in library else library
+        text = (f"it has no binary for this platform ({inside} is missing): an FMU built for another platform, "
+                "or its binaries/ folder lost")
+    return FmuUnusable(name, f"cannot load {fmu_path.name}: {text}", [], call="loading its binary")
+
+
 # Where an instance stands in FMI 2.0's co-simulation state machine, as far as ``free``
 # needs it: fmi2Terminate is allowed only once initialised (step complete or step failed),
 # fmi2FreeInstance in every state but after fmi2Fatal, after which no call at all is.
@@ -191,7 +215,17 @@ class Component:
         self._open(name, fmu_path)
         _routes[self.instance_name] = self.messages
         _pin_logger()
-        self.fmu = self._instantiate(logging_on)
+        try:
+            self.fmu = self._instantiate(logging_on)
+        except FmuUnusable:
+            _routes.pop(self.instance_name, None)
+            raise
+        except Exception as error:  # noqa: BLE001 - fmpy raises plain Exceptions for both failures
+            _routes.pop(self.instance_name, None)
+            if "Failed to instantiate" not in str(error):
+                raise library_problem(name, self.fmu_path, error) from None
+            raise FmuUnusable(name, f"{self.fmu_path.name} refused to instantiate (fmi2Instantiate returned "
+                                    "NULL)", list(self.messages)) from None
         self.state = INSTANTIATED
         functions = self.fmu._functions
         self.raw = RawCalls(ctypes.c_void_p(self.fmu.component), unconverted(functions["fmi2GetReal"]),

@@ -23,7 +23,8 @@ from fmpy.fmi3 import FMU3Slave, fmi3IntermediateUpdateCallback, fmi3LogMessageC
 from harness.description import typed_values
 from harness.description.fmu_description import read_description
 from harness.engine import component as fmi2
-from harness.engine.component import INITIALIZATION, STEPPING, Component, FmuCallError, step_call
+from harness.engine.component import (INITIALIZATION, STEPPING, Component, FmuCallError, FmuUnusable,
+                                     library_problem, step_call)
 from harness.engine.interface import RawCalls
 
 #: the FMI 2.0 names the system and the masters give the calls they make -> FMI 3.0's
@@ -99,9 +100,13 @@ class Component3(Component):
         _environments[self._environment] = self.instance_name
         fmi2.route_messages(self.instance_name, self.messages)
         self._freed = True      # until instantiated: ``free`` has nothing to end
-        self.fmu = FMU3Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
-                             modelIdentifier=self.description.coSimulation.modelIdentifier,
-                             instanceName=self.instance_name)
+        try:
+            self.fmu = FMU3Slave(guid=self.description.guid, unzipDirectory=self._unzipped,
+                                 modelIdentifier=self.description.coSimulation.modelIdentifier,
+                                 instanceName=self.instance_name)
+        except Exception as error:  # noqa: BLE001 - fmpy raises a plain Exception for a missing binary
+            self._unroute()
+            raise library_problem(name, self.fmu_path, error) from None
         resources = str(Path(self._unzipped) / "resources") + "/"
         empty = (ctypes.c_uint32 * 0)()
         self.fmu.component = self.fmu.fmi3InstantiateCoSimulation(
@@ -112,7 +117,8 @@ class Component3(Component):
             messages = [m for m in self.messages if not m.startswith("[ok]")][-5:]
             self._unroute()
             self.fmu.freeLibrary()
-            raise FmuCallError(name, "fmi3InstantiateCoSimulation", 3, 0.0, messages)
+            raise FmuUnusable(name, f"{self.fmu_path.name} refused to instantiate (fmi3InstantiateCoSimulation "
+                                    "returned NULL)", messages, call="fmi3InstantiateCoSimulation")
         self._freed = False
         self.state = fmi2.INSTANTIATED
         functions = self.fmu._functions

@@ -51,6 +51,8 @@ def summarize(result: RunResult, reference=None) -> dict:
     if "energy_balance" in scene.features and result.ok:
         if (problem := scene_kinds.driveline_problem(scene)) is None:
             summary["energy_balance"] = metrics.energy_balance(scene, result.times, result.traces)
+            if (why := metrics.untrusted(summary["energy_balance"])) is not None:
+                summary["untrusted"] = why
         else:       # the balance books the driveline's works and energies: not this system's
             summary["energy_balance_unavailable"] = f"{problem}: the driveline's energy balance does not apply"
     load_torque = f"{scene_kinds.roles(scene)[2]}.load_torque"
@@ -83,6 +85,8 @@ def write_report(path: Path, summary: dict):
     elif summary["failure"]:
         lines += ["", f"**The run failed:** {summary['failure']}", "",
                   "The traces up to the failure are in traces.csv."]
+    if summary.get("untrusted"):
+        lines += ["", f"**Not to be trusted:** {summary['untrusted']}."]
     if summary.get("unconnected_inputs"):
         lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
     if summary.get("unchecked_connections"):

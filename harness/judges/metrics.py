@@ -3,6 +3,8 @@
 reference, and the energy balance.  Pure functions of traces."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lever.physics import component_parameters
@@ -34,6 +36,26 @@ def inertias(scene: scenes.Scene) -> tuple[float, float]:
     engine, _, load = roles(scene)
     return (check_all(component_parameters.ENGINE, parameters(scene, engine))["inertia"],
             check_all(component_parameters.LOAD, parameters(scene, load))["inertia"])
+
+
+#: the largest energy residual (share of the work in) of a run whose results are to be
+#: trusted: five times a master's worst on the committed scenes (2.0 %, jacobi on
+#: kavz685_stall_resistive); beyond it the run's energy bookkeeping says its traces are not
+#: the system's motion (an unstable coupling, a tolerance of 0.999)
+TRUSTED_RESIDUAL = 0.05
+
+
+def untrusted(balance: dict | None) -> str | None:
+    """The sentence saying a run cannot be trusted from its energy balance (``energy_balance``),
+    or None where the residual is within ``TRUSTED_RESIDUAL`` (or there is no balance)."""
+    if not balance:
+        return None
+    share = balance["residual_relative"]
+    if math.isfinite(share) and share <= TRUSTED_RESIDUAL:
+        return None
+    said = f"{100 * share:.2g} %" if math.isfinite(share) else "not finite"
+    return (f"the energy residual is {said} of the work in (trusted up to {100 * TRUSTED_RESIDUAL:g} %): the traces "
+            "are not the system's motion to be relied on - take a smaller step or tolerance, or another master")
 
 
 def energy_balance(scene: scenes.Scene, times: np.ndarray, traces: dict, dissipated: np.ndarray | None = None) -> dict:

@@ -29,6 +29,13 @@ from harness.judges.solution import MonolithicSolution, ReferenceUnavailable, ca
 RTOL = 1e-10
 ATOL = 1e-10
 
+#: DOP853 is stable for steps up to about 6 / (the fastest decay rate) (its stability region
+#: on the negative real axis, Hairer & Wanner); a scene that would need more than
+#: ``EXPLICIT_STEP_BUDGET`` such steps over its span is stiff for it: its reference is
+#: solved by a stiff method instead (``stiff_method``)
+DOP853_STABILITY = 6.0
+EXPLICIT_STEP_BUDGET = 100_000
+
 
 def planned(scene: scenes.Scene | plans.Plan) -> plans.Plan:
     """The checked scene a solver takes: ``scene`` itself, or a scene checked once here."""
@@ -81,6 +88,40 @@ def solve(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cache: bool =
     return solver(plan, times, use_cache, rtol, atol, method)
 
 
+def stiff_method(driveline: Driveline, t0: float, y0, span: float, resisting: bool) -> tuple[str, str] | None:
+    """``(method, why)`` of a stiff solver for the driveline when DOP853's stability alone
+    would hold it to more than ``EXPLICIT_STEP_BUDGET`` steps over ``span`` (the fastest
+    decay of its Jacobian at the start, as ``me-cvode`` judges stiffness): CVODE's BDF on
+    the analytic Jacobian, or scipy's Radau where the load can stick (CVODE has no mode
+    switching here); None where DOP853 is the reference's solver, as it is for every
+    committed scene."""
+    rates = np.linalg.eigvals(np.array(driveline.jacobian(t0, y0), dtype=float))
+    decay = float(max([-z.real for z in rates] + [0.0]))
+    steps = decay * span / DOP853_STABILITY
+    if not steps > EXPLICIT_STEP_BUDGET:
+        return None
+    method = "Radau" if resisting else "CVODE-BDF"
+    return method, (f"stiff: a mode decays at {decay:.4g} 1/s, so DOP853 would need about {steps:.3g} steps over "
+                    f"{span:g} s (more than {EXPLICIT_STEP_BUDGET:,}); solved by {method}")
+
+
+def reference_method(plan: plans.Plan, times: np.ndarray, method: str = "DOP853") -> tuple[str, str]:
+    """``(method, note)``: the method a driveline scene's reference takes over ``times`` when
+    asked for ``method`` - a stiff one (``stiff_method``) in place of DOP853 where DOP853 would
+    not finish, with the note that says why; else ``method`` itself and no note."""
+    if method != "DOP853" or len(times) < 2:
+        return method, ""
+    built = plan.driveline.physics.get()
+    engine, load, coupling = built.engine, built.load, built.coupling
+    misalignment = _misalignment_source(plan)
+    t0 = float(times[0])
+    at_start = coupling if misalignment is None else misalignment[1].at(misalignment[0].value(t0))
+    (phi1, w1), (phi2, w2) = plan.driveline.start.get()
+    y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if isinstance(engine, LaggedShaft) else [])
+    chosen = stiff_method(Driveline(engine, lambda t: at_start, load), t0, y0, float(times[-1]) - t0, load.resisting)
+    return (method, "") if chosen is None else (chosen[0], f"; {chosen[1]}")
+
+
 def solve_driveline(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cache: bool = True,
                     rtol: float = RTOL, atol: float = ATOL, method: str = "DOP853") -> MonolithicSolution:
     """``solve`` for a driveline scene (engine - coupling - load, a misalignment source perhaps)."""
@@ -88,14 +129,16 @@ def solve_driveline(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cac
     scene = plan.scene
     roles = _driveline(plan).roles
     engine_name, coupling_name, load_name = roles.engine, roles.coupling, roles.load
-    path = cache_path(scene, times, rtol, atol, method)
-    if use_cache and (cached := load_cached(path)) is not None:
-        return cached
-
     built = plan.driveline.physics.get()
     engine, load, coupling = built.engine, built.load, built.coupling
     misalignment = _misalignment_source(plan)
     (phi1, w1), (phi2, w2) = plan.driveline.start.get()
+    lagged = isinstance(engine, LaggedShaft)
+    y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
+    method, stiff_note = reference_method(plan, times, method)
+    path = cache_path(scene, times, rtol, atol, method)
+    if use_cache and (cached := load_cached(path)) is not None:
+        return cached
 
     if misalignment is not None:
         # the coupling at alpha(t), exactly as the coupling FMU evaluates it (CouplingFamily)
@@ -111,14 +154,12 @@ def solve_driveline(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cac
         def coupling_at(t):
             return coupling
     fixed = coupling.evaluate if misalignment is None else None
-    lagged = isinstance(engine, LaggedShaft)
     # the right-hand side: the physics' own (lever.physics.driveline), as the ME editions
     driveline = Driveline(engine, coupling_at, load)
     rhs = driveline.derivatives
 
     started = clock.perf_counter()
     omega, _ = coupling.eigen_estimate(engine.inertia, load.inertia)
-    y0 = [phi1, w1, phi2, w2, 0.0, 0.0, 0.0] + ([engine.torque_start] if lagged else [])
     if method in cvode.METHODS:
         if load.resisting:
             raise ReferenceUnavailable(f"scene '{scene.name}': CVODE has no stick/slip switching here (the load "
@@ -167,7 +208,7 @@ def solve_driveline(scene: scenes.Scene | plans.Plan, times: np.ndarray, use_cac
         traces[f"{name}.misalignment_rate"] = np.array([source.rate(x) for x in t])
     # the time to the traces, the recorded outputs computed as a master reads them at its points
     wall = clock.perf_counter() - started
-    reference = MonolithicSolution(t, traces, wall, nfev, f"{method} rtol={rtol:g} atol={atol:g}")
+    reference = MonolithicSolution(t, traces, wall, nfev, f"{method} rtol={rtol:g} atol={atol:g}{stiff_note}")
     if use_cache:
         store(path, reference)
     return reference

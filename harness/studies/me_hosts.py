@@ -9,6 +9,11 @@ judged against its stand-alone reference (``lever validate --result``):
   Runge-Kutta integrator (RK4) with event indicators checked after every step, a sign change
   located by bisection, the inputs from a CSV (linear between rows, a repeated row an input
   event), the outputs to a CSV;
+* ``cvode-roots`` and ``cvode-roots-fmi3`` - the FMI 2.0 and 3.0 editions in a host as C
+  hosts with CVODE write it (``cvode_host``, after Reference-FMUs' ``fmusim --solver
+  cvode``): the event indicators are CVODE's own root functions, CVODE goes on from its
+  own history after an event that changed no state, so an indicator still zero there
+  stops the run;
 * ``c-importer-fmi3-rk4`` and ``c-importer-fmi3-cs`` - the same C importer on the FMI 3.0
   edition (``build/fmus3``, ``--me3``, ``--cs3``): the same RK4 loop through FMI 3.0's Model
   Exchange calls, and its Co-Simulation loop (the inputs set at each communication point,
@@ -213,7 +218,23 @@ def write_result(path: Path, times: np.ndarray, traces: dict) -> Path:
 
 
 #: the hosts ``main`` runs, in order
-HOSTS = ("fmpy-cvode", "c-importer-rk4", "c-importer-fmi3-rk4", "c-importer-fmi3-cs")
+HOSTS = ("fmpy-cvode", "cvode-roots", "cvode-roots-fmi3", "c-importer-rk4", "c-importer-fmi3-rk4",
+         "c-importer-fmi3-cs")
+
+
+def run_cvode_roots(case: AloneCase, fmu_dir: Path = FMUS, fmi: int = 2, rtol: float = FMPY_RTOL):
+    """``case`` in the CVODE host with its own root finding (``cvode_host``): the times, the
+    traces named as the reference's signals, and the host's run (events, restarts).  An
+    FMU with inputs is refused (the host holds them at their start values)."""
+    from . import cvode_host
+
+    if case.inputs is not None:
+        raise ValueError(f"{case.fmu}: the CVODE root-finding host holds the inputs; its reference has an input file")
+    fmu = (Path(fmu_dir) if fmi == 2 else fmi3_dir(Path(fmu_dir))) / f"{case.fmu}.fmu"
+    names = list(dict.fromkeys(case.columns.values()))
+    opt = case.opt
+    run = cvode_host.run(fmu, fmi, case.start_values, names, opt.stop, opt.step, rtol=rtol, atol=rtol * 1e-2)
+    return run.times, {ref: run.outputs[var] for ref, var in case.columns.items()}, run
 
 
 def main(out: Path, fmus=None, names: tuple = HOSTS) -> list[str]:
@@ -229,6 +250,10 @@ def main(out: Path, fmus=None, names: tuple = HOSTS) -> list[str]:
             for host in names:
                 if host == "fmpy-cvode":
                     times, traces = run_fmpy(case)
+                elif host.startswith("cvode-roots"):
+                    if case.inputs is not None:
+                        continue
+                    times, traces, _ = run_cvode_roots(case, fmi=3 if host.endswith("fmi3") else 2)
                 else:
                     fmi = 3 if "fmi3" in host else 2
                     interface = "CoSimulation" if host.endswith("-cs") else "ModelExchange"

@@ -234,6 +234,67 @@ def test_an_fmu_file_that_cannot_be_validated_stand_alone_is_bad_input(lever, fm
     assert done.exit_code == 2 and "stand-alone" in done.output
 
 
+def _damaged_copy(source, target, drop=None, description=None):
+    """``source`` rewritten to ``target``: members under ``drop`` left out, the model
+    description passed through ``description`` (bytes -> bytes)."""
+    import zipfile
+
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            if drop and item.filename.startswith(drop):
+                continue
+            data = zin.read(item.filename)
+            if description and item.filename == "modelDescription.xml":
+                data = description(data)
+            zout.writestr(item, data)
+    return target
+
+
+def test_a_damaged_fmu_file_is_bad_input_with_the_fmus_own_message(lever, fmu_dir, tmp_path):
+    """Without its binary for this platform, or with a model description of another build
+    (FMI 2.0 guid, FMI 3.0 instantiationToken), an FMU file is refused with exit code 2: what
+    is missing, or the FMU's own message - never a traceback."""
+    import re
+
+    from harness.paths import fmi3_dir
+
+    stranger = b"{00000000-0000-0000-0000-000000000000}"
+    cases = (
+        (fmu_dir, "nobin2.fmu", dict(drop="binaries/"), "no binary for this platform (binaries/linux64/EngineShaft"),
+        (fmi3_dir(fmu_dir), "nobin3.fmu", dict(drop="binaries/"),
+         "no binary for this platform (binaries/x86_64-linux/EngineShaft"),
+        (fmu_dir, "guid2.fmu", dict(description=lambda d: re.sub(rb'guid="[^"]*"', b'guid="' + stranger + b'"', d,
+                                                                  count=1)),
+         "refused to instantiate (fmi2Instantiate returned NULL); FMU said: [error] fmi2Instantiate: fmuGUID"),
+        (fmi3_dir(fmu_dir), "token3.fmu",
+         dict(description=lambda d: re.sub(rb'instantiationToken="[^"]*"', b'instantiationToken="' + stranger + b'"',
+                                           d, count=1)),
+         "refused to instantiate (fmi3InstantiateCoSimulation returned NULL); FMU said: [error] fmi3Instantiate"),
+    )
+    for folder, name, damage, words in cases:
+        path = _damaged_copy(folder / "EngineShaft.fmu", tmp_path / name, **damage)
+        done = lever("validate", path, "--out", tmp_path / name)
+        assert done.exit_code == 2, done.output
+        assert words in done.output and "Traceback" not in done.output, done.output
+
+
+def test_a_scene_with_a_damaged_fmu_file_is_bad_input_for_lever_run(lever, fmu_dir, tmp_path):
+    """The same refusal where a scene names the file: exit code 2 with the FMU's message, no
+    traceback, no results folder left."""
+    import re
+
+    from harness.paths import SCENES
+
+    damaged = _damaged_copy(fmu_dir / "EngineShaft.fmu", tmp_path / "guid2.fmu", description=lambda d: re.sub(
+        rb'guid="[^"]*"', b'guid="{00000000-0000-0000-0000-000000000000}"', d, count=1))
+    scene = tmp_path / "damaged.toml"
+    scene.write_text((SCENES / "kavz685.toml").read_text().replace('fmu = "EngineShaft"', f'fmu = "{damaged}"'))
+    done = lever("run", scene, "--stop", "0.01", "--no-reference", "--no-plots", "--out", tmp_path / "out")
+    assert done.exit_code == 2, done.output
+    assert "refused to instantiate (fmi2Instantiate returned NULL); FMU said: [error] fmi2Instantiate" in done.output
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.fixture(scope="module")
 def kavz685_run(fmu_dir):
     return reference_traces.run_scene(scenes.load("kavz685"))

@@ -20,8 +20,8 @@ from harness.judges import monolithic
 from lever.physics import component_parameters, driveline
 from lever.physics.driveline import HELD, Driveline
 from lever.physics.engine import NAMED_CHARACTERISTICS, TabulatedCharacteristic
-from lever.physics.freewheel import EVENTS as FREEWHEEL_EVENTS, FREE, STICK
-from lever.physics.me_base import der
+from lever.physics.freewheel import EVENTS as FREEWHEEL_EVENTS, FREE, N_EDGES, STICK
+from lever.physics.me_base import ANGLE_BAND, SPEED_BAND, TORQUE_BAND, der
 from lever.physics.me_coupling import CouplingME
 from lever.physics.me_engine import EngineME
 from lever.physics.me_freewheel import FreewheelME
@@ -255,7 +255,14 @@ def test_freewheel_me_derivatives_are_the_rectifier_reference_right_hand_side():
                 y = [v + rng.uniform(-0.05, 0.05) for v in y0]
                 tau = rng.uniform(-20.0, 20.0)
                 assert me.derivatives(t, y, [tau]) == model.derivatives(t, y, disc, fly, tau)
-                assert me.event_indicators(t, y, [tau]) == model.event_values(t, y, disc, fly, tau)
+                # the reference's event functions, each banded: the edges on their sides, the
+                # modes by the band of what they measure
+                me.initialize(t, y, [tau])
+                raw = model.event_values(t, y, disc, fly, tau)
+                sides = [1.0 if v >= 0.0 else -1.0 for v in raw[:N_EDGES]]
+                bands = [ANGLE_BAND * s for s in sides] + [
+                    TORQUE_BAND if m == STICK else (0.0 if m == FREE else SPEED_BAND) for m in (disc, fly)]
+                assert me.event_indicators(t, y, [tau]) == [v + b for v, b in zip(raw, bands)]
 
 
 # -- (b) analytic partials against central differences ------------------------------------------
@@ -458,17 +465,23 @@ def test_the_load_stops_sticks_and_breaks_away_where_the_indicator_changes_sign(
 
     def state(t):
         return [3.0 * t - 0.5 * deceleration * t * t, 3.0 - deceleration * t, 0.0]
-    assert load.event_indicators(stop * (1 - 1e-9), state(stop * (1 - 1e-9)), [tau])[0] > 0.0
-    assert load.event_indicators(stop * (1 + 1e-9), state(stop * (1 + 1e-9)), [tau])[0] < 0.0
-    at_rest = load.event_update(stop, state(stop), [tau])
+    # the indicator is banded (me_base.banded): it changes sign once the speed has
+    # reversed by SPEED_BAND, and the update puts the shaft at rest exactly
+    stop_banded = (3.0 + SPEED_BAND) / deceleration
+    assert load.event_indicators(stop, state(stop), [tau])[0] == pytest.approx(SPEED_BAND, abs=1e-15)
+    assert load.event_indicators(stop_banded * (1 - 1e-9), state(stop_banded * (1 - 1e-9)), [tau])[0] > 0.0
+    assert load.event_indicators(stop_banded * (1 + 1e-9), state(stop_banded * (1 + 1e-9)), [tau])[0] < 0.0
+    at_rest = load.event_update(stop_banded, state(stop_banded * (1 + 1e-9)), [tau])
     assert at_rest[1] == 0.0 and load.mode == HELD                    # |40 - 50| <= 35: sticks
     assert load.derivatives(stop, at_rest, [tau]) == [0.0, 0.0, 0.0]
     assert load.outputs(stop, at_rest, [tau])[3] == tau                 # static friction balances the drive
-    # breakaway: net = tau - 50 reaches +35 at tau = 85
-    assert load.event_indicators(stop, at_rest, [85.0 - 1e-9])[0] > 0.0
-    assert load.event_indicators(stop, at_rest, [85.0 + 1e-9])[0] < 0.0
-    load.event_update(stop, at_rest, [85.0 + 1e-9])
+    # breakaway: net = tau - 50 reaches +35 at tau = 85, the indicator TORQUE_BAND later
+    assert load.event_indicators(stop, at_rest, [85.0])[0] == pytest.approx(TORQUE_BAND, abs=1e-12)
+    assert load.event_indicators(stop, at_rest, [85.0 + TORQUE_BAND - 1e-9])[0] > 0.0
+    assert load.event_indicators(stop, at_rest, [85.0 + TORQUE_BAND + 1e-9])[0] < 0.0
+    load.event_update(stop, at_rest, [85.0 + TORQUE_BAND + 1e-9])
     assert load.mode == 1
+    assert load.event_indicators(stop, at_rest, [86.0])[0] == SPEED_BAND     # a breakaway starts off zero
     assert load.derivatives(stop, at_rest, [86.0])[1] == pytest.approx((86.0 - 50.0 - 20.0) / 2.0)
 
 
@@ -482,8 +495,13 @@ def test_the_freewheel_engages_where_its_indicator_changes_sign():
     y = me.start()
     engaged = math.acos(1.0 - y[0] / model.phi0) / model.omega
     index = FREEWHEEL_EVENTS.index("msm_contact")
+    # below its edge at the start: the indicator is e - ANGLE_BAND (me_base.banded), and
+    # changes sign where e = ANGLE_BAND
+    assert me.event_indicators(engaged, y, [0.0])[index] == pytest.approx(-ANGLE_BAND, abs=1e-15)
+    located = math.acos(1.0 - (y[0] + ANGLE_BAND) / model.phi0) / model.omega
+    assert (me.event_indicators(located * (1 - 1e-9), y, [0.0])[index] < 0.0
+            < me.event_indicators(located * (1 + 1e-9), y, [0.0])[index])
     before, after = engaged * (1 - 1e-9), engaged * (1 + 1e-9)
-    assert me.event_indicators(before, y, [0.0])[index] < 0.0 < me.event_indicators(after, y, [0.0])[index]
     assert model.forces(before, y, me.disc, me.fly, 0.0)[4] == model.t_p
     later = engaged * 1.05
     assert model.forces(later, y, me.disc, me.fly, 0.0)[4] > model.t_p
@@ -514,18 +532,27 @@ def test_the_freewheel_discs_slip_where_their_indicator_changes_sign():
         low, high = (mid, high) if indicator(mid)[0] > 0.0 else (low, mid)
     value, z = indicator(high)
     f = model.forces(0.0, z, STICK, STICK, 0.0)
-    assert abs(f[5]) == pytest.approx(f[6], rel=1e-12)   # |F| = capacity exactly where it changes sign
+    # |F| = capacity + TORQUE_BAND exactly where it changes sign (me_base.banded)
+    assert abs(f[5]) == pytest.approx(f[6] + TORQUE_BAND, rel=1e-13)
     me.event_update(0.0, z, [0.0])
     assert me.disc in (1, -1)
+    assert me.event_indicators(0.0, z, [0.0])[index] == SPEED_BAND     # a slip starts at equal speeds, off zero
 
 
 def test_the_engine_table_points_are_event_indicators():
     model = EngineME(component_parameters.engine_from(ENGINES["table"]))
     speeds = model.characteristic.speeds
     for k, w in enumerate(speeds):
+        # a speed at a point is on its upper side: SPEED_BAND off zero, a sign change once
+        # the speed is SPEED_BAND below it; the update moves the side there
         x = [0.0, w, 0.0]
-        assert model.event_indicators(0.0, x, [0.0])[k] == 0.0
-        assert model.event_indicators(0.0, [0.0, w - 1e-9, 0.0], [0.0])[k] < 0.0
+        model.initialize(0.0, x, [0.0])
+        assert model.event_indicators(0.0, x, [0.0])[k] == SPEED_BAND
+        assert model.event_indicators(0.0, [0.0, w - 0.5 * SPEED_BAND, 0.0], [0.0])[k] > 0.0
+        below = [0.0, w - 2.0 * SPEED_BAND, 0.0]
+        assert model.event_indicators(0.0, below, [0.0])[k] < 0.0
+        model.event_update(0.0, below, [0.0])
+        assert model.event_indicators(0.0, below, [0.0])[k] == pytest.approx(-3.0 * SPEED_BAND, rel=1e-6)
     assert EngineME(component_parameters.engine_from({})).event_indicators(0.0, [0.0, 30.0, 0.0], [0.0]) == []
 
 

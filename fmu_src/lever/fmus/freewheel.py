@@ -140,6 +140,7 @@ class FreewheelRectifier(ModelExchangeSlave):
 
     def _modes_from_co_simulation(self):
         self._me_model.disc, self._me_model.fly = self._disc, self._fly
+        self._me_model.initialize(self._time, self._x_physics(), self._u())
 
     def _events_settled(self, t, x, u):
         # an event the integrator stopped at (not the event iteration of the initialisation)

@@ -10,9 +10,12 @@ untouched, and the entry refuses such references from a host, so only it uses th
 reference there is ``CHANNEL + (kind << 20) + index``; every ME call is one such get or
 set, and errors are logged like any other (fmi2Error, the instance usable).
 
-Directional derivatives are the physics' partials; an output the physics' model has no
-partials of (the freewheel's torques and energies) takes central differences of its value
-instead (``_central_difference``), which docs/hosts.md says.
+Directional derivatives are the physics' partials, analytic: those of the physics' model's
+outputs and derivatives (``partials``), and for an FMU output beyond them (the freewheel's
+torques, flags and energies) the model's ``named_partials``; an output with neither is
+refused with fmi2Error and a sentence, never approximated.  The explicit time part of
+``fmi3GetOutputDerivatives`` is a central difference in time (``_time_partials``) with a
+step independent of the time itself.
 
 A model declares its continuous states (``StateVariable``: an output of the FMU or a local
 variable declared here, and the variable holding its derivative), the number of event
@@ -56,8 +59,16 @@ INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfCont
                "valuesOfContinuousStatesChanged", "nextEventTimeDefined", "nextEventTime")
 
 
-#: an output whose directional derivative is taken by central differences
-_NUMERICAL = "numerical"
+#: an FMU output beyond the physics' model's outputs: its partials are the model's
+#: ``named_partials`` (refused where it has none)
+_NUMERICAL = "named"
+
+#: the step [s] of the central difference in time of ``_time_partials``: fixed, not scaled
+#: with |t| (at t = 1e6 s a relative step was 1 s against 450 rad/s tones), the differences
+#: taken over the step as the floating-point times realise it.  Relative error about
+#: (omega h)^2 / 6 + ulp(omega t) / (omega h) for a component of angular frequency omega:
+#: 3e-6 + 7e-6 for a 450 rad/s tone at t = 1e6 s (docs/hosts.md)
+TIME_STEP = 1e-5
 
 #: the Integer calculated parameter that says how many event indicators can change sign
 #: with the parameters set (the first ones; the others stay positive): a host may leave the
@@ -524,7 +535,7 @@ class ModelExchangeSlave(LeverSlave):
         self._partials_at = None        # the modes may change
         model = self._me_current()
         t, u = self._time, self._u()
-        before = self._x()
+        before, modes = self._x(), model.modes()
         after = model.event_update(t, self._x_physics(), u)
         x = list(before)
         for name, value in zip(model.STATES, after):
@@ -532,7 +543,10 @@ class ModelExchangeSlave(LeverSlave):
         self._set_x(x)
         self._events_settled(t, self._x_physics(), u)
         upcoming = model.next_time_event(t) if hasattr(model, "next_time_event") else None
-        self._event_info = (0.0, 0.0, 0.0, float(x != before), float(upcoming is not None),
+        # a mode changed: the right-hand side jumped, the host's integrator must restart here
+        # (me_base: ``modes``), as where a state changed
+        changed = x != before or model.modes() != modes
+        self._event_info = (0.0, 0.0, 0.0, float(changed), float(upcoming is not None),
                             float(upcoming) if upcoming is not None else 0.0)
         self._dirty = ALL
 
@@ -599,17 +613,29 @@ class ModelExchangeSlave(LeverSlave):
         t, x, u = self._time, self._x_physics(), self._u()
         partials = self._partials(model, t, x, u)
         out = []
-        numerical = None
-        for key in keys:
+        named = None
+        for vr, key in zip(unknowns, keys):
             if isinstance(key, tuple):           # an output that is a state: itself
                 out.append(knowns.get(key[1], 0.0) if self._me else 0.0)
             elif key == _NUMERICAL:
-                if numerical is None:
-                    numerical = self._central_difference(model, t, x, u, knowns)
-                out.append(numerical[self.vars[unknowns[len(out)]].name])
+                if named is None and (named := self._named_partials(model, t, x, u, "fmi2GetDirectionalDerivative",
+                                                                    unknowns)) is None:
+                    return _nan_values(self, unknowns)
+                row = named[self.vars[vr].name]
+                out.append(sum(row.get(wrt, 0.0) * seed for wrt, seed in knowns.items()))
             else:
                 out.append(sum(partials.get((key, wrt), 0.0) * seed for wrt, seed in knowns.items()))
         return out
+
+    def _named_partials(self, model, t, x, u, call: str, unknowns) -> dict | None:
+        """The model's ``named_partials`` at the point, or None after an fmi2Error that says
+        it has none (an output without analytic partials is refused, not approximated)."""
+        if not hasattr(model, "named_partials"):
+            names = [self.vars[vr].name for vr in unknowns if self._unknown_key(vr) == _NUMERICAL]
+            self._error(f"{call}: output(s) {', '.join(names)} of {type(self).__name__} have no analytic partial "
+                        "derivatives in its physics; refused rather than approximated")
+            return None
+        return model.named_partials(t, x, u)
 
     def _partials(self, model, t, x, u) -> dict:
         """``model.partials(t, x, u)``, kept for the next call at the same point and modes: a
@@ -642,14 +668,17 @@ class ModelExchangeSlave(LeverSlave):
         t, x, u = self._time, self._x_physics(), self._u()
         partials = model.partials(t, x, u)
         explicit = self._time_partials(model, t, x, u)
-        out, numerical = [], None
+        out, named = [], None
         for vr, key in zip(unknowns, keys):
             if isinstance(key, tuple):           # an output that is a state: its derivative
                 out.append(seed.get(key[1], 0.0))
             elif key == _NUMERICAL:
-                if numerical is None:
-                    numerical = self._central_difference(model, t, x, u, seed, time_rate=1.0)
-                out.append(numerical[self.vars[vr].name])
+                if named is None and (named := self._named_partials(model, t, x, u, "fmi3GetOutputDerivatives",
+                                                                    unknowns)) is None:
+                    return _nan_values(self, unknowns)
+                name = self.vars[vr].name
+                out.append(sum(named[name].get(wrt, 0.0) * rate for wrt, rate in seed.items())
+                           + explicit.get(name, 0.0))
             else:
                 out.append(sum(partials.get((key, wrt), 0.0) * rate for wrt, rate in seed.items())
                            + explicit.get(key, 0.0))
@@ -661,31 +690,18 @@ class ModelExchangeSlave(LeverSlave):
         return out
 
     def _time_partials(self, model, t, x, u) -> dict:
-        """d/dt of the outputs and state derivatives at fixed states and inputs (by central
-        differences; exactly 0 for a model whose laws do not contain the time)."""
-        h = 1e-6 * max(1.0, abs(t))
+        """d/dt of the outputs and state derivatives at fixed states and inputs: a central
+        difference over ``TIME_STEP`` whatever |t| is, divided by the step the two
+        floating-point times really span (exactly 0 for a model whose laws do not contain
+        the time)."""
+        later, earlier = t + TIME_STEP, t - TIME_STEP
         sides = []
-        for when in (t + h, t - h):
+        for when in (later, earlier):
             values = dict(self._me_output_values(model, when, x, u))
             values.update((der(name), v) for name, v in zip(model.STATES, model.derivatives(when, x, u)))
             sides.append(values)
-        return {key: (sides[0][key] - sides[1][key]) / (2.0 * h) for key in sides[0]}
-
-    def _central_difference(self, model, t, x, u, knowns, time_rate=0.0) -> dict:
-        """The outputs' derivative along the seed by central differences of
-        ``_me_output_values``: for the outputs that the physics' model has no partials of
-        (a freewheel's torques and energies; documented as numerical).  ``time_rate``: how
-        far the time moves along the seed (1 for a rate in time, 0 for a derivative at a
-        fixed time)."""
-        scale = max([1.0, abs(t) * time_rate] + [abs(v) for v in x] + [abs(v) for v in u])
-        size = max([abs(v) for v in knowns.values()] + [abs(time_rate), 1e-300])
-        h = 1e-6 * scale / size
-        sides = []
-        for sign in (1.0, -1.0):
-            xs = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.STATES, x)]
-            us = [v + sign * h * knowns.get(name, 0.0) for name, v in zip(model.INPUTS, u)]
-            sides.append(self._me_output_values(model, t + sign * h * time_rate, xs, us))
-        return {name: (sides[0][name] - sides[1][name]) / (2.0 * h) for name in sides[0]}
+        span = later - earlier
+        return {key: (sides[0][key] - sides[1][key]) / span for key in sides[0]}
 
     # -- model description ---------------------------------------------------------------------------
     def _structure(self) -> dict:

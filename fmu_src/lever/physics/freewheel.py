@@ -213,6 +213,50 @@ class FreewheelRectifier:
         the branch ``forces`` takes (a gap edge, ``e = 0`` or the ball friction's
         saturation ``|de| = v_k`` on the side ``forces`` evaluates): the kinks are events or,
         for the saturation, continuous in value."""
+        return self._gradients(t, y, disc, fly, ext)["rows"]
+
+    def output_gradients(self, t: float, y, disc: int, fly: int, ext: float) -> dict:
+        """``d named_outputs / d(y, ext)``, analytic, in the modes ``disc``, ``fly``: for each
+        output of ``named_outputs`` its gradient over ``STATE`` then ``ext`` (12 values), on
+        the branch ``forces`` takes (as ``jacobian``).  Mode flags, contact sides, the event
+        count and the rocker's motion (a function of time) have none."""
+        g = self._gradients(t, y, disc, fly, ext)
+        n = len(STATE) + 1
+
+        def unit(*pairs):
+            out = [0.0] * n
+            for k, v in pairs:
+                out[k] += v
+            return out
+        e = self.rocker(t)[0] - y[0]
+        d34, d45 = y[2] - y[4], y[4] - y[6]
+        ramp = self.t_p + self.c_fi * max(e, 0.0) + self.c_b * min(e + self.z1, 0.0)
+        c34 = self.c_t * _dead_zone(d34, self.z2)
+        c45 = self.c_z * _dead_zone(d45, self.z3)
+        rows = g["rows"]
+        zero = [0.0] * n
+        out = {name: zero for name in ("rocker_angle", "rocker_speed", "rocker_acceleration", "msm_contact",
+                                       "torsion_contact", "mesh_contact", "disc_slip", "flywheel_stuck", "events")}
+        for k, (angle, speed, acceleration) in enumerate((
+                ("half_coupling_angle", "half_coupling_speed", "half_coupling_acceleration"),
+                ("driven_angle", "driven_speed", "driven_acceleration"),
+                ("torsion_end_angle", "torsion_end_speed", "torsion_end_acceleration"), ("phi", "w", "a"))):
+            out[angle], out[speed], out[acceleration] = unit((2 * k, 1.0)), unit((2 * k + 1, 1.0)), rows[2 * k + 1]
+        out.update({
+            "msm_deflection": unit((0, -1.0)), "torsion_twist": unit((2, 1.0), (4, -1.0)),
+            "mesh_deflection": unit((4, 1.0), (6, -1.0)),
+            "rocker_torque": g["t12"], "disc_torque": g["f"], "disc_capacity": g["cap"],
+            "torsion_torque": g["t34"], "mesh_torque": g["t45"], "resistance": g["brake"],
+            "input_work": unit((8, 1.0)), "output_work": unit((9, 1.0)), "dissipated_energy": unit((10, 1.0)),
+            "kinetic_energy": unit((1, self.J2 * y[1]), (3, self.J3 * y[3]), (5, self.J4 * y[5]), (7, self.J5 * y[7])),
+            "elastic_energy": unit((0, -ramp), (2, c34), (4, c45 - c34), (6, -c45)),
+        })
+        return out
+
+    def _gradients(self, t: float, y, disc: int, fly: int, ext: float) -> dict:
+        """The gradients ``jacobian`` and ``output_gradients`` are made of: ``rows`` (the
+        Jacobian), and those of the torques ``t12``, ``f`` (the discs'), ``cap``, ``t34``,
+        ``t45`` and ``brake``."""
         n = len(STATE) + 1                       # the last column: ext
         def grad(**entries):
             g = [0.0] * n
@@ -261,6 +305,7 @@ class FreewheelRectifier:
                       (2.0 * self.k_z * v45, grad(x5=1.0, x7=-1.0)))
         if disc == STICK:
             g2 = g3 = comb((1.0 / self.J23, g12), (-1.0 / self.J23, g34))
+            g_f = comb((1.0, g12), (-self.J2, g2))          # f = T12 - J2 a2
         else:
             slip = w2 - w3
             g_f = comb((disc, g_cap), (self.k_v, grad(x1=1.0, x3=-1.0)))
@@ -275,8 +320,9 @@ class FreewheelRectifier:
             g_brake = zero
             g5 = comb((1.0 / self.J5, g45), (1.0 / self.J5, grad(x11=1.0)))
         g_out = comb((w5, g_brake), (-w5, grad(x11=1.0)), (brake - ext, grad(x7=1.0)))
-        return [grad(x1=1.0), g2, grad(x3=1.0), g3, grad(x5=1.0), g4, grad(x7=1.0), g5,
+        rows = [grad(x1=1.0), g2, grad(x3=1.0), g3, grad(x5=1.0), g4, grad(x7=1.0), g5,
                 comb((w1, g12)), g_out, g_loss]
+        return {"rows": rows, "t12": g12, "f": g_f, "cap": g_cap, "t34": g34, "t45": g45, "brake": g_brake}
 
     # -- events and modes ------------------------------------------------------------------------
     def event_values(self, t: float, y, disc: int, fly: int, ext: float) -> list:

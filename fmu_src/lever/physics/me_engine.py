@@ -5,12 +5,14 @@ engine torque ``M = Mg(w)`` (``Shaft``) or lagging it, ``Te dM/dt = Mg(w) - M``
 
 A tabulated characteristic is linear between its points: its slope jumps at each point,
 so each point is an event indicator ``w - w_k`` (a solver restarts there instead of
-stepping over a kink); the partials take the slope on the right of a point.
+stepping over a kink), with hysteresis (``me_base.banded``: ``SPEED_BAND`` off the point
+on the side the speed was at the last event, so a speed that starts or rests at a point
+is no indicator at zero); the partials take the slope on the right of a point.
 """
 from __future__ import annotations
 
 from .engine import TabulatedCharacteristic
-from .me_base import ModelExchange, der
+from .me_base import SPEED_BAND, ModelExchange, banded, der, edge_side
 from .shaft import LaggedShaft, Shaft
 
 
@@ -26,6 +28,8 @@ class EngineME(ModelExchange):
         table = isinstance(self.characteristic, TabulatedCharacteristic)
         self.EVENTS = tuple(f"speed_point_{k}" for k in range(len(self.characteristic.speeds))) if table else ()
         self._start = (float(phi_start), float(w_start))
+        #: the side of each point the speed was on at the last event (``edge_side``)
+        self.sides = [1.0] * len(self.EVENTS)
 
     def start(self):
         return list(self._start) + [0.0] + ([self.shaft.torque_start] if self.lagged else [])
@@ -46,8 +50,20 @@ class EngineME(ModelExchange):
         a, m = self.rates(t, x, u)
         return [x[0], x[1], a, m, x[2]]
 
+    def initialize(self, t, x, u):
+        """The sides of the points from the speed."""
+        if self.EVENTS:
+            self.sides = [edge_side(x[1] - speed) for speed in self.characteristic.speeds]
+
     def event_indicators(self, t, x, u):
-        return [x[1] - speed for speed in self.characteristic.speeds] if self.EVENTS else []
+        if not self.EVENTS:
+            return []
+        return [banded(x[1] - speed, side, SPEED_BAND) for speed, side in zip(self.characteristic.speeds, self.sides)]
+
+    def event_update(self, t, x, u):
+        """A point changes no state: the sides follow the speed."""
+        self.initialize(t, x, u)
+        return list(x)
 
     @property
     def dependencies(self):

@@ -6,8 +6,10 @@ A load that can stick (``friction.ResistingLoad`` with Coulomb friction, stictio
 brake) has a discrete mode: slipping in direction ``+1``/``-1`` (``M`` the slip torque,
 smooth up to the stop) or held (``0``: at rest, static friction balances the drive, every
 derivative 0), the same modes the monolithic reference switches.  Its event indicator is
-positive while the mode holds: ``direction * w`` slipping (zero at the stop), the negated
-breakaway margin ``hold - |net|`` held (zero at the breakaway).
+positive while the mode holds, with hysteresis (``me_base.banded``): ``direction * w +
+SPEED_BAND`` slipping (a breakaway starts at rest; the stop comes when the speed has
+reversed by the band, and puts the shaft at rest), ``hold - |net| + TORQUE_BAND`` held (it
+may be entered with the drive at the breakaway torque).
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ import math
 
 from .friction import ResistingLoad
 from .load import FourierLoad, SpectrumLoad
-from .me_base import ModelExchange, der
+from .me_base import SPEED_BAND, TORQUE_BAND, ModelExchange, banded, der
 from .shaft import Shaft
 
 HELD = 0
@@ -57,6 +59,9 @@ class LoadME(ModelExchange):
         if self.friction:
             self.mode = self.mode_at(t, x, u)
 
+    def modes(self) -> tuple:
+        return (self.mode,)
+
     def rates(self, t, x, u):
         """``(a, M)`` in the current mode."""
         if self.friction is None:
@@ -80,8 +85,8 @@ class LoadME(ModelExchange):
         if self.friction is None:
             return []
         if self.mode == HELD:
-            return [-self.friction.breakaway_margin(t, x[0], u[0])[0]]
-        return [self.mode * x[1]]
+            return [banded(-self.friction.breakaway_margin(t, x[0], u[0])[0], 1.0, TORQUE_BAND)]
+        return [banded(self.mode * x[1], 1.0, SPEED_BAND)]
 
     def event_update(self, t, x, u):
         """A stop puts the shaft at rest exactly and the stick condition decides; a
@@ -89,6 +94,8 @@ class LoadME(ModelExchange):
         x = list(x)
         if self.friction is None:
             return x
+        # decided by the law's own rule, unbanded: the mode follows the state wherever an
+        # event iteration runs (at the banded root, or where a host set the state)
         if self.mode == HELD:
             margin, net = self.friction.breakaway_margin(t, x[0], u[0])
             if margin > 0.0:

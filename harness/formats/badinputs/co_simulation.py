@@ -247,6 +247,7 @@ STATE_EDITS = {
     "frame-time": ("whose native header's time disagrees with the model's", ("disagree",)),
     "frame-state": ("whose native header says terminated over a stepping model", ("disagree",)),
     "frame-time-bit": ("with one bit of the native header's time flipped", ("disagree",)),
+    "frame-step-failed": ("whose native header says 'step failed' (never entered by our FMUs)", ("step failed",)),
 }
 
 
@@ -283,6 +284,8 @@ def edited_state(data: bytes, edit: str, fmu: str) -> bytes:
             time = 5.0
         elif edit == "frame-state":
             state = 16
+        elif edit == "frame-step-failed":
+            state = 8
         else:
             time = struct.unpack("<d", struct.pack("<Q", struct.unpack("<Q", struct.pack("<d", time))[0] ^ 1))[0]
         return data[:12] + struct.pack("<Id", state, time) + data[24:]
