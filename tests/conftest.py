@@ -263,10 +263,27 @@ SLOW = (
     "studies/test_sweep.py::test_sweep_on_a_dask_cluster",
 )
 
+#: What runs alone, after the rest of `make test` ran on every core (``pytest -n``, marker
+#: ``serial``): tests whose verdict rests on wall-clock time that other tests beside them would
+#: stretch.  Everything else is safe side by side: it writes under its own ``tmp_path``, takes no
+#: fixed port, and shares the FMUs only once they are built (build/fmus.py locks a build), so
+#: a new test needs no entry here (docs/testing.md).
+SERIAL = (
+    # the time to stop after SIGINT compared with a whole run timed after it (a neighbour's load
+    # between the two moves the ratio), or bounded in seconds, or SIGINT sent a fixed time in
+    "engine/test_interrupts.py::test_run_interrupted_keeps_the_computed_part",
+    "engine/test_interrupts.py::test_stability_interrupted_stops_its_workers_and_resumes",
+    "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
+    # a step of 6 s alone is flagged past 15 s: two children of its own fill both cores
+    "fmus/test_step_watchdog.py",
+)
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
                                        "(tests/conftest.py NUMERICS)")
+    config.addinivalue_line("markers", "serial: run alone, after the tests run side by side "
+                                       "(tests/conftest.py SERIAL)")
     # A suite started as a background job of a shell without job control inherits SIGINT
     # ignored, and so would every `lever` the Ctrl-C tests start: they would wait for an
     # interrupt that never comes.  A handled signal is reset to its default across exec.
@@ -281,6 +298,8 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.numerics)
         if file in SLOW or f"{file}::{item.originalname}" in SLOW:
             item.add_marker(pytest.mark.slow)
+        if file in SERIAL or f"{file}::{item.originalname}" in SERIAL:
+            item.add_marker(pytest.mark.serial)
 
 
 def pytest_report_header(config):
