@@ -278,6 +278,22 @@ SERIAL = (
     "fmus/test_step_watchdog.py",
 )
 
+#: Work that several tests share through a fixture of their module (``file::fixture``) or of
+#: this file (``fixture``): an installed wheel, a run or an archive several tests judge.  The
+#: tests that use one run in one worker (marker ``xdist_group``, `make test`'s ``--dist
+#: loadgroup``), so that the work is done once rather than once in every worker.
+SHARED_WORK = (
+    "project/test_install.py::installed",
+    "oracle/test_oracle_accuracy.py::references",
+    "formats/test_outputs.py::earlier_run",
+    "formats/test_ssp_engines.py::archive",
+    "engine/test_own_fmu.py::monitor_fmu",
+    "physics/test_freewheel.py::short_scene_run",
+    "judges/test_validate.py::kavz685_run",
+    "fmus/test_dropin.py::kavz_in",
+    "kavz685_in_libcosim_from_ssp",
+)
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
@@ -291,9 +307,16 @@ def pytest_configure(config):
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+# tryfirst: before pytest-xdist's own hook, which reads the xdist_group markers given here
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     for item in items:
         file = item.path.relative_to(TESTS).as_posix()
+        for name in SHARED_WORK:
+            defined_in, _, fixture = name.rpartition("::")
+            if fixture in item.fixturenames and defined_in in ("", file):
+                item.add_marker(pytest.mark.xdist_group(name))
+                break
         if f"{file}::{item.originalname}" in NUMERICS:
             item.add_marker(pytest.mark.numerics)
         if file in SLOW or f"{file}::{item.originalname}" in SLOW:

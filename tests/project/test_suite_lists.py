@@ -54,3 +54,12 @@ def test_what_runs_alone_is_left_out_of_the_fast_subset():
         file, _, test = name.partition("::")
         for each in [test] if test else sorted(files[file]):
             assert file in slow or f"{file}::{each}" in slow, f"{file}::{each} runs alone (SERIAL) but is not in SLOW"
+
+
+def test_each_shared_work_names_a_fixture_where_it_says():
+    conftest = _conftest()
+    for name in conftest.SHARED_WORK:
+        file, _, fixture = name.rpartition("::")
+        tree = ast.parse((TESTS / (file or "conftest.py")).read_text())
+        defined = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+        assert fixture in defined, f"{name}: no fixture {fixture} in {file or 'conftest.py'}"
