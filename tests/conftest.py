@@ -284,12 +284,10 @@ SERIAL = (
 #: loadgroup``), so that the work is done once rather than once in every worker.
 SHARED_WORK = (
     "project/test_install.py::installed",
-    "oracle/test_oracle_accuracy.py::references",
     "formats/test_outputs.py::earlier_run",
     "formats/test_ssp_engines.py::archive",
     "engine/test_own_fmu.py::monitor_fmu",
     "physics/test_freewheel.py::short_scene_run",
-    "judges/test_validate.py::kavz685_run",
     "fmus/test_dropin.py::kavz_in",
     "kavz685_in_libcosim_from_ssp",
 )
