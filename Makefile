@@ -52,11 +52,12 @@ test-fast: $(STAMP)
 
 # The numerics-sensitive tests again with numpy's SIMD dispatch limited to each lower level
 # this CPU has, so that a test that holds at one dispatch level only fails here too
-# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.
+# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.  The workers
+# inherit the limit (NPY_DISABLE_CPU_FEATURES) from the pytest that starts them.
 .PHONY: test-dispatch
 test: test-dispatch
 test-dispatch: $(STAMP)
-	$(BIN)/python tests/numpy_dispatch.py
+	$(BIN)/python tests/numpy_dispatch.py $(PARALLEL)
 
 bench: $(STAMP)
 	$(BIN)/lever bench kavz685
