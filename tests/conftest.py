@@ -177,6 +177,7 @@ SLOW = (
     "fmus/test_me_hosts.py::test_the_c_importers_fmi3_co_simulation_passes_lever_validate_as_fmi2",
     "fmus/test_library_use.py::test_validate_then_run_in_one_process_keeps_the_fmus_messages",
     "fmus/test_resources.py",
+    "fmus/test_shim.py::test_a_build_started_while_another_builds_waits_and_finds_its_fmus_current",
     "fmus/test_shim.py::test_shim_exports_the_cs_api_only",
     "fmus/test_step_time.py::test_a_million_steps_of_each_hosts_clock_are_accepted",
     "fmus/test_step_watchdog.py",
