@@ -29,26 +29,35 @@ run: $(STAMP)
 docs: $(STAMP)
 	$(BIN)/python build/docs.py
 
+# Tests run side by side on every core (pytest-xdist; `make test JOBS=1` for one at a time);
+# those marked serial (tests/conftest.py SERIAL: verdicts on wall-clock time) run alone after.
+JOBS     ?= auto
+PARALLEL := -n $(JOBS) --dist loadgroup
+
 # After its prerequisite test-dispatch (below), the oracles first - expected values that do
 # not come from the code under test, so a wrong model fails within minutes - then the rest.
+# The FMUs are built before the workers start, so that none of them waits for the build.
 test: $(STAMP)
 	$(BIN)/lever build
-	$(BIN)/python -m pytest -q -x -m oracle
-	$(BIN)/python -m pytest -q -m "not oracle"
+	$(BIN)/python -m pytest -q -x -m oracle $(PARALLEL)
+	$(BIN)/python -m pytest -q -m "not oracle and not serial" $(PARALLEL)
+	$(BIN)/python -m pytest -q -m "not oracle and serial"
 
 # The fast subset for the edit-test loop: every test not marked slow (tests/conftest.py
 # SLOW), tests of every folder among them; `make test` still runs everything.
 .PHONY: test-fast
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/lever build
+	$(BIN)/python -m pytest -q -m "not slow" $(PARALLEL)
 
 # The numerics-sensitive tests again with numpy's SIMD dispatch limited to each lower level
 # this CPU has, so that a test that holds at one dispatch level only fails here too
-# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.
+# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.  The workers
+# inherit the limit (NPY_DISABLE_CPU_FEATURES) from the pytest that starts them.
 .PHONY: test-dispatch
 test: test-dispatch
 test-dispatch: $(STAMP)
-	$(BIN)/python tests/numpy_dispatch.py
+	$(BIN)/python tests/numpy_dispatch.py $(PARALLEL)
 
 bench: $(STAMP)
 	$(BIN)/lever bench kavz685

@@ -26,6 +26,7 @@ the sources' hash; a build with an unchanged hash does nothing (``--force`` rebu
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import importlib.util
 import json
@@ -33,6 +34,11 @@ import shutil
 import sys
 import tempfile
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:      # Windows: builds are not locked there
+    fcntl = None
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -109,7 +115,7 @@ def source_hash() -> str:
     named = [(f"fmu_src/lever/{p.relative_to(SOURCE).as_posix()}", p)
              for p in sorted(p for p in SOURCE.rglob("*.py") if "__pycache__" not in p.parts)]
     named += [(f"build/{p.relative_to(HERE).as_posix()}", p) for p in
-              sorted((HERE / "shim").glob("*.c")) + [HERE / "shim" / "compile.py", HERE / "fmi3.py",
+              sorted((HERE / "shim").glob("*.[ch]")) + [HERE / "shim" / "compile.py", HERE / "fmi3.py",
                                                       Path(__file__).resolve()]]
     named += [("constraints.txt", ROOT / "constraints.txt"), ("harness/compliance.py", _compliance_file())]
     for name, path in named:
@@ -149,14 +155,37 @@ def build(out_dir: Path = OUTPUT, force: bool = False, log=print) -> dict[str, P
     if not force and is_current(out_dir):
         log(f"FMUs in {out_dir} are up to date")
         return paths
-    digest = source_hash()
     out_dir.mkdir(parents=True, exist_ok=True)
-    if CHECKOUT:
-        _build_in(STAGING, out_dir, paths, digest, log)
-    else:       # the installed package's folders may not be writable
-        with tempfile.TemporaryDirectory(prefix="lever-fmu-build-") as staging:
-            _build_in(Path(staging), out_dir, paths, digest, log)
+    # Builds at once (test workers, two shells) would write the same staging folder and FMUs:
+    # one builds, the others wait and then find its FMUs current.
+    lock_dir = STAGING if CHECKOUT else out_dir
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    with _exclusive(lock_dir / ".build.lock"):
+        if not force and is_current(out_dir):
+            log(f"FMUs in {out_dir} are up to date")
+            return paths
+        digest = source_hash()
+        if CHECKOUT:
+            _build_in(STAGING, out_dir, paths, digest, log)
+        else:       # the installed package's folders may not be writable
+            with tempfile.TemporaryDirectory(prefix="lever-fmu-build-") as staging:
+                _build_in(Path(staging), out_dir, paths, digest, log)
     return paths
+
+
+@contextlib.contextmanager
+def _exclusive(lock: Path):
+    """Hold an exclusive lock on the file ``lock`` (created) for the block; where there is no
+    ``fcntl`` (Windows) the block runs unlocked."""
+    if fcntl is None:
+        yield
+        return
+    with open(lock, "a") as handle:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
 
 
 def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str, log):

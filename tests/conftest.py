@@ -200,6 +200,7 @@ SLOW = (
     "fmus/test_me_hosts.py::test_the_c_importers_fmi3_co_simulation_passes_lever_validate_as_fmi2",
     "fmus/test_library_use.py::test_validate_then_run_in_one_process_keeps_the_fmus_messages",
     "fmus/test_resources.py",
+    "fmus/test_shim.py::test_a_build_started_while_another_builds_waits_and_finds_its_fmus_current",
     "fmus/test_shim.py::test_shim_exports_the_cs_api_only",
     "fmus/test_step_time.py::test_a_million_steps_of_each_hosts_clock_are_accepted",
     "fmus/test_step_watchdog.py",
@@ -290,10 +291,41 @@ SLOW = (
     "studies/test_sweep.py::test_sweep_on_a_dask_cluster",
 )
 
+#: What runs alone, after the rest of `make test` ran on every core (``pytest -n``, marker
+#: ``serial``): tests whose verdict rests on wall-clock time that other tests beside them would
+#: stretch.  Everything else is safe side by side: it writes under its own ``tmp_path``, takes no
+#: fixed port, and shares the FMUs only once they are built (build/fmus.py locks a build), so
+#: a new test needs no entry here (docs/testing.md).
+SERIAL = (
+    # the time to stop after SIGINT compared with a whole run timed after it (a neighbour's load
+    # between the two moves the ratio), or bounded in seconds, or SIGINT sent a fixed time in
+    "engine/test_interrupts.py::test_run_interrupted_keeps_the_computed_part",
+    "engine/test_interrupts.py::test_stability_interrupted_stops_its_workers_and_resumes",
+    "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
+    # a step of 6 s alone is flagged past 15 s: two children of its own fill both cores
+    "fmus/test_step_watchdog.py",
+)
+
+#: Work that several tests share through a fixture of their module (``file::fixture``) or of
+#: this file (``fixture``): an installed wheel, a run or an archive several tests judge.  The
+#: tests that use one run in one worker (marker ``xdist_group``, `make test`'s ``--dist
+#: loadgroup``), so that the work is done once rather than once in every worker.
+SHARED_WORK = (
+    "project/test_install.py::installed",
+    "formats/test_outputs.py::earlier_run",
+    "formats/test_ssp_engines.py::archive",
+    "engine/test_own_fmu.py::monitor_fmu",
+    "physics/test_freewheel.py::short_scene_run",
+    "fmus/test_dropin.py::kavz_in",
+    "kavz685_in_libcosim_from_ssp",
+)
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
                                        "(tests/conftest.py NUMERICS)")
+    config.addinivalue_line("markers", "serial: run alone, after the tests run side by side "
+                                       "(tests/conftest.py SERIAL)")
     # A suite started as a background job of a shell without job control inherits SIGINT
     # ignored, and so would every `lever` the Ctrl-C tests start: they would wait for an
     # interrupt that never comes.  A handled signal is reset to its default across exec.
@@ -301,13 +333,22 @@ def pytest_configure(config):
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+# tryfirst: before pytest-xdist's own hook, which reads the xdist_group markers given here
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     for item in items:
         file = item.path.relative_to(TESTS).as_posix()
+        for name in SHARED_WORK:
+            defined_in, _, fixture = name.rpartition("::")
+            if fixture in item.fixturenames and defined_in in ("", file):
+                item.add_marker(pytest.mark.xdist_group(name))
+                break
         if f"{file}::{item.originalname}" in NUMERICS:
             item.add_marker(pytest.mark.numerics)
         if file in SLOW or f"{file}::{item.originalname}" in SLOW:
             item.add_marker(pytest.mark.slow)
+        if file in SERIAL or f"{file}::{item.originalname}" in SERIAL:
+            item.add_marker(pytest.mark.serial)
 
 
 def pytest_report_header(config):

@@ -92,85 +92,26 @@ typedef void (*fmi3LockPreemptionCallback)(void);
 typedef void (*fmi3UnlockPreemptionCallback)(void);
 
 /* ------------------------------------------------------------------------- */
-/* The FMI 2.0 entry underneath (the standard's ABI, fmi2FunctionTypes.h)      */
+/* The FMI 2.0 entry underneath (lever_fmi2_abi.h: the FMI 2.0 ABI)            */
 /* ------------------------------------------------------------------------- */
 
-typedef void *fmi2Component;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(void *, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(void *, fmi2Status);
-    void *componentEnvironment;
-} fmi2CallbackFunctions;
-typedef struct {
-    fmi2Boolean newDiscreteStatesNeeded;
-    fmi2Boolean terminateSimulation;
-    fmi2Boolean nominalsOfContinuousStatesChanged;
-    fmi2Boolean valuesOfContinuousStatesChanged;
-    fmi2Boolean nextEventTimeDefined;
-    fmi2Real nextEventTime;
-} fmi2EventInfo;
+#include "lever_fmi2_abi.h"
 
+/* What this layer calls of the FMI 2.0 entry (the function types fmi2XxxTYPE). */
 #define INNER_FUNCTIONS(X)                                                                         \
-    X(fmi2Component, fmi2Instantiate, (fmi2String, fmi2Type, fmi2String, fmi2String,              \
-                                       const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean))   \
-    X(void, fmi2FreeInstance, (fmi2Component))                                                     \
-    X(fmi2Status, fmi2SetDebugLogging, (fmi2Component, fmi2Boolean, size_t, const fmi2String[]))   \
-    X(fmi2Status, fmi2SetupExperiment, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean, \
-                                        fmi2Real))                                                 \
-    X(fmi2Status, fmi2EnterInitializationMode, (fmi2Component))                                    \
-    X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component))                                     \
-    X(fmi2Status, fmi2Terminate, (fmi2Component))                                                  \
-    X(fmi2Status, fmi2Reset, (fmi2Component))                                                      \
-    X(fmi2Status, fmi2GetReal, (fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]))    \
-    X(fmi2Status, fmi2GetInteger, (fmi2Component, const fmi2ValueReference[], size_t, fmi2Integer[])) \
-    X(fmi2Status, fmi2GetBoolean, (fmi2Component, const fmi2ValueReference[], size_t, fmi2Boolean[])) \
-    X(fmi2Status, fmi2GetString, (fmi2Component, const fmi2ValueReference[], size_t, fmi2String[])) \
-    X(fmi2Status, fmi2SetReal, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[])) \
-    X(fmi2Status, fmi2SetInteger, (fmi2Component, const fmi2ValueReference[], size_t,             \
-                                   const fmi2Integer[]))                                           \
-    X(fmi2Status, fmi2SetBoolean, (fmi2Component, const fmi2ValueReference[], size_t,             \
-                                   const fmi2Boolean[]))                                           \
-    X(fmi2Status, fmi2SetString, (fmi2Component, const fmi2ValueReference[], size_t, const fmi2String[])) \
-    X(fmi2Status, fmi2GetFMUstate, (fmi2Component, fmi2FMUstate *))                                \
-    X(fmi2Status, fmi2SetFMUstate, (fmi2Component, fmi2FMUstate))                                  \
-    X(fmi2Status, fmi2FreeFMUstate, (fmi2Component, fmi2FMUstate *))                               \
-    X(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component, fmi2FMUstate, size_t *))             \
-    X(fmi2Status, fmi2SerializeFMUstate, (fmi2Component, fmi2FMUstate, fmi2Byte[], size_t))        \
-    X(fmi2Status, fmi2DeSerializeFMUstate, (fmi2Component, const fmi2Byte[], size_t, fmi2FMUstate *)) \
-    X(fmi2Status, fmi2GetDirectionalDerivative, (fmi2Component, const fmi2ValueReference[], size_t, \
-                                                 const fmi2ValueReference[], size_t, const fmi2Real[], \
-                                                 fmi2Real[]))                                      \
-    X(fmi2Status, fmi2GetRealOutputDerivatives, (fmi2Component, const fmi2ValueReference[], size_t, \
-                                                 const fmi2Integer[], fmi2Real[]))                 \
-    X(fmi2Status, fmi2DoStep, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean))                    \
-    X(fmi2Status, fmi2GetRealStatus, (fmi2Component, const fmi2StatusKind, fmi2Real *))            \
-    X(fmi2Status, fmi2EnterEventMode, (fmi2Component))                                             \
-    X(fmi2Status, fmi2NewDiscreteStates, (fmi2Component, fmi2EventInfo *))                         \
-    X(fmi2Status, fmi2EnterContinuousTimeMode, (fmi2Component))                                    \
-    X(fmi2Status, fmi2CompletedIntegratorStep, (fmi2Component, fmi2Boolean, fmi2Boolean *, fmi2Boolean *)) \
-    X(fmi2Status, fmi2SetTime, (fmi2Component, fmi2Real))                                          \
-    X(fmi2Status, fmi2SetContinuousStates, (fmi2Component, const fmi2Real[], size_t))              \
-    X(fmi2Status, fmi2GetDerivatives, (fmi2Component, fmi2Real[], size_t))                         \
-    X(fmi2Status, fmi2GetEventIndicators, (fmi2Component, fmi2Real[], size_t))                     \
-    X(fmi2Status, fmi2GetContinuousStates, (fmi2Component, fmi2Real[], size_t))                    \
-    X(fmi2Status, fmi2GetNominalsOfContinuousStates, (fmi2Component, fmi2Real[], size_t))          \
-    X(fmi2Status, leverGetEventIndicatorValues, (fmi2Component, fmi2Real[], size_t))
+    X(fmi2Instantiate)                                                                             \
+    X(fmi2FreeInstance)                                                                            \
+    X(fmi2SetDebugLogging)                                                                         \
+    LEVER_FMI2_SETUP_VALUES_AND_STATES(X)                                                          \
+    X(fmi2GetDirectionalDerivative)                                                                \
+    X(fmi2GetRealOutputDerivatives)                                                                \
+    X(fmi2DoStep)                                                                                  \
+    X(fmi2GetRealStatus)                                                                           \
+    LEVER_FMI2_ME_FUNCTIONS(X)                                                                     \
+    X(leverGetEventIndicatorValues)
 
 typedef struct {
-#define INNER_MEMBER(ret, name, args) ret(*name) args;
+#define INNER_MEMBER(name) name##TYPE *name;
     INNER_FUNCTIONS(INNER_MEMBER)
 #undef INNER_MEMBER
 } Inner;
@@ -226,10 +167,9 @@ static Inner *inner_library(char *err, size_t errsize)
         pthread_mutex_unlock(&g_inner_lock);
         return NULL;
     }
-#define INNER_RESOLVE(ret, name, args)                                                             \
-    api->name = (ret(*) args)dlsym(handle, #name);                                                 \
+#define INNER_RESOLVE(name)                                                                        \
+    api->name = (name##TYPE *)lever_function(handle, path, #name, err, errsize);                   \
     if (!api->name) {                                                                              \
-        snprintf(err, errsize, "%.900s does not export %s", path, #name);                             \
         free(api);                                                                                 \
         pthread_mutex_unlock(&g_inner_lock);                                                       \
         return NULL;                                                                               \
@@ -939,21 +879,25 @@ EXPORT fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference
     return status3(s->api->fmi2SetReal(s->inner, vr, nvr, value));
 }
 
-EXPORT fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                               fmi3Int32 value[], size_t nValues)
-{
-    BEGIN(fmi3GetInt32, instance, GETTABLE, GETTABLE);
-    if (!scalar_counts(s, "fmi3GetInt32", vr, nvr, value, nValues)) return fmi3Error;
-    return status3(s->api->fmi2GetInteger(s->inner, vr, nvr, value));
-}
+/* The types whose FMI 2.0 values are the same C type: passed through as they are. */
+#define PASSED_THROUGH(type, ctype, type2)                                                         \
+    EXPORT fmi3Status fmi3Get##type(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, \
+                                    ctype value[], size_t nValues)                                 \
+    {                                                                                              \
+        BEGIN(fmi3Get##type, instance, GETTABLE, GETTABLE);                                        \
+        if (!scalar_counts(s, "fmi3Get" #type, vr, nvr, value, nValues)) return fmi3Error;         \
+        return status3(s->api->fmi2Get##type2(s->inner, vr, nvr, value));                          \
+    }                                                                                              \
+    EXPORT fmi3Status fmi3Set##type(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, \
+                                    const ctype value[], size_t nValues)                           \
+    {                                                                                              \
+        BEGIN(fmi3Set##type, instance, SETTABLE, SETTABLE);                                        \
+        if (!scalar_counts(s, "fmi3Set" #type, vr, nvr, value, nValues)) return fmi3Error;         \
+        return status3(s->api->fmi2Set##type2(s->inner, vr, nvr, value));                          \
+    }
 
-EXPORT fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                               const fmi3Int32 value[], size_t nValues)
-{
-    BEGIN(fmi3SetInt32, instance, SETTABLE, SETTABLE);
-    if (!scalar_counts(s, "fmi3SetInt32", vr, nvr, value, nValues)) return fmi3Error;
-    return status3(s->api->fmi2SetInteger(s->inner, vr, nvr, value));
-}
+PASSED_THROUGH(Int32, fmi3Int32, Integer)
+PASSED_THROUGH(String, fmi3String, String)
 
 EXPORT fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                  fmi3Boolean value[], size_t nValues)
@@ -983,22 +927,6 @@ EXPORT fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference
     fmi3Status status = status3(s->api->fmi2SetBoolean(s->inner, vr, nvr, wide));
     free(wide);
     return status;
-}
-
-EXPORT fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                fmi3String value[], size_t nValues)
-{
-    BEGIN(fmi3GetString, instance, GETTABLE, GETTABLE);
-    if (!scalar_counts(s, "fmi3GetString", vr, nvr, value, nValues)) return fmi3Error;
-    return status3(s->api->fmi2GetString(s->inner, vr, nvr, value));
-}
-
-EXPORT fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                const fmi3String value[], size_t nValues)
-{
-    BEGIN(fmi3SetString, instance, SETTABLE, SETTABLE);
-    if (!scalar_counts(s, "fmi3SetString", vr, nvr, value, nValues)) return fmi3Error;
-    return status3(s->api->fmi2SetString(s->inner, vr, nvr, value));
 }
 
 /* The types no variable of these FMUs has: nothing to get or set. */

@@ -64,19 +64,23 @@ def write_result_csv(path: Path, times: np.ndarray, traces: dict[str, np.ndarray
 
 
 C_IMPORTER = ROOT / "tests" / "c_host" / "minimal_importer.c"
+#: the FMI 2.0 declarations it shares with the FMUs' native entry (lever_fmi2_abi.h)
+C_IMPORTER_INCLUDE = ROOT / "build" / "shim"
 #: what the C importer sets and reads in each FMU it steps alone
 C_IMPORTER_CASES = {"EngineShaft": ("tau", -100.0, "w"), "LoadShaft": ("tau", 120.0, "w"),
                     "LeverCoupling": ("phi1", 0.1, "tau1"), "MisalignmentSource": (None, None, "misalignment")}
 
 
 def compile_c_importer(dest: Path) -> Path:
-    """Compiles tests/c_host/minimal_importer.c to ``dest`` with ``$CC`` or cc."""
+    """Compiles tests/c_host/minimal_importer.c (with build/shim's lever_fmi2_abi.h) to ``dest``
+    with ``$CC`` or cc."""
     cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if not cc:
         raise RuntimeError("no C compiler (cc) for the C importer")
     dest.parent.mkdir(parents=True, exist_ok=True)
-    subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2", "-o",
-                    str(dest), str(C_IMPORTER), "-ldl", "-pthread", "-lm"], check=True)
+    subprocess.run([cc, "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror", "-O2",
+                    "-I", str(C_IMPORTER_INCLUDE), "-o", str(dest), str(C_IMPORTER), "-ldl", "-pthread", "-lm"],
+                   check=True)
     return dest
 
 

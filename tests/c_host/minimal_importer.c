@@ -80,30 +80,17 @@
 #include <time.h>
 #include <unistd.h>
 
-typedef void *fmi2Component;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Boolean;
-typedef const char *fmi2String;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef struct {
-    void (*logger)(void *, fmi2String, fmi2Status, fmi2String, fmi2String, ...);
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(void *, fmi2Status);
-    void *componentEnvironment;
-} fmi2CallbackFunctions;
+/* The FMI 2.0 ABI, as the FMUs' own native entry declares it (build/shim; the compiler is
+ * given that folder). */
+#include "lever_fmi2_abi.h"
 
-typedef fmi2Component (*InstantiateT)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                      const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
-typedef void (*FreeInstanceT)(fmi2Component);
-typedef fmi2Status (*SetupExperimentT)(fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
-                                       fmi2Real);
-typedef fmi2Status (*ModeT)(fmi2Component);
-typedef fmi2Status (*GetRealT)(fmi2Component, const fmi2ValueReference[], size_t, fmi2Real[]);
-typedef fmi2Status (*SetRealT)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Real[]);
-typedef fmi2Status (*DoStepT)(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean);
+typedef fmi2InstantiateTYPE *InstantiateT;
+typedef fmi2FreeInstanceTYPE *FreeInstanceT;
+typedef fmi2SetupExperimentTYPE *SetupExperimentT;
+typedef fmi2EnterInitializationModeTYPE *ModeT;        /* every f(instance) of both versions */
+typedef fmi2GetRealTYPE *GetRealT;
+typedef fmi2SetRealTYPE *SetRealT;
+typedef fmi2DoStepTYPE *DoStepT;
 
 static void logger(void *env, fmi2String instance, fmi2Status status, fmi2String category,
                    fmi2String message, ...) {
@@ -164,21 +151,12 @@ static void *symbol(void *lib, const char *name) {
 /* Model Exchange                                                                        */
 /* ------------------------------------------------------------------------------------ */
 
-typedef int fmi2Integer;
-typedef struct {
-    fmi2Boolean newDiscreteStatesNeeded;
-    fmi2Boolean terminateSimulation;
-    fmi2Boolean nominalsOfContinuousStatesChanged;
-    fmi2Boolean valuesOfContinuousStatesChanged;
-    fmi2Boolean nextEventTimeDefined;
-    fmi2Real nextEventTime;
-} fmi2EventInfo;
-typedef fmi2Status (*SetIntegerT)(fmi2Component, const fmi2ValueReference[], size_t, const fmi2Integer[]);
-typedef fmi2Status (*NewDiscreteStatesT)(fmi2Component, fmi2EventInfo *);
-typedef fmi2Status (*CompletedIntegratorStepT)(fmi2Component, fmi2Boolean, fmi2Boolean *, fmi2Boolean *);
-typedef fmi2Status (*SetTimeT)(fmi2Component, fmi2Real);
-typedef fmi2Status (*SetStatesT)(fmi2Component, const fmi2Real[], size_t);
-typedef fmi2Status (*GetArrayT)(fmi2Component, fmi2Real[], size_t);
+typedef fmi2SetIntegerTYPE *SetIntegerT;
+typedef fmi2NewDiscreteStatesTYPE *NewDiscreteStatesT;
+typedef fmi2CompletedIntegratorStepTYPE *CompletedIntegratorStepT;
+typedef fmi2SetTimeTYPE *SetTimeT;
+typedef fmi2SetContinuousStatesTYPE *SetStatesT;
+typedef fmi2GetDerivativesTYPE *GetArrayT;              /* every f(instance, double[], n) of both versions */
 
 /* FMI 3.0 (fmi3FunctionTypes.h): the functions whose signatures differ from FMI 2.0's; the
  * status enums agree from OK to Fatal, a value reference is a 32-bit unsigned int. */

@@ -488,3 +488,29 @@ def test_without_a_compiler_lever_build_says_how_to_get_one(lever, tmp_path, mon
     result = lever("build", "--force", "--out", str(tmp_path / "fmus"))
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert "cannot run" in result.output and "apt install gcc" in result.output and "CC=" in result.output
+
+
+def test_a_build_started_while_another_builds_waits_and_finds_its_fmus_current(tmp_path, monkeypatch):
+    """Two builds at once (test workers, two shells) would write one staging folder: the
+    second waits for the first's lock, then finds the FMUs current and builds nothing."""
+    spec = importlib.util.spec_from_file_location("lever_build_fmus_lock", REPO / "build" / "fmus.py")
+    fmus = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fmus)
+    monkeypatch.setattr(fmus, "STAGING", tmp_path / "staging")
+    built = tmp_path / "built"                     # the first build's FMUs, once it is done
+    monkeypatch.setattr(fmus, "is_current", lambda out_dir: built.exists())
+    monkeypatch.setattr(fmus, "_build_in", lambda *a: pytest.fail("built again while the first build's FMUs are current"))
+    (tmp_path / "staging").mkdir()
+    # the first build: another process holding the lock for a second, then done
+    first = subprocess.Popen([sys.executable, "-c",
+                              "import fcntl, pathlib, sys, time\n"
+                              "f = open(sys.argv[1], 'a'); fcntl.flock(f, fcntl.LOCK_EX)\n"
+                              "print('locked', flush=True); time.sleep(1.0)\n"
+                              "pathlib.Path(sys.argv[2]).touch()\n",
+                              str(tmp_path / "staging" / ".build.lock"), str(built)],
+                             stdout=subprocess.PIPE, text=True)
+    assert first.stdout.readline().strip() == "locked"
+    said = []
+    fmus.build(tmp_path / "fmus", log=said.append)
+    assert first.wait(timeout=60) == 0
+    assert said == [f"FMUs in {tmp_path / 'fmus'} are up to date"]

@@ -88,7 +88,7 @@ def test_the_wheel_carries_what_an_installed_lever_needs_and_leaves_the_clones_b
     names = set(zipfile.ZipFile(wheel).namelist())
     project = "harness/_project/"
     for needed in ("constraints.txt", "build/fmus.py", "build/fmi3.py", "build/shim/compile.py",
-                   "build/shim/lever_fmi2_shim.c", "build/shim/lever_fmi3_shim.c",
+                   "build/shim/lever_fmi2_shim.c", "build/shim/lever_fmi3_shim.c", "build/shim/lever_fmi2_abi.h",
                    "resources/scenes/kavz685.toml", "resources/reference/kavz685/kavz685_ref.csv",
                    "resources/reference/EngineShaft/EngineShaft_in.csv",
                    "resources/data/monograph/harmonics_driven.csv", "tests/c_host/minimal_importer.c"):

@@ -149,6 +149,23 @@ def changed(before: dict, after: dict | None) -> list[str]:
             if after is None or not (after[n] == x or (math.isnan(x) and math.isnan(after[n])))]
 
 
+def judge_after_refusal(outcome: Outcome, instance, everything: dict | None, states, most: int | None = None):
+    """The last checks of a refused call on ``instance`` (a driver's wrapper with ``reals``,
+    ``states`` and ``usable``): the values read before it (``everything``) and the states as
+    they were, and the instance usable; what is not, is the case's problem (at most ``most``
+    moved variables named)."""
+    after = instance.reals()
+    if everything is not None:
+        moved = changed(everything, after)
+        if moved:
+            outcome.problems.append(f"the refused call changed {', '.join(moved[:most])}")
+    if states is not None and instance.states() != states:
+        outcome.problems.append(f"the refused call changed the states: {states} -> {instance.states()}")
+    why = instance.usable()
+    if why:
+        outcome.problems.append(why)
+
+
 def free_instance(fmu, function: str = "fmi2FreeInstance") -> list[str]:
     """Free an fmpy instance; its raising is the case's problem (the list of them)."""
     try:

@@ -6,7 +6,7 @@ import ctypes
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (changed, free_instance, judge_log, DECLARED, Case, Outcome, c_array, declared, instance_numbers,
+from harness.formats.badinputs.common import (free_instance, judge_after_refusal, judge_log, DECLARED, Case, Outcome, c_array, declared, instance_numbers,
                                               model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import SHIM_HEADER, STATE_EDITS, edited_state, state_edits
 from harness.formats.badinputs.model_exchange import ME_SIZES
@@ -459,16 +459,7 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         text = judge_log(outcome, logged, case)
         if "fmi2" in text:
             outcome.problems.append(f"the message speaks of FMI 2.0 functions: {text!r}")
-        after = inst.reals()
-        if everything is not None:
-            moved = changed(everything, after)
-            if moved:
-                outcome.problems.append(f"the refused call changed {', '.join(moved[:5])}")
-        if states is not None and inst.states() != states:
-            outcome.problems.append(f"the refused call changed the states: {states} -> {inst.states()}")
-        why = inst.usable()
-        if why:
-            outcome.problems.append(why)
+        judge_after_refusal(outcome, inst, everything, states, most=5)
     except Exception as error:  # noqa: BLE001 - a case that breaks the runner is a failed case
         outcome.problems.append(f"the importer saw an exception: {error!r}")
     finally:

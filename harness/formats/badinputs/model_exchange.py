@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.formats.badinputs.common import (changed, free_instance, judge_log, DECLARED, FMI2_ERROR, FMI2_OK,
+from harness.formats.badinputs.common import (free_instance, judge_after_refusal, judge_log, DECLARED, FMI2_ERROR, FMI2_OK,
                                               FMI2_WARNING, LOG, Case, Outcome, c_array, instance_numbers,
                                               listen, model_description, settle, status_of)
 from harness.formats.badinputs.co_simulation import Slave
@@ -306,14 +306,7 @@ def run_case(case: Case, fmu_dir: Path = FMUS) -> Outcome:
         if status != FMI2_ERROR:
             outcome.problems.append(f"status {status}, expected fmi2Error")
         judge_log(outcome, logged, case)
-        moved = changed(everything, model.reals())
-        if moved:
-            outcome.problems.append(f"the refused call changed {', '.join(moved)}")
-        if states is not None and model.states() != states:
-            outcome.problems.append(f"the refused call changed the states: {states} -> {model.states()}")
-        why = model.usable()
-        if why:
-            outcome.problems.append(why)
+        judge_after_refusal(outcome, model, everything, states)
     except Exception as error:  # noqa: BLE001 - a case that breaks the runner is a failed case
         outcome.problems.append(f"the importer saw an exception: {error!r}")
     finally:
