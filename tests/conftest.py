@@ -46,6 +46,7 @@ RUN_BUILT_FMUS = (
     "engine/test_fmi3_scenes.py",
     "engine/test_iteration_and_adaptive.py",
     "engine/test_masters.py",
+    "engine/test_me_events.py",
     "engine/test_model_exchange_master.py",
     "fmus/test_dropin.py",
     "formats/test_peers.py",
@@ -61,6 +62,7 @@ RUN_BUILT_FMUS = (
 SLOW = (
     "fmus/test_fmi3.py",
     "engine/test_fmi3_scenes.py",
+    "engine/test_me_events.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
     "cli/test_api.py::test_the_example_script_runs",
