@@ -1,0 +1,168 @@
+"""Every figure the benchmark and the run report compute, on constructed traces whose answer
+is worked out by hand: a case's errors (the worse of the two shafts, an error only in a
+speed, only after or only before the start-up transient), the error scales, the
+statistics after the transient, the energy balance and the spectrum's two components.
+
+The grid: 0 to 1 s in 1 ms, 1001 points.  The RMS is a time average with trapezoidal
+weights, so a difference d on the points from t = 0.5 s on (the interior point at 0.5 s
+weighs a whole step, the last half of one) has the RMS d * sqrt(0.5005), and on the points
+before it (the first weighs half a step) d * sqrt(0.4995)."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from harness.description import scene as scenes
+from harness.judges import metrics, monolithic
+from harness.studies.bench import Case, table_row
+from harness.studies.bench import timing
+
+TIMES = np.linspace(0.0, 1.0, 1001)
+TRANSIENT = 0.5
+#: the reference: the driven shaft a little slower, the engine's torque the reaction
+REFERENCE = {"engine.w": 40.0, "load.w": 38.0, "coupling.tau1": -90.0, "coupling.tau2": 100.0}
+SPEED, TORQUE = 40.0, 100.0         # the error scales: the mean speed of w1, the mean |tau2|
+AFTER = math.sqrt(0.5005)           # RMS share of a difference on t >= 0.5 s
+BEFORE = math.sqrt(0.4995)          # ... on t < 0.5 s
+
+
+@pytest.fixture(scope="module")
+def scene() -> scenes.Scene:
+    return scenes.load("kavz685").with_overrides(["experiment.stop=1.0", f"experiment.transient={TRANSIENT}"])
+
+
+def reference() -> dict:
+    return {name: np.full(TIMES.shape, value) for name, value in REFERENCE.items()}
+
+
+def run_with(**differences) -> dict:
+    """The reference's traces plus a difference per short name (a number or an array)."""
+    short = {"w1": "engine.w", "w2": "load.w", "tau1": "coupling.tau1", "tau2": "coupling.tau2"}
+    traces = reference()
+    for name, d in differences.items():
+        traces[short[name]] = traces[short[name]] + d
+    return traces
+
+
+AFTER_TRANSIENT = np.where(TIMES >= TRANSIENT, 1.0, 0.0)
+
+
+# (differences, the case's errors by hand: tau_rms, tau_max, w_rms, w_max, then after the transient)
+CASES = {
+    # the driven shaft worse in both: the benchmark must not read the engine's side alone
+    "driven shaft worse": (dict(w1=0.2, w2=0.4, tau1=1.0, tau2=3.0),
+                           (0.03, 0.03, 0.01, 0.01), (0.03, 0.03, 0.01, 0.01)),
+    # nor the driven shaft's alone
+    "engine shaft worse": (dict(w1=0.4, w2=-0.2, tau1=-3.0, tau2=1.0),
+                           (0.03, 0.03, 0.01, 0.01), (0.03, 0.03, 0.01, 0.01)),
+    "only a speed": (dict(w2=-0.4), (0.0, 0.0, 0.01, 0.01), (0.0, 0.0, 0.01, 0.01)),
+    "only after the transient": (dict(tau2=3.0 * AFTER_TRANSIENT, w2=0.4 * AFTER_TRANSIENT),
+                                 (0.03 * AFTER, 0.03, 0.01 * AFTER, 0.01), (0.03, 0.03, 0.01, 0.01)),
+    "only before the transient": (dict(tau1=3.0 * (1.0 - AFTER_TRANSIENT), w1=0.4 * (1.0 - AFTER_TRANSIENT)),
+                                  (0.03 * BEFORE, 0.03, 0.01 * BEFORE, 0.01), (0.0, 0.0, 0.0, 0.0)),
+}
+KEYS = ("tau_rms", "tau_max", "w_rms", "w_max")
+
+
+@pytest.mark.parametrize("label", list(CASES))
+def test_a_benchmark_case_is_judged_by_the_worse_shaft(scene, monkeypatch, label):
+    differences, whole, after = CASES[label]
+    monkeypatch.setattr(monolithic, "solve", lambda scene, times, *a, **k: SimpleNamespace(times=TIMES,
+                                                                                          traces=reference()))
+    case = Case("jacobi", "master", 1e-3)
+    timing._judge(case, scene, TIMES, run_with(**differences))
+    expected = {**dict(zip(KEYS, whole)), **{f"{k}_after_transient": v for k, v in zip(KEYS, after)}}
+    assert case.errors == pytest.approx(expected, rel=1e-12, abs=1e-15), label
+    assert case.energy_residual is None           # no energy traces: no residual, not a made-up one
+    # the table shows them under their names
+    row = table_row(case)
+    for key in ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient"):
+        assert row[key] == case.errors[key]
+
+
+def test_the_errors_by_signal_and_their_scales(scene):
+    # what the run report shows (error_vs_reference): each shaft's own error, scaled by the
+    # reference's mean engine speed and mean driven torque
+    assert metrics.error_scales(scene, reference()) == {"engine.w": SPEED, "load.w": SPEED,
+                                                        "coupling.tau1": TORQUE, "coupling.tau2": TORQUE}
+    bump = np.zeros(TIMES.shape)
+    bump[700] = -5.0                                 # one point: max 5, RMS 5 sqrt(dt)
+    e = metrics.driveline_errors(scene, TIMES, run_with(w1=0.2, w2=0.4, tau1=1.0, tau2=bump), TIMES, reference())
+    assert e["w1"] == pytest.approx({"rms": 0.2, "max": 0.2, "rms_relative": 0.2 / SPEED,
+                                     "max_relative": 0.2 / SPEED, "scale": SPEED}, rel=1e-12)
+    assert e["w2"] == pytest.approx({"rms": 0.4, "max": 0.4, "rms_relative": 0.4 / SPEED,
+                                     "max_relative": 0.4 / SPEED, "scale": SPEED}, rel=1e-12)
+    assert e["tau1"]["rms"] == pytest.approx(1.0, rel=1e-12)
+    assert e["tau2"] == pytest.approx({"rms": 5.0 * math.sqrt(1e-3), "max": 5.0,
+                                       "rms_relative": 5.0 * math.sqrt(1e-3) / TORQUE,
+                                       "max_relative": 5.0 / TORQUE, "scale": TORQUE}, rel=1e-9)
+    # after a time: the bump at 0.7 s is in, a bump at 0.3 s is not
+    late = metrics.driveline_errors(scene, TIMES, run_with(tau2=np.roll(bump, -400)), TIMES, reference(), after=0.5)
+    assert late["tau2"]["max"] == 0.0 and late["w1"]["rms"] == 0.0
+    # a variable grid weighs each point by the time it stands for, not by its count
+    uneven = np.array([0.0, 0.1, 1.0])
+    ref = {n: np.zeros(3) for n in REFERENCE}
+    ref["coupling.tau2"] = np.ones(3)
+    run = {**ref, "engine.w": np.array([0.0, 3.0, 0.0])}
+    e = metrics.errors(uneven, run, uneven, ref, ["engine.w"], {"engine.w": 1.0})
+    # trapezoid weights 0.05, 0.5, 0.45 (of 1 s): RMS = 3 sqrt(0.5)
+    assert e["engine.w"]["rms"] == pytest.approx(3.0 * math.sqrt(0.5), rel=1e-12)
+    # the grids must agree
+    with pytest.raises(ValueError, match="same time grid"):
+        metrics.errors(TIMES, run_with(), TIMES + 1e-3, reference(), ["engine.w"], {})
+
+
+def test_statistics_after_the_transient():
+    y = np.full(TIMES.shape, 100.0)                  # before the transient: left out
+    keep = TIMES >= TRANSIENT
+    y[keep] = [40.0] + [38.0, 42.0] * 250
+    s = metrics.statistics(TIMES, {"load.w": y, "coupling.tau2": y - 40.0}, ["load.w", "coupling.tau2", "x"],
+                           TRANSIENT)
+    assert s["load.w"] == pytest.approx({"mean": 40.0, "min": 38.0, "max": 42.0, "amplitude": 2.0,
+                                         "unevenness": 0.1}, rel=1e-12)
+    # unevenness is a speed's figure only
+    assert "unevenness" not in s["coupling.tau2"] and s["coupling.tau2"]["amplitude"] == 2.0
+    assert "x" not in s
+
+
+def test_the_energy_balance(scene):
+    # I1 = 0.128, I2 = 0.161 kg m^2 (the scene's)
+    t = np.array([0.0, 1.0, 2.0])
+    traces = {"engine.w": np.array([40.0, 41.0, 42.0]), "load.w": np.array([40.0, 39.0, 38.0]),
+              "engine.engine_work": np.array([0.0, 500.0, 1000.0]), "load.load_work": np.array([0.0, 300.0, 600.0]),
+              "coupling.elastic_energy": np.array([5.0, 6.0, 7.0]),
+              "coupling.dissipated_power": np.array([10.0, 20.0, 10.0])}
+    kinetic = 0.5 * 0.128 * (42.0 ** 2 - 40.0 ** 2) + 0.5 * 0.161 * (38.0 ** 2 - 40.0 ** 2)
+    lost = 30.0                                      # trapezoids: (10 + 20)/2 + (20 + 10)/2
+    residual = 1000.0 - 600.0 - kinetic - 2.0 - lost
+    b = metrics.energy_balance(scene, t, traces)
+    assert b == pytest.approx({"work_in_J": 1000.0, "work_out_J": 600.0, "kinetic_change_J": kinetic,
+                               "elastic_change_J": 2.0, "dissipated_J": lost, "residual_J": residual,
+                               "residual_relative": abs(residual) / 1000.0}, rel=1e-12)
+    # the cumulative dissipation, where given (the reference's) or recorded (a streamed run), is taken as it is
+    given = metrics.energy_balance(scene, t, traces, dissipated=np.array([1.0, 4.0, 9.0]))
+    assert given["dissipated_J"] == 8.0 and given["residual_J"] == pytest.approx(residual + lost - 8.0, rel=1e-12)
+    recorded = metrics.energy_balance(scene, t, {**traces, "coupling.dissipated_energy": np.array([1.0, 4.0, 9.0])})
+    assert recorded["dissipated_J"] == 8.0
+
+
+def test_the_spectrums_two_components():
+    # 4096 points over 2 pi s: every whole rad/s is a bin
+    n = 4096
+    t = np.arange(n) * (2.0 * np.pi / n)
+    torque = 100.0 + 5.0 * np.sin(40.0 * t) + 2.0 * np.cos(420.0 * t)
+    omega, amplitude = metrics.amplitude_spectrum(t, torque)
+    assert omega[40] == pytest.approx(40.0) and omega[420] == pytest.approx(420.0)
+    # np.hanning's window (symmetric, not periodic) leaks 1/n of a bin's amplitude
+    assert amplitude[40] == pytest.approx(5.0, rel=2e-3) and amplitude[420] == pytest.approx(2.0, rel=2e-3)
+    assert amplitude[0] < 1e-3          # the mean removed (kept, the 100 N*m would read 200)
+    found = metrics.spectral_components(t, {"load.w": np.full(n, 40.0), "coupling.tau2": torque},
+                                        ["coupling.tau2"], "load.w")
+    assert found["rotation_frequency_rad_s"] == 40.0
+    assert found["coupling.tau2"]["rotation"]["frequency_rad_s"] == pytest.approx(40.0)
+    assert found["coupling.tau2"]["rotation"]["amplitude"] == pytest.approx(5.0, rel=2e-3)
+    assert found["coupling.tau2"]["band"]["frequency_rad_s"] == pytest.approx(420.0)
+    assert found["coupling.tau2"]["band"]["amplitude"] == pytest.approx(2.0, rel=2e-3)
