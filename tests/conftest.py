@@ -42,6 +42,7 @@ NUMERICS = (
 #: before each of their tests (``_built_fmus``).
 RUN_BUILT_FMUS = (
     "engine/test_cosim.py",
+    "engine/test_event_scenes.py",
     "engine/test_extreme.py",
     "engine/test_fmi3_scenes.py",
     "engine/test_iteration_and_adaptive.py",
@@ -62,6 +63,7 @@ RUN_BUILT_FMUS = (
 SLOW = (
     "fmus/test_fmi3.py",
     "engine/test_fmi3_scenes.py",
+    "engine/test_event_scenes.py",
     "engine/test_me_events.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",

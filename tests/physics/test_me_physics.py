@@ -535,6 +535,18 @@ def test_the_misalignment_source_has_time_events_at_its_points():
     assert source.outputs(0.5, [], []) == [pytest.approx(0.25), pytest.approx(0.1)]
 
 
+def test_a_time_table_load_has_time_events_at_its_points():
+    # active or a brake with friction (held, its breakaway margin follows the table's kinks)
+    for extra in ({}, {"load_direction": "resistive", "friction_torque": 5.0, "breakaway_torque": 8.0}):
+        load = LoadME(component_parameters.load_from({"load_kind": "table", "table": "0.2:700; 0.3:300; 0.6:700",
+                                                      **extra}))
+        assert [load.next_time_event(t) for t in (0.0, 0.2, 0.25, 0.3, 0.6, 1.0)] == [0.2, 0.3, 0.3, 0.6, None, None]
+    # loads that are not a table: none
+    for parameters in ({"load_kind": "constant", "mean_torque": 50.0, "friction_torque": 20.0,
+                        "breakaway_torque": 35.0}, {"load_kind": "random", "mean_torque": 100.0}):
+        assert LoadME(component_parameters.load_from(parameters)).next_time_event(0.0) is None
+
+
 def test_directional_derivatives_are_the_jacobian_times_the_seed():
     model = CouplingME(component_parameters.coupling_from(COUPLINGS["linear-kinematic"]))
     u = [0.1, 35.0, 1.3, 34.0]
