@@ -63,7 +63,8 @@ def check_the_modes(label: str, result):
     if label == "stop, hold, breakaway":
         for start, end in ((0.02, 0.30), (0.63, 1.0)):
             # held: at rest exactly, and static friction gives the coupling torque back
-            assert np.all(between(result, "load.w", start, end) == 0.0), (start, end)
+            w = between(result, "load.w", start, end)
+            assert np.all(w == 0.0), f"held over {start}-{end} s, yet w = {w[w != 0.0][:2]} rad/s"
             assert np.all(between(result, "load.a", start, end) == 0.0), (start, end)
             assert np.array_equal(between(result, "load.load_torque", start, end),
                                   between(result, "coupling.tau2", start, end))
