@@ -65,6 +65,7 @@ SLOW = (
     "engine/test_fmi3_scenes.py",
     "engine/test_event_scenes.py",
     "engine/test_me_events.py",
+    "fmus/test_load_events.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
     "cli/test_api.py::test_the_example_script_runs",
