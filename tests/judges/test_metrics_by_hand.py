@@ -118,14 +118,22 @@ def test_the_errors_by_signal_and_their_scales(scene):
 def test_statistics_after_the_transient():
     y = np.full(TIMES.shape, 100.0)                  # before the transient: left out
     keep = TIMES >= TRANSIENT
-    y[keep] = [40.0] + [38.0, 42.0] * 250
-    s = metrics.statistics(TIMES, {"load.w": y, "coupling.tau2": y - 40.0}, ["load.w", "coupling.tau2", "x"],
-                           TRANSIENT)
-    assert s["load.w"] == pytest.approx({"mean": 40.0, "min": 38.0, "max": 42.0, "amplitude": 2.0,
-                                         "unevenness": 0.1}, rel=1e-12)
-    # unevenness is a speed's figure only
-    assert "unevenness" not in s["coupling.tau2"] and s["coupling.tau2"]["amplitude"] == 2.0
+    y[keep] = [50.0] + [38.0, 42.0] * 250            # the point at the transient itself is in
+    mean = (50.0 + 250 * 80.0) / 501
+    centred = np.where(keep, 0.0, 100.0)
+    centred[keep] = [0.0] + [-2.0, 2.0] * 250
+    s = metrics.statistics(TIMES, {"load.w": y, "coupling.tau2": y + 10.0, "engine.w": centred},
+                           ["x", "load.w", "coupling.tau2", "engine.w"], TRANSIENT)
+    assert s["load.w"] == pytest.approx({"mean": mean, "min": 38.0, "max": 50.0, "amplitude": 6.0,
+                                         "unevenness": 12.0 / mean}, rel=1e-12)
+    # unevenness is a speed's figure only, and only where the speed has a mean
+    assert "unevenness" not in s["coupling.tau2"] and s["coupling.tau2"]["amplitude"] == 6.0
+    assert s["engine.w"]["mean"] == 0.0
+    assert "unevenness" not in s["engine.w"]
     assert "x" not in s
+    # one point after the transient: its value, no spread
+    last = metrics.statistics(TIMES, {"load.w": y}, ["load.w"], 1.0)["load.w"]
+    assert last == {"mean": 42.0, "min": 42.0, "max": 42.0, "amplitude": 0.0, "unevenness": 0.0}
 
 
 def test_the_energy_balance(scene):
@@ -166,3 +174,34 @@ def test_the_spectrums_two_components():
     assert found["coupling.tau2"]["rotation"]["amplitude"] == pytest.approx(5.0, rel=2e-3)
     assert found["coupling.tau2"]["band"]["frequency_rad_s"] == pytest.approx(420.0)
     assert found["coupling.tau2"]["band"]["amplitude"] == pytest.approx(2.0, rel=2e-3)
+
+
+def test_the_spectrum_after_the_transient_and_around_a_reversed_shaft():
+    # 8192 points over 4 pi s; after the transient (2 pi s) 4096 of them, every whole rad/s a bin
+    n = 8192
+    t = np.arange(n) * (2.0 * np.pi / 4096)
+    transient = 2.0 * np.pi
+    torque = (100.0 + 5.0 * np.sin(38.0 * t) + 7.0 * np.sin(20.0 * t) + 9.0 * np.sin(60.0 * t)
+              + 2.0 * np.cos(420.0 * t) + np.where(t < transient, 30.0 * np.sin(40.0 * t), 0.0))
+    found = metrics.spectral_components(t, {"load.w": np.full(n, -40.0), "coupling.tau2": torque},
+                                        ["coupling.tau2"], "load.w", transient)
+    # the shaft turns backwards at 40 rad/s: its frequency's window is 36...44 rad/s; the
+    # 40 rad/s tone of the transient, the 20 and 60 rad/s ones outside the window are not it
+    assert found["rotation_frequency_rad_s"] == -40.0
+    rotation = found["coupling.tau2"]["rotation"]
+    assert rotation["frequency_rad_s"] == pytest.approx(38.0) and rotation["amplitude"] == pytest.approx(5.0, rel=2e-3)
+    assert found["coupling.tau2"]["band"]["amplitude"] == pytest.approx(2.0, rel=2e-3)
+
+
+def test_a_spectrum_of_a_variable_step_trace_and_of_a_short_one():
+    # a variable-step trace (1 ms, then 2 ms steps) is put on a grid of its median step first:
+    # read as if evenly spaced, its second half would play the tone at twice its frequency
+    t = np.concatenate([np.arange(0.0, 3.0, 1e-3), np.arange(3.0, 6.0, 2e-3)])
+    omega, amplitude = metrics.amplitude_spectrum(t, 5.0 * np.sin(40.0 * t))
+    assert omega[1] - omega[0] == pytest.approx(2.0 * np.pi / (len(omega) * 2 - 2) / 1e-3, rel=1e-3)
+    peak = np.argmax(amplitude)
+    assert omega[peak] == pytest.approx(40.0, abs=omega[1]) and amplitude[peak] == pytest.approx(5.0, rel=0.05)
+    # eight points are a spectrum, seven are none
+    eight = np.arange(8) * 1e-3
+    assert len(metrics.amplitude_spectrum(eight, np.sin(eight))[0]) == 5
+    assert [len(a) for a in metrics.amplitude_spectrum(eight[:7], np.sin(eight[:7]))] == [0, 0]

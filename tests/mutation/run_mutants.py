@@ -94,11 +94,12 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     shutil.copytree(REPO / "build" / "fmus3", target / "build" / "fmus3")    # the FMI 3.0 editions
     shutil.copytree(REPO / "resources", target / "resources")
     shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
+    shutil.copytree(REPO / "examples", target / "examples", ignore=ignore)     # tests that run the examples
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
     selected = [found for t in tests for found in _located(target, t)]
     if not selected:    # an empty selection would make mutmut run the whole suite per mutant
         raise SystemExit(f"none of the group's tests {tests} exists in {tests_from / 'tests'}")
-    also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
+    also_copy = ["fmu_src", "build", "resources", "docs", "examples", "constraints.txt", "tests", "lever", "harness"]
     (target / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
         f"source_paths = {json.dumps(['lever', 'harness'])}\n"
