@@ -535,6 +535,29 @@ def test_the_misalignment_source_has_time_events_at_its_points():
     assert source.outputs(0.5, [], []) == [pytest.approx(0.25), pytest.approx(0.1)]
 
 
+def test_the_load_starts_in_the_mode_its_state_and_drive_say():
+    """At rest the static friction holds while |net| <= hold, else the shaft slips the way
+    the net torque turns it; moving, the way it moves.  An active Fourier load,
+    Mc = 100 + 80 sin(phi) N*m, friction 5 N*m, breakaway 10 N*m: net = tau - Mc(phi)."""
+    def mode(phi, w, tau, t=0.0, **load):
+        model = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0,
+                                                       "inertia": 1.0, **load}))
+        model.initialize(t, [phi, w, 7.0], [tau])
+        return model.mode
+    fourier = {"load_kind": "fourier", "fourier": "100; 0:80"}
+    top = math.pi / 2                                   # Mc = 180 N*m there, 100 at phi = 0
+    assert mode(top, 0.0, 185.0, **fourier) == HELD     # net 5 <= 10
+    assert mode(top, 0.0, 200.0, **fourier) == 1        # net 20: forwards
+    assert mode(top, 0.0, 150.0, **fourier) == -1       # net -30: backwards
+    assert mode(0.0, 0.0, 185.0, **fourier) == 1        # the angle's load: net 85
+    assert mode(top, 1.0, 185.0, **fourier) == 1        # moving: its direction, whatever the drive
+    assert mode(top, -0.5, 300.0, **fourier) == -1
+    # a time table's load at its time: Mc = 200 N*m at 0.5 s (100 at 0, 300 at 1 s)
+    table = {"load_kind": "table", "table": "0:100; 1:300"}
+    assert mode(0.0, 0.0, 205.0, t=0.5, **table) == HELD and mode(0.0, 0.0, 205.0, t=0.0, **table) == 1
+    assert LoadME(component_parameters.load_from({})).EVENTS == ()
+
+
 def test_a_time_table_load_has_time_events_at_its_points():
     # active or a brake with friction (held, its breakaway margin follows the table's kinks)
     for extra in ({}, {"load_direction": "resistive", "friction_torque": 5.0, "breakaway_torque": 8.0}):
