@@ -555,7 +555,15 @@ def test_the_load_starts_in_the_mode_its_state_and_drive_say():
     # a time table's load at its time: Mc = 200 N*m at 0.5 s (100 at 0, 300 at 1 s)
     table = {"load_kind": "table", "table": "0:100; 1:300"}
     assert mode(0.0, 0.0, 205.0, t=0.5, **table) == HELD and mode(0.0, 0.0, 205.0, t=0.0, **table) == 1
+    held = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0, **table}))
+    held.initialize(0.5, [0.0, 0.0, 7.0], [205.0])
+    # held: no acceleration, the load torque the drive's, the margin to the breakaway 10 - 5 N*m
+    assert held.outputs(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 0.0, 205.0, 7.0]
+    assert held.event_indicators(0.5, [0.0, 0.0, 7.0], [205.0]) == [pytest.approx(5.0)]
     assert LoadME(component_parameters.load_from({})).EVENTS == ()
+    # the states a run starts from: the angle and speed given, no work done yet
+    assert LoadME(component_parameters.load_from({}), 0.3, 39.0).start() == [0.3, 39.0, 0.0]
+    assert EngineME(component_parameters.engine_from({}), 0.2, 38.0).start() == [0.2, 38.0, 0.0]
 
 
 def test_a_time_table_load_has_time_events_at_its_points():
