@@ -90,6 +90,7 @@ def test_a_velocity_reversed_by_the_event_update_is_where_cvode_restarts(ball_sc
     assert speed_error <= BOUND * tolerance * impact, f"velocity off its closed form by {speed_error:.3g} m/s"
     assert np.all(result.traces["ball.h"] >= -BOUND * tolerance * DROP)
     assert result.counters["events"] == len(bounce_times(2.0)) == 4
+    assert result.counters["time_events"] == 0      # the ball's nextEventTime is not defined
 
 
 def test_a_held_load_is_at_rest_exactly_from_its_stop_on():
@@ -107,3 +108,30 @@ def test_a_held_load_is_at_rest_exactly_from_its_stop_on():
     held = result.times >= 0.014
     assert np.all(w[held] == 0.0) and np.all(a[held] == 0.0), \
         f"held load's speed not exactly 0 after its stop: {w[held][w[held] != 0.0][:3]} rad/s"
+
+
+def test_time_events_of_an_fmu_without_states(tmp_path):
+    # a misalignment source alone: no state for CVODE to integrate, its table's points
+    # (0.25, 0.5, 0.75 s) still time events, handled in event mode one by one
+    path = tmp_path / "tilt.toml"
+    path.write_text('''name = "tilt_alone"
+description = "A misalignment source alone"
+connections = []
+record = ["tilt.misalignment", "tilt.misalignment_rate"]
+[experiment]
+start = 0.0
+stop = 1.0
+step = 0.01
+master = "me-cvode"
+transient = 0.0
+[components.tilt]
+fmu = "MisalignmentSource"
+[components.tilt.parameters]
+table = "0:15; 0.25:15; 0.5:17; 0.75:15"
+table_unit = "deg"
+''')
+    result = simulate(scenes.load(path), "me-cvode")
+    assert result.ok, result.failure
+    assert (result.counters["time_events"], result.counters["events"]) == (3, 0)
+    expected = np.interp(result.times, [0.0, 0.25, 0.5, 0.75], [15.0, 15.0, 17.0, 15.0])
+    assert np.max(np.abs(np.degrees(result.traces["tilt.misalignment"]) - expected)) <= 1e-12

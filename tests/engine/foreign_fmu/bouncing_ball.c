@@ -171,7 +171,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
-    info->nextEventTime = 0.0;
+    info->nextEventTime = 0.5;      /* not defined: a master must not take it for a time event */
     if (b->h <= 0.0 && b->v < 0.0) {        /* the bounce: a finite jump of v */
         b->h = 0.0;
         b->v = -b->e * b->v;
