@@ -561,6 +561,19 @@ def test_the_load_starts_in_the_mode_its_state_and_drive_say():
     assert held.outputs(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 0.0, 205.0, 7.0]
     assert held.event_indicators(0.5, [0.0, 0.0, 7.0], [205.0]) == [pytest.approx(5.0)]
     assert LoadME(component_parameters.load_from({})).EVENTS == ()
+    # slipping, the indicator is the speed signed by the direction: zero at the stop
+    slipping = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0, **table}))
+    slipping.initialize(0.5, [0.0, 2.0, 7.0], [205.0])
+    assert slipping.mode == 1 and slipping.event_indicators(0.5, [0.0, 2.0, 7.0], [205.0]) == [2.0]
+    # an integrator's state a little past the stop: at rest exactly, held at 0.5 s, and at
+    # 0.05 s (Mc = 110 N*m: net 95 > 10) slipping on the way the net torque turns it
+    assert slipping.event_update(0.5, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == HELD
+    slipping.mode = 1
+    assert slipping.event_update(0.05, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == 1
+    # held, a breakaway at the table's time: not at 0.5 s (margin -5), at 0.05 s
+    assert held.event_update(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 7.0] and held.mode == HELD
+    held.event_update(0.05, [0.0, 0.0, 7.0], [205.0])
+    assert held.mode == 1
     # the states a run starts from: the angle and speed given, no work done yet
     assert LoadME(component_parameters.load_from({}), 0.3, 39.0).start() == [0.3, 39.0, 0.0]
     assert EngineME(component_parameters.engine_from({}), 0.2, 38.0).start() == [0.2, 38.0, 0.0]
