@@ -110,9 +110,47 @@ def test_the_errors_by_signal_and_their_scales(scene):
     e = metrics.errors(uneven, run, uneven, ref, ["engine.w"], {"engine.w": 1.0})
     # trapezoid weights 0.05, 0.5, 0.45 (of 1 s): RMS = 3 sqrt(0.5)
     assert e["engine.w"]["rms"] == pytest.approx(3.0 * math.sqrt(0.5), rel=1e-12)
-    # the grids must agree
-    with pytest.raises(ValueError, match="same time grid"):
-        metrics.errors(TIMES, run_with(), TIMES + 1e-3, reference(), ["engine.w"], {})
+    # the grids must agree, to 1e-9 s, late in a run as early
+    for offset in (1e-3, 5e-9, np.where(TIMES > 0.5, 5e-9, 0.0)):
+        with pytest.raises(ValueError, match="same time grid"):
+            metrics.errors(TIMES, run_with(), TIMES + offset, reference(), ["engine.w"], {})
+    assert metrics.errors(TIMES, run_with(), TIMES + 5e-10, reference(), ["engine.w"], {})["engine.w"]["max"] == 0.0
+
+
+def test_errors_over_what_both_grids_hold():
+    ref = {n: v[:501] for n, v in reference().items()}
+    late = run_with(w1=AFTER_TRANSIENT)
+    # a run longer than its reference is judged where both are: up to 0.5 s, where w1 is
+    # off only at the last point (weight half a step of 0.5 s: RMS sqrt(0.0005 / 0.5))
+    e = metrics.errors(TIMES, late, TIMES[:501], ref, ["missing", "engine.w"], {})
+    assert e["engine.w"]["max"] == 1.0 and e["engine.w"]["rms"] == pytest.approx(math.sqrt(0.001), rel=1e-12)
+    # a name without a scale is judged in its own unit; one the reference lacks is left out
+    assert e["engine.w"]["scale"] == 1.0 and e["engine.w"]["rms_relative"] == e["engine.w"]["rms"]
+    assert "missing" not in e
+    late["only.run"] = np.zeros(TIMES.shape)
+    assert list(metrics.errors(TIMES, late, TIMES, reference(), ["only.run", "engine.w"], {})) == ["engine.w"]
+    # after a time that is a grid point: that point is in
+    bump = run_with(w2=np.where(TIMES == TIMES[500], 2.0, 0.0))
+    assert metrics.errors(TIMES, bump, TIMES, reference(), ["load.w"], {}, after=TIMES[500])["load.w"]["max"] == 2.0
+    # one point: its difference; two: the mean square of both
+    one = metrics.errors(TIMES[:1], run_with(w1=3.0), TIMES[:1], reference(), ["engine.w"], {})
+    assert (one["engine.w"]["rms"], one["engine.w"]["max"]) == (3.0, 3.0)
+    two = metrics.errors(TIMES[:2], run_with(w1=np.where(TIMES == 0.0, 3.0, 4.0)), TIMES[:2], reference(),
+                         ["engine.w"], {})
+    assert two["engine.w"]["rms"] == pytest.approx(math.sqrt(12.5), rel=1e-12)
+    # a variable grid of four points: trapezoid weights 0.05, 0.15, 0.45, 0.35
+    uneven = np.array([0.0, 0.1, 0.3, 1.0])
+    for k, weight in enumerate((0.05, 0.15, 0.45, 0.35)):
+        run = {"x": np.where(np.arange(4) == k, 2.0, 0.0)}
+        assert metrics.errors(uneven, run, uneven, {"x": np.zeros(4)}, ["x"], {})["x"]["rms"] == \
+            pytest.approx(2.0 * math.sqrt(weight), rel=1e-12)
+
+
+def test_errors_scaled_by_a_longer_reference(scene):
+    # the scales from another run of the reference (a longer one), not the one compared with
+    longer = {**reference(), "engine.w": np.full(TIMES.shape, 80.0)}
+    e = metrics.driveline_errors(scene, TIMES, run_with(w1=0.4), TIMES, reference(), scale_reference=longer)
+    assert e["w1"]["scale"] == 80.0 and e["w1"]["rms_relative"] == pytest.approx(0.4 / 80.0, rel=1e-12)
 
 
 def test_statistics_after_the_transient():
@@ -140,7 +178,7 @@ def test_the_energy_balance(scene):
     # I1 = 0.128, I2 = 0.161 kg m^2 (the scene's)
     t = np.array([0.0, 1.0, 2.0])
     traces = {"engine.w": np.array([40.0, 41.0, 42.0]), "load.w": np.array([40.0, 39.0, 38.0]),
-              "engine.engine_work": np.array([0.0, 500.0, 1000.0]), "load.load_work": np.array([0.0, 300.0, 600.0]),
+              "engine.engine_work": np.array([100.0, 600.0, 1100.0]), "load.load_work": np.array([50.0, 350.0, 650.0]),
               "coupling.elastic_energy": np.array([5.0, 6.0, 7.0]),
               "coupling.dissipated_power": np.array([10.0, 20.0, 10.0])}
     kinetic = 0.5 * 0.128 * (42.0 ** 2 - 40.0 ** 2) + 0.5 * 0.161 * (38.0 ** 2 - 40.0 ** 2)
@@ -155,6 +193,9 @@ def test_the_energy_balance(scene):
     assert given["dissipated_J"] == 8.0 and given["residual_J"] == pytest.approx(residual + lost - 8.0, rel=1e-12)
     recorded = metrics.energy_balance(scene, t, {**traces, "coupling.dissipated_energy": np.array([1.0, 4.0, 9.0])})
     assert recorded["dissipated_J"] == 8.0
+    # no work in: no share of it
+    idle = metrics.energy_balance(scene, t, {**traces, "engine.engine_work": np.full(3, 100.0)})
+    assert idle["work_in_J"] == 0.0 and math.isnan(idle["residual_relative"])
 
 
 def test_the_spectrums_two_components():
