@@ -550,6 +550,14 @@ def test_the_load_starts_in_the_mode_its_state_and_drive_say():
     assert mode(top, 0.0, 200.0, **fourier) == 1        # net 20: forwards
     assert mode(top, 0.0, 150.0, **fourier) == -1       # net -30: backwards
     assert mode(0.0, 0.0, 185.0, **fourier) == 1        # the angle's load: net 85
+    angle = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0,
+                                                   "inertia": 1.0, **fourier}))
+    angle.initialize(0.0, [top, 0.0, 7.0], [185.0])
+    assert angle.event_indicators(0.0, [top, 0.0, 7.0], [185.0]) == [pytest.approx(5.0)]    # 10 - |5|
+    angle.event_update(0.0, [top, 0.0, 7.0], [185.0])
+    assert angle.mode == HELD                                                                # at phi = 0 it would go
+    angle.event_update(0.0, [top, 0.0, 7.0], [200.0])
+    assert angle.mode == 1                                                                   # |20| > 10
     assert mode(top, 1.0, 185.0, **fourier) == 1        # moving: its direction, whatever the drive
     assert mode(top, -0.5, 300.0, **fourier) == -1
     # a time table's load at its time: Mc = 200 N*m at 0.5 s (100 at 0, 300 at 1 s)
@@ -570,6 +578,9 @@ def test_the_load_starts_in_the_mode_its_state_and_drive_say():
     assert slipping.event_update(0.5, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == HELD
     slipping.mode = 1
     assert slipping.event_update(0.05, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == 1
+    # a time event of the table while it slips slowly: nothing changes
+    slipping.mode = 1
+    assert slipping.event_update(0.3, [1.5, 0.5, 7.0], [205.0]) == [1.5, 0.5, 7.0] and slipping.mode == 1
     # held, a breakaway at the table's time: not at 0.5 s (margin -5), at 0.05 s
     assert held.event_update(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 7.0] and held.mode == HELD
     held.event_update(0.05, [0.0, 0.0, 7.0], [205.0])
