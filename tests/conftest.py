@@ -42,6 +42,7 @@ NUMERICS = (
 #: before each of their tests (``_built_fmus``).
 RUN_BUILT_FMUS = (
     "engine/test_cosim.py",
+    "engine/test_event_scenes.py",
     "engine/test_extreme.py",
     "engine/test_fmi3_scenes.py",
     "formats/test_plots.py::test_a_time_view_zooms_the_judged_window_to_its_values",
@@ -57,6 +58,7 @@ RUN_BUILT_FMUS = (
     "judges/test_fmu_reference.py::test_a_run_with_no_reference_to_be_had_says_so_in_one_line",
     "engine/test_iteration_and_adaptive.py",
     "engine/test_masters.py",
+    "engine/test_me_events.py",
     "engine/test_model_exchange_master.py",
     "fmus/test_dropin.py",
     "formats/test_peers.py",
@@ -76,6 +78,9 @@ SLOW = (
     "judges/test_verdict.py::test_a_result_with_some_signals_is_judged_on_those_and_lists_the_rest",
     "fmus/test_fmi3.py",
     "engine/test_fmi3_scenes.py",
+    "engine/test_event_scenes.py",
+    "engine/test_me_events.py",
+    "fmus/test_load_events.py",
     "cli/test_api.py::test_a_run_gives_its_traces_as_an_array_and_its_summary_and_writes_nothing",
     "cli/test_api.py::test_the_command_line_goes_through_the_api",
     "cli/test_api.py::test_the_example_script_runs",

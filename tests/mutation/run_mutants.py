@@ -56,6 +56,20 @@ GROUPS = {
     # The shaft FMUs' adapter (saved states among it): reached only by tests that run the
     # slave classes in the test process (the built FMUs carry their own copy of the code).
     "fmus": (["lever/fmus/shafts.py"], [], ["tests/oracle/test_oracle_states.py"]),
+    # The Model Exchange master's event path: the event mode, the discrete states settled,
+    # CVODE restarted from the states the FMUs report, the stepping loop around them.
+    "me-master": (["harness/engine/masters/model_exchange.py"],
+                  [f"harness.engine.masters.model_exchange.xǁModelExchangeCvodeMasterǁ{f}__mutmut_*"
+                   for f in ("_event", "_event_rounds", "_restart", "_read_states", "_step_impl")],
+                  ["tests/engine/test_me_events.py", "tests/engine/test_model_exchange_master.py"]),
+    # The shafts' Model Exchange editions (modes, event indicators and updates, partials),
+    # run in the test process (the freewheel's is left out, as in the physics group).
+    "me-physics": (["lever/physics/me_engine.py", "lever/physics/me_load.py"], [],
+                   ["tests/physics/test_me_physics.py"]),
+    # The figures a benchmark case and a run report are judged by.
+    "metrics": (["harness/judges/metrics.py", "harness/studies/bench/timing.py"],
+                ["harness.judges.metrics.x_*", "harness.studies.bench.timing.x__judge__mutmut_*"],
+                ["tests/judges/test_metrics_by_hand.py", "tests/studies/test_bench.py"]),
 }
 
 
@@ -73,16 +87,19 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
     # this checkout's conftest: it knows to stay inside mutmut's process (older ones do not)
     shutil.copy2(REPO / "tests" / "conftest.py", target / "tests" / "conftest.py")
     (target / "build").mkdir()
-    shutil.copy2(REPO / "build" / "fmus.py", target / "build" / "fmus.py")
+    for script in ("fmus.py", "fmi3.py"):      # both go into the FMUs' source hash
+        shutil.copy2(REPO / "build" / script, target / "build" / script)
     shutil.copytree(REPO / "build" / "shim", target / "build" / "shim", ignore=ignore)
     shutil.copytree(REPO / "build" / "fmus", target / "build" / "fmus")
+    shutil.copytree(REPO / "build" / "fmus3", target / "build" / "fmus3")    # the FMI 3.0 editions
     shutil.copytree(REPO / "resources", target / "resources")
     shutil.copytree(REPO / "docs", target / "docs")      # tests that hold the docs' tables to the code
+    shutil.copytree(REPO / "examples", target / "examples", ignore=ignore)     # tests that run the examples
     shutil.copy2(REPO / "constraints.txt", target / "constraints.txt")
     selected = [found for t in tests for found in _located(target, t)]
     if not selected:    # an empty selection would make mutmut run the whole suite per mutant
         raise SystemExit(f"none of the group's tests {tests} exists in {tests_from / 'tests'}")
-    also_copy = ["fmu_src", "build", "resources", "docs", "constraints.txt", "tests", "lever", "harness"]
+    also_copy = ["fmu_src", "build", "resources", "docs", "examples", "constraints.txt", "tests", "lever", "harness"]
     (target / "pyproject.toml").write_text(
         "[tool.mutmut]\n"
         f"source_paths = {json.dumps(['lever', 'harness'])}\n"

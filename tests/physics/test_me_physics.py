@@ -562,6 +562,73 @@ def test_the_misalignment_source_has_time_events_at_its_points():
     assert source.outputs(0.5, [], []) == [pytest.approx(0.25), pytest.approx(0.1)]
 
 
+def test_the_load_starts_in_the_mode_its_state_and_drive_say():
+    """At rest the static friction holds while |net| <= hold, else the shaft slips the way
+    the net torque turns it; moving, the way it moves.  An active Fourier load,
+    Mc = 100 + 80 sin(phi) N*m, friction 5 N*m, breakaway 10 N*m: net = tau - Mc(phi)."""
+    def mode(phi, w, tau, t=0.0, **load):
+        model = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0,
+                                                       "inertia": 1.0, **load}))
+        model.initialize(t, [phi, w, 7.0], [tau])
+        return model.mode
+    fourier = {"load_kind": "fourier", "fourier": "100; 0:80"}
+    top = math.pi / 2                                   # Mc = 180 N*m there, 100 at phi = 0
+    assert mode(top, 0.0, 185.0, **fourier) == HELD     # net 5 <= 10
+    assert mode(top, 0.0, 200.0, **fourier) == 1        # net 20: forwards
+    assert mode(top, 0.0, 150.0, **fourier) == -1       # net -30: backwards
+    assert mode(0.0, 0.0, 185.0, **fourier) == 1        # the angle's load: net 85
+    angle = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0,
+                                                   "inertia": 1.0, **fourier}))
+    angle.initialize(0.0, [top, 0.0, 7.0], [185.0])
+    assert angle.event_indicators(0.0, [top, 0.0, 7.0], [185.0]) == [pytest.approx(5.0)]    # 10 - |5|
+    angle.event_update(0.0, [top, 0.0, 7.0], [185.0])
+    assert angle.mode == HELD                                                                # at phi = 0 it would go
+    angle.event_update(0.0, [top, 0.0, 7.0], [200.0])
+    assert angle.mode == 1                                                                   # |20| > 10
+    assert mode(top, 1.0, 185.0, **fourier) == 1        # moving: its direction, whatever the drive
+    assert mode(top, -0.5, 300.0, **fourier) == -1
+    # a time table's load at its time: Mc = 200 N*m at 0.5 s (100 at 0, 300 at 1 s)
+    table = {"load_kind": "table", "table": "0:100; 1:300"}
+    assert mode(0.0, 0.0, 205.0, t=0.5, **table) == HELD and mode(0.0, 0.0, 205.0, t=0.0, **table) == 1
+    held = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0, **table}))
+    held.initialize(0.5, [0.0, 0.0, 7.0], [205.0])
+    # held: no acceleration, the load torque the drive's, the margin to the breakaway 10 - 5 N*m
+    assert held.outputs(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 0.0, 205.0, 7.0]
+    assert held.event_indicators(0.5, [0.0, 0.0, 7.0], [205.0]) == [pytest.approx(5.0)]
+    assert LoadME(component_parameters.load_from({})).EVENTS == ()
+    # slipping, the indicator is the speed signed by the direction: zero at the stop
+    slipping = LoadME(component_parameters.load_from({"friction_torque": 5.0, "breakaway_torque": 10.0, **table}))
+    slipping.initialize(0.5, [0.0, 2.0, 7.0], [205.0])
+    assert slipping.mode == 1 and slipping.event_indicators(0.5, [0.0, 2.0, 7.0], [205.0]) == [2.0]
+    # an integrator's state a little past the stop: at rest exactly, held at 0.5 s, and at
+    # 0.05 s (Mc = 110 N*m: net 95 > 10) slipping on the way the net torque turns it
+    assert slipping.event_update(0.5, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == HELD
+    slipping.mode = 1
+    assert slipping.event_update(0.05, [1.5, -1e-3, 7.0], [205.0]) == [1.5, 0.0, 7.0] and slipping.mode == 1
+    # a time event of the table while it slips slowly: nothing changes
+    slipping.mode = 1
+    assert slipping.event_update(0.3, [1.5, 0.5, 7.0], [205.0]) == [1.5, 0.5, 7.0] and slipping.mode == 1
+    # held, a breakaway at the table's time: not at 0.5 s (margin -5), at 0.05 s
+    assert held.event_update(0.5, [0.0, 0.0, 7.0], [205.0]) == [0.0, 0.0, 7.0] and held.mode == HELD
+    held.event_update(0.05, [0.0, 0.0, 7.0], [205.0])
+    assert held.mode == 1
+    # the states a run starts from: the angle and speed given, no work done yet
+    assert LoadME(component_parameters.load_from({}), 0.3, 39.0).start() == [0.3, 39.0, 0.0]
+    assert EngineME(component_parameters.engine_from({}), 0.2, 38.0).start() == [0.2, 38.0, 0.0]
+
+
+def test_a_time_table_load_has_time_events_at_its_points():
+    # active or a brake with friction (held, its breakaway margin follows the table's kinks)
+    for extra in ({}, {"load_direction": "resistive", "friction_torque": 5.0, "breakaway_torque": 8.0}):
+        load = LoadME(component_parameters.load_from({"load_kind": "table", "table": "0.2:700; 0.3:300; 0.6:700",
+                                                      **extra}))
+        assert [load.next_time_event(t) for t in (0.0, 0.2, 0.25, 0.3, 0.6, 1.0)] == [0.2, 0.3, 0.3, 0.6, None, None]
+    # loads that are not a table: none
+    for parameters in ({"load_kind": "constant", "mean_torque": 50.0, "friction_torque": 20.0,
+                        "breakaway_torque": 35.0}, {"load_kind": "random", "mean_torque": 100.0}):
+        assert LoadME(component_parameters.load_from(parameters)).next_time_event(0.0) is None
+
+
 def test_directional_derivatives_are_the_jacobian_times_the_seed():
     model = CouplingME(component_parameters.coupling_from(COUPLINGS["linear-kinematic"]))
     u = [0.1, 35.0, 1.3, 34.0]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 
 from .friction import ResistingLoad
-from .load import FourierLoad, SpectrumLoad
+from .load import FourierLoad, SpectrumLoad, TabulatedLoad
 from .me_base import SPEED_BAND, TORQUE_BAND, ModelExchange, banded, der
 from .shaft import Shaft
 
@@ -104,6 +104,15 @@ class LoadME(ModelExchange):
             x[1] = 0.0
             self.mode = self.mode_at(t, x, u)
         return x
+
+    def next_time_event(self, t: float) -> float | None:
+        """A time-table load's next point after ``t``, or None.  Its torque's slope jumps
+        there, and a held shaft's breakaway margin with it: over a steep piece (a brake
+        released in 10 ms) the margin can cross zero and back within one of the
+        integrator's steps, which a held shaft (every derivative 0) lets grow long - a
+        root finder that compares signs at the steps' ends would miss the breakaway."""
+        base = self.shaft.external.base if isinstance(self.shaft.external, ResistingLoad) else self.shaft.external
+        return base.table.next_time(t) if isinstance(base, TabulatedLoad) else None
 
     @property
     def dependencies(self):

@@ -4,8 +4,6 @@ are at the table's times: time events (``next_time_event``), not state events.
 """
 from __future__ import annotations
 
-import bisect
-
 from .me_base import ModelExchange
 from .signals import TimeTable
 
@@ -27,9 +25,7 @@ class MisalignmentME(ModelExchange):
 
     def next_time_event(self, t: float) -> float | None:
         """The first time of the table after ``t`` (where the rate jumps), or None."""
-        times = [p[0] for p in self.table.points]
-        k = bisect.bisect_right(times, t)
-        return times[k] if k < len(times) else None
+        return self.table.next_time(t)
 
     @property
     def dependencies(self):

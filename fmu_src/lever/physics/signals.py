@@ -44,3 +44,8 @@ class TimeTable:
             return 0.0
         k = self._segment(t)
         return (ys[k + 1] - ys[k]) / (ts[k + 1] - ts[k])
+
+    def next_time(self, t: float) -> float | None:
+        """The first of the table's times after ``t`` (where the rate jumps), or None."""
+        k = bisect.bisect_right(self._t, t)
+        return self._t[k] if k < len(self._t) else None
