@@ -71,7 +71,7 @@ KEYS = ("tau_rms", "tau_max", "w_rms", "w_max")
 def test_a_benchmark_case_is_judged_by_the_worse_shaft(scene, monkeypatch, label):
     differences, whole, after = CASES[label]
     monkeypatch.setattr(monolithic, "solve", lambda scene, times, *a, **k: SimpleNamespace(times=TIMES,
-                                                                                          traces=reference()))
+                                                                                          traces=reference(), info={}))
     case = Case("jacobi", "master", 1e-3)
     timing._judge(case, scene, TIMES, run_with(**differences))
     expected = {**dict(zip(KEYS, whole)), **{f"{k}_after_transient": v for k, v in zip(KEYS, after)}}
