@@ -601,24 +601,12 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
                      write_result: bool = True) -> list[Path]:
     """``validation.json``, the result as ``<NAME>_out.csv`` (cross-check naming; unless
     ``write_result`` is false) and one plot per failing signal with its band, in ``out``."""
-    import json
-
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob("*.png"):
         stale.unlink()
     if hasattr(findings, "blind_spots"):           # the engineer's verdict (harness.judges.verdict)
         return write_verdict(out, findings, result, reference, write_result)
-    written = []
-    if write_result and len(result.times):
-        path = out / f"{reference.name}_out.csv"
-        write_csv(path, Traces(result.times, {n: result.traces[n] for n in reference.outputs.signals
-                                             if n in result.traces}))
-        written.append(path)
-    summary = findings.to_dict()
-    summary["run"] = {"how": result.how, "failure": result.failure}
-    path = out / "validation.json"
-    path.write_text(json.dumps(summary, indent=2, default=float))
-    written.append(path)
+    written = _write_result_and_json(out, findings, result, reference, write_result)
     if len(result.times):
         for signal in findings.signals:
             if not signal.passed:
@@ -629,6 +617,17 @@ def write_validation(out: Path, findings, bands: dict, result: Result, reference
 def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces, write_result: bool = True) -> list[Path]:
     """``write_validation`` for the engineer's verdict: ``validation.json`` (every check, the
     tolerances and their sources, the power), the result, and a plot per failing signal."""
+    written = _write_result_and_json(out, verdict, result, reference, write_result)
+    if len(result.times):
+        written += [plot_verdict_signal(out, reference, result, s, verdict) for s in verdict.signals if not s.passed]
+    return written
+
+
+def _write_result_and_json(out: Path, judged, result: Result, reference: ReferenceTraces,
+                           write_result: bool) -> list[Path]:
+    """What every verdict writes: the result's recorded outputs (``<name>_out.csv``, unless
+    the result came from a file) and ``validation.json`` (the verdict's ``to_dict`` and how
+    the result was made)."""
     import json
 
     written = []
@@ -637,13 +636,11 @@ def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces
         write_csv(path, Traces(result.times, {n: result.traces[n] for n in reference.outputs.signals
                                              if n in result.traces}))
         written.append(path)
-    summary = verdict.to_dict()
+    summary = judged.to_dict()
     summary["run"] = {"how": result.how, "failure": result.failure}
     path = out / "validation.json"
     path.write_text(json.dumps(summary, indent=2, default=float))
     written.append(path)
-    if len(result.times):
-        written += [plot_verdict_signal(out, reference, result, s, verdict) for s in verdict.signals if not s.passed]
     return written
 
 

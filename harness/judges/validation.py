@@ -103,19 +103,9 @@ class SignalFinding:
     outside_times: list = field(default_factory=list, repr=False)
 
 
-@dataclass
-class Findings:
-    """The verdict on one result: per signal, and about the result as a whole."""
-    name: str
-    tolerance: Tolerance
-    signals: list[SignalFinding] = field(default_factory=list)
-    #: problems that fail the whole result (missing signals, span not covered, ...)
-    problems: list[str] = field(default_factory=list)
-    #: remarks that do not fail it (columns the reference does not have, ...)
-    notes: list[str] = field(default_factory=list)
-    #: the span judged [s] and the reference's whole span (``compare_span``; None: not said)
-    span: tuple[float, float] | None = None
-    whole_span: tuple[float, float] | None = None
+class JudgedSpan:
+    """What every verdict on a result says of it as a whole, from its ``signals`` (each with
+    ``name`` and ``passed``), ``problems`` and the ``span``/``whole_span`` it judged."""
 
     def describe_span(self) -> str:
         return describe_span(self.span, self.whole_span)
@@ -127,6 +117,21 @@ class Findings:
     @property
     def failed_signals(self) -> list[str]:
         return [s.name for s in self.signals if not s.passed]
+
+
+@dataclass
+class Findings(JudgedSpan):
+    """The verdict on one result: per signal, and about the result as a whole."""
+    name: str
+    tolerance: Tolerance
+    signals: list[SignalFinding] = field(default_factory=list)
+    #: problems that fail the whole result (missing signals, span not covered, ...)
+    problems: list[str] = field(default_factory=list)
+    #: remarks that do not fail it (columns the reference does not have, ...)
+    notes: list[str] = field(default_factory=list)
+    #: the span judged [s] and the reference's whole span (``compare_span``; None: not said)
+    span: tuple[float, float] | None = None
+    whole_span: tuple[float, float] | None = None
 
     def to_dict(self) -> dict:
         return {"name": self.name, "passed": self.passed, "tolerance": self.tolerance.describe(),

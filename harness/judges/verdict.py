@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness.judges import metrics
-from harness.judges.validation import describe_span, match_columns, result_window, span_problems, value_problems
+from harness.judges.validation import JudgedSpan, match_columns, result_window, span_problems, value_problems
 
 #: what a tolerance applies to
 QUANTITIES = ("mean", "amplitude", "order", "tube")
@@ -218,7 +218,7 @@ class SignalVerdict:
 
 
 @dataclass
-class Verdict:
+class Verdict(JudgedSpan):
     """The verdict on one result: per judged signal, and about the result as a whole."""
     name: str
     signals: list[SignalVerdict] = field(default_factory=list)
@@ -238,17 +238,6 @@ class Verdict:
     #: the span judged (start-up included) and the reference's whole span [s]
     span: tuple[float, float] | None = None
     whole_span: tuple[float, float] | None = None
-
-    def describe_span(self) -> str:
-        return describe_span(self.span, self.whole_span)
-
-    @property
-    def passed(self) -> bool:
-        return not self.problems and all(s.passed for s in self.signals)
-
-    @property
-    def failed_signals(self) -> list[str]:
-        return [s.name for s in self.signals if not s.passed]
 
     def failures(self) -> list[str]:
         """"coupling.tau2 amplitude +4.65 % (allowed +-2 %)", one per failed check."""
