@@ -4,7 +4,7 @@
 Both editions run the same Python adapter, the same pythonfmu library and the same FMI 2.0
 entry (build/shim/lever_fmi2_shim.c); the FMI 3.0 entry (build/shim/lever_fmi3_shim.c) is
 a layer in front of them.  The FMI 3.0 model description is the FMI 2.0 one -- written from
-the adapter's declarations (lever.fmus.model_description, lever.fmus.model_exchange) --
+the adapter's declarations (lever.fmus.model_description, lever.fmus.me_description) --
 translated element by element, so both editions declare the same variables with the same
 value references, units, ranges and dependencies:
 

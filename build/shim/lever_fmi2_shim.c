@@ -29,7 +29,7 @@
  *      terminated) are implemented here, and fmi2GetDirectionalDerivative in both
  *      interfaces.  The model is reached through pythonfmu's fmi2GetReal/fmi2SetReal on
  *      value references of the shim's own "channel" (CHANNEL and above; see
- *      fmu_src/lever/fmus/model_exchange.py), which a host's calls may not use.  One
+ *      fmu_src/lever/fmus/me_channel.py), which a host's calls may not use.  One
  *      function that is not FMI 2.0's, leverGetEventIndicatorValues, gives the FMI 3.0 entry
  *      (lever_fmi3_shim.c) the event indicators in Co-Simulation too.
  *   4. One Python thread state per host thread: pythonfmu calls PyGILState_Ensure and
@@ -865,7 +865,7 @@ static const char *state_name(int state)
 #define MEMASK_leverGetEventIndicatorValues MEMASK_fmi2GetEventIndicators
 #define MEMASK_fmi2GetNominalsOfContinuousStates (ST_INSTANTIATED | ME_RUNNING | ST_TERMINATED)
 
-/* The channel to the model (fmu_src/lever/fmus/model_exchange.py): value references
+/* The channel to the model (fmu_src/lever/fmus/me_channel.py): value references
  * CHANNEL + (kind << CHANNEL_SHIFT) + index. */
 #define CHANNEL 0x40000000u
 #define CHANNEL_SHIFT 20

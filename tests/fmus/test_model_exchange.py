@@ -1,4 +1,4 @@
-"""The FMUs' Model Exchange interface (fmu_src/lever/fmus/model_exchange.py, the native
+"""The FMUs' Model Exchange interface (fmu_src/lever/fmus/model_exchange.py and me_*.py, the native
 entry's ME state machine in build/shim): the same FMU files run in fmpy's Model Exchange
 simulation with CVode as they run in co-simulation; their directional derivatives (both
 interfaces) are the physics' analytic partials and their declared dependencies hold the
@@ -20,7 +20,7 @@ from fmpy.fmi2 import FMU2Model, FMU2Slave
 from fmpy.validation import validate_fmu
 
 ME_FMUS = ("LeverCoupling", "EngineShaft", "LoadShaft", "MisalignmentSource", "FreewheelRectifier")
-CHANNEL = 0x40000000   # the native entry's own value references (model_exchange.CHANNEL)
+CHANNEL = 0x40000000   # the native entry's own value references (lever.fmus.me_channel.CHANNEL)
 FMI2_ERROR = 3
 
 

@@ -18,7 +18,7 @@ from harness.paths import FMUS
 #: ``continuous`` after the event iteration and fmi2EnterContinuousTimeMode, ``terminated``
 #: after fmi2Terminate from there
 ME_PHASES = ("instantiated", "initialization", "event", "continuous", "terminated")
-#: the native entry's own value references (lever.fmus.model_exchange.CHANNEL)
+#: the native entry's own value references (lever.fmus.me_channel.CHANNEL)
 CHANNEL = 0x40000000
 #: the Model Exchange functions that take an array of the states' or indicators' size
 ME_ARRAYS = {"fmi2GetDerivatives": "nx", "fmi2GetContinuousStates": "nx", "fmi2SetContinuousStates": "nx",

@@ -221,9 +221,66 @@ def _column(values, what: str) -> np.ndarray:
     return column
 
 
+# -- arguments every command reads the same way -----------------------------------------------
+
+def assignments(overrides) -> list[str]:
+    """``{"coupling.stiffness": 900}`` or ``["coupling.stiffness=900"]`` as ``--set`` strings."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, Mapping):
+        return [f"{k}={_plain(v)}" for k, v in overrides.items()]
+    if isinstance(overrides, str):
+        return [overrides]
+    return names(overrides, "overrides")
+
+
+def _plain(value):
+    """A numpy scalar as the Python number it is (``--set`` reads its text)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def step(step, label="step") -> float | None:
+    """``step`` as seconds (units taken), checked as every communication step is."""
+    step = seconds(step, label)
+    if step is not None and (problem := scene_files.step_problem(step, label)):
+        raise InputError(problem)
+    return step
+
+
+def window(window) -> tuple[float | None, float | None] | None:
+    """``window`` as ``(start, stop)`` in seconds: from ``"START:STOP"`` or a pair whose
+    sides are times (units taken) or None."""
+    if window is None or isinstance(window, str):
+        return parse_window(window)
+    if not (isinstance(window, (tuple, list)) and len(window) == 2):
+        raise InputError(f"window={window!r}: expected (start, stop) in seconds or 'START:STOP'")
+    return seconds(window[0], "window start"), seconds(window[1], "window stop")
+
+
+def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
+    """``--window START:STOP`` (either side may be left empty: the reference's own end; a
+    side may carry a time unit, ``0:500 ms``)."""
+    if text is None:
+        return None
+    parts = str(text).split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        low, high = (seconds(p, "--window") if p.strip() else None for p in parts)
+    except (ValueError, InputError):
+        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 or 0:500 ms (an empty "
+                         "side: the reference's own start or stop)") from None
+    for v in (low, high):
+        if v is not None and not math.isfinite(v):
+            raise InputError(f"--window {text}: the times must be finite")
+    if low is not None and high is not None and not high > low:
+        raise InputError(f"--window {text}: STOP must be > START")
+    return low, high
+
+
 # -- warnings at the user's line ------------------------------------------------------------------
 
-_HARNESS = str(Path(__file__).resolve().parent)
+_HARNESS = str(Path(__file__).resolve().parents[1])
 
 
 def user_stacklevel() -> int:

@@ -1,0 +1,258 @@
+"""Validation from Python (``lever validate`` and ``lever reference``): a result, a scene
+or an FMU file judged against its committed reference traces."""
+from __future__ import annotations
+
+import os as _os
+from pathlib import Path
+from typing import Iterable, Iterator
+
+from harness.api import inputs as _inputs
+from harness.api.building import build
+from harness.api.choices import check_masters, load
+from harness.api.inputs import InputError
+from harness.api.results import ReferenceCheck, Validation
+from harness.description import scene as scene_files
+from harness.paths import FMUS
+
+
+#: ``lever validate --tolerance``: the engineer's verdict (harness.judges.verdict) or fmpy's
+#: cross-check band (harness.judges.validation)
+VERDICTS = ("lever", "cross-check")
+
+
+def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> dict:
+    """``name=value`` settings for an FMU run stand-alone: its parameters (and inputs not in
+    the ``_in.csv``), checked against the model description (of the FMU file ``fmu_path``,
+    default ``model``'s in build/fmus); InputError otherwise."""
+    from fmpy import read_model_description
+
+    from harness.description.plan import converted
+
+    path = fmu_path if fmu_path is not None else FMUS / f"{model}.fmu"
+    variables = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    values = {}
+    for assignment in _inputs.assignments(assignments):
+        if "=" not in assignment:
+            raise InputError(f"--set {assignment!r}: expected name=value")
+        key, raw = (x.strip() for x in assignment.split("=", 1))
+        name = key.split(".", 1)[1] if key.startswith(model + ".") else key
+        var = variables.get(name)
+        if var is None or var.causality not in ("parameter", "input"):
+            known = [v.name for v in variables.values() if v.causality == "parameter"]
+            raise InputError(f"--set {key}: {model} has no parameter '{name}'{scene_files.did_you_mean(name, known)} "
+                             f"(parameters: {', '.join(known)})")
+        value = scene_files.coerce(raw)
+        problems = scene_files.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
+        if problems:
+            raise InputError("; ".join(problems))
+        values[name] = converted(var, value, key)
+    return values
+
+
+def _fmu_file(name) -> Path | None:
+    """NAME as an FMU file (``lever validate path/Model.fmu``), or None for a name."""
+    return Path(name) if scene_files.is_fmu_path(name) else None
+
+
+def fmu_file_model(path: Path) -> tuple[str, str]:
+    """(model, FMI version) of the FMU file ``path`` to validate stand-alone: a Co-Simulation
+    FMU, FMI 2.0 or 3.0, of a model with a stand-alone reference (its ``modelName``), which
+    judges it; InputError otherwise."""
+    from fmpy import read_model_description
+
+    from harness.formats import reference_traces
+
+    if not Path(path).is_file():
+        raise InputError(f"{path}: no such FMU file")
+    try:
+        description = read_model_description(str(path))
+    except Exception as error:   # fmpy raises what zipfile and its XML reader raise
+        raise InputError(f"{path}: not an FMU whose model description can be read ({error})") from None
+    model, version = description.modelName, description.fmiVersion
+    if version != "2.0" and not version.startswith("3."):
+        raise InputError(f"{path}: FMI {version}; lever runs FMI 2.0 and 3.0 FMUs")
+    if description.coSimulation is None:
+        raise InputError(f"{path}: FMI {version} without Co-Simulation; a stand-alone run steps the FMU")
+    if model not in reference_traces.FMU_CASES:
+        why = reference_traces.why_no_reference(model)
+        raise InputError(f"{path}: {why}; that scene runs the built FMUs (`--set experiment.fmi=3`: their FMI 3.0 "
+                         f"editions), not this file" if why else
+                         f"{path}: its model '{model}' has no stand-alone reference (FMUs with one: "
+                         f"{', '.join(reference_traces.FMU_CASES)})")
+    return model, version
+
+
+def validate(name: str, *, overrides=None, master: str | None = None, step: float | str | None = None,
+             result=None, tolerance: str = "lever",
+             window: tuple[float | str | None, float | str | None] | str | None = None,
+             out: Path | str | None = None, rtol=None, signals=None) -> Validation:
+    """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
+    the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
+    ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
+    with a ``time`` field (``Run.array()``, fmpy's ``simulate_fmu``), a ``(times, {signal:
+    values})`` pair, a pandas DataFrame with a ``time`` column, or the path of a CSV another
+    tool wrote; signals named like the reference's (``component.variable`` for a scene,
+    the FMU's variable names for an FMU).  NAME may be an FMU file (``.fmu``, FMI 2.0 or
+    3.0, such as an FMI 3.0 edition in build/fmus3): it runs stand-alone as its model's
+    name does, judged by that model's reference.  ``tolerance``: "lever" or "cross-check"
+    (the band's figures).  ``window``: judge only ``(start, stop)`` of the reference's span
+    (e.g. a shorter run; seconds or with a time unit, ``("0 s", "500 ms")``, or
+    ``"START:STOP"``); ``out``: write validation.json, the result and a plot per failing
+    signal there.  ``repr()`` of what it returns says PASS or FAIL and why."""
+    from harness.engine.component import FmuUnusable
+    from harness.engine.me_component import NoModelExchange
+    from harness.engine.system import SceneInvalid
+    from harness.formats import reference_traces
+    from harness.judges import validation, verdict
+
+    if not isinstance(name, (str, _os.PathLike)):
+        raise InputError(f"name={name!r}: expected a reference's name (a scene or an FMU, e.g. 'kavz685' or "
+                         "'EngineShaft') or an FMU file's path")
+    fmu_file = _fmu_file(name)
+    label, name = (str(name), fmu_file_model(fmu_file)[0]) if fmu_file is not None else (str(name), str(name))
+    known = reference_traces.all_names()
+    if name not in known:
+        raise InputError(reference_traces.why_no_reference(name)
+                         or f"no reference '{name}'{scene_files.did_you_mean(name, known)} (known: {', '.join(known)})")
+    _inputs.choice(tolerance, "tolerance", VERDICTS)
+    if tolerance != "lever" and (_inputs.assignments(rtol) or _inputs.assignments(signals)):
+        raise InputError(f"--rtol and --signals set the 'lever' verdict; --tolerance {tolerance} is fmpy's band, "
+                         "which has its own figures and judges every signal")
+    try:
+        rules = verdict.parse_rtol(_inputs.assignments(rtol), "--rtol")
+    except ValueError as error:
+        raise InputError(str(error)) from None
+    step = _inputs.step(step)
+    out = _inputs.folder(out)
+    window = _inputs.window(window)
+    given = _inputs.result_traces(result) if result is not None else None
+    try:
+        ref = reference_traces.read(name)
+    except reference_traces.TraceFileError as error:
+        raise InputError(str(error)) from None
+    if isinstance(given, Path):
+        try:
+            other = reference_traces.read_csv(given)
+        except reference_traces.TraceFileError as error:
+            raise InputError(str(error)) from None
+        judged = reference_traces.Result(other.times, other.signals, f"from {given}")
+    elif given is not None:
+        times, traces, how = given
+        judged = reference_traces.Result(times, traces, how, failure=getattr(result, "failure", None))
+    else:
+        if fmu_file is None:
+            build()
+        if ref.kind == "fmu":
+            if master or step:
+                raise InputError(f"--master/--step: {label} is an FMU run stand-alone at its _ref.opt step")
+            try:
+                judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
+                                                  fmu_path=fmu_file)
+            except FmuUnusable as error:     # no binary here, or it refused to instantiate: bad input
+                raise InputError(f"{label}: {error}") from None
+        else:
+            spec = load(name, overrides)
+            if master:
+                check_masters(master)
+            try:
+                judged = reference_traces.run_scene(spec, master, step)
+            except (SceneInvalid, NoModelExchange) as error:
+                raise InputError(str(error)) from None
+    start, stop = ref.opt.start, ref.opt.stop
+    if window is not None:
+        low, high = window
+        start = start if low is None else low
+        stop = stop if high is None else high
+        if not (ref.opt.start <= start < stop <= ref.opt.stop):
+            raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
+                             f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
+                             f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
+    if tolerance == "lever":
+        try:
+            settings = verdict.settings_of(ref)
+            findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
+                                     window=(start, stop), transient=settings.transient,
+                                     rtol=verdict.Tolerances([settings.rules, rules]), signals=_inputs.assignments(signals),
+                                     kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label)
+        except ValueError as error:
+            raise InputError(str(error)) from None
+        bands = {}
+        findings.notes += reference_traces.provenance_notes(
+            ref, given if isinstance(given, Path) else None if result is not None else result, overrides, master, step)
+    else:
+        findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
+                                                  ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
+                                                  (ref.opt.start, ref.opt.stop))
+    if judged.failure:
+        findings.problems.append(f"the run failed: {judged.failure}")
+    if out is not None:
+        reference_traces.write_validation(out, findings, bands, judged, ref, write_result=result is None)
+    return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
+
+
+def reference_names(names: Iterable[str] = ()) -> list[str]:
+    """``names`` checked against the committed reference traces (none: all of them); an
+    FMU file (``.fmu``) is checked as ``validate`` runs it."""
+    from harness.formats import reference_traces
+
+    known = reference_traces.all_names()
+    for name in names:
+        if _fmu_file(name) is not None:
+            fmu_file_model(_fmu_file(name))
+    unknown = [n for n in names if n not in known and _fmu_file(n) is None]
+    if unknown:
+        said = "; ".join(filter(None, map(reference_traces.why_no_reference, unknown)))
+        raise InputError(said or f"no reference '{', '.join(unknown)}' (known: {', '.join(known)})")
+    return list(names) or known
+
+
+def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
+                  result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
+                  out: Path | str | None = None, rtol=None, signals=None) -> Iterator[Validation]:
+    """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
+    ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
+    and the FMUs built before the first."""
+    from harness.paths import RESULTS
+
+    chosen = reference_names(_inputs.names(names, "names"))
+    if result is not None and len(chosen) != 1:
+        raise InputError("--result: name exactly one reference the CSV is to be compared with "
+                         "(e.g. lever validate --result run.csv kavz685)")
+    span = _inputs.window(window)
+    step = _inputs.step(step)
+    if result is None and any(_fmu_file(name) is None for name in chosen):
+        build()
+    for name in chosen:
+        folder = name
+        if _fmu_file(name) is not None:       # results/validate/<Model>-fmi<major version>
+            model, version = fmu_file_model(_fmu_file(name))
+            folder = f"{model}-fmi{version.split('.')[0]}"
+        target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
+        yield validate(name, overrides=_inputs.assignments(overrides), master=master, step=step, result=result,
+                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals)
+
+
+def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:
+    """``lever reference``: regenerate each reference trace (``names``: FMUs or scenes; none:
+    all) and compare it with the committed one; ``update``: write the stale ones."""
+    from harness.formats import reference_traces
+    from harness.judges.monolithic import ReferenceUnavailable
+
+    for name in reference_names(names):
+        try:
+            fresh = reference_traces.generate(name)
+        except (ReferenceUnavailable, scene_files.SceneError) as error:
+            yield ReferenceCheck(name, "unavailable", reason=str(error))
+            continue
+        try:
+            committed = reference_traces.read(name)
+        except reference_traces.TraceFileError:
+            committed = None
+        diff = reference_traces.difference(committed, fresh)
+        if diff.current:
+            yield ReferenceCheck(name, "current")
+            continue
+        if update:
+            reference_traces.write(fresh)
+        yield ReferenceCheck(name, "updated" if update else "stale", list(diff.problems), list(diff.changes),
+                             folder=reference_traces.paths(name)["ref"].parent)
