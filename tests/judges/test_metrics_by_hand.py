@@ -70,7 +70,7 @@ KEYS = ("tau_rms", "tau_max", "w_rms", "w_max")
 @pytest.mark.parametrize("label", list(CASES))
 def test_a_benchmark_case_is_judged_by_the_worse_shaft(scene, monkeypatch, label):
     differences, whole, after = CASES[label]
-    monkeypatch.setattr(monolithic, "solve", lambda scene, times, *a, **k: SimpleNamespace(times=TIMES,
+    monkeypatch.setattr(monolithic, "solve", lambda scene, times, *a, **k: SimpleNamespace(times=TIMES, info={},
                                                                                           traces=reference()))
     case = Case("jacobi", "master", 1e-3)
     timing._judge(case, scene, TIMES, run_with(**differences))
