@@ -44,7 +44,7 @@ from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
-from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
+from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -301,10 +301,6 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
 #: how to make the study shorter, said with its estimate when it is long
 NARROW = "--master, --stiffness, --damping or --h-omega narrow the grid"
 
-#: communication steps of the two runs that time each master before a study
-CALIBRATION_STEPS = (50, 250)
-
-
 def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: int, fmu_dir: Path = FMUS) -> float:
     """How long ``todo`` will take, about: each master's cost of a case (set-up) and of a
     step, from two runs of the scene (``CALIBRATION_STEPS``, at h*omega_n = 0.5) timed now,
@@ -320,14 +316,9 @@ def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: i
             pass
         return clock.perf_counter() - started
 
-    few, many = CALIBRATION_STEPS
     masters = list(dict.fromkeys(c.master for c in todo))
-    timed(masters[0], few)          # the first run pays for imports and loading the FMUs
-    cost = {}
-    for master in masters:
-        short, long = timed(master, few), timed(master, many)
-        per_step = max(0.0, (long - short) / (many - few))
-        cost[master] = (max(0.0, short - few * per_step), per_step)
+    timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
+    cost = {master: step_cost(lambda steps, master=master: timed(master, steps)) for master in masters}
     total = sum(cost[c.master][0] + cost[c.master][1] * c.steps for c in todo)
     return total / max(1, min(jobs, len(todo)))
 
