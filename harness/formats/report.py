@@ -213,10 +213,11 @@ def plot(out: Path, result: RunResult, reference=None):
         if names[a] not in tr or names[b] not in tr:
             continue
         drive, driven = sign * np.asarray(tr[names[a]], dtype=float), np.asarray(tr[names[b]], dtype=float)
-        shown = f"-{a}" if sign < 0 else a
-        save_figure(plotting.time_view(t, [(f"{shown} (drive)", drive), (f"{b} (driven)", driven)], quantity, unit,
-                                       transient, title,
-                                       (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
+        shown = f"-{names[a]}" if sign < 0 else names[a]
+        save_figure(plotting.time_view(t, [(f"{shown} (drive)", drive), (f"{names[b]} (driven)", driven)], quantity,
+                                       unit, transient, title,
+                                       (f"{names[b]} - ({shown})" if sign < 0 else f"{names[b]} - {names[a]}",
+                                        driven - drive)),
                     out / filename)
     if scene_kinds.roles(result.scene)[2] is not None:   # our load shaft (a user's FMU in its place: no angle to plot over)
         plot_over_angle(out, result.scene, t, tr, title)
@@ -236,13 +237,13 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
         name = names[key]
         ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label=f"reference ({fmu_reference.label(reference)})")
         ax.plot(t[:n], traces[name][:n], "C1--", lw=0.8, label=f"co-simulation ({master})")
-        ax.set_ylabel(f"{key} [{unit}]")
+        ax.set_ylabel(f"{name} [{unit}]")
     for ax, pair, unit in ((axes[3], ("w1", "w2"), "rad/s"), (axes[4], ("tau1", "tau2"), "N*m")):
         for key, color in zip(pair, plotting.PAIR_COLOURS):
             name = names[key]
             if name in traces and name in reference.traces:
                 plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),
-                               color, f"error {key}")
+                               color, f"error {name}")
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_ylabel(f"error [{unit}]")
     axes[-1].set_xlabel("time [s]")
@@ -253,18 +254,26 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
     return fig
 
 
+def _angle_panels(names: dict) -> dict:
+    """The over-angle figures: file -> (view, [(y label, [(short name, legend)])]), each
+    legend naming its signal as the traces do."""
+    return {"revolution.png": ("revolution", [("U12 [1]", [("U12", names["U12"])]),
+                                              ("torque [N*m]", [("-tau1", f"-{names['tau1']} (drive)"),
+                                                                ("tau2", f"{names['tau2']} (driven)")])]),
+            "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", f"{names['w1']} drive"),
+                                                                   ("w2", f"{names['w2']} driven")]),
+                                                ("acceleration [rad/s^2]",
+                                                 [("a1", f"{names['a1']} drive"), ("a2", f"{names['a2']} driven")])]),
+            U12_PLOT: ("u12", [("U12 = dPhi/dphi2 [1]", [("U12", f"{names['U12']}, the coupling's transfer function")])])}
+
+
 def plot_over_angle(out: Path, scene, times, traces, title: str):
     """``revolution.png`` (U12 and the torques over the driven shaft's last whole
     revolution) and ``revolutions.png`` (speeds and accelerations over its last few), over
     the driven shaft's angle as the monograph's figures are; nothing when the run holds
     no whole revolution."""
     views = angle_views(scene, times, traces)
-    panels = {"revolution.png": ("revolution", [("U12 [1]", [("U12", "U12")]),
-                                                ("torque [N*m]", [("-tau1", "-tau1 (drive)"), ("tau2", "tau2 (driven)")])]),
-              "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", "w1 drive"), ("w2", "w2 driven")]),
-                                                  ("acceleration [rad/s^2]",
-                                                   [("a1", "a1 drive"), ("a2", "a2 driven")])]),
-              U12_PLOT: ("u12", [("U12 = dPhi/dphi2 [1]", [("U12", "U12, the coupling's transfer function")])])}
+    panels = _angle_panels(metrics.signals(scene))
     for filename, (key, rows) in panels.items():
         if views[key] is not None:
             save_figure(angle_figure(views[key], key, rows, title), out / filename)
@@ -307,7 +316,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
         return
     rotation = float(abs(tr[names["w2"]][keep].mean()))
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True, layout="constrained")
-    for ax, (name, label) in zip(axes, ((names["tau2"], "tau2, torque on the driven shaft"),
+    for ax, (name, label) in zip(axes, ((names["tau2"], f"{names['tau2']}, torque on the driven shaft"),
                                         (load_torque, "load torque Mc"))):
         if name not in tr:
             continue

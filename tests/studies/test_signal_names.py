@@ -70,3 +70,13 @@ def test_another_scenes_names_are_its_own():
 def test_the_bench_progress_line_says_torque_not_tau():
     case = Case("jacobi", "master", 1e-3, wall_times=[0.5], errors={"tau_rms": 1e-3}, steps=100)
     assert "torque rms    0.1000 %" in report.progress_line(case)
+
+
+def test_the_run_plots_legends_name_the_signals_as_the_traces_do():
+    from harness.formats import report as run_report
+
+    legends = [legend for _, rows in run_report._angle_panels(KAVZ).values() for _, series in rows
+               for _, legend in series]
+    assert legends == ["coupling.U12", "-coupling.tau1 (drive)", "coupling.tau2 (driven)", "engine.w drive",
+                       "load.w driven", "engine.a drive", "load.a driven",
+                       "coupling.U12, the coupling's transfer function"]
