@@ -108,8 +108,8 @@ def write_report(path: Path, summary: dict):
             if s:
                 lines.append(f"| {name} | {fmt(s['mean'])} | {fmt(s['amplitude'])} | "
                              f"{fmt(s.get('unevenness'))} |")
-        lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
-                  "(negative: it brakes the engine), tau2 the torque on the driven shaft; each signal is "
+        lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; the coupling's tau1 is the torque on the drive shaft "
+                  "(negative: it brakes the engine), its tau2 the torque on the driven shaft; each signal is "
                   "named as in traces.csv."]
     source = (summary.get("reference") or {}).get("source", "monolithic")
     lines += reference_error_lines(summary, f"Error against the {source} reference",
@@ -128,7 +128,7 @@ def write_report(path: Path, summary: dict):
     if spectrum:
         drawn = " (spectrum.png)" if "spectrum.png" in (summary.get("files") or ()) else ""
         lines += ["", f"## Spectrum{drawn}", "",
-                  f"Amplitudes after the transient at the driven shaft's rotation frequency (mean w2 = "
+                  f"Amplitudes after the transient at the driven shaft's rotation frequency (its mean speed "
                   f"{spectrum['rotation_frequency_rad_s']:.4g} rad/s) and in the oscillograms' band 415-425 rad/s "
                   "(docs/physics.md#the-oscillograms-spectrum):", "",
                   "| signal | at the rotation frequency | in 415-425 rad/s |", "|---|---|---|"]
