@@ -36,7 +36,8 @@ MASTER_CHOICE = click.Choice(list(api.masters()))
 @click.option("--step", type=TIME, default=None,
               help="Communication step [s], or with a time unit, e.g. '1 ms' (default: the scene's).")
 @click.option("--stop", type=TIME, default=None,
-              help="Stop time [s], or with a time unit, e.g. 500ms (as --set experiment.stop=S); a scene's start-up transient that does not fit the "
+              help="Stop time [s], or with a time unit, e.g. 500ms (as --set experiment.stop=S); a scene's start-up "
+                   "transient that does not fit the "
                    "shorter run takes the same share of it (said before the run).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/<scene>).")

@@ -134,7 +134,8 @@ def measured(files, stiffness, no_cycles, out):
                    "stiffness_measured, load_alpha0, load_alpha5 (default: all).")
 @click.option("--scene", "scene_option", default=None, hidden=True, help="Deprecated: the base scene is SCENE.")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override the base scene.")
-@click.option("--stop", type=TIME, default=None, help="Simulated time per case [s], or with a time unit, e.g. 500ms (default: the scene's).")
+@click.option("--stop", type=TIME, default=None,
+              help="Simulated time per case [s], or with a time unit, e.g. 500ms (default: the scene's).")
 @click.option("--thin", type=click.IntRange(1, 100), default=1, help="Every n-th value of each axis (ends kept).")
 @click.option("--workers", type=click.IntRange(1, 256), default=None, help="Local processes (default: CPU count).")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
