@@ -515,7 +515,8 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
              + ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
              + f" ({result.reused} reused from the case log; {result.wall_s:.0f} s).", "",
              "Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
-             f"iteration did not converge) or the amplitude of the coupling torque tau2 grew > {GROWTH_DIVERGENT:g}x "
+             f"iteration did not converge) or the amplitude of the coupling torque "
+             f"{metrics.signals(result.scene)['tau2']} grew > {GROWTH_DIVERGENT:g}x "
              "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
              f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
              "**stable** - neither.  Compared with the prediction, a case is *unstable* when divergent or growing "
