@@ -90,6 +90,8 @@ SLOW = (
     "cli/test_command_line.py::test_a_study_says_how_long_it_will_take_before_it_runs",
     "cli/test_command_line.py::test_a_run_without_plots_lists_no_plots",
     "cli/test_command_line.py::test_a_sweep_says_how_long_it_will_take_before_it_runs",
+    "cli/test_command_line.py::test_step_and_stop_take_units_as_the_api_does",
+    "studies/test_signal_names.py::test_the_sweeps_files_name_the_signals_as_the_traces_do",
     "cli/test_input_safety.py::test_a_bad_set_value_is_exit_2_and_a_sentence",
     "cli/test_input_safety.py::test_a_value_of_the_wrong_type_in_a_scene_file_is_refused",
     "cli/test_input_safety.py::test_an_unconnected_input_is_named_in_the_output_and_the_report",

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from harness import api
+from harness.api import inputs as api_inputs
 from harness.paths import FMUS
 
 #: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
@@ -29,6 +30,26 @@ def user_errors():
         yield
     except api.InputError as error:
         raise UserError(str(error)) from None
+
+
+class TimeType(click.ParamType):
+    """A time option (``--step``, ``--stop``): seconds, or a value with a time unit as the
+    API takes it (``"1 ms"``, ``500ms``); a wrong unit is refused naming the option."""
+
+    name = "time"
+
+    def convert(self, value, param, ctx):
+        if value is None or isinstance(value, float):
+            return value
+        option = param.opts[0] if param is not None and param.opts else "time"
+        try:
+            return api_inputs.seconds(value, option)
+        except api.InputError as error:
+            self.fail(str(error), param, ctx)
+
+
+#: a time option's type: "--step 0.001", "--step '1 ms'", "--stop 500ms"
+TIME = TimeType()
 
 
 def ensure_fmus(fmu_dir: Path = FMUS, force: bool = False, quiet: bool = False):

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from harness import api
-from harness.cli.common import INTERRUPTED_EXIT, UNTRUSTED_EXIT, UserError, user_errors
+from harness.cli.common import INTERRUPTED_EXIT, TIME, UNTRUSTED_EXIT, UserError, user_errors
 from harness.cli.studies import print_measured
 from harness.paths import RESULTS
 
@@ -33,9 +33,11 @@ MASTER_CHOICE = click.Choice(list(api.masters()))
                    "coupling.misalignment='20 deg') or experiment.stop=5.")
 @click.option("--master", type=MASTER_CHOICE, default=None,
               help="Co-simulation master (default: the scene's; what each does: docs/reference/masters.md).")
-@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
-@click.option("--stop", type=float, default=None,
-              help="Stop time [s] (as --set experiment.stop=S); a scene's start-up transient that does not fit the "
+@click.option("--step", type=TIME, default=None,
+              help="Communication step [s], or with a time unit, e.g. '1 ms' (default: the scene's).")
+@click.option("--stop", type=TIME, default=None,
+              help="Stop time [s], or with a time unit, e.g. 500ms (as --set experiment.stop=S); a scene's start-up "
+                   "transient that does not fit the "
                    "shorter run takes the same share of it (said before the run).")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/<scene>).")
@@ -171,7 +173,8 @@ def reference(names, update):
               help="Change a parameter of the run under test, not of the reference: component.parameter=value "
                    "for a scene, parameter=value for an FMU (e.g. --set coupling.stiffness=800).")
 @click.option("--master", type=MASTER_CHOICE, default=None, help="Master for a scene (default: the scene's).")
-@click.option("--step", type=float, default=None, help="Communication step for a scene [s] (default: the scene's).")
+@click.option("--step", type=TIME, default=None, help="Communication step for a scene [s], or with a time unit, e.g. '1 ms' "
+                   "(default: the scene's).")
 @click.option("--result", "result_csv", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Validate this CSV from another tool's run of NAME instead of running it: a 'time' column and "
                    "columns named like the reference's signals (component.variable for a scene, the FMU's "

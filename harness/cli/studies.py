@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from harness import api
-from harness.cli.common import UserError, user_errors
+from harness.cli.common import TIME, UserError, user_errors
 from harness.paths import RESULTS
 
 
@@ -134,7 +134,8 @@ def measured(files, stiffness, no_cycles, out):
                    "stiffness_measured, load_alpha0, load_alpha5 (default: all).")
 @click.option("--scene", "scene_option", default=None, hidden=True, help="Deprecated: the base scene is SCENE.")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override the base scene.")
-@click.option("--stop", type=float, default=None, help="Simulated time per case [s] (default: the scene's).")
+@click.option("--stop", type=TIME, default=None,
+              help="Simulated time per case [s], or with a time unit, e.g. 500ms (default: the scene's).")
 @click.option("--thin", type=click.IntRange(1, 100), default=1, help="Every n-th value of each axis (ends kept).")
 @click.option("--workers", type=click.IntRange(1, 256), default=None, help="Local processes (default: CPU count).")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
@@ -178,7 +179,8 @@ def sweep(scene, axes, scene_option, assignments, stop, thin, workers, dask_addr
               help="Only these engines (repeatable; default all: lever, lever-jacobi, container, fmpy-ssp, "
                    "libcosim-ssp, libcosim-ecco).")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
-@click.option("--step", type=float, default=None, help="Communication step [s] (default: the scene's).")
+@click.option("--step", type=TIME, default=None,
+              help="Communication step [s], or with a time unit, e.g. '1 ms' (default: the scene's).")
 @click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Runs per engine; the median run time is quoted.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
@@ -199,7 +201,8 @@ def engines(scene, engine_names, assignments, step, repeats, out):
               help="Only these hosts (repeatable; default all: harness-jacobi, libcosim-fixed, ecos, ecos-serial, "
                    "ecos-log-all, c-importer).")
 @click.option("--set", "assignments", multiple=True, metavar="NAME=VALUE", help="Override (as for `lever run`).")
-@click.option("--step", type=float, default=1e-3, show_default=True, help="Communication step [s].")
+@click.option("--step", type=TIME, default=1e-3, show_default=True,
+              help="Communication step [s], or with a time unit, e.g. '1 ms'.")
 @click.option("--repeats", type=click.IntRange(1, 20), default=3, show_default=True,
               help="Runs per host; the median is quoted.")
 @click.option("--fmu-dir", type=click.Path(exists=True, file_okay=False, path_type=Path), default=None,
@@ -224,7 +227,7 @@ def hosts(scene, host_names, assignments, step, repeats, fmu_dir, native_env, ou
 @click.argument("names", nargs=-1, metavar="[SCENES]...")
 @click.option("--master", "masters", multiple=True, type=click.Choice(list(api.masters())),
               help="Only this master (repeatable; default: every master).")
-@click.option("--stop", type=float, default=0.2, show_default=True,
+@click.option("--stop", type=TIME, default=0.2, show_default=True,
               help="Run each scene for at most this many seconds (0: each scene's own length).")
 def fingerprint(names, masters, stop):
     """Print a SHA-256 of the traces of every committed scene (or SCENES) run with every

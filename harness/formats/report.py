@@ -61,11 +61,10 @@ def summarize(result: RunResult, reference=None) -> dict:
                                                           names["w2"], scene.experiment.transient)
     if reference is not None and len(result.times) and reference.info.get("source", "monolithic") != "monolithic":
         made = fmu_reference.summary(scene, result.times, result.traces, reference)
-        made["error_vs_reference"] = {names.get(k, k): e for k, e in made["error_vs_reference"].items()}
         summary.update(made)
     elif reference is not None and len(result.times):
-        summary["error_vs_reference"] = {names[short]: e for short, e in metrics.driveline_errors(
-            scene, result.times, result.traces, reference.times, reference.traces).items()}
+        summary["error_vs_reference"] = metrics.driveline_errors(scene, result.times, result.traces, reference.times,
+                                                                 reference.traces)
         summary["reference"] = {"source": "monolithic", "method": reference.method, "wall_time_s": reference.wall_time,
                                 "rhs_evaluations": reference.n_rhs,
                                 "energy_balance": metrics.energy_balance(
@@ -109,8 +108,8 @@ def write_report(path: Path, summary: dict):
             if s:
                 lines.append(f"| {name} | {fmt(s['mean'])} | {fmt(s['amplitude'])} | "
                              f"{fmt(s.get('unevenness'))} |")
-        lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; tau1 is the torque on the drive shaft "
-                  "(negative: it brakes the engine), tau2 the torque on the driven shaft; each signal is "
+        lines += ["", "Units: w [rad/s], a [rad/s^2], tau [N*m]; the coupling's tau1 is the torque on the drive shaft "
+                  "(negative: it brakes the engine), its tau2 the torque on the driven shaft; each signal is "
                   "named as in traces.csv."]
     source = (summary.get("reference") or {}).get("source", "monolithic")
     lines += reference_error_lines(summary, f"Error against the {source} reference",
@@ -129,7 +128,7 @@ def write_report(path: Path, summary: dict):
     if spectrum:
         drawn = " (spectrum.png)" if "spectrum.png" in (summary.get("files") or ()) else ""
         lines += ["", f"## Spectrum{drawn}", "",
-                  f"Amplitudes after the transient at the driven shaft's rotation frequency (mean w2 = "
+                  f"Amplitudes after the transient at the driven shaft's rotation frequency (its mean speed "
                   f"{spectrum['rotation_frequency_rad_s']:.4g} rad/s) and in the oscillograms' band 415-425 rad/s "
                   "(docs/physics.md#the-oscillograms-spectrum):", "",
                   "| signal | at the rotation frequency | in 415-425 rad/s |", "|---|---|---|"]
@@ -214,10 +213,11 @@ def plot(out: Path, result: RunResult, reference=None):
         if names[a] not in tr or names[b] not in tr:
             continue
         drive, driven = sign * np.asarray(tr[names[a]], dtype=float), np.asarray(tr[names[b]], dtype=float)
-        shown = f"-{a}" if sign < 0 else a
-        save_figure(plotting.time_view(t, [(f"{shown} (drive)", drive), (f"{b} (driven)", driven)], quantity, unit,
-                                       transient, title,
-                                       (f"{b} - ({shown})" if sign < 0 else f"{b} - {a}", driven - drive)),
+        shown = f"-{names[a]}" if sign < 0 else names[a]
+        save_figure(plotting.time_view(t, [(f"{shown} (drive)", drive), (f"{names[b]} (driven)", driven)], quantity,
+                                       unit, transient, title,
+                                       (f"{names[b]} - ({shown})" if sign < 0 else f"{names[b]} - {names[a]}",
+                                        driven - drive)),
                     out / filename)
     if scene_kinds.roles(result.scene)[2] is not None:   # our load shaft (a user's FMU in its place: no angle to plot over)
         plot_over_angle(out, result.scene, t, tr, title)
@@ -237,13 +237,13 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
         name = names[key]
         ax.plot(reference.times[:n], reference.traces[name][:n], "k-", lw=1.2, label=f"reference ({fmu_reference.label(reference)})")
         ax.plot(t[:n], traces[name][:n], "C1--", lw=0.8, label=f"co-simulation ({master})")
-        ax.set_ylabel(f"{key} [{unit}]")
+        ax.set_ylabel(f"{name} [{unit}]")
     for ax, pair, unit in ((axes[3], ("w1", "w2"), "rad/s"), (axes[4], ("tau1", "tau2"), "N*m")):
         for key, color in zip(pair, plotting.PAIR_COLOURS):
             name = names[key]
             if name in traces and name in reference.traces:
                 plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),
-                               color, f"error {key}")
+                               color, f"error {name}")
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_ylabel(f"error [{unit}]")
     axes[-1].set_xlabel("time [s]")
@@ -254,18 +254,26 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
     return fig
 
 
+def _angle_panels(names: dict) -> dict:
+    """The over-angle figures: file -> (view, [(y label, [(short name, legend)])]), each
+    legend naming its signal as the traces do."""
+    return {"revolution.png": ("revolution", [("U12 [1]", [("U12", names["U12"])]),
+                                              ("torque [N*m]", [("-tau1", f"-{names['tau1']} (drive)"),
+                                                                ("tau2", f"{names['tau2']} (driven)")])]),
+            "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", f"{names['w1']} drive"),
+                                                                   ("w2", f"{names['w2']} driven")]),
+                                                ("acceleration [rad/s^2]",
+                                                 [("a1", f"{names['a1']} drive"), ("a2", f"{names['a2']} driven")])]),
+            U12_PLOT: ("u12", [("U12 = dPhi/dphi2 [1]", [("U12", f"{names['U12']}, the coupling's transfer function")])])}
+
+
 def plot_over_angle(out: Path, scene, times, traces, title: str):
     """``revolution.png`` (U12 and the torques over the driven shaft's last whole
     revolution) and ``revolutions.png`` (speeds and accelerations over its last few), over
     the driven shaft's angle as the monograph's figures are; nothing when the run holds
     no whole revolution."""
     views = angle_views(scene, times, traces)
-    panels = {"revolution.png": ("revolution", [("U12 [1]", [("U12", "U12")]),
-                                                ("torque [N*m]", [("-tau1", "-tau1 (drive)"), ("tau2", "tau2 (driven)")])]),
-              "revolutions.png": ("revolutions", [("speed [rad/s]", [("w1", "w1 drive"), ("w2", "w2 driven")]),
-                                                  ("acceleration [rad/s^2]",
-                                                   [("a1", "a1 drive"), ("a2", "a2 driven")])]),
-              U12_PLOT: ("u12", [("U12 = dPhi/dphi2 [1]", [("U12", "U12, the coupling's transfer function")])])}
+    panels = _angle_panels(metrics.signals(scene))
     for filename, (key, rows) in panels.items():
         if views[key] is not None:
             save_figure(angle_figure(views[key], key, rows, title), out / filename)
@@ -308,7 +316,7 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
         return
     rotation = float(abs(tr[names["w2"]][keep].mean()))
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True, layout="constrained")
-    for ax, (name, label) in zip(axes, ((names["tau2"], "tau2, torque on the driven shaft"),
+    for ax, (name, label) in zip(axes, ((names["tau2"], f"{names['tau2']}, torque on the driven shaft"),
                                         (load_torque, "load torque Mc"))):
         if name not in tr:
             continue

@@ -201,12 +201,13 @@ JUDGED = ("w1", "w2", "tau1", "tau2")
 
 def driveline_errors(scene: scenes.Scene, times, traces: dict, reference_times, reference: dict,
                      after: float | None = None, scale_reference: dict | None = None) -> dict:
-    """``errors`` of the driveline's speeds and torques by short name (``JUDGED``), scaled
-    by ``error_scales`` of the reference (or of ``scale_reference``, a longer run of it)."""
+    """``errors`` of the driveline's speeds and torques (``JUDGED``), by the traces' names
+    (``coupling.tau2``, ``engine.w``), scaled by ``error_scales`` of the reference (or of
+    ``scale_reference``, a longer run of it)."""
     names = signals(scene)
     scales = error_scales(scene, reference if scale_reference is None else scale_reference)
     full = errors(times, traces, reference_times, reference, [names[s] for s in JUDGED], scales, after)
-    return {s: full[names[s]] for s in JUDGED if names[s] in full}
+    return {names[s]: full[names[s]] for s in JUDGED if names[s] in full}
 
 
 def error_scales(scene: scenes.Scene, reference: dict) -> dict[str, float]:

@@ -203,6 +203,20 @@ def _jsonable(value):
     raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
 
 
+#: communication steps of the two runs that time a study's cases before it starts
+CALIBRATION_STEPS = (50, 250)
+
+
+def step_cost(timed) -> tuple[float, float]:
+    """``(set-up, per step)`` [s] of a kind of run, from ``timed(steps)`` (the seconds a run
+    of that many communication steps takes) at ``CALIBRATION_STEPS``: the difference of the
+    two is the steps' cost, the rest of the shorter run its set-up."""
+    few, many = CALIBRATION_STEPS
+    short, long = timed(few), timed(many)
+    per_step = max(0.0, (long - short) / (many - few))
+    return max(0.0, short - few * per_step), per_step
+
+
 def duration_text(seconds: float, narrow: str) -> str:
     """A study's estimated time in words ("about 40 s", "about 6 min"); when it is longer
     than a minute, with how to stop and resume it and ``narrow``, how to make it shorter."""

@@ -46,8 +46,8 @@ def run_engine(engine: str, scene: scenes.Scene, step: float, fmu_dir: Path = FM
 
 
 def reference_errors(scene: scenes.Scene, result: RunResult) -> dict:
-    """Errors of ``result`` against the monolithic reference, by short signal name
-    (``w1``, ``tau2``, ...): RMS and max, absolute and relative (torques to the mean
+    """Errors of ``result`` against the monolithic reference, by the traces' signal names
+    (``engine.w``, ``coupling.tau2``, ...): RMS and max, absolute and relative (torques to the mean
     torque, speeds to the mean speed), over the whole run."""
     times = result.times
     prepended = len(times) and times[0] > scene.experiment.start + 1e-12
@@ -83,27 +83,36 @@ def compare(scene: scenes.Scene, engines: list[str], step: float | None = None, 
             row["errors"] = reference_errors(scene, first)
         rows.append(row)
         if progress:
-            progress(_line(row))
+            progress(_line(row, shown(scene)))
     return rows
 
 
-def _line(row: dict) -> str:
+def shown(scene: scenes.Scene) -> tuple[str, str]:
+    """The speed and the torque the progress lines and the table show: the drive shaft's
+    speed and the torque on the driven shaft, as the traces name them."""
+    names = metrics.signals(scene)
+    return names["w1"], names["tau2"]
+
+
+def _line(row: dict, signals: tuple[str, str]) -> str:
     if not row["ok"]:
         return f"{row['engine']:14s} failed: {row['failure']}"
     e = row["errors"]
-    return (f"{row['engine']:14s} RMS error w1 {100 * e['w1']['rms_relative']:.4f} %, tau2 "
-            f"{100 * e['tau2']['rms_relative']:.4f} %, run time {row['wall_time_s']:.3f} s")
+    return f"{row['engine']:14s} RMS error " + ", ".join(
+        f"{name} {100 * e[name]['rms_relative']:.4f} %" for name in signals) + \
+        f", run time {row['wall_time_s']:.3f} s"
 
 
 def table(scene: scenes.Scene, rows: list[dict]) -> str:
     """The markdown table of ``rows``."""
     e = scene.experiment
+    speed, torque = shown(scene)
     lines = [f"Scene `{scene.name}`, {e.stop - e.start:g} s simulated, communication step "
              f"{rows[0]['step_s'] * 1e3:g} ms. Errors are RMS (max) against the monolithic reference, relative "
-             "to the mean speed (w) and the mean torque (tau); run time is the median of the runs, "
+             "to the mean speed and the mean torque; run time is the median of the runs, "
              "stepping only for our harness and libcosim, everything (unpacking, instantiation) for fmpy.ssp and "
              "the container (one call each).", "",
-             "| engine | what runs | w1 error % | tau2 error % | run time [s] | the master's error |",
+             f"| engine | what runs | {speed} error % | {torque} error % | run time [s] | the master's error |",
              "|---|---|---|---|---|---|"]
     for row in rows:
         if not row["ok"]:
@@ -114,7 +123,7 @@ def table(scene: scenes.Scene, rows: list[dict]) -> str:
         def cell(name):
             return f"{100 * err[name]['rms_relative']:.3g} ({100 * err[name]['max_relative']:.3g})"
 
-        lines.append(f"| `{row['engine']}` | {row['runs']} | {cell('w1')} | {cell('tau2')} | "
+        lines.append(f"| `{row['engine']}` | {row['runs']} | {cell(speed)} | {cell(torque)} | "
                      f"{row['wall_time_s']:.3f} | {row['master_error']} |")
     return "\n".join(lines) + "\n"
 

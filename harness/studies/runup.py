@@ -56,7 +56,7 @@ def table() -> list[tuple[str, dict]]:
 
 
 def markdown(rows) -> str:
-    lines = ["| engine, start | Te [s] | w1 settles [s] | w2 settles [s] | n1 [rpm] | n2 [rpm] | peak n1 [rpm] |",
+    lines = ["| engine, start | Te [s] | engine.w settles [s] | load.w settles [s] | n1 [rpm] | n2 [rpm] | peak n1 [rpm] |",
              "|---|---|---|---|---|---|---|",
              f"| **monograph** (Fig. 4.6a) | - | {MONOGRAPH['settle_s']} | - | {MONOGRAPH['n1_rpm']} | "
              f"{MONOGRAPH['n2_rpm']} | - |"]
@@ -67,7 +67,7 @@ def markdown(rows) -> str:
 
 
 def scan(lags) -> str:
-    lines = ["| Te [s] | w1 settles [s] | w2 settles [s] | peak n1 [rpm] |", "|---|---|---|---|"]
+    lines = ["| Te [s] | engine.w settles [s] | load.w settles [s] | peak n1 [rpm] |", "|---|---|---|---|"]
     for lag in lags:
         r = runup("kavz685_runup_rest", [f"engine.torque_lag={lag}"])
         lines.append(f"| {lag:g} | {r['settle1_s']:.3f} | {r['settle2_s']:.3f} | {r['peak1_rpm']:.1f} |")

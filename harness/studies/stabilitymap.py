@@ -44,7 +44,7 @@ from harness.description import scene as scenes
 from harness.judges import stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
-from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
+from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
 from harness.paths import FMUS, RESULTS
 
 GROWTH_DIVERGENT = 10.0
@@ -301,10 +301,6 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
 #: how to make the study shorter, said with its estimate when it is long
 NARROW = "--master, --stiffness, --damping or --h-omega narrow the grid"
 
-#: communication steps of the two runs that time each master before a study
-CALIBRATION_STEPS = (50, 250)
-
-
 def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: int, fmu_dir: Path = FMUS) -> float:
     """How long ``todo`` will take, about: each master's cost of a case (set-up) and of a
     step, from two runs of the scene (``CALIBRATION_STEPS``, at h*omega_n = 0.5) timed now,
@@ -320,14 +316,9 @@ def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: i
             pass
         return clock.perf_counter() - started
 
-    few, many = CALIBRATION_STEPS
     masters = list(dict.fromkeys(c.master for c in todo))
-    timed(masters[0], few)          # the first run pays for imports and loading the FMUs
-    cost = {}
-    for master in masters:
-        short, long = timed(master, few), timed(master, many)
-        per_step = max(0.0, (long - short) / (many - few))
-        cost[master] = (max(0.0, short - few * per_step), per_step)
+    timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
+    cost = {master: step_cost(lambda steps, master=master: timed(master, steps)) for master in masters}
     total = sum(cost[c.master][0] + cost[c.master][1] * c.steps for c in todo)
     return total / max(1, min(jobs, len(todo)))
 
@@ -524,7 +515,8 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
              + ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
              + f" ({result.reused} reused from the case log; {result.wall_s:.0f} s).", "",
              "Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
-             f"iteration did not converge) or the amplitude of the coupling torque tau2 grew > {GROWTH_DIVERGENT:g}x "
+             f"iteration did not converge) or the amplitude of the coupling torque "
+             f"{metrics.signals(result.scene)['tau2']} grew > {GROWTH_DIVERGENT:g}x "
              "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
              f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
              "**stable** - neither.  Compared with the prediction, a case is *unstable* when divergent or growing "

@@ -6,7 +6,10 @@ model reproduces.
 A sweep is a set of *axes*; each varies one quantity of a base scene (default
 ``kavz685``) over the range the monograph studies (docs/physics.md#kavz-685), at the conditions of the figure it
 mirrors, and records means and amplitudes ``A = (max - min)/2`` of the shafts' speeds,
-accelerations and torques after the start-up transient.  Cases run on local processes
+accelerations and torques after the start-up transient.  The cases compute by the
+monograph's index (``A_w1``: 1 the drive, 2 the driven shaft, as its figures are keyed);
+what sweep.json, sweep.md and the caller get names each signal as the traces do
+(``A_engine.w``, ``mean_coupling.tau2``: ``published``).  Cases run on local processes
 (``concurrent.futures``) or on a Dask cluster (``address``); each finished or failed case
 is kept in a :class:`harness.studies.cases.CaseLog`, so a killed sweep resumes where it stopped
 and one failing case (recorded with its diagnosis) does not cost the others.
@@ -14,6 +17,7 @@ and one failing case (recorded with its diagnosis) does not cost the others.
 from __future__ import annotations
 
 import json
+import re
 import time as clock
 import traceback
 from dataclasses import dataclass, field
@@ -26,7 +30,7 @@ from harness.judges import metrics
 from harness.judges.solution import physics_hash
 from harness.description import scene as scenes
 from harness.engine import interrupt
-from harness.studies.cases import FAILED, CaseLog, case_key, collect, duration_text
+from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
 from harness.paths import DATA, FMUS, RESULTS
 
 SHORT = ("w1", "w2", "a1", "a2", "tau1", "tau2")
@@ -201,16 +205,37 @@ def _sweep(axes, out, scene, stop, extra, workers, dask, progress, resume, fmu_d
         entry["result"] = log.get(case["key"]) or {"status": FAILED, "error": "not run"}
         results.append(entry)
     report = {"scene": scene, "stop": stop, "cases": results, "trends": trends(axes, results)}
-    write(out, axes, report)
-    return report
+    return write(out, axes, report, metrics.signals(scenes.load(scene)))
+
+
+#: a key or a word of the monograph's index: A_w1, mean_tau2 (1 the drive, 2 the driven shaft), unevenness_1
+_INDEXED = re.compile(r"\b(?:(A|mean)_(w|a|tau)([12])|unevenness_([12]))\b")
+
+
+def signal_key(key: str, names: dict) -> str:
+    """``key`` (or every such word of a text) under the traces' signal names: ``A_w1`` ->
+    ``A_engine.w``, ``mean_tau2`` -> ``mean_coupling.tau2``, ``unevenness_2`` ->
+    ``unevenness_load.w`` (``names``: ``metrics.signals`` of the scene); other keys as they are."""
+    def named(m):
+        if m.group(4):
+            return f"unevenness_{names['w' + m.group(4)]}"
+        return f"{m.group(1)}_{names[m.group(2) + m.group(3)]}"
+    return _INDEXED.sub(named, key)
+
+
+def published(report: dict, names: dict) -> dict:
+    """The report as written and returned: each case's amplitudes, means and unevenness,
+    the trends' quantities and numbers under the traces' signal names (``signal_key``);
+    the differences (``dA_tau``) and the shafts' common means (``mean_w``) keep theirs."""
+    cases = [{**c, "result": {signal_key(k, names): v for k, v in c["result"].items()}} for c in report["cases"]]
+    trends_named = [{**t, "holds_for": [signal_key(q, names) for q in t["holds_for"]],
+                     "numbers": signal_key(t["numbers"], names)} for t in report["trends"]]
+    differences = {f"dA_{q}": signal_key(f"A_{q}2 - A_{q}1", names) for q in ("w", "a", "tau")}
+    return {**report, "differences": differences, "cases": cases, "trends": trends_named}
 
 
 #: how to make a sweep shorter, said with its estimate when it is long
 NARROW = "--axis, --thin or --stop make it shorter"
-
-#: communication steps of the runs that time a case before a sweep
-CALIBRATION_STEPS = (50, 250)
-
 
 def estimated_seconds(pending: list[dict], workers: int | None = None) -> float:
     """How long the ``pending`` cases will take on ``workers`` local processes, about: the
@@ -231,11 +256,8 @@ def estimated_seconds(pending: list[dict], workers: int | None = None) -> float:
         simulate(short, fmu_dir=Path(first.get("fmu_dir", FMUS)))
         return clock.perf_counter() - started
 
-    few, many = CALIBRATION_STEPS
-    timed(few)                       # the first run pays for imports and loading the FMUs
-    short, long = timed(few), timed(many)
-    per_step = max(0.0, (long - short) / (many - few))
-    setup = max(0.0, short - few * per_step)
+    timed(CALIBRATION_STEPS[0])      # the first run pays for imports and loading the FMUs
+    setup, per_step = step_cost(timed)
     total = 0.0
     for case in pending:
         e = base.with_overrides(case["overrides"]).experiment
@@ -440,8 +462,8 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
             _ran(results, axis_name))
     if "load" in names:
         x, w = _series("load", results, "mean_w")
-        add("mean speed falls with load", ["mean w"] if _monotone(w, -1) else [], ["mean w"],
-            "mean w [rad/s] at " + _fmt_series(x, w), _ran(results, "load"))
+        add("mean speed falls with load", ["mean speed"] if _monotone(w, -1) else [], ["mean speed"],
+            "mean speed [rad/s] at " + _fmt_series(x, w), _ran(results, "load"))
         x, t = _series("load", results, "mean_tau")
         add("mean torque rises with load", ["mean torque"] if _monotone(t, +1) else [], ["mean torque"],
             "mean torque [N*m] at " + _fmt_series(x, t), _ran(results, "load"))
@@ -461,11 +483,11 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
         _, t = _series("inertia", results, "mean_tau")
         # A change the size of rounding is no trend: the monograph's mean speed falls by 9 % (Fig. 3.16);
         # an angle-locked load part moves the model's by some 0.002 %
-        holds = (["mean w"] if _monotone(w, -1) and _moves(w) else []) + \
+        holds = (["mean speed"] if _monotone(w, -1) and _moves(w) else []) + \
             (["mean torque"] if _monotone(t, +1) and _moves(t) else [])
         add("a heavier driven shaft (I2) lowers the mean speed and raises the mean torque (Fig. 3.16)",
-            holds, ["mean w", "mean torque"],
-            f"mean w [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
+            holds, ["mean speed", "mean torque"],
+            f"mean speed [rad/s] at I2 {_fmt_series(x, w, '')}; mean torque [N*m] {_fmt_series(x, t)}.  In the model "
             "the steady means are set by the engine characteristic and the mean load alone; I2 enters only the "
             f"fluctuations (the means move by {100 * _span(w):.2g} % and {100 * _span(t):.2g} % over the axis; "
             f"a trend needs {100 * MEANINGFUL:g} %)", _ran(results, "inertia"))
@@ -476,17 +498,25 @@ def trends(axes: list[Axis], results: list[dict]) -> list[dict]:
 # Report
 
 
-def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
+def write(out: Path, axes: list[Axis], report: dict, names: dict | None = None) -> dict:
+    """sweep.json, sweep.md and a plot an axis of ``report`` (its cases by the monograph's
+    index) to ``out``; returns the report as ``published`` under the signals' ``names``
+    (default: ``metrics.signals`` of the report's scene)."""
+    names = names or metrics.signals(scenes.load(report["scene"]))
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(json.dumps(report, indent=2, default=str))
+    public = published(report, names)
+    (out / "sweep.json").write_text(json.dumps(public, indent=2, default=str))
     results = report["cases"]
     failed = [r for r in results if r["result"].get("status") != "ok"]
+    amplitudes = ("A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2")
     lines = [f"# Parameter sweep of the {report['scene']} scene against the monograph's figures", "",
-             "Amplitudes A = (max - min)/2 and means after the start-up transient; index 1 the drive shaft, 2 the "
-             "driven shaft; dA = A2 - A1 (the monograph's difference).  Each axis varies one quantity at the "
+             "Amplitudes A = (max - min)/2 and means after the start-up transient of the drive shaft's "
+             f"({names['w1']}, {names['a1']}, {names['tau1']}) and the driven shaft's ({names['w2']}, {names['a2']}, "
+             f"{names['tau2']}) signals; dA = A driven - A drive (the monograph's difference, e.g. dA_tau = "
+             f"{public['differences']['dA_tau']}).  Each axis varies one quantity at the "
              "conditions of the figure it mirrors.", "", "## Trends (docs/physics.md#what-the-monograph-reports)", "",
              "| trend | reproduced | numbers |", "|---|---|---|"]
-    for t in report["trends"]:
+    for t in public["trends"]:
         verdict = {"yes": "yes", "partly": "partly: " + ", ".join(t["holds_for"]), "no": "**no**",
                    NOT_JUDGED: NOT_JUDGED}[t["reproduced"]]
         lines.append(f"| {t['trend']} | {verdict} | {_cell(t['numbers'])} |")
@@ -494,13 +524,13 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
         rows = [r for r in results if r["axis"] == axis.name]
         lines += ["", f"## {axis.name} (Fig. {axis.figure}): {axis.quantity}", "", axis.note, "",
                   f"![{axis.name}](sweep_{axis.name}.png)", "",
-                  "| value | A w1 | A w2 | A a1 | A a2 | A tau1 | A tau2 | mean w | mean torque | status |",
+                  "| value | " + " | ".join(signal_key(k, names).replace("_", " ", 1) for k in amplitudes)
+                  + " | mean speed | mean torque | status |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             res = r["result"]
             if res.get("status") == "ok":
-                cells = " | ".join(f"{res[k]:.4g}" for k in ("A_w1", "A_w2", "A_a1", "A_a2", "A_tau1", "A_tau2",
-                                                             "mean_w", "mean_tau"))
+                cells = " | ".join(f"{res[k]:.4g}" for k in amplitudes + ("mean_w", "mean_tau"))
                 lines.append(f"| {r['x']:g} | {cells} | ok |")
             else:
                 lines.append(f"| {r['x']:g} |" + " - |" * 8 + f" failed: {_cell(res.get('error'))} "
@@ -510,7 +540,8 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
             reported.update(measured_amplitudes())
         if reported:
             lines += ["", "Reported by the monograph: " + "; ".join(
-                f"{k} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts) for k, pts in reported.items())]
+                f"{signal_key(k, names)} " + ", ".join(f"{x:g} -> {_range(v)}" for x, v in pts)
+                for k, pts in reported.items())]
             compared = against_monograph(rows, reported)
             if compared:
                 lines += ["", "The model beside the monograph (its cases interpolated at the printed points):", ""]
@@ -520,7 +551,7 @@ def write(out: Path, axes: list[Axis], report: dict) -> list[Path]:
         lines += ["", "## Failed cases", ""] + [f"- {r['axis']} = {r['x']:g}: {_cell(r['result'].get('error'))} "
                                                 f"({_cell(r['result'].get('where'))})" for r in failed]
     (out / "sweep.md").write_text("\n".join(lines) + "\n")
-    return [out / "sweep.md", out / "sweep.json"]
+    return public
 
 
 def _cell(text) -> str:
@@ -720,4 +751,5 @@ def thin(axes: list[Axis], every: int) -> list[Axis]:
             for a in axes]
 
 
-__all__ = ["Axis", "default_axes", "plan", "check", "run_case", "sweep", "trends", "select", "thin"]
+__all__ = ["Axis", "default_axes", "plan", "check", "run_case", "sweep", "trends", "select", "thin", "published",
+           "signal_key"]

@@ -85,3 +85,22 @@ def test_a_sweep_says_how_long_it_will_take_before_it_runs(lever, fmu_dir, tmp_p
                  "--workers", "1", "--out", tmp_path)
     assert said.exit_code in (0, 1), said.output
     assert re.search(r"^sweep: 2 cases to run; about \d+ s \(estimated\)$", said.stderr, re.M), said.stderr
+
+
+def test_step_and_stop_take_units_as_the_api_does(lever, fmu_dir, tmp_path):
+    runs = {}
+    for name, step, stop in (("units", "2 ms", "20ms"), ("seconds", "0.002", "0.02")):
+        said = lever("run", "--step", step, "--stop", stop, "--no-plots", "--no-reference", "--no-progress",
+                     "--out", tmp_path / name)
+        assert said.exit_code == 0, said.output
+        runs[name] = (tmp_path / name / "traces.csv").read_bytes()
+    assert runs["units"] == runs["seconds"] and len(runs["units"].splitlines()) == 12   # header and 11 rows
+
+
+@pytest.mark.parametrize("command, option, value", [
+    (["run", "--no-reference"], "--step", "2 kg"), (["run", "--no-reference"], "--stop", "half a second"),
+    (["validate", "kavz685"], "--step", "1 m"), (["sweep", "--axis", "load"], "--stop", "5 N")])
+def test_a_time_option_of_a_wrong_unit_is_refused_naming_the_option(lever, tmp_path, command, option, value):
+    said = lever(*command, option, value, "--out", tmp_path)
+    assert said.exit_code == 2 and f"Invalid value for '{option}': {option}='{value}'" in said.output, said.output
+    assert not any(tmp_path.iterdir())                   # refused before anything ran

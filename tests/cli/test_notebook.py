@@ -41,6 +41,6 @@ def test_the_example_notebook_runs_and_shows_what_it_says(fmu_dir, tmp_path):
     assert any(s.startswith("Validation(kavz685: FAIL, judged t = 0 ... 1 s") for s in shown), said
     # (a kernel may send two quick prints as one stream output: compared line by line)
     lines = "".join(o.get("text", "") for c in code for o in c.outputs if o.output_type == "stream").splitlines()
-    compared = [line for line in lines if " tau2 error " in line and "% RMS, wall time" in line]
+    compared = [line for line in lines if " coupling.tau2 error " in line and "% RMS, wall time" in line]
     assert [s.split()[0] for s in compared] == ["jacobi", "jacobi-linear", "jacobi-quadratic"], said
     assert "'engine_torque'" in shown[-1], said        # fmpy's own structured array of the FMU

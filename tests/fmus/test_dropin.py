@@ -251,7 +251,7 @@ def test_lever_run_and_export_on_the_command_line(lever, tmp_path):
 # Relative RMS errors at h = 1 ms over 0.3 s: libcosim's and fmpy.ssp's masters feed the
 # shafts the torque of the states one step older (first order, about 0.8 % of the mean
 # torque at 1 ms; our jacobi-quadratic: 0.001 %).
-TOLERANCE = {"w1": 5e-3, "tau2": 3e-2}
+TOLERANCE = {"engine.w": 5e-3, "coupling.tau2": 3e-2}
 
 
 @pytest.mark.parametrize("engine", ["libcosim-ssp", "fmpy-ssp"])
@@ -266,7 +266,7 @@ def test_the_exported_scene_runs_in_another_engine_within_tolerance(engine, kavz
     # ... and the error is the master's, not the FMUs': our first-order jacobi on the same
     # FMUs errs by the same order, and our default master by far less.
     ours = engines.reference_errors(spec, kavz_in("lever"))
-    assert ours["tau2"]["rms_relative"] < 1e-4 < errors["tau2"]["rms_relative"]
+    assert ours["coupling.tau2"]["rms_relative"] < 1e-4 < errors["coupling.tau2"]["rms_relative"]
 
 
 def test_libcosim_from_ssp_is_libcosim_from_the_api(kavz_in):

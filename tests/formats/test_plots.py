@@ -125,7 +125,7 @@ def test_the_reference_plot_shows_the_torques_error_beside_the_speeds_in_two_col
     assert "rad/s" in speeds.get_ylabel() and "N*m" in torques.get_ylabel()
     for ax, pair in ((speeds, ("w1", "w2")), (torques, ("tau1", "tau2"))):
         labels = ax.get_legend_handles_labels()[1]
-        assert [any(f"error {k}" in label for label in labels) for k in pair] == [True, True]
+        assert [any(f"error {names[k]}" in label for label in labels) for k in pair] == [True, True]   # as the traces
         colours = {tuple(line.get_color()) if not isinstance(line.get_color(), str) else line.get_color()
                    for line in ax.lines if line.get_label().startswith("error")}
         assert len(colours) == 2

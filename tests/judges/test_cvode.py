@@ -15,7 +15,7 @@ from lever.physics.driveline import Driveline
 
 def torque_error(scene, times, solution, reference):
     e = metrics.driveline_errors(scene, times, solution.traces, reference.times, reference.traces)
-    return max(e["tau1"]["rms_relative"], e["tau2"]["rms_relative"])
+    return max(e["coupling.tau1"]["rms_relative"], e["coupling.tau2"]["rms_relative"])
 
 
 @pytest.mark.parametrize("method", ["CVODE-BDF", "CVODE-Adams"])

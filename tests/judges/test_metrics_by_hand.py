@@ -91,17 +91,17 @@ def test_the_errors_by_signal_and_their_scales(scene):
     bump = np.zeros(TIMES.shape)
     bump[700] = -5.0                                 # one point: max 5, RMS 5 sqrt(dt)
     e = metrics.driveline_errors(scene, TIMES, run_with(w1=0.2, w2=0.4, tau1=1.0, tau2=bump), TIMES, reference())
-    assert e["w1"] == pytest.approx({"rms": 0.2, "max": 0.2, "rms_relative": 0.2 / SPEED,
+    assert e["engine.w"] == pytest.approx({"rms": 0.2, "max": 0.2, "rms_relative": 0.2 / SPEED,
                                      "max_relative": 0.2 / SPEED, "scale": SPEED}, rel=1e-12)
-    assert e["w2"] == pytest.approx({"rms": 0.4, "max": 0.4, "rms_relative": 0.4 / SPEED,
+    assert e["load.w"] == pytest.approx({"rms": 0.4, "max": 0.4, "rms_relative": 0.4 / SPEED,
                                      "max_relative": 0.4 / SPEED, "scale": SPEED}, rel=1e-12)
-    assert e["tau1"]["rms"] == pytest.approx(1.0, rel=1e-12)
-    assert e["tau2"] == pytest.approx({"rms": 5.0 * math.sqrt(1e-3), "max": 5.0,
+    assert e["coupling.tau1"]["rms"] == pytest.approx(1.0, rel=1e-12)
+    assert e["coupling.tau2"] == pytest.approx({"rms": 5.0 * math.sqrt(1e-3), "max": 5.0,
                                        "rms_relative": 5.0 * math.sqrt(1e-3) / TORQUE,
                                        "max_relative": 5.0 / TORQUE, "scale": TORQUE}, rel=1e-9)
     # after a time: the bump at 0.7 s is in, a bump at 0.3 s is not
     late = metrics.driveline_errors(scene, TIMES, run_with(tau2=np.roll(bump, -400)), TIMES, reference(), after=0.5)
-    assert late["tau2"]["max"] == 0.0 and late["w1"]["rms"] == 0.0
+    assert late["coupling.tau2"]["max"] == 0.0 and late["engine.w"]["rms"] == 0.0
     # a variable grid weighs each point by the time it stands for, not by its count
     uneven = np.array([0.0, 0.1, 1.0])
     ref = {n: np.zeros(3) for n in REFERENCE}
@@ -150,7 +150,7 @@ def test_errors_scaled_by_a_longer_reference(scene):
     # the scales from another run of the reference (a longer one), not the one compared with
     longer = {**reference(), "engine.w": np.full(TIMES.shape, 80.0)}
     e = metrics.driveline_errors(scene, TIMES, run_with(w1=0.4), TIMES, reference(), scale_reference=longer)
-    assert e["w1"]["scale"] == 80.0 and e["w1"]["rms_relative"] == pytest.approx(0.4 / 80.0, rel=1e-12)
+    assert e["engine.w"]["scale"] == 80.0 and e["engine.w"]["rms_relative"] == pytest.approx(0.4 / 80.0, rel=1e-12)
 
 
 def test_statistics_after_the_transient():

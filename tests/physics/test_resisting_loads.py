@@ -118,7 +118,7 @@ def test_the_resistive_stall_scene_stops_holds_and_closes_its_energy_balance(fmu
     assert ref_balance["residual_relative"] < 1e-8, ref_balance
     errors = metrics.driveline_errors(spec, t, result.traces, ref.times, ref.traces)
     # measured RMS 0.00079 % of the mean torque for tau2 (same run)
-    assert errors["tau2"]["rms_relative"] < 3e-5, errors
+    assert errors["coupling.tau2"]["rms_relative"] < 3e-5, errors
 
 
 def test_the_reference_switches_stick_and_slip_at_the_physics_events():

@@ -91,7 +91,12 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir, monkeyp
             continue
         assert float(r["overhead_above_floor"]) == pytest.approx(
             float(r["wall_median_s"]) / float(r["floor_s"]) - 1.0, rel=1e-9), r
-    claims = json.loads((tmp_path / "bench.json").read_text())["claims"]
+    written = json.loads((tmp_path / "bench.json").read_text())
+    # the signals each error column is the larger of, named as the traces name them
+    assert written["judged"] == {"tau": ["coupling.tau1", "coupling.tau2"], "w": ["engine.w", "load.w"]}
+    assert "torque: the larger of coupling.tau1 and coupling.tau2, speed: the larger of engine.w and load.w" in \
+        (tmp_path / "bench.md").read_text()
+    claims = written["claims"]
     # The best master is the one of least (interpolated) time at the target error, read off
     # the claims' own table; jacobi-quadratic reaches the 0.5 % target on this plan.
     at_target = claims["time_at_target_s"]
@@ -386,3 +391,34 @@ def test_the_fmi_editions_are_not_compared_where_there_is_no_other_edition(tmp_p
     assert "no FMI 3.0 edition of EngineShaft" in editions.missing(scene.load("kavz685"), only_fmi2)
     assert editions.summary_lines({"not_compared": "why"}) == [
         "  FMI 3.0 against FMI 2.0 editions not compared: why"]
+
+
+def test_a_long_bench_is_estimated_from_each_masters_timed_runs(monkeypatch):
+    """Each master timed at two lengths (a fake clock: 0.2 s set-up, 1 ms a step, 3 ms for
+    jacobi-quadratic), summed over the plan's cases and repeats, a long run once."""
+    from types import SimpleNamespace
+
+    from harness.studies.bench import timing
+
+    spec = scene.load("kavz685")                    # 10 s
+    spec.bench = {"steps": {"jacobi": [1e-3, 2e-3], "jacobi-quadratic": [1e-3]}, "peers": {"fmpy": [1e-3]},
+                  "repeats_limit_s": 15.0}
+    p = bench.plan(spec)
+    now = [0.0]
+
+    def simulate(short, name, step, fmu_dir, options=None):
+        steps = round((short.experiment.stop - short.experiment.start) / step)
+        now[0] += 0.2 + steps * (3e-3 if name == "jacobi-quadratic" else 1e-3)
+
+    monkeypatch.setattr(timing, "simulate", simulate)
+    monkeypatch.setattr(timing, "clock", SimpleNamespace(perf_counter=lambda: now[0]))
+    floor = 1e-4
+    extra = timing.FLOOR_STEPS * floor
+    prices = 4 * timing.PRICE_STEPS * floor
+    # jacobi 10000 steps: 10.2 s x 3; 5000: 5.2 s x 3; quadratic 30.2 s > the limit: once; the
+    # peer as the baseline (jacobi) at 1 ms: 10.2 s x 3
+    expected = (3 * (10.2 + extra) + 3 * (5.2 + extra) + (30.2 + extra) + 3 * (10.2 + extra) + 4 * prices)
+    assert timing.estimated_seconds(spec, p, 3, None, floor) == pytest.approx(expected, rel=1e-9)
+    # a short benchmark is not timed at all
+    monkeypatch.setattr(timing, "simulate", lambda *a, **k: pytest.fail("timed a short benchmark"))
+    assert timing.estimated_seconds(spec, p, 3, None, 1e-9) is None

@@ -13,8 +13,9 @@ and after them.  A figure that cannot be (a share below zero, a floor above the 
 a figure from fewer runs than asked) is flagged with the machine's load and the spread, not
 shown (``harness.studies.trust``).  Errors are measured once
 (runs are deterministic) against the tight monolithic reference on the run's own
-communication grid: time-averaged RMS and max of ``tau1, tau2, w1, w2`` relative to the
-mean torque and speed, over the whole run and after the scene's start-up transient, and
+communication grid: time-averaged RMS and max of the torques and speeds (``coupling.tau1``,
+``coupling.tau2``, ``engine.w``, ``load.w``; a case's ``tau_rms`` the larger of the torques')
+relative to the mean torque and speed, over the whole run and after the scene's start-up transient, and
 the energy residual.
 
 The plan comes from the scene's ``[bench]`` table (steps per master, tolerances for

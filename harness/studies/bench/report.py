@@ -22,7 +22,7 @@ def progress_line(case: Case) -> str:
     """A finished case in one line of ``lever bench``'s progress."""
     if case.failure:
         return f"  {case.label:34s} FAILED: {case.failure[:150]}"
-    return (f"  {case.label:34s} {case.wall:8.3f} s  tau rms {100 * case.errors.get('tau_rms', math.nan):9.4f} %"
+    return (f"  {case.label:34s} {case.wall:8.3f} s  torque rms {100 * case.errors.get('tau_rms', math.nan):9.4f} %"
             f"  ({case.steps} steps)")
 
 
@@ -109,6 +109,15 @@ def _ratio(r: dict | None, digits: int = 2) -> str:
     return trust.ratio_text(r, digits)
 
 
+def _judged_text(judged: dict | None) -> str:
+    """Which signals the torque and speed errors are the larger of (``judged``: bench's
+    ``tau``/``w`` -> the two signals' names), in words; nothing where not known."""
+    if not judged:
+        return ""
+    return (f"; torque: the larger of {' and '.join(judged['tau'])}, speed: the larger of "
+            f"{' and '.join(judged['w'])} (columns tau_* and w_* of bench.csv)")
+
+
 def markdown(result: dict, rows: list[dict]) -> str:
     c = result["claims"]
     floor = result.get("floor_spread") or trust.spread([result["floor_per_step_s"]])
@@ -116,15 +125,15 @@ def markdown(result: dict, rows: list[dict]) -> str:
     lines = [f"# Work-precision benchmark: {result['scene']}", "",
              f"Median [min-max] of up to {result['repeats']} repeats of the stepping loop; errors against "
              f"{result.get('reference') or 'the monolithic reference (DOP853, rtol 1e-10)'}, relative to the mean "
-             "torque / speed, time-averaged RMS.  "
+             "torque / speed, time-averaged RMS" + _judged_text(result.get("judged")) + ".  "
              f"FMU-call floor: {trust.spread_text(floor)} per communication step"
              + (f"; the same calls into do-nothing FMUs: {trust.spread_text(hollow_floor)}"
                 if hollow_floor and hollow_floor.get("n") else "") + ".", "",
              machine_text(result.get("machine") or c.get("machine")), ""]
     if result.get("eigenfrequency_rad_s"):
         lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
-    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above floor | tau RMS | tau max | w RMS | "
-              "tau RMS after transient | energy residual | note |",
+    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above floor | torque RMS | torque max | "
+              "speed RMS | torque RMS after transient | energy residual | note |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
@@ -232,7 +241,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
                 setting = f"h = {r['step']:g} s" if r.get("tolerance") is None else \
                     f"tol {r['tolerance']:g}, longest step {r['step']:.3g} s"
                 lines.append(f"- {name} {setting} (h*omega_n = {r['h_omega']:.2f}): "
-                             + (f"stable, energy residual {r['energy_residual']:.2e}, tau RMS {_pct(r['tau_rms'])}"
+                             + (f"stable, energy residual {r['energy_residual']:.2e}, torque RMS {_pct(r['tau_rms'])}"
                                 if r["stable"] else "failed"))
     lines += editions.markdown(result.get("fmi_editions"))
     return "\n".join(lines) + "\n"

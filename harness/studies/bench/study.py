@@ -9,12 +9,17 @@ import numpy as np
 
 from harness.description import scene as scenes
 from harness.engine import interrupt
-from harness.judges import fmu_reference
+from harness.judges import fmu_reference, metrics
 from harness.paths import FMUS
 from harness.studies import trust
 from harness.studies.bench import do_nothing_twins, editions, floors, headlines, report, schedule, timing
 from harness.studies.bench.schedule import Case
-from harness.studies.cases import CaseLog, case_key
+from harness.studies.cases import CaseLog, case_key, duration_text
+
+
+#: how to make the benchmark shorter, said with its estimate; and what the estimate leaves out
+NARROW = ("--only, --no-peers, --no-monolithic or --repeats make it shorter; the monolithic solutions and the "
+          "side-by-side rounds come on top")
 
 
 def bench(scene: scenes.Scene, repeats: int = 3, fmu_dir: Path = FMUS, only: list[str] | None = None,
@@ -74,6 +79,10 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     machine.samples += [x for x in ours_case.load if x is not None]
     floor_per_step = ours_case.wall
     say(f"FMU-call floor: {trust.spread_text(trust.spread(ours_case.wall_times))} per communication step")
+    estimate = timing.estimated_seconds(scene, p, repeats, fmu_dir, floor_per_step)
+    if estimate is not None and estimate > 60:
+        say(f"{len(timing.planned_runs(scene, p, repeats))} cases of masters and peers; "
+            f"{duration_text(estimate, NARROW)}")
     # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step): what
     # any pythonfmu FMU costs, and the other half of each master's time split.
     try:
@@ -144,7 +153,10 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     compared = _compare_editions(scene, p, repeats, fmu_dir, log, say) if fmi_editions else None
     if compared is not None:
         machine.samples += [x for x in compared.get("load", []) if x is not None]
+    names = metrics.signals(scene)
     return {"scene": scene.name, "plan": p, "repeats": repeats, "reference": against,
+            # the signals each error column is the larger of (tau_rms: the torques', w_rms: the speeds')
+            "judged": {"tau": [names["tau1"], names["tau2"]], "w": [names["w1"], names["w2"]]},
             "floor_per_step_s": floor_per_step,
             "floor_spread": trust.spread(ours_case.wall_times),
             "hollow_floor_per_step_s": hollow_case.wall if hollow_case else None,

@@ -5,6 +5,7 @@ rounds of the cases a headline ratio divides."""
 from __future__ import annotations
 
 import statistics as stats
+import time as clock
 from pathlib import Path
 
 import numpy as np
@@ -28,14 +29,15 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
     except fmu_reference.ReferenceUnavailable:
         return      # no errors: the study says once why (``fmu_reference.described``)
     transient = scene.experiment.start + scene.experiment.transient
+    names = metrics.signals(scene)
     for suffix, after in (("", None), ("_after_transient", transient)):
         e = metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
         if len(e) < 4:
             continue
         for kind in ("tau", "w"):
             for measure in ("rms", "max"):
-                case.errors[f"{kind}_{measure}{suffix}"] = max(e[f"{kind}1"][f"{measure}_relative"],
-                                                               e[f"{kind}2"][f"{measure}_relative"])
+                case.errors[f"{kind}_{measure}{suffix}"] = max(e[names[f"{kind}1"]][f"{measure}_relative"],
+                                                               e[names[f"{kind}2"]][f"{measure}_relative"])
     if (energy := scene_kinds.energy_variables(scene)) and all(n in traces for n in energy):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
@@ -77,6 +79,59 @@ def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None) -> Case:
 
 #: steps of the floor timed before each run of a case (about 0.1 s of calls)
 FLOOR_STEPS = 2000
+
+#: how many times the FMU-call floor a master's step costs at most, about (an implicit
+#: master iterating, or CVODE's many calls): a benchmark whose runs would take less than a
+#: minute at this many floors is not timed for an estimate
+COSTLIEST_STEP_IN_FLOORS = 30.0
+
+
+def planned_runs(scene, p: dict, repeats: int) -> list[tuple[str, float, int]]:
+    """``(master, output step, runs)`` of each master's and peer's case of plan ``p`` (a
+    peer as the plan's baseline master, a tolerance case at its output grid)."""
+    runs = [(name, h, repeats) for name, steps in p["steps"].items() for h in steps]
+    runs += [(name, p["output_steps"].get(name, scene.experiment.step), repeats)
+             for name, tolerances in p["tolerances"].items() for _ in tolerances]
+    runs += [(p["baseline"], h, repeats) for steps in p["peers"].values() for h in steps]
+    runs += [(p["baseline"], scene.experiment.step, repeats) for tolerances in p["peer_tolerances"].values()
+             for _ in tolerances]
+    return runs
+
+
+def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_step: float) -> float | None:
+    """How long the masters' and peers' runs of plan ``p`` will take, about: each master's
+    set-up and cost of a communication step timed now (``cases.step_cost``, at the scene's
+    step), times each case's steps and repeats (one run where it would pass the plan's
+    ``repeats_limit_s``), with the floor timed before each run.  None where the runs would
+    take less than a minute even at ``COSTLIEST_STEP_IN_FLOORS`` times the FMU-call floor
+    (nothing is timed then).  The monolithic solutions and the side-by-side rounds come on
+    top, and an adaptive master's steps are its own: an estimate, not a promise."""
+    from harness.studies.cases import CALIBRATION_STEPS, step_cost
+
+    e = scene.experiment
+    runs = planned_runs(scene, p, repeats)
+    steps = {run: (e.stop - e.start) / run[1] for run in runs}
+    if sum(steps[r] * r[2] for r in runs) * floor_per_step * COSTLIEST_STEP_IN_FLOORS < 60.0:
+        return None
+
+    def timed(name: str, count: int) -> float:
+        short = scene.with_overrides([f"experiment.stop={e.start + count * e.step!r}", "experiment.transient=0"])
+        options, _ = master_options(scene, name, None)
+        started = clock.perf_counter()
+        simulate(short, name, e.step, fmu_dir, options=options)
+        return clock.perf_counter() - started
+
+    masters = list(dict.fromkeys(name for name, _, _ in runs))
+    timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
+    cost = {name: step_cost(lambda count, name=name: timed(name, count)) for name in masters}
+    total = 0.0
+    for run in runs:
+        name, _, runs_asked = run
+        setup, per_step = cost[name]
+        one = setup + per_step * steps[run]
+        total += (one + FLOOR_STEPS * floor_per_step) * (1 if one > p["repeats_limit_s"] else runs_asked) \
+            + 4 * PRICE_STEPS * floor_per_step       # the call prices before and after a case, ours and the twins'
+    return total
 
 
 #: steps of each pricing of the calls, before and after a case's runs
