@@ -4,8 +4,10 @@
 made (``refusals``: the scene cannot run; ``unconnected``: inputs held at their start
 values), the FMU files and their model descriptions, the start values converted to the
 FMUs' units, what a run records, the ``[limits]`` in SI units, the scene's kind, and the
-physics objects its reference and divergence bounds are derived from.  The engine and
-the monolithic reference take the plan and do not come back to the scene's checks.
+physics objects its reference and divergence bounds are derived from, with the values the
+physics checked.  The engine and the monolithic reference take the plan and do not come
+back to the scene's checks; judges handed the scene take its driveline's plan
+(``driveline_of``, made once per scene object), so a run checks each component's values once.
 
 A plan is made whether or not the scene is sound: a scene with refusals has no start
 values, and the physics that could not be built holds the error its building raised
@@ -14,6 +16,8 @@ plan.
 """
 from __future__ import annotations
 
+import copy
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -21,6 +25,7 @@ from typing import Any, Callable, Mapping
 
 
 from lever.physics import component_parameters
+from lever.physics.parameters import check_all
 
 from harness.description import scene_kinds, typed_values
 from harness.description.fmu_description import read_description
@@ -55,6 +60,12 @@ class DrivelinePlan:
     roles: scene_kinds.Driveline
     #: ``scene_kinds.DrivelinePhysics`` (engine shaft, coupling, load shaft)
     physics: Built
+    #: the engine shaft's and the load shaft's values checked against their declarations
+    #: (``component_parameters.ENGINE``, ``LOAD``: every parameter, defaults filled in)
+    engine: Built
+    load: Built
+    #: the coupling's checked values and misalignment (``component_parameters.check_coupling``)
+    coupling: Built
     #: ``((phi1, w1), (phi2, w2))``: the engine's and the load's start angle and speed
     start: Built
     #: the connection driving the coupling's misalignment input, if one does
@@ -173,29 +184,59 @@ def check(scene: scenes.Scene, overrides=(), fmu_dir: Path = FMUS) -> Plan:
                 unchecked=tuple(scenes.unchecked_connections(scene, descriptions)),
                 limits=_build(lambda: MappingProxyType({k: float(scenes.quantity(v, f"limits.{k}"))
                                                         for k, v in scene.limits.items()})), kind=scene_kinds.kind_of(scene), roles=scene_kinds.roles(scene),
-                driveline=_driveline(scene) if scene_kinds.is_driveline(scene) else None,
+                driveline=driveline_of(scene) if scene_kinds.is_driveline(scene) else None,
                 driveline_problem=scene_kinds.driveline_problem(scene),
                 rectifier=RectifierPlan(rectifier, _build(lambda: scene_kinds.rectifier_model(scene)),
                                         _build(lambda: scene_kinds.rectifier_inputs(scene))) if rectifier else None)
 
 
+#: ``driveline_of``'s plans: id(scene) -> (a weak reference to the scene, what its plan was made from, the plan)
+_DRIVELINES: dict[int, tuple[weakref.ref, Any, DrivelinePlan]] = {}
+
+
+def _made_from(scene: scenes.Scene):
+    """What a scene's driveline plan is made from: a scene changed since is planned anew."""
+    return copy.deepcopy(({n: (c.fmu, c.parameters) for n, c in scene.components.items()}, scene.connections))
+
+
+def driveline_of(scene: scenes.Scene) -> DrivelinePlan:
+    """The driveline's physics of ``scene`` (``scene_kinds.NotADriveline`` for another kind),
+    made once for the scene object: the plan and the judges handed the scene (the stability
+    advice, the energy balance) read the same, each component's values checked once."""
+    made_from = _made_from(scene)
+    held = _DRIVELINES.get(id(scene))
+    if held is not None and held[0]() is scene and held[1] == made_from:
+        return held[2]
+    driveline = _driveline(scene)
+    key = id(scene)
+    _DRIVELINES[key] = (weakref.ref(scene, lambda _: _DRIVELINES.pop(key, None)), made_from, driveline)
+    return driveline
+
+
 def _driveline(scene: scenes.Scene) -> DrivelinePlan:
     names = scene_kinds.driveline(scene)
     driver = next((c for c in scene.connections if c.target == names.coupling and c.input == "misalignment"), None)
+    engine = _build(lambda: check_all(component_parameters.ENGINE, scene_kinds.parameters(scene, names.engine)))
+    coupling = _build(lambda: component_parameters.check_coupling(scene_kinds.parameters(scene, names.coupling)))
+    load = _build(lambda: check_all(component_parameters.LOAD, scene_kinds.parameters(scene, names.load)))
+
+    def physics():
+        return scene_kinds.DrivelinePhysics(names, component_parameters.engine_of(engine.get()),
+                                            component_parameters.coupling_of(*coupling.get()),
+                                            component_parameters.load_of(load.get()))
 
     def start():
-        return (component_parameters.start_state(scene_kinds.parameters(scene, names.engine), component_parameters.ENGINE),
-                component_parameters.start_state(scene_kinds.parameters(scene, names.load), component_parameters.LOAD))
+        return ((engine.get()["phi_start"], engine.get()["w_start"]),
+                (load.get()["phi_start"], load.get()["w_start"]))
 
     def misalignment():
         if (driver is None or scenes.fmu_name(scene.components[driver.source].fmu) != "MisalignmentSource"
                 or driver.output != "misalignment"):
             return None
         return (component_parameters.misalignment_source_from(scene_kinds.parameters(scene, driver.source)),
-                component_parameters.coupling_family_from(scene_kinds.parameters(scene, names.coupling)))
+                component_parameters.coupling_family_of(*coupling.get()))
 
-    return DrivelinePlan(names, _build(lambda: scene_kinds.physics(scene)), _build(start),
-                         driver, _build(misalignment))
+    return DrivelinePlan(names, _build(physics), engine, load, coupling, _build(start), driver, _build(misalignment))
 
 
 #: where a run's parameter value came from (``parameter_record``)

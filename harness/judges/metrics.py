@@ -7,11 +7,8 @@ import math
 
 import numpy as np
 
-from lever.physics import component_parameters
-from lever.physics.parameters import check_all
-
-from harness.description import scene as scenes
-from harness.description.scene_kinds import parameters, roles
+from harness.description import plan as plans, scene as scenes
+from harness.description.scene_kinds import roles
 
 
 def _trapezoid(y, x):
@@ -33,9 +30,8 @@ def signals(scene: scenes.Scene) -> dict[str, str]:
 
 
 def inertias(scene: scenes.Scene) -> tuple[float, float]:
-    engine, _, load = roles(scene)
-    return (check_all(component_parameters.ENGINE, parameters(scene, engine))["inertia"],
-            check_all(component_parameters.LOAD, parameters(scene, load))["inertia"])
+    driveline = plans.driveline_of(scene)
+    return driveline.engine.get()["inertia"], driveline.load.get()["inertia"]
 
 
 #: the largest energy residual (share of the work in) of a run whose results are to be

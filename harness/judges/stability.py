@@ -62,10 +62,9 @@ from lever.physics.coupling import build_coupling, coupling_mode
 from lever.physics.engine import LinearCharacteristic
 from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad
-from lever.physics.parameters import check_all
 from lever.physics.shaft import LaggedShaft, Shaft
 
-from harness.description import scene_kinds
+from harness.description import plan as plans, scene_kinds
 from harness.description.fmu_description import read_description
 from harness.engine import masters as master_family
 from harness.description import scene as scenes
@@ -148,9 +147,9 @@ class TwoInertia:
 def model_of(scene: scenes.Scene) -> TwoInertia:
     """The two-inertia model of ``scene`` from its parameter values (defaults where the
     scene sets none); ``scene_kinds.NotADriveline`` for a scene of another kind."""
-    built = scene_kinds.physics(scene)
-    drive = check_all(component_parameters.ENGINE, scene_kinds.parameters(scene, built.roles.engine))
-    driven = check_all(component_parameters.LOAD, scene_kinds.parameters(scene, built.roles.load))
+    driveline = plans.driveline_of(scene)
+    built = driveline.physics.get()
+    drive, driven = driveline.engine.get(), driveline.load.get()
     law = built.coupling
     characteristic = built.engine.external
     if isinstance(characteristic, LinearCharacteristic):

@@ -120,10 +120,22 @@ LOAD = (
 )
 
 
+def check_coupling(values: dict) -> tuple[dict, float]:
+    """The coupling's checked values (``COUPLING``) and its checked misalignment (the
+    ``misalignment`` value, else the default)."""
+    return (check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"}),
+            MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default)))
+
+
 def coupling_from(values: dict, misalignment: float | None = None) -> LeverCoupling:
     p = check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"})
     alpha = MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default) if misalignment is None
                                else misalignment)
+    return coupling_of(p, alpha)
+
+
+def coupling_of(p: dict, alpha: float) -> LeverCoupling:
+    """The coupling from checked values (``check_coupling``) at the misalignment ``alpha``."""
     return build_coupling(p["transfer_mode"], alpha, p["support_deformation"], p["hinge_deformation"],
                           p["stiffness"], p["damping"], p["elastic_table"])
 
@@ -131,8 +143,11 @@ def coupling_from(values: dict, misalignment: float | None = None) -> LeverCoupl
 def coupling_family_from(values: dict) -> CouplingFamily:
     """The coupling for a misalignment that varies in time, exact at the start value
     (``values['misalignment']``, else the default)."""
-    p = check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"})
-    start = MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default))
+    return coupling_family_of(*check_coupling(values))
+
+
+def coupling_family_of(p: dict, start: float) -> CouplingFamily:
+    """``coupling_family_from`` for checked values (``check_coupling``)."""
 
     def transfer_at(alpha):
         return TransferFunction(p["transfer_mode"], MISALIGNMENT.check(alpha), p["support_deformation"],
@@ -170,7 +185,11 @@ SHORTEST_LAG = 1e-6
 def engine_from(values: dict) -> Shaft | LaggedShaft:
     """The drive shaft: a ``Shaft`` whose engine answers instantly (``torque_lag = 0``),
     else a ``LaggedShaft`` whose engine torque is a state."""
-    p = check_all(ENGINE, values)
+    return engine_of(check_all(ENGINE, values))
+
+
+def engine_of(p: dict) -> Shaft | LaggedShaft:
+    """``engine_from`` for values checked against ``ENGINE``."""
     characteristic = engine_characteristic(p["stall_torque"], p["torque_slope"], p["characteristic"])
     if p["torque_lag"] >= SHORTEST_LAG:
         return LaggedShaft(p["inertia"], characteristic, p["torque_lag"], p["torque_start"], p["max_substep"])
@@ -178,7 +197,11 @@ def engine_from(values: dict) -> Shaft | LaggedShaft:
 
 
 def load_from(values: dict) -> Shaft:
-    p = check_all(LOAD, values)
+    return load_of(check_all(LOAD, values))
+
+
+def load_of(p: dict) -> Shaft:
+    """``load_from`` for values checked against ``LOAD``."""
     spectrum = Spectrum(p["order"], p["order_share"], p["order_phase"], p["narrowband_share"],
                         p["narrowband_low"], p["narrowband_high"], p["narrowband_tones"])
     load = load_model(p["load_kind"], p["mean_torque"], p["random_amplitude"], p["seed"], p["tones"],
