@@ -322,9 +322,14 @@ def _checks(frame: _Frame, t_res: np.ndarray, y_res: np.ndarray, rtol: dict) -> 
     scale = _allowed_scale(frame.amplitude, frame.mean, magnitude=frame.magnitude)
     allowed = rtol["amplitude"][0] * scale
     d = amplitude - frame.amplitude
-    checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, abs(d) <= allowed,
-                        f"{amplitude:.4g} vs {frame.amplitude:.4g} ({_percent(d / scale)}, allowed "
-                        f"+-{100 * rtol['amplitude'][0]:.3g} %)"))
+    if scale == abs(frame.amplitude):
+        detail = (f"{amplitude:.4g} vs {frame.amplitude:.4g} ({_percent(d / scale)}, allowed "
+                  f"+-{100 * rtol['amplitude'][0]:.3g} %)")
+    else:       # a reference with next to no ripple: the tolerance is of its mean or of the noise floor
+        basis = "its mean" if scale == abs(frame.mean) else "the noise floor"
+        detail = (f"{amplitude:.4g} vs {frame.amplitude:.4g} ({d:+.3g}, allowed +-{allowed:.3g}: "
+                  f"{100 * rtol['amplitude'][0]:.3g} % of {basis}, {scale:.3g})")
+    checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, abs(d) <= allowed, detail))
     if frame.orders:
         _, components = metrics.spectrum(frame.t, at)
         for k, i, ref in frame.orders:
