@@ -231,12 +231,14 @@ def compare_signal(name: str, t: np.ndarray, y: np.ndarray, t_ref: np.ndarray, y
         flags_at = t_cmp
         b = Band(t_ref, y_ref - width, y_ref + width, width)
         n = len(t_cmp)
-    error = y_cmp - y_true
+    with np.errstate(over="ignore", invalid="ignore"):     # an absurd sample's error is inf, counted below
+        error = y_cmp - y_true
     finite = np.isfinite(error)
     if len(error) and finite.all():
-        rms = float(np.sqrt(np.mean(error ** 2)))
         i = int(np.argmax(np.abs(error)))
         peak, peak_time = float(abs(error[i])), float(t_cmp[i])
+        # scaled by the peak: an absurd sample's square would overflow where its RMS does not
+        rms = peak * float(np.sqrt(np.mean((error / peak) ** 2))) if peak > 0 else 0.0
     elif len(error):
         rms = peak = math.inf
         peak_time = float(t_cmp[np.flatnonzero(~finite)[0]])
