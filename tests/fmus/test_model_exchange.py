@@ -277,21 +277,9 @@ def test_directional_derivatives_are_central_differences(unpacked, name):
         for _ in range(5):
             x, u = draw_x(rng), draw_u(rng)
             for k, known in enumerate(states + inputs):
-                set_point(fmu, md, vr, x, u)
-                analytic = fmu.getDirectionalDerivative([vr[n] for n in unknowns], [vr[known]], [1.0])
-                value = x[k] if k < nx else u[known]
-                h = 1e-6 * max(abs(value), 1.0)
-                sides = []
-                for sign in (1.0, -1.0):
-                    xs, us = list(x), dict(u)
-                    if k < nx:
-                        xs[k] = value + sign * h
-                    else:
-                        us[known] = value + sign * h
-                    set_point(fmu, md, vr, xs, us)
-                    sides.append(me_unknowns(fmu, md, vr, nx))
+                analytic, centrals = analytic_and_central(fmu, md, vr, x, u, unknowns, k, known, 1e-6)
                 for j, name_j in enumerate(unknowns):
-                    central = (sides[0][j] - sides[1][j]) / (2 * h)
+                    central = centrals[j]
                     scale = max(abs(central), abs(analytic[j]), 1.0)
                     assert abs(analytic[j] - central) <= 1e-6 * scale, (name_j, known, analytic[j], central)
                     if abs(central) > 1e-9 * scale:
@@ -299,6 +287,27 @@ def test_directional_derivatives_are_central_differences(unpacked, name):
                         assert known in declared[j], (name_j, known)
     finally:
         free(fmu)
+
+
+def analytic_and_central(fmu, md, vr, x, u, unknowns, k, known, relative_step):
+    """The FMU's directional derivative of ``unknowns`` along the ``k``-th of its states and
+    then inputs (``known``) at ``(x, u)``, and the central difference of the same, its step
+    ``relative_step`` of the value differentiated (at least of 1)."""
+    nx = md.numberOfContinuousStates
+    set_point(fmu, md, vr, x, u)
+    analytic = fmu.getDirectionalDerivative([vr[n] for n in unknowns], [vr[known]], [1.0])
+    value = x[k] if k < nx else u[known]
+    h = relative_step * max(abs(value), 1.0)
+    sides = []
+    for sign in (1.0, -1.0):
+        xs, us = list(x), dict(u)
+        if k < nx:
+            xs[k] = value + sign * h
+        else:
+            us[known] = value + sign * h
+        set_point(fmu, md, vr, xs, us)
+        sides.append(me_unknowns(fmu, md, vr, nx))
+    return analytic, [(plus - minus) / (2 * h) for plus, minus in zip(*sides)]
 
 
 #: every FMU with states or inputs at the edges of what users pass: large times (a load's
@@ -327,21 +336,9 @@ def test_directional_derivatives_hold_at_extreme_inputs_and_large_times(unpacked
         unknowns = [u_.variable.name for u_ in md.derivatives] + [u_.variable.name for u_ in md.outputs]
         fmu.setTime(t)
         for k, known in enumerate(states + inputs):
-            set_point(fmu, md, vr, x, u)
-            analytic = fmu.getDirectionalDerivative([vr[n] for n in unknowns], [vr[known]], [1.0])
-            value = x[k] if k < nx else u[known]
-            h = 1e-7 * max(abs(value), 1.0)
-            sides = []
-            for sign in (1.0, -1.0):
-                xs, us = list(x), dict(u)
-                if k < nx:
-                    xs[k] = value + sign * h
-                else:
-                    us[known] = value + sign * h
-                set_point(fmu, md, vr, xs, us)
-                sides.append(me_unknowns(fmu, md, vr, nx))
+            analytic, centrals = analytic_and_central(fmu, md, vr, x, u, unknowns, k, known, 1e-7)
             for j, name_j in enumerate(unknowns):
-                central = (sides[0][j] - sides[1][j]) / (2 * h)
+                central = centrals[j]
                 scale = max(abs(central), abs(analytic[j]), 1.0)
                 assert abs(analytic[j] - central) <= 1e-5 * scale, (t, name_j, known, analytic[j], central)
     finally:
