@@ -181,7 +181,7 @@ def test_tolerances_of_the_verdict_are_refused_with_the_cross_check_band(kavz):
     ({}, None),
 ])
 def test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives(lever, fmu_dir, tmp_path, change, failed):
-    """The issue's runs, shortened to 3 s (the steady window t = 2 ... 3 s holds 5.8
+    """A changed coupling's runs, shortened to 3 s (the steady window t = 2 ... 3 s holds 5.8
     revolutions): misalignment 20 deg and damping +20 % fail naming tau2's amplitude, the
     scene as it is passes."""
     run = api.run("kavz685", change, stop=3.0, reference=False, notify=lambda *_: None)

@@ -71,7 +71,7 @@ def test_static_friction_holds_up_to_the_breakaway_then_slips_towards_the_drive(
 
 
 def test_an_active_load_reverses_a_stalled_shaft_a_brake_does_not():
-    """The issue: at rest an active 700 N.m turns the shaft backwards against 600 N.m;
+    """At rest an active 700 N.m turns the shaft backwards against 600 N.m;
     the same 700 N.m as a brake holds it."""
     for direction, moves in (("active", True), ("resistive", False)):
         shaft = braked(brake=700.0, inertia=0.161, direction=direction)

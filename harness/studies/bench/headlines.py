@@ -229,7 +229,7 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
         stable_base = [c for c in by_engine.get(baseline, []) if c.stable and c.tolerance is None]
         if stable_base:
             largest = max(stable_base, key=lambda c: c.step)
-            # the bar for the stiff case: the target reached in a tenth of this
+            # the bar for the stiff case: the target reached in a tenth of this
             fractions, faster = {}, {}
             for n, t in at_target.items():
                 if t is not None and n in master_family.MASTERS and n != baseline:
