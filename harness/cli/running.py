@@ -253,10 +253,7 @@ def _print_verdict(name, verdict, result, out: Path):
     if verdict.not_judged:
         click.echo(f"  not judged (not in the result{' or not chosen' if verdict.chosen else ''}): "
                    f"{', '.join(verdict.not_judged)}")
-    for problem in verdict.problems:
-        click.echo(f"  problem: {problem}")
-    for note in verdict.notes:
-        click.echo(f"  note: {note}")
+    _print_problems_and_notes(verdict)
     if verdict.blind_spots:
         click.echo(f"  {verdict.blind_spots}")
     failed = "; ".join(f"{s.name}: {', '.join(c.quantity for c in s.failed)}" for s in verdict.signals if not s.passed)
@@ -273,14 +270,19 @@ def _print_validation(name, findings, result, out: Path):
     for s in findings.signals:
         click.echo(f"  {s.name:24s} {s.rms_error:11.4g} {s.max_error:11.4g} {s.max_error_time:9.4g} "
                    f"{s.band_width:10.4g} {100 * s.fraction_outside:7.3g}%  {'pass' if s.passed else 'FAIL'}")
-    for problem in findings.problems:
-        click.echo(f"  problem: {problem}")
-    for note in findings.notes:
-        click.echo(f"  note: {note}")
+    _print_problems_and_notes(findings)
     verdict = "PASS" if findings.passed else "FAIL" + (
         f" ({', '.join(findings.failed_signals)})" if findings.failed_signals else "")
     span = f" over {findings.describe_span()}" if findings.span else ""
     click.echo(f"  {name}: {verdict}{span}; written to {out}/")
+
+
+def _print_problems_and_notes(findings):
+    """What fails the whole result and what the reader should know, as both verdicts list them."""
+    for problem in findings.problems:
+        click.echo(f"  problem: {problem}")
+    for note in findings.notes:
+        click.echo(f"  note: {note}")
 
 
 COMMANDS = (list_scenes, run, reference, validate)
