@@ -27,7 +27,7 @@ from typing import Any, Callable, Mapping
 from lever.physics import component_parameters
 from lever.physics.parameters import check_all
 
-from harness.description import scene_kinds, typed_values
+from harness.description import scene_kinds, typed_values, units
 from harness.description.fmu_description import read_description
 from harness.description import scene as scenes
 from harness.paths import FMUS, fmi3_dir
@@ -265,7 +265,7 @@ def parameter_record(scene: scenes.Scene, fmu_dir: Path = FMUS) -> dict[str, dic
         parameters = [v for v in description.modelVariables if v.causality == "parameter"] if description else []
         for var in parameters:
             key = f"{name}.{var.name}"
-            unit = var.unit or (var.declaredType.unit if var.declaredType else None)
+            unit = units.declared_unit(var)
             if var.name in spec.parameters:
                 source = FROM_SET if key in scene.overrides else FROM_SCENE
                 value = spec.parameters[var.name]
