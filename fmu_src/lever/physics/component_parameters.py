@@ -120,18 +120,16 @@ LOAD = (
 )
 
 
-def check_coupling(values: dict) -> tuple[dict, float]:
-    """The coupling's checked values (``COUPLING``) and its checked misalignment (the
-    ``misalignment`` value, else the default)."""
-    return (check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"}),
-            MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default)))
+def check_coupling(values: dict, misalignment: float | None = None) -> tuple[dict, float]:
+    """The coupling's checked values (``COUPLING``) and its checked misalignment
+    (``misalignment`` where given, else the ``misalignment`` value, else the default)."""
+    p = check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"})
+    return p, MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default) if misalignment is None
+                                 else misalignment)
 
 
 def coupling_from(values: dict, misalignment: float | None = None) -> LeverCoupling:
-    p = check_all(COUPLING, {k: v for k, v in values.items() if k != "misalignment"})
-    alpha = MISALIGNMENT.check(values.get("misalignment", MISALIGNMENT.default) if misalignment is None
-                               else misalignment)
-    return coupling_of(p, alpha)
+    return coupling_of(*check_coupling(values, misalignment))
 
 
 def coupling_of(p: dict, alpha: float) -> LeverCoupling:

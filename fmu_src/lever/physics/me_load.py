@@ -23,9 +23,14 @@ from .shaft import Shaft
 HELD = 0
 
 
+def base_law(load):
+    """The load's law without its friction (``ResistingLoad.base``), or the load itself."""
+    return load.base if isinstance(load, ResistingLoad) else load
+
+
 def depends_on_angle(load) -> bool:
     """Whether the load's resistance depends on the driven angle."""
-    base = load.base if isinstance(load, ResistingLoad) else load
+    base = base_law(load)
     return isinstance(base, FourierLoad) or (isinstance(base, SpectrumLoad) and base.order_amplitude != 0.0)
 
 
@@ -41,6 +46,9 @@ class LoadME(ModelExchange):
         self._start = (float(phi_start), float(w_start))
         #: +1/-1 slipping, HELD at rest; None without friction that sticks
         self.mode = None
+        base = base_law(shaft.external)
+        #: a time-table load's table (its points are time events), resolved once here
+        self._time_table = base.table if isinstance(base, TabulatedLoad) else None
 
     def start(self):
         return list(self._start) + [0.0]
@@ -111,8 +119,7 @@ class LoadME(ModelExchange):
         released in 10 ms) the margin can cross zero and back within one of the
         integrator's steps, which a held shaft (every derivative 0) lets grow long - a
         root finder that compares signs at the steps' ends would miss the breakaway."""
-        base = self.shaft.external.base if isinstance(self.shaft.external, ResistingLoad) else self.shaft.external
-        return base.table.next_time(t) if isinstance(base, TabulatedLoad) else None
+        return self._time_table.next_time(t) if self._time_table is not None else None
 
     @property
     def dependencies(self):
