@@ -152,18 +152,8 @@ class Validation:
         verdict = "PASS" if f.passed else "FAIL"
         span = f", judged {f.describe_span()}" if f.span else ""
         failed = [s for s in f.signals if not s.passed]
-        if hasattr(f, "tolerance"):         # fmpy's cross-check band (harness.judges.validation)
-            lines = [f"Validation({self.name}: {verdict}{span}; {len(f.signals)} signals, "
-                     f"{len(f.signals) - len(failed)} within the band ({f.tolerance.describe()})"]
-            shown = [f"  FAIL {s.name}: {100 * s.fraction_outside:.3g} % of the samples outside "
-                     f"+-{s.band_width:.4g}, max error {s.max_error:.4g} at t = {s.max_error_time:.4g} s"
-                     for s in failed]
-        else:                               # the engineer's verdict (harness.judges.verdict)
-            lines = [f"Validation({self.name}: {verdict}{span}; {len(f.signals)} signals judged, "
-                     f"{len(f.signals) - len(failed)} pass"
-                     + (f", {len(f.not_judged)} not judged" if f.not_judged else "")]
-            shown = [f"  FAIL {s.name}: " + "; ".join(f"{c.quantity} {c.detail}" for c in s.failed)
-                     for s in failed]
+        lines = [f"Validation({self.name}: {verdict}{span}; {f.counted()}"]
+        shown = [f"  FAIL {s.name}: {f.failure_line(s)}" for s in failed]
         lines += shown[:8]
         if len(failed) > 8:
             lines.append(f"  ... {len(failed) - 8} more failing signals in .findings.signals")

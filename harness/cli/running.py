@@ -225,7 +225,7 @@ def validate(names, assignments, master, step, result_csv, tolerance, rtol, sign
                                              rtol=list(rtol),
                                              signals=[x.strip() for x in signals.split(",") if x.strip()]
                                              if signals else None):
-                if hasattr(verdict.findings, "blind_spots"):
+                if verdict.findings.KIND == "lever":
                     _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out)
                 else:
                     _print_validation(verdict.name, verdict.findings, verdict.result, verdict.out)

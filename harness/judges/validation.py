@@ -105,7 +105,18 @@ class SignalFinding:
 
 class JudgedSpan:
     """What every verdict on a result says of it as a whole, from its ``signals`` (each with
-    ``name`` and ``passed``), ``problems`` and the ``span``/``whole_span`` it judged."""
+    ``name`` and ``passed``), ``problems`` and the ``span``/``whole_span`` it judged.  Each
+    kind says which it is (``KIND``: ``lever validate --tolerance``'s name for it), what its
+    signal count means and why a signal failed, in a line each."""
+    KIND = ""
+
+    def counted(self) -> str:
+        """"10 signals judged, 8 pass" - what the verdict counts, in its own words."""
+        raise NotImplementedError
+
+    def failure_line(self, signal) -> str:
+        """Why ``signal`` failed, in one line."""
+        raise NotImplementedError
 
     def describe_span(self) -> str:
         return describe_span(self.span, self.whole_span)
@@ -132,6 +143,16 @@ class Findings(JudgedSpan):
     #: the span judged [s] and the reference's whole span (``compare_span``; None: not said)
     span: tuple[float, float] | None = None
     whole_span: tuple[float, float] | None = None
+
+    KIND = "cross-check"
+
+    def counted(self) -> str:
+        within = sum(s.passed for s in self.signals)
+        return f"{len(self.signals)} signals, {within} within the band ({self.tolerance.describe()})"
+
+    def failure_line(self, s) -> str:
+        return (f"{100 * s.fraction_outside:.3g} % of the samples outside +-{s.band_width:.4g}, max error "
+                f"{s.max_error:.4g} at t = {s.max_error_time:.4g} s")
 
     def to_dict(self) -> dict:
         return {"name": self.name, "passed": self.passed, "tolerance": self.tolerance.describe(),

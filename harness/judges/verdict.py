@@ -239,6 +239,16 @@ class Verdict(JudgedSpan):
     span: tuple[float, float] | None = None
     whole_span: tuple[float, float] | None = None
 
+    KIND = "lever"
+
+    def counted(self) -> str:
+        passing = sum(s.passed for s in self.signals)
+        return (f"{len(self.signals)} signals judged, {passing} pass"
+                + (f", {len(self.not_judged)} not judged" if self.not_judged else ""))
+
+    def failure_line(self, s) -> str:
+        return "; ".join(f"{c.quantity} {c.detail}" for c in s.failed)
+
     def failures(self) -> list[str]:
         """"coupling.tau2 amplitude +4.65 % (allowed +-2 %)", one per failed check."""
         return [f"{s.name} {c.quantity} {c.detail}" for s in self.signals for c in s.failed]
