@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.description import typed_values
+
 
 class HostFailure(RuntimeError):
     """The host could not go on (CVODE's message, or an FMI call's status)."""
@@ -43,16 +45,6 @@ class _Fmi2:
     def __init__(self, model):
         self.m = model
 
-    def set_start(self, variable, value):
-        if variable.type == "Integer":
-            self.m.setInteger([variable.valueReference], [int(value)])
-        elif variable.type == "Boolean":
-            self.m.setBoolean([variable.valueReference], [bool(value)])
-        elif variable.type == "String":
-            self.m.setString([variable.valueReference], [str(value)])
-        else:
-            self.m.setReal([variable.valueReference], [float(value)])
-
     def get(self, vrs):
         return list(self.m.getReal(vrs))
 
@@ -70,14 +62,6 @@ class _Fmi2:
 
 
 class _Fmi3(_Fmi2):
-    def set_start(self, variable, value):
-        if variable.type.startswith("Int") or variable.type.startswith("UInt"):
-            getattr(self.m, f"set{variable.type}")([variable.valueReference], [int(value)])
-        elif variable.type in ("Boolean", "String"):
-            getattr(self.m, f"set{variable.type}")([variable.valueReference], [value])
-        else:
-            self.m.setFloat64([variable.valueReference], [float(value)])
-
     def get(self, vrs):
         return list(self.m.getFloat64(vrs))
 
@@ -119,7 +103,7 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
     initialised = False
     try:
         for name, value in start_values.items():
-            host.set_start(variables[name], value)
+            typed_values.set_on(raw, variables[name], value, name)
         host.initialise(0.0, stop)
         initialised = True
         raw.exitInitializationMode()
