@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.description import typed_values
+from harness.engine.component import unzipped as extracted
 
 
 class HostFailure(RuntimeError):
@@ -81,11 +82,11 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
     """The FMU ``fmu`` (its FMI ``fmi`` edition) from 0 to ``stop`` through CVODE (BDF) with
     its own root finding, the outputs ``outputs`` recorded every ``step`` (see the module
     docstring)."""
-    from fmpy import extract, read_model_description
+    from fmpy import read_model_description
     from sksundae.cvode import CVODE
 
     md = read_model_description(str(fmu))
-    unzipped = extract(str(fmu))
+    unzipped = extracted(fmu)
     variables = {v.name: v for v in md.modelVariables}
     if fmi == 2:
         from fmpy.fmi2 import FMU2Model
