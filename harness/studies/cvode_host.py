@@ -108,12 +108,7 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
         host.initialise(0.0, stop)
         initialised = True
         raw.exitInitializationMode()
-        while True:
-            needed, terminate, _ = host.event_update()
-            if terminate:
-                raise HostFailure("the FMU asked to terminate at its initialisation")
-            if not needed:
-                break
+        _settle(host, "at its initialisation")
         raw.enterContinuousTimeMode()
         return _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_events, CVODE)
     finally:
@@ -122,6 +117,20 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
                 raw.terminate()
         with contextlib.suppress(Exception):
             raw.freeInstance()
+
+
+def _settle(host, when: str, rounds: int = 100) -> bool:
+    """Event-update rounds until the FMU needs no more; whether any changed the states.  A
+    host does not loop for ever: an FMU still asking after ``rounds`` rounds is a failure."""
+    changed = False
+    for _ in range(rounds):
+        needed, terminate, states = host.event_update()
+        changed = changed or states
+        if terminate:
+            raise HostFailure(f"the FMU asked to terminate {when}")
+        if not needed:
+            return changed
+    raise HostFailure(f"the FMU still asked for event iterations after {rounds} rounds {when}")
 
 
 def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_events, CVODE) -> HostRun:
@@ -175,14 +184,7 @@ def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_
             raw.getEventIndicators(z, nz)
             run.log.append((t, list(z[:nz])))
             raw.enterEventMode()
-            changed = False
-            for _ in range(100):
-                needed, terminate, states = host.event_update()
-                changed = changed or states
-                if terminate:
-                    raise HostFailure(f"the FMU asked to terminate at t = {t:.9g} s")
-                if not needed:
-                    break
+            changed = _settle(host, f"at t = {t:.9g} s")
             raw.enterContinuousTimeMode()
             raw.getEventIndicators(z, nz)
             zeros = [i for i in range(nz) if z[i] == 0.0]
