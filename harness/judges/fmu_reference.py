@@ -192,9 +192,9 @@ def observed_orders(coarse: dict, middle: dict, fine: dict) -> dict:
     log2(|coarse - middle| / |middle - fine|) in RMS; None where the change is at round-off."""
     out = {}
     for name in fine:
-        scale = float(np.sqrt(np.mean(fine[name] ** 2))) or 1.0
-        first = float(np.sqrt(np.mean((coarse[name] - middle[name]) ** 2)))
-        second = float(np.sqrt(np.mean((middle[name] - fine[name]) ** 2)))
+        scale = metrics.rms(fine[name]) or 1.0
+        first = metrics.rms(coarse[name] - middle[name])
+        second = metrics.rms(middle[name] - fine[name])
         if second <= ROUND_OFF * scale or first <= ROUND_OFF * scale:
             out[name] = None
         else:
@@ -271,7 +271,7 @@ def _at(made: MonolithicSolution, times: np.ndarray) -> MonolithicSolution:
         for name, values in made.traces.items():
             values = np.asarray(values, dtype=float)
             coarse = CubicSpline(grid[::2], values[::2])(grid)
-            spread = float(np.sqrt(np.mean((coarse - values) ** 2))) / 16.0
+            spread = metrics.rms(coarse - values) / 16.0
             check[name] = check[name] + spread
     info = {**made.info, "check": check, "interpolated": int((~on_grid).sum())}
     return MonolithicSolution(times, traces, made.wall_time, made.n_rhs, made.method, info=info)
@@ -298,7 +298,7 @@ def errors(scene, times, traces, ref: MonolithicSolution, after: float | None = 
     if all(n in traces and n in ref.traces for n in judged):
         return metrics.driveline_errors(scene, times, traces, ref.times, ref.traces, after=after)
     names = [n for n in traces if n in ref.traces]
-    scales = {n: float(np.sqrt(np.mean(np.asarray(ref.traces[n], float) ** 2))) or 1.0 for n in names}
+    scales = {n: metrics.rms(np.asarray(ref.traces[n], float)) or 1.0 for n in names}
     return metrics.errors(np.asarray(times, float), traces, ref.times, ref.traces, names, scales, after)
 
 

@@ -11,6 +11,11 @@ from harness.description import plan as plans, scene as scenes
 from harness.description.scene_kinds import roles
 
 
+def rms(values) -> float:
+    """Root mean square of ``values`` (equal weights: the rows of one grid)."""
+    return float(np.sqrt(np.mean(np.asarray(values) ** 2)))
+
+
 def _trapezoid(y, x):
     return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(x))) if len(x) > 1 else 0.0
 

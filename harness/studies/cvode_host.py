@@ -21,6 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.description import typed_values
+from harness.engine.component import unzipped as extracted
+
 
 class HostFailure(RuntimeError):
     """The host could not go on (CVODE's message, or an FMI call's status)."""
@@ -43,16 +46,6 @@ class _Fmi2:
     def __init__(self, model):
         self.m = model
 
-    def set_start(self, variable, value):
-        if variable.type == "Integer":
-            self.m.setInteger([variable.valueReference], [int(value)])
-        elif variable.type == "Boolean":
-            self.m.setBoolean([variable.valueReference], [bool(value)])
-        elif variable.type == "String":
-            self.m.setString([variable.valueReference], [str(value)])
-        else:
-            self.m.setReal([variable.valueReference], [float(value)])
-
     def get(self, vrs):
         return list(self.m.getReal(vrs))
 
@@ -70,14 +63,6 @@ class _Fmi2:
 
 
 class _Fmi3(_Fmi2):
-    def set_start(self, variable, value):
-        if variable.type.startswith("Int") or variable.type.startswith("UInt"):
-            getattr(self.m, f"set{variable.type}")([variable.valueReference], [int(value)])
-        elif variable.type in ("Boolean", "String"):
-            getattr(self.m, f"set{variable.type}")([variable.valueReference], [value])
-        else:
-            self.m.setFloat64([variable.valueReference], [float(value)])
-
     def get(self, vrs):
         return list(self.m.getFloat64(vrs))
 
@@ -97,11 +82,11 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
     """The FMU ``fmu`` (its FMI ``fmi`` edition) from 0 to ``stop`` through CVODE (BDF) with
     its own root finding, the outputs ``outputs`` recorded every ``step`` (see the module
     docstring)."""
-    from fmpy import extract, read_model_description
+    from fmpy import read_model_description
     from sksundae.cvode import CVODE
 
     md = read_model_description(str(fmu))
-    unzipped = extract(str(fmu))
+    unzipped = extracted(fmu)
     variables = {v.name: v for v in md.modelVariables}
     if fmi == 2:
         from fmpy.fmi2 import FMU2Model
@@ -119,16 +104,11 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
     initialised = False
     try:
         for name, value in start_values.items():
-            host.set_start(variables[name], value)
+            typed_values.set_on(raw, variables[name], value, name)
         host.initialise(0.0, stop)
         initialised = True
         raw.exitInitializationMode()
-        while True:
-            needed, terminate, _ = host.event_update()
-            if terminate:
-                raise HostFailure("the FMU asked to terminate at its initialisation")
-            if not needed:
-                break
+        _settle(host, "at its initialisation")
         raw.enterContinuousTimeMode()
         return _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_events, CVODE)
     finally:
@@ -137,6 +117,20 @@ def run(fmu: Path, fmi: int, start_values: dict, outputs: list, stop: float, ste
                 raw.terminate()
         with contextlib.suppress(Exception):
             raw.freeInstance()
+
+
+def _settle(host, when: str, rounds: int = 100) -> bool:
+    """Event-update rounds until the FMU needs no more; whether any changed the states.  A
+    host does not loop for ever: an FMU still asking after ``rounds`` rounds is a failure."""
+    changed = False
+    for _ in range(rounds):
+        needed, terminate, states = host.event_update()
+        changed = changed or states
+        if terminate:
+            raise HostFailure(f"the FMU asked to terminate {when}")
+        if not needed:
+            return changed
+    raise HostFailure(f"the FMU still asked for event iterations after {rounds} rounds {when}")
 
 
 def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_events, CVODE) -> HostRun:
@@ -190,14 +184,7 @@ def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_
             raw.getEventIndicators(z, nz)
             run.log.append((t, list(z[:nz])))
             raw.enterEventMode()
-            changed = False
-            for _ in range(100):
-                needed, terminate, states = host.event_update()
-                changed = changed or states
-                if terminate:
-                    raise HostFailure(f"the FMU asked to terminate at t = {t:.9g} s")
-                if not needed:
-                    break
+            changed = _settle(host, f"at t = {t:.9g} s")
             raw.enterContinuousTimeMode()
             raw.getEventIndicators(z, nz)
             zeros = [i for i in range(nz) if z[i] == 0.0]

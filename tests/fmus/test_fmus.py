@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
+from harness.description import typed_values
 from harness.description.fmu_description import read_description, time_derivatives
 from harness.engine.component import Component, FmuCallError
 from lever.fmus.registry import NAMES as FMU_NAMES
@@ -526,13 +527,7 @@ class _Fmi:
 
     def set(self, values: dict):
         for name, value in values.items():
-            v = self.vr[name]
-            if v.type == "Real":
-                self.slave.setReal([v.valueReference], [float(value)])
-            elif v.type == "Integer":
-                self.slave.setInteger([v.valueReference], [int(value)])
-            else:
-                self.slave.setString([v.valueReference], [str(value)])
+            typed_values.set_on(self.slave, self.vr[name], value, name)
 
     def start(self, parameters: dict):
         self.set(parameters)
