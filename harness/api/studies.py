@@ -99,8 +99,12 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     masters = _inputs.names(masters, "masters")
     try:
         spec = load(scene)
-        plan = stabilitymap.default_plan(spec, dense)
-    except (scene_files.SceneError, scene_kinds.NotADriveline, ValueError) as error:
+    except (scene_files.SceneError, ValueError) as error:
+        raise InputError(str(error)) from None
+    build()
+    try:
+        plan = stabilitymap.default_plan(spec, dense, say=progress)
+    except (scene_kinds.NotADriveline, ValueError) as error:
         raise InputError(str(error)) from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
@@ -118,7 +122,6 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     plan.masters = list(dict.fromkeys(masters)) or plan.masters
     plan.min_steps = min_steps
     plan.refine = refine
-    build()
     out = _claim(out or stabilitymap.default_out(spec))
     with _resumable(out):
         result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)

@@ -41,7 +41,7 @@ from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.description import scene as scenes
-from harness.judges import stability
+from harness.judges import coupling_scene, stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
 from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
@@ -88,11 +88,11 @@ class Plan:
                 "periods": self.periods, "refine_growth": self.refine_growth}
 
 
-def default_plan(scene: scenes.Scene, dense: bool = False) -> Plan:
+def default_plan(scene: scenes.Scene, dense: bool = False, fmu_dir: Path = FMUS, say=None) -> Plan:
     """The default sweep (a few minutes on 2 cores): the scene's stiffness, 1e4, 1e5 and
     1e6 N*m/rad; the scene's damping, a tenth of it and none; h*omega_n from 0.05 to 5;
     every fixed-step master.  ``dense``: 7 stiffnesses, 5 dampings, 19 steps."""
-    model = stability.model_of(scene)
+    model = stability.model_of(scene, fmu_dir, say)
     c0, b0 = model.stiffness, model.damping
     if dense:
         stiffnesses = sorted({float(f"{c:.4g}") for c in np.geomspace(c0, 1e6, 7)})
@@ -188,15 +188,20 @@ def amplitude_growth(tau: np.ndarray) -> float:
     return float(last / first) if first > 0 else (math.inf if last > 0 else 1.0)
 
 
-def classify(growth: float, energy_residual: float | None, failure: str | None) -> tuple[str, str]:
+def classify(growth: float, energy_residual: float | None, failure: str | None,
+             energy: bool = True) -> tuple[str, str]:
     """``(status, why)`` from the torque amplitude growth, the energy residual (relative
-    to the engine's work) and the run's failure message (criteria: module docstring)."""
+    to the engine's work) and the run's failure message (criteria: module docstring).
+    ``energy=False``: a scene whose energy balance cannot be had (a foreign FMU's work is
+    not known) is classified by the growth alone."""
     if failure:
         return "divergent", f"the run failed: {failure}"
     if not math.isfinite(growth) or growth > GROWTH_DIVERGENT:
         return "divergent", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DIVERGENT:g}x)"
     if growth > GROWTH_DRIFT:
         return "energy-drifting", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DRIFT:g}x)"
+    if not energy:
+        return "stable", f"amplitude x{growth:.3g} (no energy balance: it needs every FMU's equations)"
     if energy_residual is None or not math.isfinite(energy_residual):
         return "energy-drifting", "no finite energy residual"
     if energy_residual > ENERGY_DRIFT:
@@ -215,22 +220,23 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     """Run one case on the FMUs and classify it (an exception is the caller's to record)."""
     from harness.engine.run import simulate
 
-    coupling = scene_kinds.driveline(scene).coupling
+    coupling = scene.component_of(coupling_scene.COUPLING_FMU)
     spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
-    model = stability.model_of(spec)
+    model = stability.model_of(spec, fmu_dir)
     step = model.step_for(case.h_omega)
     n = case.steps
+    balanced = scene_kinds.is_driveline(spec)      # the energy balance needs every equation
     spec = replace(spec, experiment=replace(spec.experiment, start=0.0, stop=n * step, transient=0.0),
-                   features=set(spec.features) | {"energy_balance"})
+                   features=set(spec.features) | ({"energy_balance"} if balanced else set()))
     started = clock.perf_counter()
     result = simulate(spec, case.master, step, fmu_dir=fmu_dir)
     wall = clock.perf_counter() - started
     tau = result.traces.get(metrics.signals(spec)["tau2"], np.empty(0))
     growth = amplitude_growth(tau)
     residual = None
-    if result.ok and len(result.times) > 1:
+    if balanced and result.ok and len(result.times) > 1:
         residual = metrics.energy_balance(spec, result.times, result.traces)["residual_relative"]
-    status, why = classify(growth, residual, result.failure)
+    status, why = classify(growth, residual, result.failure, energy=balanced)
     return {"status": "ok", "class": status, "why": why, "growth": growth, "energy_residual": residual,
             "failure": result.failure, "step_s": step, "steps_planned": n, "steps_done": max(0, len(result.times) - 1),
             "omega_n": model.omega_n, "zeta": model.zeta, "wall_s": wall}
@@ -265,7 +271,7 @@ def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: boo
 def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     say = progress or (lambda *_: None)
     started = clock.perf_counter()
-    model = stability.model_of(scene)
+    model = stability.model_of(scene, fmu_dir, say)
     edges = predictions(model, plan, fmu_dir)
     cases = cases_of(plan, edges, model, fmu_dir)
     log = CaseLog(out, plan.fingerprint(scene), resume=resume)
@@ -506,7 +512,8 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
              f"Linearised two-inertia model: I1 = {model.drive_inertia:g}, I2 = {model.driven_inertia:g} kg*m^2, "
              f"K1 = {model.engine_slope:g} N*m*s/rad, U12 = 1 (harness/stability.py states the linearisation). "
              f"Scene coupling: c = {model.stiffness:g} N*m/rad, b = {model.damping:g} N*m*s/rad: "
-             f"omega_n = {model.omega_n:.4g} rad/s, zeta = {model.zeta:.3g}.", "",
+             f"omega_n = {model.omega_n:.4g} rad/s, zeta = {model.zeta:.3g}."
+             + (f"  Measured, not read from the scene: {model.uncertainty()}." if model.measured else ""), "",
              f"Sweep: c in {', '.join(f'{c:.4g}' for c in plan.stiffnesses)} N*m/rad; b in "
              f"{', '.join(f'{b:.3g}' for b in plan.dampings)} N*m*s/rad; h*omega_n in "
              f"{', '.join(f'{x:g}' for x in plan.h_omegas)}" + (" plus 0.9 and 1.1 (where growth is slow: up to 2) times each predicted edge" if plan.refine else "")
