@@ -48,7 +48,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     only = _inputs.names(only, "only")
     out = _inputs.folder(out)
     try:
-        benchmark.plan(spec, list(only))      # refuses unknown masters before anything runs
+        benchmark.check_plan(spec, list(only))      # refuses unknown masters before anything runs
     except ValueError as error:
         raise InputError(str(error)) from None
     build()
@@ -89,7 +89,7 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written``."""
     from harness.description import scene_kinds
-    from harness.studies import stabilitymap
+    from harness.studies import stability_report, stabilitymap
 
     out = _inputs.folder(out)
     min_steps = _inputs.count(min_steps, "min_steps", 16, 100000)
@@ -125,7 +125,7 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     out = _claim(out or stabilitymap.default_out(spec))
     with _resumable(out):
         result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
-    written = stabilitymap.write(out, result)
+    written = stability_report.write(out, result)
     return {"result": result, "agreement": stabilitymap.agreement(result), "written": written}
 
 
