@@ -234,6 +234,13 @@ SLOW = (
     "formats/test_ssp_export.py::test_the_archive_loads_back_with_its_scene_annotation_where_it_is_now_and_where_it_was",
     "formats/test_ssp_export.py::test_the_ssd_is_what_omsimulator_adds_as_a_weakly_coupled_system",
     "judges/test_revolutions.py::test_the_plot_files_over_the_angle",
+    "judges/test_coupling_stability.py::test_the_measured_eigenfrequency_is_the_one_of_the_fmus_equations",
+    "judges/test_coupling_stability.py::test_the_advisor_warns_and_the_stiff_run_ends_diverged_with_its_traces",
+    "judges/test_coupling_stability.py::test_the_guard_bounds_both_coupling_speeds_from_our_engine_line",
+    "judges/test_coupling_stability.py::test_the_map_of_the_user_scene_agrees_with_the_observed_classes",
+    "judges/test_coupling_stability.py::test_the_bench_ladder_of_a_scene_without_bench",
+    "judges/test_coupling_stability.py::test_a_scene_without_our_coupling_is_told_what_the_analysis_needs",
+    "judges/test_coupling_stability.py::test_an_fmu_refusing_its_probes_is_named_with_why",
     "judges/test_stability.py::test_advisor_warns_and_proposes_stable_choices",
     "judges/test_stability.py::test_lever_run_prints_the_advice",
     "judges/test_stability.py::test_lever_stability_runs_and_resumes",
@@ -320,6 +327,7 @@ SERIAL = (
 #: loadgroup``), so that the work is done once rather than once in every worker.
 SHARED_WORK = (
     "project/test_install.py::installed",
+    "judges/test_coupling_stability.py::user_scene",
     "formats/test_outputs.py::earlier_run",
     "formats/test_ssp_engines.py::archive",
     "engine/test_own_fmu.py::monitor_fmu",
