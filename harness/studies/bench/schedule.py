@@ -80,7 +80,7 @@ class Case:
 #: format's reference page shows this table)
 KEYS = {
     "steps": ("{master = [h, ...]}: the communication steps [s] each fixed-step master runs at",
-              "without steps and tolerances: the ladder (``ladder``)"),
+              "the ladder"),
     "tolerances": ("{master = [tol, ...]}: the tolerances each adaptive or Model Exchange master runs at",
                    "the ladder"),
     "output_steps": ("{master = h}: the grid [s] a tolerance run records on", "the scene's step"),
