@@ -394,6 +394,29 @@ def fmu_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def user_example():
+    """``user_example(folder, stop, transient)``: examples/user_fmu built into ``folder`` -
+    the user's pythonfmu FMU (no units) and its scene ``user_driveline.toml`` shortened to
+    ``stop`` with the start-up ``transient``; returns the scene file."""
+    return _user_example
+
+
+def _user_example(folder: Path, stop: float, transient: float) -> Path:
+    import importlib.util
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "user_fmu"
+    spec = importlib.util.spec_from_file_location("user_fmu_build", example / "build_fmu.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    build.build(folder)
+    text = (example / "user_driveline.toml").read_text()
+    assert "stop = 2.0" in text and "transient = 0.5" in text
+    (folder / "user_driveline.toml").write_text(text.replace("stop = 2.0", f"stop = {stop!r}").replace(
+        "transient = 0.5", f"transient = {transient!r}"))
+    return folder / "user_driveline.toml"
+
+
+@pytest.fixture(scope="session")
 def c_importer(tmp_path_factory) -> Path:
     """The minimal C importer (tests/c_host), compiled once for the tests of every module."""
     from harness.studies import hosts

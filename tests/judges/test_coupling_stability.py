@@ -5,7 +5,6 @@ agreement, the bench's ladder, and what a scene without the coupling or an FMU t
 refuses its probes is told."""
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -41,17 +40,11 @@ def test_a_response_no_shaft_gives_is_refused():
 
 
 @pytest.fixture(scope="module")
-def user_scene(tmp_path_factory) -> Path:
-    spec = importlib.util.spec_from_file_location("user_fmu_build", EXAMPLE / "build_fmu.py")
-    build = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(build)
-    folder = tmp_path_factory.mktemp("user_fmu")
-    build.build(folder)
+def user_scene(tmp_path_factory, user_example) -> Path:
+    scene = user_example(tmp_path_factory.mktemp("user_fmu"), 0.2, 0.05)
     text = (EXAMPLE / "user_driveline.toml").read_text()
-    (folder / "user_driveline.toml").write_text(text.replace("stop = 2.0", "stop = 0.2").replace(
-        "transient = 0.5", "transient = 0.05"))
-    (folder / "no_bench.toml").write_text(text[:text.index("[bench]")].replace('"user_driveline"', '"no_bench"'))
-    return folder / "user_driveline.toml"
+    (scene.parent / "no_bench.toml").write_text(text[:text.index("[bench]")].replace('"user_driveline"', '"no_bench"'))
+    return scene
 
 
 def test_the_measured_eigenfrequency_is_the_one_of_the_fmus_equations(user_scene, fmu_dir):
