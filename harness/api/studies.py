@@ -89,6 +89,7 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written``."""
     from harness.description import scene_kinds
+    from harness.judges import port_probe
     from harness.studies import stability_report, stabilitymap
 
     out = _inputs.folder(out)
@@ -106,6 +107,9 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
         plan = stabilitymap.default_plan(spec, dense, say=progress)
     except (scene_kinds.NotADriveline, ValueError) as error:
         raise InputError(str(error)) from None
+    except port_probe.ProbeRefused as error:
+        raise InputError(f"{error}: the map's steps are multiples of the coupling mode's period, which needs the "
+                         "port's inertia; lever run still runs the scene (without the advice)") from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:

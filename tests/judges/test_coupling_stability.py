@@ -122,3 +122,15 @@ def test_an_fmu_refusing_its_probes_is_named_with_why(user_scene, fmu_dir, monke
         stability.model_of(spec)
     said = stability.run_advice(spec, "jacobi", 1e-3)
     assert len(said) == 1 and "no advice for this scene" in said[0] and "DrivenShaft.fmu" in said[0]
+    with pytest.raises(api.InputError, match=r"load \(FMU DrivenShaft.fmu\) refused the probe runs .*needs the port's "
+                                             "inertia"):
+        api.stability_map(spec, masters=["jacobi"])
+
+
+def test_a_long_probe_says_its_estimate_first(user_scene, fmu_dir, monkeypatch):
+    monkeypatch.setattr(port_probe, "LONG_PROBE", 0.0)
+    monkeypatch.setattr(port_probe, "_PROBED", {})
+    heard = []
+    stability.model_of(scenes.load(user_scene), say=heard.append)
+    assert len(heard) == 1 and heard[0].startswith("probing load (DrivenShaft.fmu): about ")
+    assert "(4 runs of 200 steps" in heard[0]
