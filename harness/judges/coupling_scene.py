@@ -7,10 +7,9 @@ its two sides must be one shaft: ``P.phi_out -> coupling.phi1``, ``P.w_out -> co
 and ``coupling.tau1 -> P.tau_in`` from and to the same component ``P`` (and the same for
 ``phi2``, ``w2``, ``tau2``).  A side that is our EngineShaft (drive side) or LoadShaft
 (driven side) is read from its parameters, as for our own scenes; any other FMU is
-measured from outside by probe runs (``harness.judges.port_probe``): its inertia and its
-damping, the slope of its torque in its speed.  An FMU offering Model Exchange is probed
-the same way through its co-simulation interface; one without co-simulation is refused
-with the reason.
+measured from outside (``harness.judges.port_probe``): its inertia and its damping, the
+slope of its torque in its speed - from its Model Exchange derivatives where it offers
+them with its speed a state, else by probe runs of its co-simulation interface.
 """
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from lever.physics.load import ConstantLoad
 from lever.physics.shaft import LaggedShaft, Shaft
 
 from harness.description import scene as scenes
-from harness.description.fmu_description import read_description
+from harness.description.fmu_description import read_description, time_derivatives
 from harness.engine.interface import RawCalls
 from harness.engine.system import System, feedthrough_components
 from harness.paths import FMUS
@@ -159,10 +159,13 @@ class _LinearShaft(_LinearComponent):
         super().__init__(name, description)
         self.shaft = shaft
         self.port = port
-        # a foreign port without the derivative inputs gets the torque held (rate 0)
-        self._rate = "tau_rate" if not port.fmu and "tau_rate" in self._vr else None
-        self._accel = "tau_accel" if not port.fmu and "tau_accel" in self._vr else None
-        self._a = "a" if not port.fmu and "a" in self._vr else None
+        # the torque's derivative inputs the description declares (a master ramps them in,
+        # fmu_description.time_derivatives); a port without them gets the torque held
+        derivative_of = {of: name for name, of in time_derivatives(description).items()}
+        self._rate = derivative_of.get(port.tau)
+        self._accel = derivative_of.get(self._rate) if self._rate else None
+        # the output a master reads as the speed's time derivative (the midpoint prediction)
+        self._a = derivative_of.get(port.w)
 
     @property
     def phi(self) -> float:
@@ -194,7 +197,9 @@ class _LinearLaggedShaft(_LinearShaft):
     reports it (``engine_torque``), so the masters' saved states carry it."""
 
     def _outputs(self):
-        self["a"] = self.shaft.acceleration(self.time, self.phi, self.w, self[self.port.tau], self["engine_torque"])
+        if self._a:
+            self[self._a] = self.shaft.acceleration(self.time, self.phi, self.w, self[self.port.tau],
+                                                    self["engine_torque"])
 
     def _advance(self, t, h):
         tau, rate, accel = self._inputs()

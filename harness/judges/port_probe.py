@@ -1,6 +1,7 @@
 """What a shaft FMU looks like from our lever coupling, measured: its inertia and its
-damping (the slope of its torque in its speed) from short probe runs of fresh
-co-simulation instances.
+damping (the slope of its torque in its speed), from its Model Exchange derivatives where
+it offers them (``linearised``), else from short probe runs of fresh co-simulation
+instances.
 
 A co-simulation-only FMU (every pythonfmu FMU) offers neither its equations nor its
 Jacobian, and no state to roll back to; what it offers is a run.  Seen from the coupling,
@@ -54,12 +55,16 @@ class PortModel:
     residual: float
     probe_step: float
     probe_steps: int
+    #: "probe runs", or "Model Exchange derivatives" (``linearised``)
+    method: str = "probe runs"
 
     def text(self) -> str:
+        how = (f"from its Model Exchange derivatives at the start, torques +-{' and +-'.join(f'{a:g}' for a in AMPLITUDES)}"
+               f" N*m" if self.method != "probe runs" else
+               f"from probe runs: torque steps of {' and '.join(f'{a:g}' for a in AMPLITUDES)} N*m, "
+               f"{self.probe_steps} steps of {self.probe_step:.3g} s; fit residual {100 * self.residual:.2g} %")
         return (f"{self.component} ({Path(self.fmu).name}): inertia {self.inertia:.4g} +- "
-                f"{100 * self.inertia_spread:.2g} %, damping {self.damping:.4g} +- {self.damping_spread:.2g} "
-                f"(from probe runs: torque steps of {' and '.join(f'{a:g}' for a in AMPLITUDES)} N*m, "
-                f"{self.probe_steps} steps of {self.probe_step:.3g} s; fit residual {100 * self.residual:.2g} %)")
+                f"{100 * self.inertia_spread:.2g} %, damping {self.damping:.4g} +- {self.damping_spread:.2g} ({how})")
 
 
 def fit_first_order(dw: np.ndarray, amplitude: float, h: float) -> tuple[float, float, float]:
@@ -115,8 +120,68 @@ def probe(component: str, path: Path, start_values: dict, tau: str, w: str, step
     key = (str(path), path.stat().st_mtime if path.exists() else 0.0, tuple(sorted(
         (k, repr(v)) for k, v in start_values.items())), tau, w, float(step))
     if key not in _PROBED:
-        _PROBED[key] = _probe(component, path, start_values, tau, w, step, say)
+        _PROBED[key] = (linearised(component, path, start_values, tau, w)
+                        or _probe(component, path, start_values, tau, w, step, say))
     return _PROBED[key]
+
+
+#: the speed change [rad/s] the damping's difference quotient in the Model Exchange derivatives uses
+SPEED_DELTA = 1e-3
+
+
+def linearised(component: str, path: Path, start_values: dict, tau: str, w: str) -> PortModel | None:
+    """The ``PortModel`` of an FMI 2.0 FMU offering Model Exchange whose speed ``w`` is a
+    continuous state, from its derivatives at the start: ``1/J = d(dw/dt)/d tau`` (central
+    differences at each of ``AMPLITUDES``: their spread measures the nonlinearity) and
+    ``-k/J = d(dw/dt)/dw``; None where it offers no such thing (then it is probed), and
+    where it refuses a call (the probe runs then say so, if they fail too)."""
+    from harness.description.fmu_description import read_description
+    from harness.engine.me_component import ModelExchangeComponent
+
+    description = read_description(path)
+    if description.modelExchange is None or description.fmiVersion != "2.0":
+        return None
+    try:
+        fmu = ModelExchangeComponent(f"{component}-linearised", path)
+    except Exception:  # noqa: BLE001 - the probe runs are the fallback
+        return None
+    try:
+        if w not in fmu.state_names:
+            return None
+        fmu.set_parameters(dict(start_values))
+        fmu.initialize(0.0, None)
+        fmu.exit_initialization()
+        for _ in range(100):
+            if not fmu.new_discrete_states().newDiscreteStatesNeeded:
+                break
+        fmu.enter_continuous_time_mode()
+        fmu.get_states()
+        i = fmu.state_names.index(w)
+        vrs, values = fmu.real_buffer([tau])
+
+        def rate(torque: float, dw: float = 0.0) -> float:
+            values[0] = torque
+            fmu.write(vrs, values)
+            fmu.get_states()
+            fmu.x[i] += dw
+            fmu.set_states()
+            fmu.derivatives()
+            fmu.x[i] -= dw
+            fmu.set_states()
+            return fmu.dx[i]
+
+        inertias = [2.0 * a / (rate(a) - rate(-a)) for a in AMPLITUDES]
+        slopes = [(rate(0.0, SPEED_DELTA) - rate(0.0, -SPEED_DELTA)) / (2.0 * SPEED_DELTA)]
+    except Exception:  # noqa: BLE001 - the probe runs are the fallback
+        return None
+    finally:
+        fmu.free()
+    inertia = inertias[0]
+    if not (math.isfinite(inertia) and inertia > 0.0 and math.isfinite(slopes[0])):
+        return None
+    return PortModel(component, str(path), float(inertia), float(-slopes[0] * inertia),
+                     float(abs(max(inertias) - min(inertias)) / inertia), 0.0, 0.0, 0.0, 0,
+                     "Model Exchange derivatives")
 
 
 #: the ports probed in this process, by FMU file, its time, start values, port names and step

@@ -134,3 +134,25 @@ def test_a_long_probe_says_its_estimate_first(user_scene, fmu_dir, monkeypatch):
     stability.model_of(scenes.load(user_scene), say=heard.append)
     assert len(heard) == 1 and heard[0].startswith("probing load (DrivenShaft.fmu): about ")
     assert "(4 runs of 200 steps" in heard[0]
+
+
+def test_an_fmu_offering_model_exchange_is_linearised_and_predicts_as_our_own(fmu_dir, tmp_path):
+    """Our LoadShaft under another file name is a foreign FMU to the analysis: linearised from
+    its Model Exchange derivatives, its model and one-step maps are those of kavz685."""
+    import dataclasses
+    import shutil
+
+    ours = scenes.load("kavz685")
+    shutil.copy(fmu_dir / "LoadShaft.fmu", tmp_path / "MyShaft.fmu")
+    components = dict(ours.components)
+    components["load"] = scenes.ComponentSpec(str(tmp_path / "MyShaft.fmu"), dict(ours.components["load"].parameters))
+    theirs = dataclasses.replace(ours, name="kavz685_foreign_load", components=components)
+    expected, model = stability.model_of(ours), stability.model_of(theirs)
+    (side, port), = model.measured
+    assert side == "driven" and port.method == "Model Exchange derivatives"
+    assert model.omega_n == pytest.approx(expected.omega_n, rel=1e-9) and model.zeta == pytest.approx(expected.zeta,
+                                                                                                     rel=1e-6)
+    for master in ("jacobi", "jacobi-linear", "jacobi-midpoint", "trapezoidal-newton"):
+        h = expected.step_for(0.5)
+        assert stability.spectral_radius(model, master, h) == pytest.approx(
+            stability.spectral_radius(expected, master, h), rel=1e-7), master
