@@ -84,7 +84,9 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
                   resume: bool = True, out: Path | str | None = None,
                   progress: Callable[[str], None] | None = None) -> dict:
     """``lever stability``: every case of the map classified against the edges the linear
-    analysis predicts (empty sequences: the default plan's, ``dense``: denser); writes
+    analysis predicts (empty sequences: the default plan's, ``dense``: denser), for any scene
+    with our LeverCoupling between two shafts (FMUs of one's own are measured first:
+    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate); writes
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written``."""
