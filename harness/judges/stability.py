@@ -402,7 +402,7 @@ class Assessment:
 
 
 def assess(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-           fmu_dir: Path = FMUS) -> Assessment | None:
+           fmu_dir: Path = FMUS, say=None) -> Assessment | None:
     """The linear analysis of ``master`` at ``step`` (defaults: the scene's) on the
     scene's driveline, with stable alternatives when it is unstable; None when the scene
     has no driveline to linearise, the master chooses its own steps (adaptive) or
@@ -414,7 +414,7 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
             or master_family.MASTERS[master].interface != CO_SIMULATION):
         return None
     try:
-        model = model_of(scene, fmu_dir)
+        model = model_of(scene, fmu_dir, say)
     except scene_kinds.NotADriveline:
         return None
     rho = spectral_radius(model, master, step, fmu_dir)
@@ -435,23 +435,24 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
 
 
 def advise(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-           fmu_dir: Path = FMUS) -> list[str]:
+           fmu_dir: Path = FMUS, say=None) -> list[str]:
     """Findings (empty when none) about running ``scene`` with ``master`` at ``step``
     (defaults: the scene's): a warning when the linearised driveline's coupling mode
     makes the master's one-step map unstable at that step, naming a master and a step
     the same analysis finds stable.  Adaptive masters choose their own steps and get no
     finding; a scene without an engine - coupling - load chain gets none either."""
-    assessment = assess(scene, master, step, fmu_dir)
+    assessment = assess(scene, master, step, fmu_dir, say)
     if assessment is None or assessment.stable:
         return []
     return [assessment.finding()]
 
 
-def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS) -> list[str]:
-    """``advise`` for a run about to start: advice must never stop a run, so a scene the
-    analysis cannot read gets a finding saying so instead of an exception."""
+def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS, say=None) -> list[str]:
+    """``advise`` for a run about to start (``say`` hears a long probe's estimate first):
+    advice must never stop a run, so a scene the analysis cannot read gets a finding saying
+    so instead of an exception."""
     try:
-        return advise(scene, master, step, fmu_dir)
+        return advise(scene, master, step, fmu_dir, say)
     except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
         return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
 

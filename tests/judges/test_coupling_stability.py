@@ -134,6 +134,10 @@ def test_a_long_probe_says_its_estimate_first(user_scene, fmu_dir, monkeypatch):
     stability.model_of(scenes.load(user_scene), say=heard.append)
     assert len(heard) == 1 and heard[0].startswith("probing load (DrivenShaft.fmu): about ")
     assert "(4 runs of 200 steps" in heard[0]
+    monkeypatch.setattr(port_probe, "_PROBED", {})       # before a run, too (lever run prints it as a note)
+    before_run = []
+    assert stability.run_advice(scenes.load(user_scene), "jacobi", 1e-3, say=before_run.append) == []
+    assert len(before_run) == 1 and before_run[0].startswith("probing load (DrivenShaft.fmu): about ")
 
 
 def test_an_fmu_offering_model_exchange_is_linearised_and_predicts_as_our_own(fmu_dir, tmp_path):
