@@ -8,7 +8,11 @@ The model (linearised about the steady operating point):
     I2 * dw2/dt = -b_v * w2 + tau2         driven shaft; b_v the load's viscous friction
     T = c * (phi1 - phi2) + b * (w1 - w2), tau1 = -T, tau2 = T
 
-in deviations from the steady motion.  Linearisation: the transfer function is taken
+in deviations from the steady motion.  Where a side of the coupling is not our EngineShaft
+or LoadShaft but an FMU of one's own, its inertia and its slope (K1, or b_v) are measured
+(``harness.judges.coupling_scene``, ``port_probe``) and the model says how well
+(``TwoInertia.uncertainty``); the stand-in then carries that FMU's model description.
+Linearisation: the transfer function is taken
 at its mean, ``U12 = 1`` and ``Phi(phi2) = phi2`` (the kinematic mode's ratio varies by
 under 1 % about it: a parametric modulation left out; the ``scaled`` mode's 14 % is not
 small and is only roughly covered), a tabulated elastic law by its nominal stiffness,
