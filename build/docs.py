@@ -471,9 +471,15 @@ def scene_page() -> str:
     out.append("## connections and record\n\n`connections` are strings `\"component.output -> "
                "component.input\"`; an input is driven by one connection at most. `record` names outputs "
                "`\"component.output\"` to write into the traces.\n\n")
+    from harness.studies.bench.schedule import KEYS
+
     out.append("## [bench]\n\nThe work-precision benchmark's plan for the scene (`lever bench`): which "
                "masters at which steps or tolerances. Its keys are read by the benchmark itself "
-               "(`harness/studies/`), not declared with the scene's.\n")
+               "(`harness/studies/bench/schedule.py`), not declared with the scene's; another key is refused. "
+               "Without `steps` and `tolerances` each master gets a ladder from near its predicted stability "
+               "edge down ([guide/check-stability.md](../guide/check-stability.md#the-benchmarks-steps)).\n\n"
+               "| key | what | default |\n|---|---|---|\n")
+    out += [f"| `{key}` | {what} | {default.replace('``', '`')} |\n" for key, (what, default) in KEYS.items()]
     return "".join(out).rstrip() + "\n"
 
 

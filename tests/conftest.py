@@ -234,6 +234,15 @@ SLOW = (
     "formats/test_ssp_export.py::test_the_archive_loads_back_with_its_scene_annotation_where_it_is_now_and_where_it_was",
     "formats/test_ssp_export.py::test_the_ssd_is_what_omsimulator_adds_as_a_weakly_coupled_system",
     "judges/test_revolutions.py::test_the_plot_files_over_the_angle",
+    "judges/test_coupling_stability.py::test_the_measured_eigenfrequency_is_the_one_of_the_fmus_equations",
+    "judges/test_coupling_stability.py::test_the_advisor_warns_and_the_stiff_run_ends_diverged_with_its_traces",
+    "judges/test_coupling_stability.py::test_the_guard_bounds_both_coupling_speeds_from_our_engine_line",
+    "judges/test_coupling_stability.py::test_the_map_of_the_user_scene_agrees_with_the_observed_classes",
+    "judges/test_coupling_stability.py::test_the_bench_ladder_of_a_scene_without_bench",
+    "judges/test_coupling_stability.py::test_a_scene_without_our_coupling_is_told_what_the_analysis_needs",
+    "judges/test_coupling_stability.py::test_an_fmu_refusing_its_probes_is_named_with_why",
+    "judges/test_coupling_stability.py::test_a_long_probe_says_its_estimate_first",
+    "judges/test_coupling_stability.py::test_an_fmu_offering_model_exchange_is_linearised_and_predicts_as_our_own",
     "judges/test_stability.py::test_advisor_warns_and_proposes_stable_choices",
     "judges/test_stability.py::test_lever_run_prints_the_advice",
     "judges/test_stability.py::test_lever_stability_runs_and_resumes",
@@ -320,6 +329,7 @@ SERIAL = (
 #: loadgroup``), so that the work is done once rather than once in every worker.
 SHARED_WORK = (
     "project/test_install.py::installed",
+    "judges/test_coupling_stability.py::user_scene",
     "formats/test_outputs.py::earlier_run",
     "formats/test_ssp_engines.py::archive",
     "engine/test_own_fmu.py::monitor_fmu",
@@ -383,6 +393,29 @@ def fmu_dir() -> Path:
     for name in FMU_NAMES:
         assert (FMUS / f"{name}.fmu").exists(), name
     return FMUS
+
+
+@pytest.fixture(scope="session")
+def user_example():
+    """``user_example(folder, stop, transient)``: examples/user_fmu built into ``folder`` -
+    the user's pythonfmu FMU (no units) and its scene ``user_driveline.toml`` shortened to
+    ``stop`` with the start-up ``transient``; returns the scene file."""
+    return _user_example
+
+
+def _user_example(folder: Path, stop: float, transient: float) -> Path:
+    import importlib.util
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "user_fmu"
+    spec = importlib.util.spec_from_file_location("user_fmu_build", example / "build_fmu.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    build.build(folder)
+    text = (example / "user_driveline.toml").read_text()
+    assert "stop = 2.0" in text and "transient = 0.5" in text
+    (folder / "user_driveline.toml").write_text(text.replace("stop = 2.0", f"stop = {stop!r}").replace(
+        "transient = 0.5", f"transient = {transient!r}"))
+    return folder / "user_driveline.toml"
 
 
 @pytest.fixture(scope="session")

@@ -90,7 +90,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
     if spec.experiment.transient_note:
         say("note", spec.experiment.transient_note)
-    advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir)
+    advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir, lambda text: say("note", text))
     for warning in advice:
         say("warning", warning)         # before the run, so a long run is not waited for
     if (method_note := run_method(spec, chosen, options)) is not None:

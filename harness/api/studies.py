@@ -48,7 +48,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     only = _inputs.names(only, "only")
     out = _inputs.folder(out)
     try:
-        benchmark.plan(spec, list(only))      # refuses unknown masters before anything runs
+        benchmark.check_plan(spec, list(only))      # refuses unknown masters before anything runs
     except ValueError as error:
         raise InputError(str(error)) from None
     build()
@@ -84,12 +84,15 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
                   resume: bool = True, out: Path | str | None = None,
                   progress: Callable[[str], None] | None = None) -> dict:
     """``lever stability``: every case of the map classified against the edges the linear
-    analysis predicts (empty sequences: the default plan's, ``dense``: denser); writes
+    analysis predicts (empty sequences: the default plan's, ``dense``: denser), for any scene
+    with our LeverCoupling between two shafts (FMUs of one's own are measured first:
+    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate); writes
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written``."""
     from harness.description import scene_kinds
-    from harness.studies import stabilitymap
+    from harness.judges import port_probe
+    from harness.studies import stability_report, stabilitymap
 
     out = _inputs.folder(out)
     min_steps = _inputs.count(min_steps, "min_steps", 16, 100000)
@@ -99,9 +102,16 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     masters = _inputs.names(masters, "masters")
     try:
         spec = load(scene)
-        plan = stabilitymap.default_plan(spec, dense)
-    except (scene_files.SceneError, scene_kinds.NotADriveline, ValueError) as error:
+    except (scene_files.SceneError, ValueError) as error:
         raise InputError(str(error)) from None
+    build()
+    try:
+        plan = stabilitymap.default_plan(spec, dense, say=progress)
+    except (scene_kinds.NotADriveline, ValueError) as error:
+        raise InputError(str(error)) from None
+    except port_probe.ProbeRefused as error:
+        raise InputError(f"{error}: the map's steps are multiples of the coupling mode's period, which needs the "
+                         "port's inertia; lever run still runs the scene (without the advice)") from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:
@@ -118,11 +128,10 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     plan.masters = list(dict.fromkeys(masters)) or plan.masters
     plan.min_steps = min_steps
     plan.refine = refine
-    build()
     out = _claim(out or stabilitymap.default_out(spec))
     with _resumable(out):
         result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
-    written = stabilitymap.write(out, result)
+    written = stability_report.write(out, result)
     return {"result": result, "agreement": stabilitymap.agreement(result), "written": written}
 
 

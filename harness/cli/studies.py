@@ -66,7 +66,9 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     """The stability map of SCENE: every case classified (stable / energy-drifting /
     divergent) against the edges the linear analysis predicts; writes stability.md,
     stability.csv, stability_map.png and the resumable case log cases.jsonl.  Before the
-    cases run it says how long they will take, about (each master timed on the scene)."""
+    cases run it says how long they will take, about (each master timed on the scene).
+    SCENE may be any scene with our LeverCoupling between two shafts: a shaft FMU of one's
+    own is measured first (its Model Exchange derivatives, or short probe runs)."""
     with user_errors():
         done = api.stability_map(scene, stiffnesses=stiffnesses, dampings=dampings, h_omegas=h_omegas,
                                  masters=masters, dense=dense, min_steps=min_steps, refine=not no_refine, jobs=jobs,

@@ -17,6 +17,16 @@ a run within one communication step of going non-finite or past them.
   ``W sqrt(c (I1 + I2))``), plus the damping torque at a relative speed of
   ``(1 + U12max) W``, times ``U12max`` (``tau2 = U12 * T``).
 
+For a scene with our lever coupling between shafts of other FMUs (a user's engine or load
+model) the guard knows only what is ours: where the drive side is our EngineShaft, the
+speed bound of both coupling sides is ``margin`` times the largest of its start speed, its
+no-load speed and (no steady speed) the speed its largest torque gives its own inertia from
+rest over the run - the foreign side's inertia only slows that, its torques are not known
+(an assisting foreign torque needs a ``[limits]`` speed).  The coupling torques are checked
+for being finite only (their bound needs both inertias); where the drive side is not our
+EngineShaft no speed is plausible from the scene's values either, and only finiteness is
+checked.  The run's advisor (``lever run``) still predicts the instability beforehand.
+
 A scene overrides any of it in a ``[limits]`` table (``speed`` [rad/s], ``torque``
 [N*m], ``margin``), also with ``--set limits.speed=...``; ``inf`` leaves only the
 finiteness check.  Every other connected output is checked for being finite.
@@ -30,13 +40,14 @@ import math
 from dataclasses import dataclass
 
 
+from lever.physics import component_parameters
 from lever.physics.elastic import LinearElasticLaw
 from lever.physics.engine import LinearCharacteristic, TabulatedCharacteristic
 from lever.physics.friction import ResistingLoad
 from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, SpectrumLoad, TabulatedLoad
-from lever.physics.parameters import ParameterError
+from lever.physics.parameters import ParameterError, check_all
 
-from harness.description import plan as plans
+from harness.description import plan as plans, scene_kinds
 
 #: default factor between the plausible speeds of a scene and its speed bound
 MARGIN = 10.0
@@ -122,7 +133,7 @@ def bounds(plan: plans.Plan) -> list[Bound]:
     """The bounds a run of a checked scene is held to (see the module docstring): speeds
     and coupling torques of the driveline, when the scene has one; nothing otherwise."""
     if plan.driveline is None:
-        return []
+        return _coupling_bounds(plan)
     limits = dict(plan.limits.get())
     margin = limits.get("margin", MARGIN)
     out = []
@@ -150,6 +161,43 @@ def bounds(plan: plans.Plan) -> list[Bound]:
                f"({energy:.4g} J) plus damping torque")
     out += [Bound(f"{coupling_name}.tau1", torque, "N.m", why), Bound(f"{coupling_name}.tau2", torque, "N.m", why)]
     return out
+
+
+def _coupling_bounds(plan: plans.Plan) -> list[Bound]:
+    """The speed bound of a scene with our coupling and our engine shaft beside another
+    FMU (module docstring); nothing for a scene without them."""
+    coupling = plan.roles[1] if plan.roles else None
+    if coupling is None:
+        return []
+    into = {c.input: c for c in plan.connections if c.target == coupling}
+    sides = [into.get(k) for k in ("w1", "w2")]
+    limits = dict(plan.limits.get())
+    torques = [Bound(f"{coupling}.{t}", limits["torque"], "N.m", "set in the scene's [limits]")
+               for t in ("tau1", "tau2")] if "torque" in limits else []
+    if sides[0] is None or sides[0].source != plan.roles[0]:
+        return torques
+    try:
+        values = check_all(component_parameters.ENGINE, scene_kinds.parameters(plan.scene, sides[0].source))
+        engine = component_parameters.engine_of(values)
+    except (ParameterError, ValueError):
+        return torques
+    char = engine.external
+    candidates = {"start speed": abs(values["w_start"])}
+    if isinstance(char, LinearCharacteristic) and char.slope > 0.0:
+        candidates["no-load speed of the engine line"] = abs(char.steady_speed(0.0))
+    else:
+        torques = [abs(m) for m in char.torques] if isinstance(char, TabulatedCharacteristic) else [
+            abs(char.stall_torque)]
+        span = plan.experiment.stop - plan.experiment.start
+        candidates["the engine's free acceleration over the run"] = max(torques) * span / engine.inertia
+    if "speed" in limits:
+        speed, why = limits["speed"], "set in the scene's [limits]"
+    else:
+        which = max(candidates, key=candidates.get)
+        margin = limits.get("margin", MARGIN)
+        speed = margin * candidates[which]
+        why = f"{margin:g} x the largest plausible speed {candidates[which]:.4g} rad/s ({which})"
+    return [Bound(f"{c.source}.{c.output}", speed, "rad/s", why) for c in sides if c is not None] + torques
 
 
 class Guard:

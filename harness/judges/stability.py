@@ -8,7 +8,11 @@ The model (linearised about the steady operating point):
     I2 * dw2/dt = -b_v * w2 + tau2         driven shaft; b_v the load's viscous friction
     T = c * (phi1 - phi2) + b * (w1 - w2), tau1 = -T, tau2 = T
 
-in deviations from the steady motion.  Linearisation: the transfer function is taken
+in deviations from the steady motion.  Where a side of the coupling is not our EngineShaft
+or LoadShaft but an FMU of one's own, its inertia and its slope (K1, or b_v) are measured
+(``harness.judges.coupling_scene``, ``port_probe``) and the model says how well
+(``TwoInertia.uncertainty``); the stand-in then carries that FMU's model description.
+Linearisation: the transfer function is taken
 at its mean, ``U12 = 1`` and ``Phi(phi2) = phi2`` (the kinematic mode's ratio varies by
 under 1 % about it: a parametric modulation left out; the ``scaled`` mode's 14 % is not
 small and is only roughly covered), a tabulated elastic law by its nominal stiffness,
@@ -51,26 +55,21 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from lever.physics import component_parameters
-from lever.physics.coupling import build_coupling, coupling_mode
-from lever.physics.engine import LinearCharacteristic
-from lever.physics.friction import ResistingLoad
-from lever.physics.load import ConstantLoad
-from lever.physics.shaft import LaggedShaft, Shaft
+from lever.physics.coupling import coupling_mode
 
 from harness.description import plan as plans, scene_kinds
-from harness.description.fmu_description import read_description
 from harness.engine import masters as master_family
 from harness.description import scene as scenes
 from harness.paths import FMUS
-from harness.engine.interface import RawCalls
-from harness.engine.system import CO_SIMULATION, System, feedthrough_components
+from harness.engine.system import CO_SIMULATION
+from harness.judges import coupling_scene
+from harness.judges.linear_driveline import DRIVELINE_CONNECTIONS, LinearDriveline, Wiring  # noqa: F401 - re-exported
 
 #: A spectral radius above 1 + this is unstable (rounding of the map stays far below).
 RHO_TOLERANCE = 1e-7
@@ -98,6 +97,11 @@ class TwoInertia:
     engine_lag: float = 0.0
     #: b_v, the load's viscous friction [N*m*s/rad] (the one slope of a load in w)
     driven_slope: float = 0.0
+    #: the ports' FMUs where they are not our EngineShaft and LoadShaft (None: ours)
+    wiring: Wiring | None = None
+    #: the ports measured by probe runs, ``(("drive" | "driven", port_probe.PortModel), ...)``,
+    #: whose spreads the model's uncertainty comes from
+    measured: tuple = ()
 
     @property
     def omega_n(self) -> float:
@@ -117,10 +121,25 @@ class TwoInertia:
                              effective_slope, self.driven_slope)
 
     def with_coupling(self, stiffness: float | None = None, damping: float | None = None) -> "TwoInertia":
-        return TwoInertia(self.drive_inertia, self.driven_inertia, self.engine_slope,
-                          self.stiffness if stiffness is None else float(stiffness),
-                          self.damping if damping is None else float(damping), engine_lag=self.engine_lag,
-                          driven_slope=self.driven_slope)
+        return replace(self, stiffness=self.stiffness if stiffness is None else float(stiffness),
+                       damping=self.damping if damping is None else float(damping))
+
+    @property
+    def omega_spread(self) -> float:
+        """The relative uncertainty of ``omega_n`` from the measured ports' inertias (0:
+        every inertia known from the scene's values): ``omega_n ~ I_red^(-1/2)``, and a
+        side's share of ``I_red``'s relative change is the other side's share of the inertia."""
+        i1, i2 = self.drive_inertia, self.driven_inertia
+        share = {"drive": i2 / (i1 + i2), "driven": i1 / (i1 + i2)}
+        return 0.5 * sum(share[side] * port.inertia_spread for side, port in self.measured)
+
+    def uncertainty(self) -> str:
+        """What the model's figures rest on, for a finding: "" when every value is the
+        scene's own."""
+        if not self.measured:
+            return ""
+        return (f"omega_n +- {100 * self.omega_spread:.2g} % from the measured port(s): "
+                + "; ".join(port.text() for _, port in self.measured))
 
     def step_for(self, h_omega: float) -> float:
         """The communication step [s] at which ``h * omega_n`` is ``h_omega``."""
@@ -144,230 +163,27 @@ class TwoInertia:
         return np.linalg.eigvals(a)
 
 
-def model_of(scene: scenes.Scene) -> TwoInertia:
+def model_of(scene: scenes.Scene, fmu_dir: Path = FMUS, say=None) -> TwoInertia:
     """The two-inertia model of ``scene`` from its parameter values (defaults where the
-    scene sets none); ``scene_kinds.NotADriveline`` for a scene of another kind."""
+    scene sets none).  A scene with our LeverCoupling between shafts of other FMUs gets
+    the model with those ports measured (``coupling_scene.chain``: probe runs, ``say``
+    hears a long probe's estimate first); ``scene_kinds.NotADriveline`` (its subclass
+    ``coupling_scene.NoCouplingModel``) says what the analysis needs where the scene has no such chain,
+    ``port_probe.ProbeRefused`` names an FMU that refused its probes."""
+    if not scene_kinds.is_driveline(scene):
+        found = coupling_scene.chain(scene, fmu_dir, say)
+        drive, driven = found.drive, found.driven
+        wiring = None if found.wiring == Wiring() else found.wiring
+        measured = tuple((side, s.measured) for side, s in (("drive", drive), ("driven", driven)) if s.measured)
+        return TwoInertia(drive.inertia, driven.inertia, drive.slope, found.stiffness, found.damping,
+                          engine_lag=drive.lag, driven_slope=driven.slope, wiring=wiring, measured=measured)
     driveline = plans.driveline_of(scene)
     built = driveline.physics.get()
-    drive, driven = driveline.engine.get(), driveline.load.get()
+    driven = driveline.load.get()
     law = built.coupling
-    characteristic = built.engine.external
-    if isinstance(characteristic, LinearCharacteristic):
-        slope = characteristic.slope
-    else:   # tabulated: its slope at the starting speed
-        w, dw = drive["w_start"], max(1e-3, 1e-3 * abs(drive["w_start"]))
-        slope = -(characteristic.torque(0.0, 0.0, w + dw) - characteristic.torque(0.0, 0.0, w - dw)) / (2 * dw)
-    return TwoInertia(drive["inertia"], driven["inertia"], max(0.0, slope), law.law.nominal_stiffness,
-                      law.damping, engine_lag=drive["torque_lag"] if drive["torque_lag"] >= component_parameters.SHORTEST_LAG
-                      else 0.0, driven_slope=driven["viscous_damping"])
-
-
-# -- the stand-in system -----------------------------------------------------------------------
-
-@lru_cache(maxsize=8)
-def _description(path: str, mtime: float):
-    return read_description(path)
-
-
-def _descriptions(fmu_dir: Path) -> dict:
-    out = {}
-    for fmu in ("EngineShaft", "LeverCoupling", "LoadShaft"):
-        path = Path(fmu_dir) / f"{fmu}.fmu"
-        if not path.exists():
-            raise FileNotFoundError(f"{path} is missing: build the FMUs first (lever build)")
-        out[fmu] = _description(str(path), path.stat().st_mtime)
-    return out
-
-
-class _LinearComponent:
-    """One component of the stand-in: the FMU's model description, values by value
-    reference, and the interface the masters and ``System`` use
-    (``harness.engine.interface.CoSimComponent``, its raw calls included)."""
-
-    def __init__(self, name: str, description):
-        self.name = name
-        self.description = description
-        self.variables = {v.name: v for v in description.modelVariables}
-        self.values = {v.valueReference: 0.0 for v in description.modelVariables if v.type == "Real"}
-        self._vr = {v.name: v.valueReference for v in description.modelVariables}
-        self.gets = self.sets = self.steps = self.state_calls = 0
-        self.time = 0.0
-        self.raw = RawCalls(None, self._get, self._set, self._raw_step)
-
-    @property
-    def calls(self) -> int:
-        return self.gets + self.sets + self.steps + self.state_calls
-
-    def variable(self, name):
-        return self.variables[name]
-
-    def vr(self, name):
-        return self._vr[name]
-
-    def __getitem__(self, name):
-        return self.values[self._vr[name]]
-
-    def __setitem__(self, name, value):
-        self.values[self._vr[name]] = float(value)
-
-    def real_buffer(self, names):
-        import ctypes
-        names = list(names)
-        return (ctypes.c_uint * len(names))(*[self.vr(n) for n in names]), (ctypes.c_double * len(names))()
-
-    def _outputs(self):
-        """Recompute the outputs from the inputs and the state."""
-
-    def _get(self, handle, vrs, n, values):
-        self._outputs()
-        for i in range(n):
-            values[i] = self.values[vrs[i]]
-        return 0
-
-    def _set(self, handle, vrs, n, values):
-        for i in range(n):
-            self.values[vrs[i]] = values[i]
-        return 0
-
-    def read(self, vrs, values):
-        self.gets += 1
-        self._get(None, vrs, len(vrs), values)
-
-    def write(self, vrs, values):
-        self.sets += 1
-        self._set(None, vrs, len(vrs), values)
-
-    def do_step(self, t, h):
-        self.steps += 1
-        self._advance(t, h)
-        self.time = t + h
-
-    def _raw_step(self, handle, t, h, no_set_prior_state):
-        self._advance(t, h)
-        self.time = t + h
-        return 0
-
-    def _advance(self, t, h):
-        pass
-
-    def fail(self, call, status):
-        raise RuntimeError(f"linear stand-in {self.name}: {call} returned status {status}")
-
-    def save_state(self):
-        return dict(self.values)
-
-    def restore_state(self, state, time):
-        self.values = dict(state)
-        self.time = time
-
-    def free_state(self, state):
-        pass
-
-    def free(self):
-        pass
-
-
-class _LinearShaft(_LinearComponent):
-    def __init__(self, name, description, shaft: Shaft):
-        super().__init__(name, description)
-        self.shaft = shaft
-
-    @property
-    def accel(self) -> float:
-        """``tau_accel``, where the model description (an FMU of this build) declares it."""
-        return self["tau_accel"] if "tau_accel" in self._vr else 0.0
-
-    def _outputs(self):
-        self["a"] = self.shaft.acceleration(self.time, self["phi"], self["w"], self["tau"])
-
-    def _advance(self, t, h):
-        phi, w, _ = self.shaft.advance(t, self["phi"], self["w"], self["tau"], h, self["tau_rate"], self.accel)
-        self["phi"], self["w"] = phi, w
-
-
-class _LinearLaggedShaft(_LinearShaft):
-    """The drive shaft with a lagged engine: the torque M is state, kept where the FMU
-    reports it (``engine_torque``), so the masters' saved states carry it."""
-
-    def _outputs(self):
-        self["a"] = self.shaft.acceleration(self.time, self["phi"], self["w"], self["tau"], self["engine_torque"])
-
-    def _advance(self, t, h):
-        phi, w, torque, _ = self.shaft.advance(t, self["phi"], self["w"], self["engine_torque"], self["tau"], h,
-                                               self["tau_rate"], self.accel)
-        self["phi"], self["w"], self["engine_torque"] = phi, w, torque
-
-
-class _LinearCoupling(_LinearComponent):
-    def __init__(self, name, description, stiffness, damping):
-        super().__init__(name, description)
-        self.coupling = build_coupling("synchronous", 0.0, 0.0, 0.0, stiffness, damping)
-
-    def _outputs(self):
-        self["tau1"], self["tau2"] = self.coupling.torques(self["phi1"], self["w1"], self["phi2"], self["w2"])
-
-
-DRIVELINE_CONNECTIONS = ("engine.phi -> coupling.phi1", "engine.w -> coupling.w1", "load.phi -> coupling.phi2",
-                         "load.w -> coupling.w2", "coupling.tau1 -> engine.tau", "coupling.tau2 -> load.tau")
-
-
-def _driven_load(model: TwoInertia):
-    """The linear load of the stand-in: none, or the load's viscous friction alone (smooth:
-    ``lever.physics.friction``, no sticking without Coulomb friction)."""
-    if not model.driven_slope:
-        return ConstantLoad(0.0)
-    return ResistingLoad(ConstantLoad(0.0), "active", 0.0, 0.0, model.driven_slope)
-
-
-class LinearDriveline(System):
-    """``System`` with the linear two-inertia model in place of the FMUs (same wiring,
-    same model descriptions, same propagation code)."""
-
-    def __init__(self, model: TwoInertia, step: float, fmu_dir: Path = FMUS):
-        descriptions = _descriptions(fmu_dir)
-        self.model = model
-        self.scene = scenes.Scene(
-            name="linear-driveline", description="linearised two-inertia driveline",
-            components={"engine": scenes.ComponentSpec("EngineShaft"), "coupling": scenes.ComponentSpec("LeverCoupling"),
-                        "load": scenes.ComponentSpec("LoadShaft")},
-            connections=[scenes.parse_connection(c) for c in DRIVELINE_CONNECTIONS],
-            experiment=scenes.Experiment(start=0.0, stop=1e9, step=step), record=[], features=set())
-        self.record = []
-        line = LinearCharacteristic(0.0, model.engine_slope)
-        engine = (_LinearLaggedShaft("engine", descriptions["EngineShaft"],
-                                     LaggedShaft(model.drive_inertia, line, model.engine_lag, 0.0))
-                  if model.engine_lag > 0.0 else
-                  _LinearShaft("engine", descriptions["EngineShaft"], Shaft(model.drive_inertia, line)))
-        self.components = {
-            "engine": engine,
-            "coupling": _LinearCoupling("coupling", descriptions["LeverCoupling"], model.stiffness, model.damping),
-            "load": _LinearShaft("load", descriptions["LoadShaft"], Shaft(model.driven_inertia, _driven_load(model))),
-        }
-        self.feedthrough = feedthrough_components(self.scene, {n: c.description for n, c in self.components.items()})
-        self.stateful = [n for n in self.scene.components if n not in self.feedthrough]
-        self._plan()
-
-    @property
-    def lagged(self) -> bool:
-        return self.model.engine_lag > 0.0
-
-    def set_state(self, phi1, w1, phi2, w2, torque=0.0, t=0.0):
-        """Put the shafts (and a lagged engine's torque) in a state and make the system
-        consistent (as after a step)."""
-        for component in self.components.values():
-            for vr in component.values:
-                component.values[vr] = 0.0
-            component.time = t
-        engine, load = self.components["engine"], self.components["load"]
-        engine["phi"], engine["w"], load["phi"], load["w"] = phi1, w1, phi2, w2
-        if self.lagged:
-            engine["engine_torque"] = torque
-        self.propagate()
-
-    def state(self) -> list[float]:
-        """``[phi1, w1, phi2, w2]``, and the engine torque when it lags."""
-        engine, load = self.components["engine"], self.components["load"]
-        return [engine["phi"], engine["w"], load["phi"], load["w"]] + ([engine["engine_torque"]] if self.lagged else [])
+    inertia, slope, lag = coupling_scene.engine_side(driveline.engine.get())
+    return TwoInertia(inertia, driven["inertia"], slope, law.law.nominal_stiffness, law.damping, engine_lag=lag,
+                      driven_slope=driven["viscous_damping"])
 
 
 # -- one-step maps -------------------------------------------------------------------------------
@@ -447,7 +263,7 @@ def one_step_map(model: TwoInertia, master: str, step: float, fmu_dir: Path = FM
     # (jacobi-midpoint's accelerations): propagation reads them before it writes the new
     # torques, so they carry the torque of the step before - state of the map, too.
     buffered = [(system.buffers[name][1], system.index[(name, var)], f"{name}.{var}")
-                for name in system.stateful for var in system.exposed[name] if var not in ("phi", "w")]
+                for name in system.stateful for var in system.exposed[name] if var not in system.motion(name)]
     core = ["phi1", "w1", "phi2", "w2"] + (["M1"] if system.lagged else [])   # M1: the lagged engine torque
     names = (core + [label for _, _, label in buffered]
              + [f"{each.component.name}.{vr}@t-{k + 1}h" for k in range(slots) for each in inputs
@@ -583,12 +399,14 @@ class Assessment:
                f"(h = {self.model.step_for(self.edge):.3g} s)" if self.edge is not None and self.edge > EDGE_RANGE[0]
                else f"{self.master} is predicted unstable at any step here")
         proposal = " or ".join(f"{m} at h = {h:.3g} s" for m, h in self.proposals) or "a smaller step"
+        measured = f"  The model: {self.model.uncertainty()}." if self.model.measured else ""
         return (f"stability: {self.master} at h = {self.step:.3g} s (h*omega_n = {self.h_omega:.3g}; coupling mode "
-                f"{mode}) is outside the predicted stable region: {why}; {own}.  Predicted stable: {proposal}.")
+                f"{mode}) is outside the predicted stable region: {why}; {own}.  Predicted stable: {proposal}."
+                + measured)
 
 
 def assess(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-           fmu_dir: Path = FMUS) -> Assessment | None:
+           fmu_dir: Path = FMUS, say=None) -> Assessment | None:
     """The linear analysis of ``master`` at ``step`` (defaults: the scene's) on the
     scene's driveline, with stable alternatives when it is unstable; None when the scene
     has no driveline to linearise, the master chooses its own steps (adaptive) or
@@ -600,7 +418,7 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
             or master_family.MASTERS[master].interface != CO_SIMULATION):
         return None
     try:
-        model = model_of(scene)
+        model = model_of(scene, fmu_dir, say)
     except scene_kinds.NotADriveline:
         return None
     rho = spectral_radius(model, master, step, fmu_dir)
@@ -621,23 +439,24 @@ def assess(scene: scenes.Scene, master: str | None = None, step: float | None = 
 
 
 def advise(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-           fmu_dir: Path = FMUS) -> list[str]:
+           fmu_dir: Path = FMUS, say=None) -> list[str]:
     """Findings (empty when none) about running ``scene`` with ``master`` at ``step``
     (defaults: the scene's): a warning when the linearised driveline's coupling mode
     makes the master's one-step map unstable at that step, naming a master and a step
     the same analysis finds stable.  Adaptive masters choose their own steps and get no
     finding; a scene without an engine - coupling - load chain gets none either."""
-    assessment = assess(scene, master, step, fmu_dir)
+    assessment = assess(scene, master, step, fmu_dir, say)
     if assessment is None or assessment.stable:
         return []
     return [assessment.finding()]
 
 
-def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS) -> list[str]:
-    """``advise`` for a run about to start: advice must never stop a run, so a scene the
-    analysis cannot read gets a finding saying so instead of an exception."""
+def run_advice(scene: scenes.Scene, master: str, step: float, fmu_dir: Path = FMUS, say=None) -> list[str]:
+    """``advise`` for a run about to start (``say`` hears a long probe's estimate first):
+    advice must never stop a run, so a scene the analysis cannot read gets a finding saying
+    so instead of an exception."""
     try:
-        return advise(scene, master, step, fmu_dir)
+        return advise(scene, master, step, fmu_dir, say)
     except Exception as error:  # noqa: BLE001 - a scene the analysis cannot read still runs
         return [f"stability advisor: no advice for this scene ({type(error).__name__}: {error})"]
 
@@ -650,6 +469,8 @@ def cvode_method(scene: scenes.Scene) -> tuple[str, str] | None:
     master's own rule (``harness.engine.masters.model_exchange.choose_method``); None for a
     scene without an engine - coupling - load chain (the master then applies the rule to
     its system Jacobian at the start)."""
+    if not scene_kinds.is_driveline(scene):
+        return None
     try:
         model = model_of(scene)
     except scene_kinds.NotADriveline:

@@ -26,7 +26,6 @@ cases are kept in a ``harness.studies.cases.CaseLog``; a re-run resumes.
 """
 from __future__ import annotations
 
-import csv
 import math
 import multiprocessing
 import time as clock
@@ -41,7 +40,7 @@ from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.description import scene as scenes
-from harness.judges import stability
+from harness.judges import coupling_scene, stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
 from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
@@ -88,11 +87,11 @@ class Plan:
                 "periods": self.periods, "refine_growth": self.refine_growth}
 
 
-def default_plan(scene: scenes.Scene, dense: bool = False) -> Plan:
+def default_plan(scene: scenes.Scene, dense: bool = False, fmu_dir: Path = FMUS, say=None) -> Plan:
     """The default sweep (a few minutes on 2 cores): the scene's stiffness, 1e4, 1e5 and
     1e6 N*m/rad; the scene's damping, a tenth of it and none; h*omega_n from 0.05 to 5;
     every fixed-step master.  ``dense``: 7 stiffnesses, 5 dampings, 19 steps."""
-    model = stability.model_of(scene)
+    model = stability.model_of(scene, fmu_dir, say)
     c0, b0 = model.stiffness, model.damping
     if dense:
         stiffnesses = sorted({float(f"{c:.4g}") for c in np.geomspace(c0, 1e6, 7)})
@@ -188,15 +187,20 @@ def amplitude_growth(tau: np.ndarray) -> float:
     return float(last / first) if first > 0 else (math.inf if last > 0 else 1.0)
 
 
-def classify(growth: float, energy_residual: float | None, failure: str | None) -> tuple[str, str]:
+def classify(growth: float, energy_residual: float | None, failure: str | None,
+             energy: bool = True) -> tuple[str, str]:
     """``(status, why)`` from the torque amplitude growth, the energy residual (relative
-    to the engine's work) and the run's failure message (criteria: module docstring)."""
+    to the engine's work) and the run's failure message (criteria: module docstring).
+    ``energy=False``: a scene whose energy balance cannot be had (a foreign FMU's work is
+    not known) is classified by the growth alone."""
     if failure:
         return "divergent", f"the run failed: {failure}"
     if not math.isfinite(growth) or growth > GROWTH_DIVERGENT:
         return "divergent", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DIVERGENT:g}x)"
     if growth > GROWTH_DRIFT:
         return "energy-drifting", f"coupling torque amplitude grew {growth:.3g}x (> {GROWTH_DRIFT:g}x)"
+    if not energy:
+        return "stable", f"amplitude x{growth:.3g} (no energy balance: it needs every FMU's equations)"
     if energy_residual is None or not math.isfinite(energy_residual):
         return "energy-drifting", "no finite energy residual"
     if energy_residual > ENERGY_DRIFT:
@@ -215,22 +219,23 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     """Run one case on the FMUs and classify it (an exception is the caller's to record)."""
     from harness.engine.run import simulate
 
-    coupling = scene_kinds.driveline(scene).coupling
+    coupling = scene.component_of(coupling_scene.COUPLING_FMU)
     spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
-    model = stability.model_of(spec)
+    model = stability.model_of(spec, fmu_dir)
     step = model.step_for(case.h_omega)
     n = case.steps
+    balanced = scene_kinds.is_driveline(spec)      # the energy balance needs every equation
     spec = replace(spec, experiment=replace(spec.experiment, start=0.0, stop=n * step, transient=0.0),
-                   features=set(spec.features) | {"energy_balance"})
+                   features=set(spec.features) | ({"energy_balance"} if balanced else set()))
     started = clock.perf_counter()
     result = simulate(spec, case.master, step, fmu_dir=fmu_dir)
     wall = clock.perf_counter() - started
     tau = result.traces.get(metrics.signals(spec)["tau2"], np.empty(0))
     growth = amplitude_growth(tau)
     residual = None
-    if result.ok and len(result.times) > 1:
+    if balanced and result.ok and len(result.times) > 1:
         residual = metrics.energy_balance(spec, result.times, result.traces)["residual_relative"]
-    status, why = classify(growth, residual, result.failure)
+    status, why = classify(growth, residual, result.failure, energy=balanced)
     return {"status": "ok", "class": status, "why": why, "growth": growth, "energy_residual": residual,
             "failure": result.failure, "step_s": step, "steps_planned": n, "steps_done": max(0, len(result.times) - 1),
             "omega_n": model.omega_n, "zeta": model.zeta, "wall_s": wall}
@@ -265,7 +270,7 @@ def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: boo
 def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     say = progress or (lambda *_: None)
     started = clock.perf_counter()
-    model = stability.model_of(scene)
+    model = stability.model_of(scene, fmu_dir, say)
     edges = predictions(model, plan, fmu_dir)
     cases = cases_of(plan, edges, model, fmu_dir)
     log = CaseLog(out, plan.fingerprint(scene), resume=resume)
@@ -437,242 +442,7 @@ def agreement(result: StabilityMap, fmu_dir: Path = FMUS) -> dict:
             "rate_ratio_range": (float(min(rate_ratios)), float(max(rate_ratios))) if rate_ratios else None}
 
 
-# -- output ---------------------------------------------------------------------------------------
+# -- output (harness.studies.stability_report writes it) ------------------------------------------
 
 def default_out(scene: scenes.Scene) -> Path:
     return RESULTS / "stability" / scene.name
-
-
-def write(out: Path, result: StabilityMap, fmu_dir: Path = FMUS, plots: bool = True) -> list[Path]:
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    agreed = agreement(result, fmu_dir)
-    paths = [_write_csv(out / "stability.csv", result, fmu_dir), _write_markdown(out / "stability.md", result, agreed)]
-    if plots:
-        paths.append(_plot(out / "stability_map.png", result))
-    return paths
-
-
-def _write_csv(path: Path, result: StabilityMap, fmu_dir) -> Path:
-    fields = ["master", "stiffness", "damping", "h_omega", "steps", "omega_n", "zeta", "step_s", "predicted_rho",
-              "predicted_growth", "predicted_edge", "class", "growth", "energy_residual", "steps_planned", "steps_done", "wall_s", "why"]
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fields)
-        writer.writeheader()
-        for case in sorted(result.results, key=lambda c: (c.master, c.stiffness, -c.damping, c.h_omega)):
-            r = result.results[case]
-            model = result.model.with_coupling(case.stiffness, case.damping)
-            row = {"master": case.master, "stiffness": case.stiffness, "damping": case.damping, "h_omega": case.h_omega,
-                   "steps": case.steps,
-                   "omega_n": model.omega_n, "zeta": model.zeta, "step_s": model.step_for(case.h_omega),
-                   "predicted_rho": predicted_radius(result.model, case, fmu_dir),
-                   "predicted_growth": predicted_growth(predicted_radius(result.model, case, fmu_dir), case.steps),
-                   "predicted_edge": result.edges.get(case.row)}
-            if r.get("status") == FAILED:
-                row.update({"class": "failed", "why": f"{r['error']} ({r['where']})"})
-            else:
-                row.update({k: r.get(k) for k in ("class", "growth", "energy_residual", "steps_planned", "steps_done",
-                                                   "wall_s", "why")})
-            writer.writerow(row)
-    return path
-
-
-SYMBOL = {"stable": "S", "energy-drifting": "E", "divergent": "X", "failed": "!"}
-
-
-def _fmt(x, digits=3):
-    return "-" if x is None else f"{x:.{digits}g}"
-
-
-def summary_table(result: StabilityMap, agreed: dict) -> list[str]:
-    """The edges table: one row per master and coupling, predicted against observed."""
-    lines = ["| master | c [N*m/rad] | b [N*m*s/rad] | zeta | predicted edge h*w_n | observed: last stable | "
-             "first unstable | observed/predicted |", "|---|---|---|---|---|---|---|---|"]
-    for r in agreed["edge_rows"]:
-        lines.append(f"| {r['master']} | {r['stiffness']:.4g} | {r['damping']:.3g} | {r['zeta']:.3g} | "
-                     f"{_fmt(r['predicted_edge']) if r['predicted_edge'] is not None else 'none <= 100'} | "
-                     f"{_fmt(r['last_stable'])} | {_fmt(r['first_unstable']) if r['first_unstable'] else 'none'} | "
-                     f"{_fmt(r['ratio'])} |")
-    return lines
-
-
-def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
-    plan, model = result.plan, result.model
-    counts = {}
-    for r in result.results.values():
-        key = "failed" if r.get("status") == FAILED else r["class"]
-        counts[key] = counts.get(key, 0) + 1
-    lines = [f"# Stability map: {result.scene.name}", "",
-             f"Linearised two-inertia model: I1 = {model.drive_inertia:g}, I2 = {model.driven_inertia:g} kg*m^2, "
-             f"K1 = {model.engine_slope:g} N*m*s/rad, U12 = 1 (harness/stability.py states the linearisation). "
-             f"Scene coupling: c = {model.stiffness:g} N*m/rad, b = {model.damping:g} N*m*s/rad: "
-             f"omega_n = {model.omega_n:.4g} rad/s, zeta = {model.zeta:.3g}.", "",
-             f"Sweep: c in {', '.join(f'{c:.4g}' for c in plan.stiffnesses)} N*m/rad; b in "
-             f"{', '.join(f'{b:.3g}' for b in plan.dampings)} N*m*s/rad; h*omega_n in "
-             f"{', '.join(f'{x:g}' for x in plan.h_omegas)}" + (" plus 0.9 and 1.1 (where growth is slow: up to 2) times each predicted edge" if plan.refine else "")
-             + f"; masters {', '.join(plan.masters)}.  Each case runs max({plan.min_steps}, {plan.periods:g} periods) "
-             f"steps (at most {plan.max_steps}).  {len(result.results)} cases: "
-             + ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
-             + f" ({result.reused} reused from the case log; {result.wall_s:.0f} s).", "",
-             "Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
-             f"iteration did not converge) or the amplitude of the coupling torque "
-             f"{metrics.signals(result.scene)['tau2']} grew > {GROWTH_DIVERGENT:g}x "
-             "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
-             f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
-             "**stable** - neither.  Compared with the prediction, a case is *unstable* when divergent or growing "
-             f"(> {GROWTH_DRIFT:g}x); the predicted edge is where the spectral radius of the master's one-step map "
-             "crosses 1.", ""]
-    lines += ["## Agreement", ""]
-    if agreed["explicit_rows"]:
-        low, high = agreed["explicit_ratio_range"]
-        lines.append(f"Explicit masters ({', '.join(m for m in EXPLICIT if m in plan.masters)}): the predicted edge "
-                     f"lies between the last observed stable and the first observed unstable h*omega_n in "
-                     f"**{agreed['explicit_bracketed']} of {agreed['explicit_rows']}** (master, c, b) rows with both "
-                     f"observed; observed edge (geometric mean of the bracket) / predicted: median "
-                     f"{agreed['explicit_ratio_median']:.3g}, range {low:.3g} ... {high:.3g}.  The brackets leave out "
-                     f"the {agreed['inconclusive']} inconclusive runs: spectral radius above 1 but a predicted growth "
-                     f"over the run below {GROWTH_DRIFT:g}x, which no run of that length can show.")
-    if agreed["rate_ratio_median"] is not None:
-        low, high = agreed["rate_ratio_range"]
-        lines.append("")
-        lines.append(f"Growth rates, in the {len(agreed['rates'])} cases that grew measurably (> {GROWTH_DRIFT:g}x) "
-                     "and ran to the end: the observed growth per step, ln(growth) / (3/4 steps), over the predicted "
-                     f"ln(spectral radius): median {agreed['rate_ratio_median']:.3g}, range {low:.3g} ... {high:.3g}.")
-    lines.append("")
-    lines.append("Case by case, predicted to grow visibly (spectral radius^(3/4 steps) > "
-                 f"{GROWTH_DRIFT:g}) against observed unstable:")
-    lines.append("")
-    lines.append("| master | cases | agree |")
-    lines.append("|---|---|---|")
-    for m in plan.masters:
-        s = agreed["by_master"].get(m)
-        if s:
-            lines.append(f"| {m} | {s['cases']} | {s['agree']} ({100 * s['agree'] / s['cases']:.0f} %) |")
-    lines.append("")
-    implicit = [m for m in plan.masters if m not in EXPLICIT]
-    for m in implicit:
-        bad = [(c, r) for c, r in result.results.items() if c.master == m and r.get("status") != FAILED and unstable(r)]
-        edges = sorted({e for (mm, _, _), e in result.edges.items() if mm == m and e is not None})
-        predicted = (f"predicted edge (its iteration stops converging) at h*omega_n = "
-                     f"{', '.join(f'{e:.3g}' for e in edges)}" if edges else "predicted stable at every swept step")
-        if bad:
-            where = ", ".join(f"c={c.stiffness:.3g} b={c.damping:.3g} x={c.h_omega:g}" for c, _ in sorted(
-                bad, key=lambda item: (item[0].stiffness, item[0].damping, item[0].h_omega))[:8])
-            lines.append(f"- {m}: {predicted}; observed unstable in {len(bad)} cases ({where}"
-                         + (", ..." if len(bad) > 8 else "") + ")")
-        else:
-            lines.append(f"- {m}: {predicted}; observed stable (not growing) in every swept case")
-    if agreed["mismatches"]:
-        lines += ["", "Cases where prediction and observation differ:", "",
-                  "| master | c | b | h*omega_n | steps | predicted rho | predicted growth | observed | growth | "
-                  "h*omega_n / predicted edge |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
-        for mm in sorted(agreed["mismatches"], key=lambda m: (m["case"].master, m["case"].stiffness,
-                                                               -m["case"].damping, m["case"].h_omega)):
-            c = mm["case"]
-            lines.append(f"| {c.master} | {c.stiffness:.4g} | {c.damping:.3g} | {c.h_omega:g} | {c.steps} | "
-                         f"{mm['rho']:.6g} | {_fmt(mm['predicted_growth'])} | {mm['observed']} | {_fmt(mm['growth'])} | "
-                         f"{_fmt(mm['x_over_edge'])} |")
-    lines += ["", "## Edges", ""] + summary_table(result, agreed)
-    lines += ["", "## Cases", "",
-              "S stable, E energy-drifting, X divergent, ! failed (the case raised); columns h*omega_n "
-              "(refinement points in stability.csv).", ""]
-    xs = plan.h_omegas
-    at = {(*case.row, case.h_omega): r for case, r in result.results.items()}
-    lines.append("| master | c | b | zeta | " + " | ".join(f"{x:g}" for x in xs) + " |")
-    lines.append("|---|---|---|---|" + "---|" * len(xs))
-    for m in plan.masters:
-        for c in plan.stiffnesses:
-            for b in plan.dampings:
-                cells = []
-                for x in xs:
-                    r = at.get((m, c, b, x))
-                    cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
-                zeta = result.model.with_coupling(c, b).zeta
-                lines.append(f"| {m} | {c:.4g} | {b:.3g} | {zeta:.3g} | " + " | ".join(cells) + " |")
-    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
-    if failed:
-        lines += ["", "## Cases that raised", ""]
-        lines += [f"- {c.key}: {r['error']} ({r['where']})" for c, r in failed]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-COLOURS = {"stable": "#2e7d32", "energy-drifting": "#f9a825", "divergent": "#c62828", "failed": "#616161"}
-
-
-def edge_curves(result: StabilityMap, master: str, points: int = 9, fmu_dir: Path = FMUS) -> list:
-    """Predicted edge against zeta for each swept stiffness (damping from 0 to the
-    largest swept): ``[(c, zetas, edges)]``."""
-    curves = []
-    b_max = max(result.plan.dampings) or 1.0
-    for c in result.plan.stiffnesses:
-        zetas, edges = [], []
-        for b in np.linspace(0.0, b_max, points):
-            model = result.model.with_coupling(c, b)
-            edge = stability.stability_edge(model, master, fmu_dir)
-            if edge is not None:
-                zetas.append(model.zeta)
-                edges.append(edge)
-        if edges:
-            curves.append((c, zetas, edges))
-    return curves
-
-
-def legend_classes(statuses) -> list[str]:
-    """The classes a map's legend names: those its cases hold, in ``COLOURS``' order (no
-    "failed" entry when nothing failed)."""
-    return [k for k in COLOURS if k in set(statuses)]
-
-
-def _plot(path: Path, result: StabilityMap) -> Path:
-    from matplotlib.lines import Line2D
-
-    from harness.formats import plotting
-
-    plt = plotting.pyplot()
-    masters = result.plan.masters
-    ncols = min(3, len(masters))            # one panel a master, three to a row: no blank panels beside one
-    nrows = math.ceil(len(masters) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), 4.2 * nrows + 0.6), squeeze=False,
-                             sharex=True, sharey=True, layout="constrained")
-    statuses = set()
-    zetas = [result.model.with_coupling(c.stiffness, c.damping).zeta for c in result.results]
-    for ax, master in zip(axes.flat, masters):
-        for case, r in result.results.items():
-            if case.master != master:
-                continue
-            status = "failed" if r.get("status") == FAILED else r["class"]
-            statuses.add(status)
-            zeta = result.model.with_coupling(case.stiffness, case.damping).zeta
-            ax.scatter(case.h_omega, zeta, s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
-        for (m, c, b), edge in result.edges.items():
-            if m == master and edge is not None:
-                ax.plot(edge, result.model.with_coupling(c, b).zeta, marker="|", color="k", ms=16, mew=1.6)
-        for c, zs, es in edge_curves(result, master):
-            ax.plot(es, zs, "k-", lw=0.9, alpha=0.7)
-            ax.annotate(f"c={c:.0e}" if c >= 1e4 else f"c={c:.4g}", (es[-1], zs[-1]), fontsize=6, alpha=0.7)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_title(master, fontsize=10)
-        ax.grid(True, which="both", alpha=0.2)
-    for ax in axes[-1]:
-        ax.set_xlabel("h * omega_n")
-    for ax in axes[:, 0]:
-        ax.set_ylabel("damping ratio zeta")
-    for ax in list(axes.flat)[len(masters):]:
-        ax.axis("off")
-    if zetas:
-        axes[0, 0].set_ylim(min(zetas) / 1.5, max(zetas) * 1.5)
-    for ax in list(axes.flat)[:len(masters)]:
-        plotting.log_ticks(ax.xaxis)
-        plotting.log_ticks(ax.yaxis)
-    handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in legend_classes(statuses)]
-    handles.append(Line2D([], [], color="k", lw=0.9, marker="|", ms=10,
-                          label="predicted edge (|: swept coupling; line: per stiffness, damping varied)"))
-    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if ncols > 1 else 2, fontsize=8,
-               frameon=False)
-    fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path

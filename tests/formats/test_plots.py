@@ -8,7 +8,7 @@ import numpy as np
 from types import SimpleNamespace
 
 from harness.formats import plotting, report
-from harness.studies import stabilitymap
+from harness.studies import stability_report
 from harness.studies import sweep as sweeps
 from harness.studies.bench import Case
 from harness.studies.bench import report as bench_report
@@ -53,8 +53,8 @@ def test_legends_are_beside_the_data_not_on_it():
 
 
 def test_a_stability_maps_legend_names_only_the_classes_it_holds():
-    assert stabilitymap.legend_classes({"stable", "divergent"}) == ["stable", "divergent"]
-    assert "failed" in stabilitymap.legend_classes({"stable", "failed"})
+    assert stability_report.legend_classes({"stable", "divergent"}) == ["stable", "divergent"]
+    assert "failed" in stability_report.legend_classes({"stable", "failed"})
 
 
 def _accelerations():

@@ -5,7 +5,6 @@ not show the master's order; a user's pythonfmu FMU without units, built here, c
 is judged against the extrapolated reference."""
 from __future__ import annotations
 
-import importlib.util
 import shutil
 from pathlib import Path
 
@@ -84,18 +83,9 @@ def test_the_made_reference_is_cached_by_the_scene(fmu_dir):
 
 
 @pytest.fixture(scope="module")
-def user_scene(tmp_path_factory) -> Path:
+def user_scene(tmp_path_factory, user_example) -> Path:
     """The how-to's scene with its user's FMU (pythonfmu, no units) built here, 0.1 s long."""
-    spec = importlib.util.spec_from_file_location("user_fmu_build", EXAMPLE / "build_fmu.py")
-    build = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(build)
-    folder = tmp_path_factory.mktemp("user_fmu")
-    build.build(folder)
-    text = (EXAMPLE / "user_driveline.toml").read_text()
-    assert "stop = 2.0" in text and "transient = 0.5" in text
-    (folder / "user_driveline.toml").write_text(text.replace("stop = 2.0", "stop = 0.1").replace("transient = 0.5",
-                                                                                              "transient = 0.05"))
-    return folder / "user_driveline.toml"
+    return user_example(tmp_path_factory.mktemp("user_fmu"), 0.1, 0.05)
 
 
 def test_a_users_fmu_without_units_connects_and_is_judged_against_the_extrapolated_reference(

@@ -14,7 +14,7 @@ from harness.engine import masters
 from harness.engine import run
 from harness.description import scene
 from harness.judges import stability
-from harness.studies import stabilitymap
+from harness.studies import stability_report, stabilitymap
 
 KAVZ = stability.TwoInertia(0.128, 0.161, 14.06, 715.4, 6.35)
 UNDAMPED = stability.TwoInertia(0.128, 0.161, 0.0, 1e5, 0.0)     # zeta = 0 exactly
@@ -290,7 +290,7 @@ def test_a_case_that_raises_is_recorded_and_the_sweep_goes_on(tmp_path, monkeypa
     result = stabilitymap.sweep(spec, plan, tmp_path)
     statuses = {case.h_omega: r.get("status") for case, r in result.results.items()}
     assert statuses == {0.05: "ok", 0.1: cases.FAILED}
-    stabilitymap.write(tmp_path, result, plots=False)
+    stability_report.write(tmp_path, result, plots=False)
     text = (tmp_path / "stability.md").read_text()
     assert "Cases that raised" in text and "instantiation refused" in text
     # a re-run keeps the failed case (it does not retry a recorded failure)

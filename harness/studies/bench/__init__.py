@@ -39,12 +39,12 @@ from harness.studies.bench.headlines import (bracket, case_noise, case_problems,
                                              time_at_error)
 from harness.studies.bench.report import (COLUMNS, default_out, faster_text, machine_text, markdown, plot,
                                           summary_lines, table_row, write)
-from harness.studies.bench.schedule import Case, fingerprint, plan
+from harness.studies.bench.schedule import Case, check as check_plan, fingerprint, plan
 from harness.studies.bench.study import bench
 from harness.studies.bench.timing import measure_rounds, run_master, run_monolithic, run_peer
 from harness.studies.cases import case_key
 
-__all__ = ["CALL_KINDS", "COLUMNS", "Case", "bench", "bracket", "call_floor", "call_prices", "case_key",
+__all__ = ["CALL_KINDS", "COLUMNS", "Case", "bench", "bracket", "call_floor", "call_prices", "case_key", "check_plan",
            "case_noise", "case_problems", "claims", "compare_editions", "default_out", "eigenfrequency",
            "faster_text", "fingerprint",
            "headline_cases", "interpolate", "machine_text", "markdown", "measure_rounds", "overhead_above_floor",

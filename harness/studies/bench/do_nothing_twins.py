@@ -25,6 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from harness.description import plan as plans
 from harness.description import scene as scenes
 from harness.description.fmu_description import read_description, time_derivatives
 from harness.paths import FMUS, RESULTS
@@ -143,10 +144,15 @@ def build_twin(fmu: Path, dest: Path) -> Path:
 def twins(scene: scenes.Scene, fmu_dir: Path = FMUS, cache: Path = DEFAULT_CACHE) -> Path:
     """A folder with a do-nothing twin of each of the scene's FMUs under the FMU's own file
     name (so ``System(scene, folder)`` runs the scene on them), built where missing."""
+    by_file = [f"{name} ({spec.fmu})" for name, spec in scene.components.items() if scenes.is_fmu_path(spec.fmu)]
+    if by_file:
+        # the scene names those files itself: a run on the twins' folder would step them, not their twins
+        raise ValueError(f"{', '.join(by_file)} given by file: a do-nothing twin in another folder cannot stand in "
+                         "for it")
     keys = {}
     for spec in scene.components.values():
         if spec.fmu not in keys:
-            keys[spec.fmu] = twin_key(read_description(Path(fmu_dir) / f"{spec.fmu}.fmu"))
+            keys[spec.fmu] = twin_key(read_description(plans.fmu_path(spec.fmu, fmu_dir)))
     folder = Path(cache) / hashlib.sha256(json.dumps(sorted(keys.items())).encode()).hexdigest()[:16]
     for fmu, key in keys.items():
         dest = folder / f"{fmu}.fmu"

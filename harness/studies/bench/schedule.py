@@ -10,9 +10,11 @@ import statistics as stats
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from harness.description import plan as plans, scene_kinds
 from harness.description import scene as scenes
 from harness.engine import masters as master_family
 from harness.engine.system import MODEL_EXCHANGE
+from harness.judges import port_probe, stability
 from harness.paths import FMUS
 from harness.studies.cases import FAILED, CaseLog, case_key
 
@@ -74,21 +76,108 @@ class Case:
         return case_key(self.kind, self.engine, self.step, self.tolerance)
 
 
-def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
-    """The scene's benchmark plan, with defaults: every master at the scene's step."""
+#: the keys of a scene's ``[bench]`` table, what each holds and its default (the scene
+#: format's reference page shows this table)
+KEYS = {
+    "steps": ("{master = [h, ...]}: the communication steps [s] each fixed-step master runs at",
+              "the ladder"),
+    "tolerances": ("{master = [tol, ...]}: the tolerances each adaptive or Model Exchange master runs at",
+                   "the ladder"),
+    "output_steps": ("{master = h}: the grid [s] a tolerance run records on", "the scene's step"),
+    "peers": ("{peer = [h, ...]}: the steps each peer engine runs at (`lever engines` names them)", "none"),
+    "peer_tolerances": ("{peer = [tol, ...]}: ECCO's tolerances [J per step]", "none"),
+    "monolithic_rtol": ("[rtol, ...]: the monolithic reference's tolerances (DOP853)", "[1e-4, 1e-6, 1e-8]"),
+    "monolithic_cvode_rtol": ("[rtol, ...]: the same equations under CVODE", "none"),
+    "target_error": ("the relative error the headline claims compare the masters at", "1e-3"),
+    "baseline": ("the master the headline ratios divide by", "jacobi"),
+    "repeats_limit_s": ("a case whose one run takes longer than this [s] runs once", "5"),
+}
+
+#: the ladder's tolerances where the scene's [bench] names none: (adaptive masters, Model Exchange)
+LADDER_TOLERANCES = {"co-simulation": (1e-2, 1e-3, 1e-4), "model exchange": (1e-4, 1e-6, 1e-8)}
+#: the ladder's steps: its largest, then halved this many times
+LADDER_RUNGS = 3
+
+
+def _rounded(x: float) -> float:
+    return float(f"{x:.3g}")
+
+
+def ladder(scene: scenes.Scene, fmu_dir: Path = FMUS, say=None) -> tuple[dict, dict, dict]:
+    """``(steps, tolerances, dropped)`` for a scene whose ``[bench]`` names no steps or
+    tolerances: each fixed-step co-simulation master at ``LADDER_RUNGS`` steps from near
+    its predicted stability edge down (the largest: twice the scene's step, or 0.8 of the
+    edge's step where that is shorter; then halved), each adaptive or Model Exchange
+    master at ``LADDER_TOLERANCES``; ``dropped``: master -> why it is not run (predicted
+    unstable at every step, an FMU without Model Exchange).  Without a stability model
+    (a scene without our coupling) the steps are the scene's times 2, 1 and 1/2, and
+    ``dropped`` says nothing: nothing was judged."""
+    top = 2.0 * scene.experiment.step
+    try:
+        model = stability.model_of(scene, fmu_dir, say)
+    except (scene_kinds.NotADriveline, port_probe.ProbeRefused, ValueError) as error:
+        model = None
+        if say is not None:
+            say(f"bench ladder: no stability model ({error}); steps 2, 1 and 1/2 times the scene's")
+    steps, tolerances, dropped = {}, {}, {}
+    descriptions = plans.descriptions_for(scene, fmu_dir)
+    for name, cls in master_family.MASTERS.items():
+        if cls.interface == MODEL_EXCHANGE:
+            lacking = [n for n, c in scene.components.items()
+                       if c.fmu in descriptions and descriptions[c.fmu].modelExchange is None]
+            if lacking:
+                dropped[name] = ("it needs Model Exchange in every FMU; " + ", ".join(
+                    f"{n} ({scene.components[n].fmu})" for n in lacking) + " offer(s) co-simulation only")
+                continue
+        if cls.adaptive or cls.interface == MODEL_EXCHANGE:
+            tolerances[name] = list(LADDER_TOLERANCES[cls.interface])
+            continue
+        largest = top
+        if model is not None:
+            edge = stability.stability_edge(model, name, fmu_dir)
+            if edge is not None and edge <= stability.EDGE_RANGE[0]:
+                dropped[name] = (f"predicted unstable at every step on this scene (coupling mode omega_n = "
+                                 f"{model.omega_n:.4g} rad/s, zeta = {model.zeta:.3g})")
+                continue
+            if edge is not None:
+                largest = min(top, stability.MARGIN * model.step_for(edge))
+        steps[name] = [_rounded(largest / 2 ** k) for k in range(LADDER_RUNGS)]
+    return steps, tolerances, dropped
+
+
+def check(scene: scenes.Scene, only: list[str] | None = None):
+    """``ValueError`` for a ``[bench]`` key or a master (in it or in ``only``) that is not
+    known: what ``plan`` refuses, without making the plan."""
+    table = dict(scene.bench)
+    unknown = sorted(set(table) - set(KEYS))
+    if unknown:
+        raise ValueError(f"scene '{scene.name}' [bench]: unknown key(s) {', '.join(unknown)} (known: "
+                         f"{', '.join(KEYS)})")
+    try:
+        master_family.check(*table.get("steps", {}), *table.get("tolerances", {}), *table.get("output_steps", {}))
+    except master_family.UnknownMaster as error:
+        raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
+    master_family.check(*(only or ()))
+
+
+def plan(scene: scenes.Scene, only: list[str] | None = None, fmu_dir: Path = FMUS, say=None) -> dict:
+    """The scene's benchmark plan, with defaults (``KEYS``); without steps and tolerances
+    in its ``[bench]``, the ladder (``ladder``).  ``dropped``: each master not run (asked
+    for with ``only``, or in the ladder) and why."""
     table = dict(scene.bench)
     steps = {name: [float(h) for h in values] for name, values in table.get("steps", {}).items()}
     tolerances = {name: [float(x) for x in values] for name, values in table.get("tolerances", {}).items()}
+    check(scene, only)
+    dropped = {}
     if not steps and not tolerances:
-        steps = {name: [scene.experiment.step] for name, m in master_family.MASTERS.items() if not m.adaptive}
-    try:
-        master_family.check(*steps, *tolerances, *table.get("output_steps", {}))
-    except master_family.UnknownMaster as error:
-        raise ValueError(f"scene '{scene.name}' [bench]: {error}") from None
+        steps, tolerances, dropped = ladder(scene, fmu_dir, say)
     if only:
-        master_family.check(*only)
+        for name in only:
+            if name not in steps and name not in tolerances and name not in dropped:
+                dropped[name] = "the scene's [bench] names no steps or tolerances for it"
         steps = {k: v for k, v in steps.items() if k in only}
         tolerances = {k: v for k, v in tolerances.items() if k in only}
+        dropped = {k: v for k, v in dropped.items() if k in only}
     output_steps = {name: float(h) for name, h in table.get("output_steps", {}).items()}
     return {
         "steps": steps,
@@ -115,6 +204,7 @@ def plan(scene: scenes.Scene, only: list[str] | None = None) -> dict:
         "target_error": float(table.get("target_error", 1e-3)),
         "baseline": table.get("baseline", "jacobi"),
         "repeats_limit_s": float(table.get("repeats_limit_s", 5.0)),
+        "dropped": dropped,
     }
 
 

@@ -52,8 +52,10 @@ def _compare_editions(scene, p, repeats, fmu_dir, log, say) -> dict:
 
 
 def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resume, fmi_editions) -> dict:
-    p = schedule.plan(scene, only)
     say = progress or (lambda text: None)
+    p = schedule.plan(scene, only, fmu_dir, say)
+    for name, why in p["dropped"].items():
+        say(f"{name} not run: {why}")
     log = CaseLog(out, schedule.fingerprint(scene, repeats, fmu_dir), resume=resume) if out is not None else None
     if log is not None and len(log):
         say(f"resuming: {len(log)} case(s) already in {log.path}")
