@@ -264,7 +264,7 @@ def plot(out, result, reference=None):
         for ax, unit in zip(axes[3:], ("rad/s", "N*m")):
             for color, (var, _) in zip(plotting.PAIR_COLOURS, (v for v in compared if v[1] == unit)):
                 plotting.trace(ax, t[:n], np.asarray(tr[var][:n]) - np.asarray(reference.traces[f"{name}.{var}"][:n]),
-                               color, f"error {var} (FMU - reference)")
+                               color, f"error {var}")
             ax.set_ylabel(f"FMU - reference\n[{unit}]")
         for ax in axes:
             ax.grid(alpha=0.3)

@@ -244,7 +244,7 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
             name = names[key]
             if name in traces and name in reference.traces:
                 plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),
-                               color, f"error {name} (co-simulation - reference)")
+                               color, f"error {name}")
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_ylabel(f"co-simulation - reference\n[{unit}]")
     axes[-1].set_xlabel("time [s]")
