@@ -88,6 +88,7 @@ SLOW = (
     "cli/test_api.py::test_validate_judges_given_traces_over_a_window",
     "cli/test_api.py::test_numpy_scalars_are_numbers",
     "cli/test_notebook.py::test_the_example_notebook_runs_and_shows_what_it_says",
+    "cli/test_guide_output.py::test_getting_started_shows_what_the_run_prints",
     "cli/test_command_line.py::test_a_study_says_how_long_it_will_take_before_it_runs",
     "cli/test_command_line.py::test_a_run_without_plots_lists_no_plots",
     "cli/test_command_line.py::test_a_sweep_says_how_long_it_will_take_before_it_runs",

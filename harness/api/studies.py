@@ -178,7 +178,7 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
 
 def sweep_verdict(trend: dict) -> str:
     """A trend's verdict as ``lever sweep`` prints it."""
-    from harness.studies.sweep import NOT_JUDGED
+    from harness.studies.sweep_trends import NOT_JUDGED
 
     return {"yes": "reproduced", "partly": "partly", "no": "NOT reproduced", NOT_JUDGED: NOT_JUDGED}[trend["reproduced"]]
 

@@ -88,7 +88,7 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
 @click.option("--scan", "lags", multiple=True, type=float,
               help="runup: settling times of kavz685_runup_rest at this engine torque lag [s] (repeatable)")
 def study(name, out, lags):
-    """Recompute the numbers behind a documented decision (docs/decisions.md) or statement
+    """Recompute the numbers behind a documented decision (docs/record/decisions.md) or statement
     (runup: the no-load run-up beside the monograph's 0.42 s, docs/models-and-fmus.md;
     reference-agreement: errors against the references made from the FMUs beside those against
     the monolithic one, docs/how-to/measure-your-own-error.md)."""

@@ -169,8 +169,9 @@ def impulse_limits(whole, judged):
 
 def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, transient: float, title: str,
               difference: tuple[str, np.ndarray] | None = None):
-    """A figure of quantities over time as a report judges them: the whole run (the
-    transient shaded; an impulse at the start left off the scale and its peaks named), then
+    """A figure of quantities over time as a report judges them: the whole run of each
+    series in its own panel, on one scale (the transient shaded; an impulse at the start
+    left off the scale and its peaks named), then
     each series alone over the judged window t >= start + ``transient``, zoomed to it,
     with its mean and its max and min (amplitude A = (max - min)/2, as the report states
     it), and ``difference`` (label, values) over that window when given (two curves that
@@ -185,21 +186,30 @@ def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, t
     rows = 1 + len(series) + (difference is not None)
     fig = plt.figure(figsize=(12, 1.2 + 2.1 * rows), layout="constrained")
     grid = fig.add_gridspec(rows, 2, width_ratios=(3.2, 1.0))
-    overview = fig.add_subplot(grid[0, :])
-    for label, values in series:
-        overview.plot(t, values, "-", lw=0.7, label=label)
-    mark_transient(overview, t[0], t[0] + transient)
+    # the whole run of each series in its own panel, side by side on one scale: drive and
+    # driven torque (or speed) are close, and drawn on one axes one hid the other
+    whole_row = grid[0, :].subgridspec(1, len(series), wspace=0.02)
     whole = np.concatenate([np.asarray(v, dtype=float) for _, v in series])
     limits = impulse_limits(whole, np.concatenate([np.asarray(v, dtype=float)[judged] for _, v in series]))
+    overviews = []
+    for i, (label, values) in enumerate(series):
+        overview = fig.add_subplot(whole_row[0, i], sharey=overviews[0] if overviews else None)
+        overview.plot(t, values, "-", color=f"C{i}", lw=0.7)
+        mark_transient(overview, t[0], t[0] + transient)
+        overview.set_title(f"whole run: {label}", fontsize=9, loc="left")
+        overview.grid(alpha=0.3)
+        if overviews:
+            overview.tick_params(labelleft=False)
+        overviews.append(overview)
+    overviews[0].set_ylabel(f"{ylabel} [{unit}]")
     if limits is not None:
-        overview.set_ylim(*limits)
-        overview.text(0.99, 0.97, f"start-up peaks off the scale: max {np.nanmax(whole):.4g}, "
-                      f"min {np.nanmin(whole):.4g} {unit}", transform=overview.transAxes, ha="right", va="top",
-                      fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.9})
-    overview.set_ylabel(f"{ylabel} [{unit}]")
-    overview.set_title("whole run", fontsize=9, loc="left")
-    overview.grid(alpha=0.3)
-    legend_outside(overview)
+        overviews[0].set_ylim(*limits)
+        overviews[-1].text(0.99, 0.97, f"start-up peaks off the scale: max {np.nanmax(whole):.4g}, "
+                           f"min {np.nanmin(whole):.4g} {unit}", transform=overviews[-1].transAxes, ha="right",
+                           va="top", fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.9})
+    if transient > 0:
+        overviews[-1].legend(*overviews[-1].get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                             borderaxespad=0.0, fontsize=8)
     tj = t[judged]
     panels = [(f"C{i}", label, np.asarray(values, dtype=float)[judged], f"{label} [{unit}]")
               for i, (label, values) in enumerate(series)]

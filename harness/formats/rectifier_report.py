@@ -50,7 +50,7 @@ def write_report(path, summary: dict):
     lines = report_heading(summary) + [
              f"Master **{summary['master']}**, communication step {summary['step_s']:g} s, 0 ... {summary['stop_s']:g} s; "
              f"wall time {summary['wall_time_s']:.2f} s.  One FMU (`FreewheelRectifier`) holds the whole chain "
-             "(docs/decisions.md: why one FMU)."]
+             "(docs/record/decisions.md: why one FMU)."]
     if summary["failure"]:
         interrupted = (summary.get("diagnosis") or {}).get("kind") == "interrupted"
         lines += ["", f"**The run {'was interrupted (Ctrl-C)' if interrupted else 'failed'}:** {summary['failure']}",
@@ -265,7 +265,7 @@ def plot(out, result, reference=None):
             for color, (var, _) in zip(plotting.PAIR_COLOURS, (v for v in compared if v[1] == unit)):
                 plotting.trace(ax, t[:n], np.asarray(tr[var][:n]) - np.asarray(reference.traces[f"{name}.{var}"][:n]),
                                color, f"error {var}")
-            ax.set_ylabel(f"error [{unit}]")
+            ax.set_ylabel(f"FMU - reference\n[{unit}]")
         for ax in axes:
             ax.grid(alpha=0.3)
             plotting.legend_outside(ax)

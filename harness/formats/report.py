@@ -228,8 +228,9 @@ def plot(out: Path, result: RunResult, reference=None):
 
 def reference_figure(t, traces, reference, names: dict, master: str, title: str):
     """vs_reference.png: w1, w2 and tau2 of the co-simulation over the reference's, and the
-    errors of both speeds and both torques (drive side blue, driven side red; a dense error
-    drawn as its envelope)."""
+    errors of both speeds and both torques, co-simulation - reference (positive: the
+    co-simulation above the reference; drive side blue, driven side red; a dense error drawn
+    as its envelope)."""
     plt = plotting.pyplot()
     fig, axes = plt.subplots(5, 1, figsize=(11, 12), sharex=True, layout="constrained")
     n = min(len(t), len(reference.times))
@@ -245,7 +246,7 @@ def reference_figure(t, traces, reference, names: dict, master: str, title: str)
                 plotting.trace(ax, t[:n], np.asarray(traces[name][:n]) - np.asarray(reference.traces[name][:n]),
                                color, f"error {name}")
         ax.axhline(0.0, color="0.6", lw=0.8)
-        ax.set_ylabel(f"error [{unit}]")
+        ax.set_ylabel(f"co-simulation - reference\n[{unit}]")
     axes[-1].set_xlabel("time [s]")
     for ax in axes:
         ax.grid(alpha=0.3)
@@ -305,8 +306,10 @@ def angle_figure(view: dict, key: str, rows: list, title: str):
 
 def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     """spectrum.png: amplitude spectra of the driven-shaft torque and the load torque after
-    the transient, the driven shaft's rotation frequency and the oscillograms' 415-425 rad/s
-    band marked (docs/physics.md#the-oscillograms-spectrum)."""
+    the transient, each marked at the bins the report states (the peak near the driven
+    shaft's rotation frequency and in the oscillograms' 415-425 rad/s band,
+    docs/physics.md#the-oscillograms-spectrum, both from ``metrics.spectral_components``), with
+    the window and the frequency resolution said."""
     names = metrics.signals(result.scene)
     load_torque = f"{scene_kinds.roles(result.scene)[2]}.load_torque"
     transient = result.scene.experiment.transient
@@ -314,22 +317,32 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
     keep = t >= t[0] + transient
     if keep.sum() < 8:
         return
-    rotation = float(abs(tr[names["w2"]][keep].mean()))
+    stated = metrics.spectral_components(t, tr, [names["tau2"], load_torque], names["w2"], transient)
+    rotation = abs(stated["rotation_frequency_rad_s"])
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True, layout="constrained")
+    resolution = None
     for ax, (name, label) in zip(axes, ((names["tau2"], f"{names['tau2']}, torque on the driven shaft"),
-                                        (load_torque, "load torque Mc"))):
+                                        (load_torque, f"{load_torque}, the load's resisting torque"))):
         if name not in tr:
             continue
         omega, amplitude = metrics.amplitude_spectrum(t, tr[name], transient)
+        resolution = float(omega[1] - omega[0]) if len(omega) > 1 else resolution
         ax.semilogy(omega, np.maximum(amplitude, 1e-6), "C0-", lw=0.7, label=label)
-        ax.axvline(rotation, color="C3", ls="--", lw=0.8, label=f"shaft rotation {rotation:.3g} rad/s")
+        ax.axvline(rotation, color="C3", ls="--", lw=0.8, label=f"mean driven-shaft speed {rotation:.4g} rad/s")
         ax.axvspan(*metrics.OSCILLOGRAM_BAND, color="C2", alpha=0.3, label="415-425 rad/s (oscillograms)")
+        for key, marker, color in (("rotation", "o", "C3"), ("band", "s", "C2")):
+            peak = stated.get(name, {}).get(key)
+            if peak:        # the bin and amplitude report.md states
+                ax.plot(peak["frequency_rad_s"], peak["amplitude"], marker, color=color, mfc="none", ms=8, mew=1.5,
+                        label=f"peak {peak['amplitude']:.3g} N*m at {peak['frequency_rad_s']:.4g} rad/s")
         ax.set_ylabel("amplitude [N*m]")
         ax.set_ylim(1e-4, None)
         ax.grid(alpha=0.3)
         plotting.legend_outside(ax)
     axes[-1].set_xlim(0.0, 600.0)
-    axes[-1].set_xlabel("angular frequency [rad/s]")
+    window = t[keep][-1] - t[keep][0]
+    axes[-1].set_xlabel("angular frequency [rad/s]" + ("" if resolution is None else
+                        f"  (Hann window over {window:.4g} s: bins {resolution:.3g} rad/s apart)"))
     fig.suptitle(f"{title}: spectrum after t = {t[0] + transient:g} s")
     save_figure(fig, out / "spectrum.png")
 

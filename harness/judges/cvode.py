@@ -4,7 +4,7 @@ stiff scenes, Adams for lightly damped ones, with the physics' analytic Jacobian
 
 The right-hand side is the monolithic reference's (``Driveline.derivatives``); only the
 integrator differs.  ``monolithic.solve`` takes it as ``method="CVODE-BDF"`` or
-``"CVODE-Adams"`` (docs/decisions.md: why CVODE, and why this binding).
+``"CVODE-Adams"`` (docs/record/decisions.md: why CVODE, and why this binding).
 """
 from __future__ import annotations
 

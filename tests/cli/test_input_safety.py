@@ -3,7 +3,7 @@ units of the wrong dimension, values of the wrong type, honest verdicts on trace
 NaN or absurd samples, unconnected inputs, scenes that are not the standard driveline,
 and one error path (exit 2 and a sentence, no traceback) at every entry point; a
 property-based test drives the CLI in-process with generated scene files, --set values
-and CSVs.  docs/reliability.md has the table of these classes and their counts."""
+and CSVs.  docs/record/reliability-cases.md has the table of these classes and their counts."""
 from __future__ import annotations
 
 import csv

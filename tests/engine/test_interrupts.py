@@ -332,8 +332,9 @@ def test_dask_sweep_interrupted_logs_the_case_under_way(tmp_path, fmu_dir, monke
     the case a worker is running is logged as interrupted, the queued ones are not logged."""
     distributed = pytest.importorskip("distributed")
     from harness.studies import sweep as sweeps
+    from harness.studies import sweep_axes
 
-    axis = sweeps.Axis("stiffness", "3.17", "c", [450.0, 600.0, 900.0], sweeps.FIG_317, "coupling.stiffness")
+    axis = sweeps.Axis("stiffness", "3.17", "c", [450.0, 600.0, 900.0], sweep_axes.FIG_317, "coupling.stiffness")
     record = CaseLog.record
 
     def record_then_interrupt(self, key, result):

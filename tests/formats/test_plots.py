@@ -10,6 +10,7 @@ from types import SimpleNamespace
 from harness.formats import plotting, report
 from harness.studies import stability_report
 from harness.studies import sweep as sweeps
+from harness.studies import sweep_report
 from harness.studies.bench import Case
 from harness.studies.bench import report as bench_report
 
@@ -27,8 +28,10 @@ def test_a_time_view_zooms_the_judged_window_to_its_values():
     t, y = _start_up_and_ripple()
     fig = plotting.time_view(t, [("-tau1 (drive)", y), ("tau2 (driven)", y + 0.5)], "torque", "N*m", 2.0, "x",
                              ("tau2 - (-tau1)", np.full_like(y, 0.5)))
-    overview, drive, _, driven, _, difference = fig.axes[:6]      # each judged panel has its detail beside it
-    assert overview.get_ylim()[0] < 1.0 and overview.get_ylim()[1] > 119.0     # the whole run, start-up and all
+    # the whole run of each series in its own panel, then each judged panel with its detail beside it
+    whole_drive, whole_driven, drive, _, driven, _, difference = fig.axes[:7]
+    for overview in (whole_drive, whole_driven):
+        assert overview.get_ylim()[0] < 1.0 and overview.get_ylim()[1] > 119.0     # the whole run, start-up and all
     for ax, shift in ((drive, 0.0), (driven, 0.5)):
         low, high = ax.get_ylim()
         # the ripple fills the panel: its +-6 N*m is most of the axis, not a twentieth of 0-120
@@ -73,11 +76,11 @@ def test_an_impulse_at_the_start_is_left_off_the_overviews_scale_and_its_peaks_n
     t, a1, a2 = _accelerations()
     fig = plotting.time_view(t, [("a1 (drive)", a1), ("a2 (driven)", a2)], "acceleration", "rad/s^2", 2.0, "x",
                              ("a2 - a1", a2 - a1))
-    overview = fig.axes[0]
-    low, high = overview.get_ylim()
+    overviews = fig.axes[:2]
+    low, high = overviews[0].get_ylim()
     # the running wave (+-37) is a readable part of the axis, not a twentieth of +-600
     assert -300 < low < -37 and 37 < high < 300
-    (note,) = [text.get_text() for text in overview.texts]
+    (note,) = [text.get_text() for ax in overviews for text in ax.texts]
     assert "off the scale" in note and "600" in note
     plt.close(fig)
 
@@ -91,7 +94,7 @@ def test_a_dense_curve_is_drawn_as_its_envelope_and_its_wave_in_a_detail_beside_
     plt = plotting.pyplot()
     t, a1, a2 = _accelerations()
     fig = plotting.time_view(t, [("a1 (drive)", a1), ("a2 (driven)", a2)], "acceleration", "rad/s^2", 2.0, "x")
-    _, drive, drive_detail, driven, driven_detail = fig.axes
+    _, _, drive, drive_detail, driven, driven_detail = fig.axes
     assert not drive.collections and any(len(line.get_xdata()) > 7000 for line in drive.lines)   # a line
     assert driven.collections                                                    # an envelope (filled band)
     assert all(len(line.get_xdata()) <= plotting.ENVELOPE_SLICES for line in driven.lines)
@@ -184,15 +187,15 @@ REPORTED_318 = {"dA_w": [(10, 0.28), (35, 1.37)], "dA_a": [(10, 225.0), (35, 98.
 
 
 def test_the_sweep_says_how_far_and_which_way_the_model_is_from_the_monograph():
-    compared = {c["key"]: c for c in sweeps.against_monograph(_sweep_rows(), REPORTED_318)}
+    compared = {c["key"]: c for c in sweep_report.against_monograph(_sweep_rows(), REPORTED_318)}
     tau = compared["dA_tau"]
     assert tau["model"] == [-0.43, -2.1] and tau["opposite_sign_at"] == [10, 35]
     assert 25 < tau["ratio"][0] <= tau["ratio"][1] < 27
     assert compared["dA_a"]["opposite_sign_at"] == [35]
-    sentence = sweeps.comparison_sentence(tau)
+    sentence = sweep_report.comparison_sentence(tau)
     assert "+11 -> +56" in sentence and "-0.43 -> -2.1" in sentence and sentence.endswith("of opposite sign")
-    assert sweeps.comparison_sentence(compared["dA_a"]).endswith("of opposite sign at 35")
-    assert "opposite" not in sweeps.comparison_sentence(compared["dA_w"])
+    assert sweep_report.comparison_sentence(compared["dA_a"]).endswith("of opposite sign at 35")
+    assert "opposite" not in sweep_report.comparison_sentence(compared["dA_w"])
 
 
 def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_the_gap(tmp_path, monkeypatch):
@@ -200,7 +203,7 @@ def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_
     plt = plotting.pyplot()
     monkeypatch.setattr(plt.Figure, "savefig", lambda fig, path, **options: drawn.setdefault("fig", fig))
     axis = sweeps.select(["misalignment"])[0]
-    sweeps._plot(tmp_path / "s.png", axis, _sweep_rows(), REPORTED_318)
+    sweep_report._plot(tmp_path / "s.png", axis, _sweep_rows(), REPORTED_318)
     fig = drawn["fig"]
     assert len(fig.axes) == 6                                       # two rows: no row of the monograph's own
     torque_dA = fig.axes[5]
@@ -227,7 +230,7 @@ def test_a_run_of_three_samples_gets_a_detail_of_two_without_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         fig = plotting.time_view(t, [("a", y), ("b", y)], "x", "u", 0.0, "t", ("d", y - y))
-    assert fig.axes[2].get_xlim() == (0.001, 0.002)
+    assert fig.axes[3].get_xlim() == (0.001, 0.002)      # the first judged panel's detail
     plt.close(fig)
 
 
@@ -237,3 +240,79 @@ def test_the_pair_colours_are_not_neighbours_in_the_colour_cycle():
 
     a, b = (np.array(to_rgb(c)) for c in plotting.PAIR_COLOURS)
     assert np.abs(a - b).sum() > 1.0
+
+
+def test_the_reference_plot_says_which_way_its_error_is_taken():
+    plt = plotting.pyplot()
+    t, names, reference, run = _reference_and_run()
+    fig = report.reference_figure(t, run, reference, names, "jacobi", "x")
+    for ax in fig.axes[3:]:
+        assert "co-simulation - reference" in ax.get_ylabel()
+    plt.close(fig)
+
+
+def test_the_whole_run_draws_each_series_in_its_own_panel_on_one_scale():
+    """Drive and driven torque lie within a few N*m of each other: on one axes one hid the
+    other; side by side, each is seen, on the same scale."""
+    plt = plotting.pyplot()
+    t, y = _start_up_and_ripple()
+    fig = plotting.time_view(t, [("-tau1 (drive)", y), ("tau2 (driven)", y + 0.5)], "torque", "N*m", 2.0, "x")
+    whole = [ax for ax in fig.axes if ax.get_title(loc="left").startswith("whole run")]
+    assert [ax.get_title(loc="left") for ax in whole] == ["whole run: -tau1 (drive)", "whole run: tau2 (driven)"]
+    assert [len(ax.lines) for ax in whole] == [1, 1]
+    assert whole[0].get_ylim() == whole[1].get_ylim()
+    plt.close(fig)
+
+
+def _work_precision_label(tmp_path, monkeypatch, repeats: int) -> str:
+    cases = [Case("jacobi", "master", step, None, wall_times=[0.1 * k for k in range(1, repeats + 1)],
+                  errors={"tau_rms": error}) for step, error in ((1e-3, 1e-2), (5e-4, 5e-3))]
+    drawn = {}
+    plt = plotting.pyplot()
+    monkeypatch.setattr(plt.Figure, "savefig", lambda fig, path, **options: drawn.setdefault("ax", fig.axes[0]))
+    bench_report.plot(tmp_path / "wp.png", {"cases": cases, "claims": {"target_error": 1e-3}, "scene": "x"})
+    return drawn["ax"].get_xlabel()
+
+
+def test_the_work_precision_plot_says_median_only_of_repeated_runs(tmp_path, monkeypatch):
+    once = _work_precision_label(tmp_path, monkeypatch, 1)
+    assert "median" not in once and "one run each" in once
+    assert "(median of up to 3 repeats)" in _work_precision_label(tmp_path, monkeypatch, 3)
+
+
+def test_the_spectrum_marks_the_bins_the_report_states_and_says_its_resolution(tmp_path, monkeypatch):
+    """A shaft-order line at 36.66 rad/s over an 8 s window falls between bins 0.785 rad/s
+    apart: the report states the bin's frequency, and the plot marks that bin, not the
+    mean speed; the load torque is named as the traces name it."""
+    from harness.description import scene as scenes
+    from harness.judges import metrics
+
+    scene = scenes.load("kavz685")
+    names = metrics.signals(scene)
+    t = np.arange(0.0, 10.0 + 5e-4, 1e-3)
+    speed = 36.66
+    load = 107.5 + 4.8 * np.sin(speed * t) + 0.9 * np.sin(418.0 * t)
+    traces = {names["w2"]: np.full_like(t, speed), names["tau2"]: load + 0.1 * np.sin(73.3 * t),
+              "load.load_torque": load}
+    result = SimpleNamespace(scene=scene, times=t, traces=traces)
+    drawn = {}
+    plt = plotting.pyplot()
+    monkeypatch.setattr(report, "save_figure", lambda fig, path: drawn.setdefault("fig", fig))
+    report._plot_spectrum(tmp_path, result, "x", plt)
+    stated = metrics.spectral_components(t, traces, [names["tau2"], "load.load_torque"], names["w2"],
+                                         scene.experiment.transient)
+    torque, load_axes = drawn["fig"].axes
+    assert load_axes.get_legend_handles_labels()[1][0].startswith("load.load_torque")
+    for ax, name in ((torque, names["tau2"]), (load_axes, "load.load_torque")):
+        marks = {line.get_label(): (line.get_xdata()[0], line.get_ydata()[0]) for line in ax.lines
+                 if line.get_label().startswith("peak")}
+        for key in ("rotation", "band"):
+            peak = stated[name][key]
+            assert (peak["frequency_rad_s"], peak["amplitude"]) in marks.values()
+        rotation_bin = stated[name]["rotation"]["frequency_rad_s"]
+        assert abs(rotation_bin - speed) > 0.05            # a bin beside the mean speed, marked as such
+        assert f"{rotation_bin:.4g} rad/s" in " ".join(marks)
+    window = 10.0 - scene.experiment.transient
+    label = load_axes.get_xlabel()
+    assert "Hann" in label and f"{2 * np.pi / window:.3g} rad/s" in label
+    plt.close(drawn["fig"])

@@ -1,5 +1,5 @@
 """The unsplit driveline under SUNDIALS CVODE (harness.judges.cvode): the same right-hand
-side as the DOP853 reference, the physics' analytic Jacobian (docs/decisions.md)."""
+side as the DOP853 reference, the physics' analytic Jacobian (docs/record/decisions.md)."""
 from __future__ import annotations
 
 import numpy as np

@@ -31,7 +31,7 @@ DEG = math.pi / 180.0
 
 # Fig. 3.7, as printed (monograph lines 912-914): (alpha [deg], D2s/l2, D2h/lc2, dU12).
 # The text names only the deformation it varies; the other is the figure's 0.03 (a
-# stated assumption of docs/decisions.md, "Interpolating the reported amplitudes").
+# stated assumption of docs/record/decisions.md, "Interpolating the reported amplitudes").
 FIG_3_7 = (
     (5.0, 0.03, 0.03, 0.065),    # "at alpha = 5 deg ... 0.065 at D2/l2 = 0,03"
     (30.0, 0.05, 0.03, 0.34),    # "to 30 deg at D2/l2 = 0,05 ... reaches 0.34"
@@ -42,7 +42,7 @@ FIG_3_7 = (
 )
 
 # The scaled mode interpolates the six points by k sin(alpha)^p (D2s^q + D2h^r), four
-# constants (docs/decisions.md): it cannot pass through all six.  Measured deviations of
+# constants (docs/record/decisions.md): it cannot pass through all six.  Measured deviations of
 # the scaled U12's amplitude from the printed ones (in the order above): -5.2 %, -17.5 %,
 # +0.7 %, +8.0 %, +13.6 %, +3.5 %.  Allowed: 20 % (1.14x the largest).  A mistyped point (0.34 -> 0.034)
 # bends the fit by -64 % at that point and by 30-40 % at others.

@@ -4,7 +4,7 @@ The table below is typed from the sources, not read from ``lever.physics.compone
 the physical bounds (a spring's stiffness > 0, a damping or a load's random bound >= 0,
 a relative deformation >= 0, the misalignment's geometric working range alpha < 75 deg,
 the engine slope K1 >= 0...) from docs/physics.md (section given per row), the
-computability bounds from docs/decisions.md ("Ranges that keep every admitted value
+computability bounds from docs/record/decisions.md ("Ranges that keep every admitted value
 computable": inertias from 1e-6 kg*m2), and the engineering caps (1e9 N*m/rad...) from the
 FMUs' own documentation (``documentation/_main.html``, generated at build).  The
 bad-input corpus (harness/formats/badinputs/) is generated from the parameter declarations it tests, so a
@@ -41,7 +41,7 @@ RANGES = [
     ("LeverCoupling", "hinge_deformation", 0.0, 0.5, False, True, "physics.md#the-driven-halfs-displacement: relative deformation D2h/lc2"),
     ("LeverCoupling", "misalignment", 0.0, 75 * DEG, False, True, "physics.md#misalignment-range-and-time-varying-input: geometric working range < 75 deg"),
     # -- the engine shaft (docs/physics.md#engine) --
-    ("EngineShaft", "inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("EngineShaft", "inertia", 1e-6, 1e6, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
     ("EngineShaft", "stall_torque", -1e6, 1e6, False, False, "FMU docs"),
     ("EngineShaft", "torque_slope", 0.0, 1e6, False, False, "physics.md#the-line: Mg = M1 - K1*w falls with speed, K1 >= 0"),
     ("EngineShaft", "torque_lag", 0.0, 100.0, False, False, "a time constant, >= 0 (0: no lag); cap: FMU docs"),
@@ -50,7 +50,7 @@ RANGES = [
     ("EngineShaft", "w_start", -1e5, 1e5, False, False, "FMU docs"),
     ("EngineShaft", "max_substep", 0.0, 1.0, True, False, "FMU docs: an integration step, > 0"),
     # -- the load shaft (docs/physics.md#loads) --
-    ("LoadShaft", "inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("LoadShaft", "inertia", 1e-6, 1e6, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
     ("LoadShaft", "mean_torque", -1e6, 1e6, False, False, "FMU docs"),
     ("LoadShaft", "random_amplitude", 0.0, 1e6, False, False, "physics.md#constant-and-random: |Mc - Mm| <= dM, dM >= 0"),
     ("LoadShaft", "band_low", 0.0, 1e5, True, False, "FMU docs: a frequency of the random part, > 0"),
@@ -69,10 +69,10 @@ RANGES = [
     # -- the freewheel rectifier (docs/physics.md#freewheel-rectifier; the paper's eqs. (1)-(18)) --
     ("FreewheelRectifier", "input_speed", 0.0, 1e4, True, False, "physics.md#freewheel-rectifier: rocker frequency, > 0"),
     ("FreewheelRectifier", "rocker_amplitude", 0.0, 1.5, True, False, "physics.md#freewheel-rectifier: phi0 > 0"),
-    ("FreewheelRectifier", "half_coupling_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
-    ("FreewheelRectifier", "driven_parts_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
-    ("FreewheelRectifier", "torsion_end_inertia", 1e-6, 1e3, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
-    ("FreewheelRectifier", "flywheel_inertia", 1e-6, 1e6, False, False, "docs/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "half_coupling_inertia", 1e-6, 1e3, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "driven_parts_inertia", 1e-6, 1e3, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "torsion_end_inertia", 1e-6, 1e3, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
+    ("FreewheelRectifier", "flywheel_inertia", 1e-6, 1e6, False, False, "docs/record/decisions.md: inertias from 1e-6 kg*m2"),
     ("FreewheelRectifier", "ramp_angle", 0.0, math.pi / 2, True, True, "ramp inclination in (0, 90 deg): tan finite"),
     ("FreewheelRectifier", "contact_radius", 0.0, 10.0, True, False, "a radius, > 0"),
     ("FreewheelRectifier", "disc_friction", 0.0, 2.0, False, False, "a friction coefficient, >= 0"),

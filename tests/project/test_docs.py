@@ -87,6 +87,33 @@ def test_no_issue_numbers_outside_the_changelog():
     assert offenders == []
 
 
+# Who built the project is no part of its docs: the words that spoke of the people at work
+# beside a measurement, or of who asked for a change.  Written in pieces so that this file
+# does not match itself.
+BUILDERS = re.compile("|".join([r"other engin" + r"eers", r"engin" + r"eers' work", r"\bthe fil" + r"er\b",
+                                r"next engin" + r"eer", r"engin" + r"eering record"]), re.I)
+
+
+def test_the_builders_pattern_sees_each_wording():
+    for line in ["beside seven other engin" + "eers' work", "the fil" + "er's result", "for the next engin" + "eer",
+                 "the Engin" + "eering record"]:
+        assert BUILDERS.search(line), line
+    for line in ["a driveline designer", "the filter", "profiler"]:
+        assert not BUILDERS.search(line), line
+
+
+def test_no_page_speaks_of_who_built_it():
+    """The README and the docs speak of the project; the changelog's history is exempt."""
+    offenders = []
+    for name in tracked_files():
+        if not (name == "README.md" or name.startswith("docs/") and name.endswith(".md")) or name in HISTORY:
+            continue
+        for number, line in enumerate((ROOT / name).read_text(encoding="utf-8").splitlines(), 1):
+            if BUILDERS.search(line):
+                offenders.append(f"{name}:{number}: {line.strip()[:120]}")
+    assert offenders == []
+
+
 def anchors(markdown: str) -> set[str]:
     """GitHub's anchors of a page's headings: lower case, punctuation dropped, spaces as '-'."""
     out = set()

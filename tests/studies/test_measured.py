@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from harness.studies import measured
+from harness.studies import measured, measured_conditions
 from harness.description import scene as scenes
 from harness.paths import DATA
 from lever.physics.load import fourier_from_samples, read_harmonics
@@ -113,7 +113,7 @@ def test_committed_grade_scenes_are_the_ones_the_command_builds():
                     assert mine == theirs, (drive.grade, name, key)
                 else:
                     assert math.isclose(mine, theirs, rel_tol=1e-9), (drive.grade, name, key)
-        assert committed.experiment.stop == built.experiment.stop and committed.experiment.master == measured.MASTER
+        assert committed.experiment.stop == built.experiment.stop and committed.experiment.master == measured_conditions.MASTER
 
 
 def test_a_new_measurement_is_checked_the_same_way(tmp_path, fmu_dir):

@@ -8,15 +8,17 @@ import json
 import pytest
 
 from harness.studies import sweep as sweeps
+from harness.studies import sweep_axes
+from harness.studies.sweep_trends import NOT_JUDGED
 
 # Short runs: 0.6 s simulated, amplitudes after 0.2 s.
 SHORT = ["experiment.transient=0.2"]
 
 
 def _axes():
-    return [sweeps.Axis("stiffness", "3.17", "c", [450.0, 900.0], sweeps.FIG_317, "coupling.stiffness"),
+    return [sweeps.Axis("stiffness", "3.17", "c", [450.0, 900.0], sweep_axes.FIG_317, "coupling.stiffness"),
             # a damping the coupling refuses: the case fails, the others complete
-            sweeps.Axis("damping", "3.17", "b", [-1.0], sweeps.FIG_317, "coupling.damping")]
+            sweeps.Axis("damping", "3.17", "b", [-1.0], sweep_axes.FIG_317, "coupling.damping")]
 
 
 def test_local_sweep_keeps_failures_and_resumes(tmp_path, fmu_dir):
@@ -135,7 +137,7 @@ def test_no_verdict_from_too_few_cases(verdict):
     for r in results[1:3]:
         r["result"] = {"status": "failed", "error": "SceneInvalid: not valid:\n  - a | b"}
     found = _one({t["trend"]: t for t in sweeps.trends(sweeps.select([axis]), results)}, title)
-    assert found["reproduced"] == sweeps.NOT_JUDGED
+    assert found["reproduced"] == NOT_JUDGED
     assert found["numbers"].startswith(f"not judged: 2 of {len(XS)} cases ran")
 
 

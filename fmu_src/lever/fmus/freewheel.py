@@ -1,7 +1,7 @@
 """``FreewheelRectifier`` FMU: the whole rectifier chain - prescribed rocker, half-couplings
 on their ball ramps, friction discs, torsion shaft, gear mesh and output flywheel - in one
 FMU, because its gaps and stiff contacts (2000-5000 rad/s) must be stepped by one
-integrator with located events (docs/decisions.md).
+integrator with located events (docs/record/decisions.md).
 
 Its port is the output shaft, with a shaft's causality (``tau -> phi, w, a``, no direct
 feedthrough of ``phi, w``): a downstream model can be coupled through a compliant element

@@ -23,7 +23,7 @@ INF = math.inf
 
 #: The transfer-function mode of the KAVZ-685 scene and of the coupling FMU's default.
 #: Chosen by comparing both modes with the monograph's reported amplitudes and the
-#: measurements (docs/decisions.md): "kinematic".
+#: measurements (docs/record/decisions.md): "kinematic".
 DEFAULT_TRANSFER_MODE = "kinematic"
 
 COUPLING = (

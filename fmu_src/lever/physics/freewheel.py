@@ -19,7 +19,7 @@ The chain, from the drive to the output (the paper's Fig. 2):
    (5 kg*m^2 models the paper's stop mode), with a Coulomb resistance ``Mc`` and a
    torque port ``tau`` for a downstream model.
 
-How the printed equations are used (and where they are not) is in docs/decisions.md.
+How the printed equations are used (and where they are not) is in docs/record/decisions.md.
 Here, in short: the model is written as torques on the relative coordinates, each
 with an exact potential, so power in = d(kinetic + elastic)/dt + output + dissipated
 holds identically:

@@ -127,7 +127,7 @@ class TransferFunction:
         self.hinge_deformation = float(hinge_deformation)
         # d_alpha: the support's tilt, no more than the misalignment that loads it, so that
         # U12 -> 1 continuously as alpha -> 0 (the full tilt at alpha -> 0+ would leave a
-        # 4.5e-4 ripple there, where U12 = 1 exactly at alpha = 0; docs/decisions.md)
+        # 4.5e-4 ripple there, where U12 = 1 exactly at alpha = 0; docs/record/decisions.md)
         self.tilt = min(math.asin(self.support_deformation), self.alpha)
         self.phase_shift = math.asin(self.hinge_deformation)     # d_phi
         coefficients = []

@@ -297,6 +297,7 @@ def plot(path: Path, result: dict) -> Path:
         key = ({"monolithic": "monolithic (scipy DOP853)", "monolithic-cvode": "monolithic (CVODE)"}
                .get(case.engine, case.engine))
         groups.setdefault(key, []).append(case)
+    repeats = 1
     for name, group in groups.items():
         # joined in the order of their setting, loosest first: sorted by run time, two points
         # whose times differ by the machine's noise swapped places and the line zig-zagged
@@ -304,6 +305,7 @@ def plot(path: Path, result: dict) -> Path:
                      key=lambda c: -(c.tolerance if c.tolerance is not None else c.step or 0.0))
         if not ran:
             continue
+        repeats = max(repeats, *(len(c.wall_times) for c in ran))
         kind = group[0].kind
         style = {"master": "-o", "peer": "--s", "monolithic": ":^"}[kind]
         line, = ax.loglog([c.wall for c in ran], [100 * c.errors["tau_rms"] for c in ran], style, label=name,
@@ -315,7 +317,9 @@ def plot(path: Path, result: dict) -> Path:
                             xytext=(3, 3), fontsize=6, color=line.get_color())
     target = result["claims"]["target_error"]
     ax.axhline(100 * target, color="grey", lw=0.8, ls="--", label=f"target error {100 * target:g} %")
-    ax.set_xlabel("run time of the stepping loop [s] (median)")
+    # a median only where a case was timed more than once (`--repeats 1`: each point is one run)
+    ax.set_xlabel("run time of the stepping loop [s] " +
+                  (f"(median of up to {repeats} repeats)" if repeats > 1 else "(one run each)"))
     ax.set_ylabel("RMS torque error [% of mean torque]")
     ax.set_title(f"Work-precision, scene {result['scene']} (numbers: the communication step in ms)")
     ax.grid(True, which="both", alpha=0.3)
