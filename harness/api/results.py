@@ -241,6 +241,14 @@ class Returned(dict):
         return "\n".join(lines) + ")"
 
 
+class ReturnedTuple(tuple):
+    """What a command returns as a pair or triple (``text, path = api.study(...)``, ``outcomes,
+    summary = api.bad_inputs()``): a tuple whose ``repr()`` gives each item in brief."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(" + ", ".join(brief(item) for item in self) + ")"
+
+
 class StabilityMapResult(Returned):
     """What ``stability_map`` returns: ``["result"]`` (every case and its class,
     ``harness.studies.stabilitymap.StabilityMap``), ``["agreement"]`` (the prediction against

@@ -12,7 +12,7 @@ from harness.api import inputs as _inputs
 from harness.api.building import build
 from harness.api.choices import check_masters, load
 from harness.api.inputs import InputError
-from harness.api.results import BenchResult, Returned, StabilityMapResult
+from harness.api.results import BenchResult, Returned, ReturnedTuple, StabilityMapResult
 from harness.description import scene as scene_files
 from harness.paths import FMUS
 
@@ -193,7 +193,7 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
         (out / "runup.md").write_text(text + "\n")
-        return text, out / "runup.md"
+        return ReturnedTuple((text, out / "runup.md"))
     if name not in ("transfer-modes", "reference-agreement"):
         raise InputError(f"no study '{name}' (known: transfer-modes, runup, reference-agreement)")
     if lags:
@@ -205,11 +205,11 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
         text = reference_agreement.study()
         out.mkdir(parents=True, exist_ok=True)
         (out / "reference_agreement.md").write_text(text + "\n")
-        return text, out / "reference_agreement.md"
+        return ReturnedTuple((text, out / "reference_agreement.md"))
     from harness.studies import decisions
 
     build()
-    return decisions.transfer_modes(out), out / "transfer_modes.md"
+    return ReturnedTuple((decisions.transfer_modes(out), out / "transfer_modes.md"))
 
 
 def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, stiffness: float | None = None,

@@ -114,6 +114,18 @@ class Scene:
     #: where the values came from, not what the scene is (equal scenes compare equal)
     overrides: dict = field(default_factory=dict, compare=False)
 
+    def __repr__(self) -> str:
+        """In a line or two (a notebook's output): the components, the experiment, the
+        overrides and the file, not the notes and tables."""
+        e = self.experiment
+        text = (f"Scene({self.name}: {len(self.components)} components ("
+                + ", ".join(f"{n} {fmu_name(c.fmu)}" for n, c in self.components.items())
+                + f"), {len(self.connections)} connections, t = {e.start:g} ... {e.stop:g} s, step {e.step:g} s, "
+                f"master {e.master}, {len(self.record)} signals recorded"
+                + (f", --set {'; '.join(f'{k} = {v}' for k, v in self.overrides.items())}" if self.overrides else "")
+                + (f", from {self.path}" if self.path else "") + ")")
+        return text if len(text) <= 2000 else text[:1995] + "...)"
+
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
         return next((n for n, c in self.components.items() if fmu_name(c.fmu) == fmu), None)
