@@ -163,46 +163,45 @@ def validation_problems(table: dict) -> list[str]:
     return problems
 
 
-#: the ``[bench]`` table's keys (harness.studies.bench.schedule reads them): key -> its shape
-BENCH_KEYS = {"steps": "per master, a list of steps [s]", "tolerances": "per master, a list of tolerances",
-              "peers": "per peer, a list of steps [s]", "peer_tolerances": "per peer, a list of numbers",
-              "output_steps": "per master, a step [s]", "monolithic_rtol": "a list of tolerances",
-              "monolithic_cvode_rtol": "a list of tolerances", "target_error": "a number",
-              "repeats_limit_s": "a number of seconds", "baseline": "a master's name (a string)"}
+#: the ``[bench]`` table's keys (harness.studies.bench.schedule reads them): key -> (shape, in words)
+BENCH_KEYS = {"steps": ("table of numbers", "a list of steps [s] per master"),
+              "tolerances": ("table of numbers", "a list of tolerances per master"),
+              "peers": ("table of numbers", "a list of steps [s] per peer"),
+              "peer_tolerances": ("table of numbers", "a list of numbers per peer"),
+              "output_steps": ("table of number", "a step [s] per master"),
+              "monolithic_rtol": ("numbers", "a list of tolerances"),
+              "monolithic_cvode_rtol": ("numbers", "a list of tolerances"),
+              "target_error": ("number", "a number"), "repeats_limit_s": ("number", "a number of seconds"),
+              "baseline": ("text", "a master's name (a string)")}
 
 
 def bench_problems(table: dict) -> list[str]:
     """The ``[bench]`` table's keys it does not have and values not of their shape
-    (``BENCH_KEYS``): numbers are numbers, never booleans or strings."""
+    (``BENCH_KEYS``), each by its full name (``bench.steps.jacobi``): numbers are numbers,
+    never booleans or strings."""
     problems = []
     for key, value in table.items():
         if key not in BENCH_KEYS:
             problems.append(f"bench.{key}: no such key{did_you_mean(key, BENCH_KEYS)} (a [bench] table has: "
                             f"{', '.join(BENCH_KEYS)})")
             continue
-        what = BENCH_KEYS[key]
-        if key == "baseline":
-            ok = isinstance(value, str)
-        elif key in ("target_error", "repeats_limit_s"):
-            ok = units.is_number(value)
-        elif key in ("monolithic_rtol", "monolithic_cvode_rtol"):
-            ok = isinstance(value, list) and all(map(units.is_number, value))
-        elif key == "output_steps":
-            ok = isinstance(value, dict) and all(map(units.is_number, value.values()))
-        else:
-            ok = isinstance(value, dict) and all(isinstance(v, list) and all(map(units.is_number, v))
-                                                 for v in value.values())
-        if not ok:
-            problems.append(f"bench.{key} = {units.kind_of_value(value) if not isinstance(value, dict) else 'a table'}"
-                            f"{_first_wrong(value)}: expected {what}")
+        shape, what = BENCH_KEYS[key]
+        if shape.startswith("table of ") and not isinstance(value, dict):
+            problems.append(f"bench.{key} = {units.kind_of_value(value)}: expected a table of {what}")
+            continue
+        entries = value.items() if shape.startswith("table of ") else [(None, value)]
+        element = shape.removeprefix("table of ")
+        for inner, entry in entries:
+            label = f"bench.{key}" + (f".{inner}" if inner is not None else "")
+            if element == "text":
+                wrong = None if isinstance(entry, str) else units.kind_of_value(entry)
+            elif element == "number":
+                wrong = None if units.is_number(entry) else units.kind_of_value(entry)
+            elif not isinstance(entry, list):
+                wrong = units.kind_of_value(entry)
+            else:
+                wrong = next((f"a list (item {k}: {units.kind_of_value(x)})" for k, x in enumerate(entry)
+                              if not units.is_number(x)), None)
+            if wrong is not None:
+                problems.append(f"{label} = {wrong}: expected {what.replace(' per master', '').replace(' per peer', '')}")
     return problems
-
-
-def _first_wrong(value) -> str:
-    """`` (X.y = the boolean true)``: the first value of a table or list that is not a number."""
-    items = list(value.items()) if isinstance(value, dict) else list(enumerate(value)) if isinstance(value, list) else []
-    for key, inner in items:
-        for number in (inner if isinstance(inner, list) else [inner]):
-            if not units.is_number(number):
-                return f" ({key}: {units.kind_of_value(number)})"
-    return ""

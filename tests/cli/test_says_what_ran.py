@@ -14,12 +14,15 @@ import warnings
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from harness import api
 from harness.api import results
 from harness.description import scene as scenes
 from harness.description import units
 from harness.formats.run_files import run_title
+from test_input_safety import VALUES, _toml_value     # the corpus's generated values (this folder is on sys.path)
 
 SHORT = 0.05        # s: the runs here are about the record, not the motion
 
@@ -153,9 +156,12 @@ def test_strict_is_a_boolean():
     ("[validation.torque]\nmean = false\n", "validation.torque.mean = the boolean false"),
     ("[bench]\ntarget_error = \"1e-3\"\n", "bench.target_error = '1e-3': expected a number"),
     ("[bench]\nrepeats_limit_s = true\n", "bench.repeats_limit_s = the boolean true"),
-    ("[bench]\nmonolithic_rtol = [1e-6, \"1e-8\"]\n", "bench.monolithic_rtol = a list"),
-    ("[bench.steps]\njacobi = [true, 1e-3]\n", "bench.steps = a table (jacobi: the boolean true)"),
-    ("[bench.output_steps]\nadaptive = \"1 ms\"\n", "bench.output_steps = a table (adaptive: '1 ms')"),
+    ("[bench]\nmonolithic_rtol = [1e-6, \"1e-8\"]\n", "bench.monolithic_rtol = a list (item 1: '1e-8')"),
+    ("[bench.steps]\njacobi = [true, 1e-3]\n", "bench.steps.jacobi = a list (item 0: the boolean true): expected a "
+                                             "list of steps [s]"),
+    ("[bench.steps]\njacobi = 1e-3\n", "bench.steps.jacobi = 0.001: expected a list of steps [s]"),
+    ("[bench]\nsteps = [1e-3]\n", "bench.steps = a list: expected a table of a list of steps [s] per master"),
+    ("[bench.output_steps]\nadaptive = \"1 ms\"\n", "bench.output_steps.adaptive = '1 ms': expected a step [s]"),
     ("[bench]\ntarget_eror = 1e-3\n", "bench.target_eror: no such key (did you mean 'target_error'?)"),
     ("[experiment]\nfmi = 2.0\n", "experiment.fmi = 2.0: expected 2 or 3"),
 ])
@@ -173,6 +179,39 @@ def test_the_command_line_refuses_such_a_table_with_exit_2(lever, tmp_path):
     done = lever("run", path, "--stop", SHORT, "--out", tmp_path / "run")
     assert done.exit_code == 2 and "validation.amplitude = the boolean true" in done.output
     assert "validation.mean = '0.05'" in done.output and not (tmp_path / "run").exists()
+
+
+TABLE_KEYS = {"validation": ["amplitude", "mean", "order", "tube"], "validation.torque": ["mean", "amplitude"],
+              "bench": ["target_error", "repeats_limit_s", "monolithic_rtol", "baseline"],
+              "bench.steps": ["jacobi"], "bench.output_steps": ["adaptive"]}
+
+
+@settings(max_examples=100, derandomize=True, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(st.sampled_from(sorted(TABLE_KEYS)), st.data(), VALUES)
+def test_every_value_a_user_writes_in_these_tables_is_taken_as_a_number_or_refused_naming_it(tmp_path_factory,
+                                                                                          table, data, value):
+    """The corpus's generated values (booleans, strings with and without units, dates, lists,
+    numbers) in each table: what loads holds numbers where numbers belong; the rest is
+    refused naming the table's key."""
+    key = data.draw(st.sampled_from(TABLE_KEYS[table]))
+    path = tmp_path_factory.mktemp("table") / "mine.toml"
+    path.write_text(f'extends = "kavz685"\n[{table}]\n{key} = {_toml_value(value)}\n', encoding="utf-8",
+                    errors="surrogatepass")
+    try:
+        scene = scenes.load(path)
+    except scenes.SceneError as refused:
+        said = str(refused)
+        assert f"{table}.{key}" in said or "not a valid TOML file" in said, said      # a control character
+        return
+    top, _, inner = table.partition(".")
+    written = getattr(scene, top)[inner][key] if inner else getattr(scene, top)[key]
+    if key == "baseline":
+        assert isinstance(written, str)
+    elif key == "monolithic_rtol" or table == "bench.steps":
+        assert isinstance(written, list) and all(units.is_number(x) for x in written)
+    else:
+        assert units.is_number(written), written
 
 
 def test_sound_tables_are_taken(tmp_path):
