@@ -110,7 +110,7 @@ def extend(base: dict, variant: dict) -> dict:
 
 
 #: the shape of a scene file: key -> (what it must be, in words; test)
-_SHAPE = {
+SHAPE = {
     "name": ("a string", lambda v: isinstance(v, str)),
     "description": ("a string", lambda v: isinstance(v, str)),
     "notes": ("a string", lambda v: isinstance(v, str)),
@@ -133,11 +133,11 @@ _SHAPE = {
 
 def check_shape(data: dict, path: Path):
     """``SceneError`` naming the key when a scene file's table is not of the scene's shape
-    (``_SHAPE``; unknown keys too)."""
+    (``SHAPE``; unknown keys too)."""
     for key, value in data.items():
-        if key not in _SHAPE:
-            raise SceneError(f"{path}: unknown key '{key}' (a scene has: {', '.join(_SHAPE)})")
-        what, test = _SHAPE[key]
+        if key not in SHAPE:
+            raise SceneError(f"{path}: unknown key '{key}' (a scene has: {', '.join(SHAPE)})")
+        what, test = SHAPE[key]
         if not test(value):
             raise SceneError(f"{path}: {key} = {units.kind_of_value(value)}: expected {what}")
     problems = validation_problems(data.get("validation", {})) + bench_problems(data.get("bench", {}))
