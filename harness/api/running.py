@@ -48,6 +48,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     from harness.engine import masters
     from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
+    from harness.engine.observers import PaceWatch
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
     from harness.formats import outputs, report
@@ -111,6 +112,8 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
             out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once
         except outputs.OutputError as error:
             raise InputError(str(error)) from None
+    if observer is None:        # a long run says how long, from its own pace, once it has one
+        observer = PaceWatch(spec.experiment.stop, lambda message: say("note", message))
     try:
         result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,

@@ -35,6 +35,7 @@ from scipy.interpolate import CubicSpline
 from harness.description import plan as plans
 from harness.description import scene_kinds
 from harness.engine import masters as master_family
+from harness.engine import observers
 from harness.engine.run import simulate
 from harness.judges import metrics, monolithic, rectifier
 from harness.judges import solution as solutions
@@ -248,19 +249,11 @@ def expected_wait(plan: plans.Plan, run) -> str | None:
     points = sum(round((e.stop - e.start) / step) for step in steps)
     pace = run.wall_time / max(1, len(run.times) - 1)
     figure = points * pace
-    said = (f"about {_duration(figure)}" if not model_exchange else f"{_duration(figure)} or more")
+    said = (f"about {observers.duration(figure)}" if not model_exchange else f"{observers.duration(figure)} or more")
     runs = (f"{EXTRAPOLATED_MASTER} at steps {h:.4g}, {h / 2:.4g} and {h / 4:.4g} s" if not model_exchange else
             f"me-cvode at rtol {ME_TOLERANCE:g} and {ME_CHECK_TOLERANCE:g} on a {h:.4g} s grid")
     return (f"{said} ({runs}: {points:,} communication points, {points / max(1, len(run.times) - 1):.3g} times this "
             f"run's, at its pace of {1e3 * pace:.3g} ms a point)")
-
-
-def _duration(seconds: float) -> str:
-    if seconds < 90:
-        return f"{seconds:.2g} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.2g} min"
-    return f"{seconds / 3600:.2g} h"
 
 
 def _cached(plan, source, master, use_cache, make) -> MonolithicSolution:

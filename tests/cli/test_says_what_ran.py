@@ -311,3 +311,23 @@ def test_a_run_says_the_made_references_wait_before_the_wait(fmu_dir, monkeypatc
     (note,) = [m for m in heard_when_made if m.startswith("no monolithic reference")]
     assert "making it takes " in note and "communication points" in note, note
     assert done.summary["reference"]["source"] != "monolithic"
+
+
+def test_a_long_run_says_how_long_from_its_own_pace_once(monkeypatch):
+    from harness.engine import observers
+
+    wall = iter([0.0, 0.5, 1.0, 1.5, 2.0])
+    monkeypatch.setattr(observers.clock, "perf_counter", lambda: next(wall))
+    heard = []
+    watch = observers.PaceWatch(10.0, heard.append)
+    watch.started(0.0)                    # wall 0
+    watch.stepped(31, 0.2)                # not a 32nd step: the clock is not read
+    watch.stepped(32, 0.25)               # wall 0.5: too early to say
+    watch.stepped(64, 0.5)                # wall 1.0: 5 % in 1 s -> 20 s in all
+    watch.stepped(96, 0.75)               # said once only
+    assert heard == ["the run takes about 20 s (5 % of t = 0 ... 10 s done in 1 s; about 19 s to go)"]
+    quick = observers.PaceWatch(10.0, heard.append)
+    wall = iter([0.0, 1.0])
+    quick.started(0.0)
+    quick.stepped(32, 5.0)                # half done in 1 s: 2 s in all, nothing to say
+    assert len(heard) == 1 and quick.said
