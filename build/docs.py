@@ -394,10 +394,10 @@ _TOML_TYPES = {"float": "number", "str": "string", "bool": "true or false", "flo
 
 
 def scene_page() -> str:
-    from harness.description import scene
+    from harness.description import scene, scene_file
 
-    shape = scene._SHAPE      # the one declaration of a scene file's keys (what each must be)
-    out = [HEADER.format(source="`harness.description.scene`"),
+    shape = scene_file.SHAPE      # the one declaration of a scene file's keys (what each must be)
+    out = [HEADER.format(source="`harness.description.scene`, `harness.description.scene_file`"),
            "# Reference: the scene file\n\n",
            "A scene is a TOML file (UTF-8) in `resources/scenes/` or anywhere on disk (`lever run "
            "path/to/scene.toml`); `lever scenes` lists the committed ones, and "
@@ -409,9 +409,9 @@ def scene_page() -> str:
            "## Top-level keys\n\nAny other key is refused with a message naming it.\n\n"]
 
     def inherit(key):
-        if key in scene.OWN:
+        if key in scene_file.OWN:
             return "the variant's own (not taken from the base)"
-        if key in scene.MERGED:
+        if key in scene_file.MERGED:
             return "merged key by key into the base's"
         if key == "components":
             return "merged by component: `fmu` replaced, `parameters` merged key by key"
@@ -471,15 +471,18 @@ def scene_page() -> str:
     out.append("## connections and record\n\n`connections` are strings `\"component.output -> "
                "component.input\"`; an input is driven by one connection at most. `record` names outputs "
                "`\"component.output\"` to write into the traces.\n\n")
-    from harness.studies.bench.schedule import KEYS
-
+    out.append("## [validation]\n\n`lever validate`'s relative tolerances for the scene's reference: "
+               "`QUANTITY = number` (mean, amplitude, order, tube) for every signal, and sub-tables by kind or "
+               "signal (`[validation.torque]`, `[validation.\"coupling.tau2\"]`) - numbers only (a boolean or "
+               "a string is refused); see [../validation.md](../validation.md).\n\n")
     out.append("## [bench]\n\nThe work-precision benchmark's plan for the scene (`lever bench`): which "
-               "masters at which steps or tolerances. Its keys are read by the benchmark itself "
-               "(`harness/studies/bench/schedule.py`), not declared with the scene's; another key is refused. "
-               "Without `steps` and `tolerances` each master gets a ladder from near its predicted stability "
-               "edge down ([guide/check-stability.md](../guide/check-stability.md#the-benchmarks-steps)).\n\n"
-               "| key | what | default |\n|---|---|---|\n")
-    out += [f"| `{key}` | {what} | {default.replace('``', '`')} |\n" for key, (what, default) in KEYS.items()]
+               "masters at which steps or tolerances.  Numbers are numbers (a boolean or a string is "
+               "refused), and any other key is refused naming it.  Without `steps` and `tolerances` each "
+               "master gets a ladder from near its predicted stability edge down "
+               "([guide/check-stability.md](../guide/check-stability.md#the-benchmarks-steps)).\n\n")
+    out.append(table(["key", "what", "must be", "default"],
+                     [[f"`{key}`", what, must_be, default] for key, (_, must_be, what, default)
+                      in scene_file.BENCH_KEYS.items()]) + "\n")
     return "".join(out).rstrip() + "\n"
 
 

@@ -33,7 +33,7 @@ from harness.api.checks import bad_inputs, compliance
 from harness.api.choices import check_masters, load, masters, scenes, scenes_list
 from harness.api.exports import export
 from harness.api.inputs import InputError, Signals, UnknownSignal, parse_window
-from harness.api.results import BenchResult, ReferenceCheck, Run, Validation
+from harness.api.results import UNTRUSTED, BenchResult, ReferenceCheck, Run, Validation
 from harness.api.running import RunNote, run
 from harness.api.studies import (StudyInterrupted, bench, engines, fingerprints, hosts, measured, stability_map,
                                  study, sweep, sweep_verdict)

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from harness.api.building import build
+from harness.api.results import ReturnedTuple
 
 
 def compliance(fmus: Iterable[Path | str] = ()) -> Iterator[tuple[Path, list[str]]]:
@@ -37,4 +38,4 @@ def bad_inputs() -> tuple[list, str]:
 
     build()
     outcomes = badinputs.run()
-    return outcomes, badinputs.summary(outcomes)
+    return ReturnedTuple((outcomes, badinputs.summary(outcomes)))

@@ -2,6 +2,7 @@
 loaded with its overrides, the co-simulation masters."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from harness.api import inputs as _inputs
@@ -35,9 +36,15 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
     scene = _inputs.scene_argument(scene)
     assignments = _inputs.assignments(overrides)
     stop = _inputs.seconds(stop, "stop")
+    strict = _inputs.flag(strict, "strict")
+    given = dict(a.split("=", 1) for a in assignments if "=" in a)
+    given = {k.strip(): v.strip() for k, v in given.items()}
     if stop is not None:
+        _refuse_both("stop", stop, "experiment.stop", given.get("experiment.stop"), _seconds_or_none)
         assignments.append(f"experiment.stop={stop!r}")
     if strict:
+        _refuse_both("strict", True, "experiment.strict", given.get("experiment.strict"),
+                     lambda text: {"true": True, "false": False}.get(text))
         assignments.append("experiment.strict=true")
     try:
         if isinstance(scene, scene_files.Scene):
@@ -50,6 +57,40 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
         return spec.with_overrides(assignments)
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
+
+
+def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step: float | None = None):
+    """InputError when ``master`` or ``step`` (``--master``, ``--step``) and the scene's
+    ``--set experiment.master`` or ``experiment.step`` say different things: the record
+    (summary.json, report.md, the plots) states the ``--set`` values, so a run with
+    another one in effect would be recorded as what it did not run."""
+    if master is not None:
+        _refuse_both("master", master, "experiment.master", spec.overrides.get("experiment.master"),
+                     lambda text: text.strip().strip("'\""))
+    if step is not None:
+        _refuse_both("step", step, "experiment.step", spec.overrides.get("experiment.step"), _seconds_or_none)
+
+
+def _seconds_or_none(text: str) -> float | None:
+    try:
+        return _inputs.seconds(text, "experiment")
+    except InputError:
+        return None
+
+
+def _refuse_both(argument: str, value, key: str, raw: str | None, read):
+    """InputError when ``--set key=raw`` (read as ``read(raw)``) is not ``value``, the
+    ``argument`` also given."""
+    if raw is None:
+        return
+    said = read(str(raw))
+    if isinstance(value, float) and isinstance(said, float) and math.isclose(value, said, rel_tol=1e-12):
+        return
+    if said == value and type(said) is type(value):
+        return
+    shown = f"{value:g} s" if isinstance(value, float) else repr(value)
+    raise InputError(f"{argument}={shown} (--{argument}) and --set {key}={raw} disagree: give one of them "
+                     f"(both set the experiment's {key.split('.', 1)[1]})")
 
 
 def masters(fixed_step: bool = False) -> dict[str, str]:

@@ -42,6 +42,13 @@ def number(value, argument: str) -> float:
     raise InputError(f"{argument}={_shown(value)}: expected a number")
 
 
+def flag(value, argument: str) -> bool:
+    """True or False (a numpy boolean too; never a number or a string such as "no")."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise InputError(f"{argument}={_shown(value)}: expected True or False")
+
+
 def count(value, argument: str, low: int, high: int | None = None) -> int:
     """A whole number in [low, high] from an int or a numpy integer."""
     if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
@@ -223,15 +230,33 @@ def _column(values, what: str) -> np.ndarray:
 
 # -- arguments every command reads the same way -----------------------------------------------
 
-def assignments(overrides) -> list[str]:
-    """``{"coupling.stiffness": 900}`` or ``["coupling.stiffness=900"]`` as ``--set`` strings."""
+def assignments(overrides, argument: str = "overrides") -> list[str]:
+    """``{"coupling.stiffness": 900}`` or ``["coupling.stiffness=900"]`` as ``--set`` strings
+    (``argument``: the name a refusal gives, the caller's: ``overrides``, ``rtol``)."""
     if overrides is None:
         return []
     if isinstance(overrides, Mapping):
         return [f"{k}={_plain(v)}" for k, v in overrides.items()]
     if isinstance(overrides, str):
         return [overrides]
-    return names(overrides, "overrides")
+    return names(overrides, argument)
+
+
+def tolerances(rtol, argument: str = "rtol") -> list[str]:
+    """Relative tolerances as ``--rtol`` texts: ``"amplitude=0.05"``, a list of such texts,
+    or ``{"amplitude": 0.05, "torque:mean": 0.002}`` whose values are numbers (a boolean or a
+    string is no tolerance).  InputError naming ``argument`` otherwise."""
+    if isinstance(rtol, Mapping):
+        for key, value in rtol.items():
+            if not isinstance(key, str):
+                raise InputError(f"{argument}: {_shown(key)} is not a quantity's name (e.g. 'amplitude', "
+                                 "'torque:mean')")
+            number(value, f"{argument}[{key!r}]")
+        return [f"{k}={_plain(v)}" for k, v in rtol.items()]
+    if rtol is not None and not isinstance(rtol, (str, os.PathLike)) and not isinstance(rtol, Iterable):
+        raise InputError(f"{argument}={_shown(rtol)}: expected 'QUANTITY=VALUE' texts (e.g. 'amplitude=0.05'), "
+                         "a list of them or a dict {quantity: number}")
+    return assignments(rtol, argument)
 
 
 def _plain(value):

@@ -14,6 +14,10 @@ from harness.api.inputs import Signals
 from harness.description import scene as scene_files
 
 
+#: what a completed run whose energy balance fails is called (``Run.untrusted``, ``lever run``)
+UNTRUSTED = "NOT TO BE TRUSTED"
+
+
 @_dataclass
 class Run:
     """One run: the result (times, traces, failure), the reference and the summary (what
@@ -61,8 +65,15 @@ class Run:
 
     @property
     def ok(self) -> bool:
-        """Whether the run reached its stop time without a failure."""
-        return self.result.ok
+        """Whether the run reached its stop time without a failure and is to be trusted (an
+        energy residual above 5 % of the work in says the traces are not the system's motion:
+        ``untrusted`` says why, ``lever run`` prints NOT TO BE TRUSTED and exits 3)."""
+        return self.result.ok and not self.untrusted
+
+    @property
+    def untrusted(self) -> str | None:
+        """Why a completed run is not to be trusted, in a sentence (None: nothing says so)."""
+        return self.summary.get("untrusted")
 
     @property
     def failure(self) -> str | None:
@@ -71,13 +82,15 @@ class Run:
 
     @property
     def outcome(self) -> str:
-        """How the run ended: "ok"; "interrupted" (Ctrl-C: what was computed is kept, marked
-        so); "refused" (the FMUs refused the scene's values before the first step: the input
-        is at fault, not the run); "failed" (part-way: the traces before the failure are kept)."""
+        """How the run ended: "ok"; "untrusted" (it reached its stop time, but its energy
+        residual says the traces are not the system's motion: ``untrusted``); "interrupted"
+        (Ctrl-C: what was computed is kept, marked so); "refused" (the FMUs refused the
+        scene's values before the first step: the input is at fault, not the run); "failed"
+        (part-way: the traces before the failure are kept)."""
         if self.result.interrupted:
             return "interrupted"
         if self.result.ok:
-            return "ok"
+            return "untrusted" if self.untrusted else "ok"
         return "refused" if self.result.failure_stage == "initialisation" else "failed"
 
     def array(self, names: Iterable[str] | str | None = None) -> _np.ndarray:
@@ -98,6 +111,8 @@ class Run:
         lines = [head]
         if self.failure:
             lines.append(f"  failure: {self.failure}")
+        if self.untrusted:
+            lines.append(f"  {UNTRUSTED}: {self.untrusted}")
         errors = s.get("error_vs_reference") or {}
         for name, stats in list((s.get("statistics") or {}).items())[:6]:
             if stats:
@@ -191,6 +206,70 @@ class BenchResult(dict):
                     f"{', ...' if len(failed) > 4 else ''})" if failed else ", none failed")]
         summary = list(self.get("summary") or [])
         lines += summary[:14] + ([f"  ... {len(summary) - 14} more lines in ['summary']"] if len(summary) > 14 else [])
+        written = self.get("written") or []
+        lines.append(f"  written: {Path(written[0]).parent}/ ({', '.join(Path(w).name for w in written)}))"
+                     if written else "  nothing written)")
+        return "\n".join(lines)
+
+
+#: the longest ``repr`` a value the api returns may have: a notebook cell's output on a screen
+REPR_LIMIT = 3000
+
+
+def brief(value, width: int = 70) -> str:
+    """``value`` in a few words for a repr: a number or a short text as is, a collection by
+    how many it holds, anything longer cut with an ellipsis."""
+    text = str(value) if isinstance(value, Path) else repr(value)
+    if len(text) <= width:
+        return text
+    if isinstance(value, dict):
+        keys = ", ".join(map(str, list(value)[:4]))
+        return f"{len(value)} entries ({keys}{', ...' if len(value) > 4 else ''})"
+    if isinstance(value, (list, tuple, set)):
+        return f"{len(value)} items"
+    if isinstance(value, str) and "\n" in value:
+        return f"a text of {value.count(chr(10)) + 1} lines"
+    return text[:width - 3] + "..."
+
+
+class Returned(dict):
+    """What a study returns, as a dict (``result["agreement"]``, ...); its ``repr()`` says in
+    a few lines what it holds, each key with its value in brief, not the whole of it."""
+
+    def __repr__(self) -> str:
+        lines = [f"{type(self).__name__}("] + [f"  {key!r}: {brief(value)}" for key, value in self.items()]
+        return "\n".join(lines) + ")"
+
+
+class ReturnedTuple(tuple):
+    """What a command returns as a pair or triple (``text, path = api.study(...)``, ``outcomes,
+    summary = api.bad_inputs()``): a tuple whose ``repr()`` gives each item in brief."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(" + ", ".join(brief(item) for item in self) + ")"
+
+
+class StabilityMapResult(Returned):
+    """What ``stability_map`` returns: ``["result"]`` (every case and its class,
+    ``harness.studies.stabilitymap.StabilityMap``), ``["agreement"]`` (the prediction against
+    what was observed), ``["written"]`` (the files); ``repr()`` says what ``lever stability``
+    prints."""
+
+    def __repr__(self) -> str:
+        result, agreed = self.get("result"), self.get("agreement") or {}
+        cases = len(getattr(result, "results", {}) or {})
+        scene = getattr(getattr(result, "scene", None), "name", "?")
+        lines = [f"StabilityMapResult({scene}: {cases} cases, {getattr(result, 'reused', 0)} of them from the case log"]
+        if agreed.get("explicit_rows"):
+            lines.append(f"  explicit masters: predicted edge inside the observed bracket in "
+                         f"{agreed['explicit_bracketed']} of {agreed['explicit_rows']} rows; observed/predicted "
+                         f"median {agreed['explicit_ratio_median']:.3g}")
+        by_master = list((agreed.get("by_master") or {}).items())
+        lines += [f"  {m:24s} prediction agrees in {s['agree']}/{s['cases']} cases" for m, s in by_master[:12]]
+        if len(by_master) > 12:
+            lines.append(f"  ... {len(by_master) - 12} more masters in ['agreement']['by_master']")
+        if agreed.get("mismatches"):
+            lines.append(f"  {len(agreed['mismatches'])} cases disagree with the prediction: ['agreement']['mismatches']")
         written = self.get("written") or []
         lines.append(f"  written: {Path(written[0]).parent}/ ({', '.join(Path(w).name for w in written)}))"
                      if written else "  nothing written)")

@@ -9,9 +9,9 @@ from typing import Callable
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_masters, load
+from harness.api.choices import check_agreement, check_masters, load
 from harness.api.inputs import InputError
-from harness.api.results import Run
+from harness.api.results import UNTRUSTED, Run
 from harness.description import plan as _plans
 from harness.description import scene as scene_files
 from harness.paths import FMUS
@@ -42,11 +42,13 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     ``observer`` is told of every step (``harness.engine.observers``); ``latency``: time every
     step and write latency.md and latency.json to ``out`` (``Run.latency`` summarises them);
     ``plots``: false writes the traces, summary and report without drawing the plots.
-    A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why);
+    A failed or interrupted run is returned (``Run.ok`` false, ``Run.failure`` says why), and
+    so is one not to be trusted (``Run.ok`` false, ``Run.untrusted`` says why, a warning);
     bad input raises InputError before anything runs."""
     from harness.engine import masters
     from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
+    from harness.engine.observers import PaceWatch
     from harness.engine.run import available_memory, simulate, trace_memory
     from harness.engine.system import SceneInvalid
     from harness.formats import outputs, report
@@ -63,6 +65,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     chosen = master or spec.experiment.master
     check_masters(chosen)
     step = _inputs.step(step)
+    check_agreement(spec, master=master, step=step)
     out = _inputs.folder(out)
     options = {}
     if tolerance is not None:
@@ -109,6 +112,8 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
             out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once
         except outputs.OutputError as error:
             raise InputError(str(error)) from None
+    if observer is None:        # a long run says how long, from its own pace, once it has one
+        observer = PaceWatch(spec.experiment.stop, lambda message: say("note", message))
     try:
         result = simulate(plan, master, step, progress=progress, options=options,
                           stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
@@ -130,7 +135,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
             try:
                 solution = monolithic.solve(plan, result.times)
             except monolithic.ReferenceUnavailable as error:
-                solution = _made_reference(plan, result.times, str(error), say)
+                solution = _made_reference(plan, result, str(error), say)
     except KeyboardInterrupt:
         say("note", "interrupted while solving the reference: the run's results are written without it")
         result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
@@ -139,22 +144,26 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         summary = report.write(Path(out), result, solution, plots=plots)
     else:
         summary = report.summarize(result, solution)
+    if summary.get("untrusted"):
+        say("warning", f"{UNTRUSTED}: {summary['untrusted']}")
     done = Run(result, solution, summary, Path(out) if out is not None else None, notes)
     if latency:
         done.latency = step_latency.report(Path(out), timer, result)
     return done
 
 
-def _made_reference(plan, times, why: str, say):
+def _made_reference(plan, run, why: str, say):
     """A reference made from the scene's FMUs (``harness.judges.fmu_reference``) where the
-    monolithic one is ``why`` unavailable; None, said in one line, where none can be had."""
+    monolithic one is ``why`` unavailable, at the times of ``run``, what it takes said before
+    it is made (from ``run``'s pace); None, said in one line, where none can be had."""
     from harness.judges import fmu_reference
 
     made = "Model Exchange" if fmu_reference.offers_model_exchange(plan) else "extrapolated co-simulation runs"
+    wait = fmu_reference.expected_wait(plan, run)
     say("note", f"no monolithic reference ({why}): the error is measured against a reference made from the "
-                f"scene's FMUs ({made}; cached once computed)")
+                f"scene's FMUs ({made}" + ("; cached)" if wait is None else f", cached once made): making it takes {wait}"))
     try:
-        return fmu_reference.reference(plan, times)
+        return fmu_reference.reference(plan, run.times)
     except fmu_reference.ReferenceUnavailable as error:
         say("note", f"no reference for this scene, so no error: {error}")
     except (ValueError, RuntimeError, OSError) as error:     # the run's own results are kept whatever the reference did

@@ -12,7 +12,7 @@ from harness.api import inputs as _inputs
 from harness.api.building import build
 from harness.api.choices import check_masters, load
 from harness.api.inputs import InputError
-from harness.api.results import BenchResult
+from harness.api.results import BenchResult, Returned, ReturnedTuple, StabilityMapResult
 from harness.description import scene as scene_files
 from harness.paths import FMUS
 
@@ -82,14 +82,15 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
                   dampings: Iterable[float] = (), h_omegas: Iterable[float] = (), masters: Iterable[str] = (),
                   dense: bool = False, min_steps: int = 500, refine: bool = True, jobs: int = 1,
                   resume: bool = True, out: Path | str | None = None,
-                  progress: Callable[[str], None] | None = None) -> dict:
+                  progress: Callable[[str], None] | None = None) -> StabilityMapResult:
     """``lever stability``: every case of the map classified against the edges the linear
     analysis predicts (empty sequences: the default plan's, ``dense``: denser), for any scene
     with our LeverCoupling between two shafts (FMUs of one's own are measured first:
     ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate); writes
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
-    Returns ``result``, ``agreement`` and ``written``."""
+    Returns ``result``, ``agreement`` and ``written`` (a dict whose ``repr()`` says what
+    ``lever stability`` prints)."""
     from harness.description import scene_kinds
     from harness.judges import port_probe
     from harness.studies import stability_report, stabilitymap
@@ -132,7 +133,7 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     with _resumable(out):
         result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
     written = stability_report.write(out, result)
-    return {"result": result, "agreement": stabilitymap.agreement(result), "written": written}
+    return StabilityMapResult(result=result, agreement=stabilitymap.agreement(result), written=written)
 
 
 def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, stop: float | None = None,
@@ -170,8 +171,8 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     _claim(out)
     try:
         with _resumable(out):
-            return sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers, dask=dask,
-                                progress=progress, resume=resume)
+            return Returned(sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers,
+                                         dask=dask, progress=progress, resume=resume))
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
 
@@ -201,7 +202,7 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
         (out / "runup.md").write_text(text + "\n")
-        return text, out / "runup.md"
+        return ReturnedTuple((text, out / "runup.md"))
     if name not in ("transfer-modes", "reference-agreement"):
         raise InputError(f"no study '{name}' (known: transfer-modes, runup, reference-agreement)")
     if lags:
@@ -213,11 +214,11 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
         text = reference_agreement.study()
         out.mkdir(parents=True, exist_ok=True)
         (out / "reference_agreement.md").write_text(text + "\n")
-        return text, out / "reference_agreement.md"
+        return ReturnedTuple((text, out / "reference_agreement.md"))
     from harness.studies import decisions
 
     build()
-    return decisions.transfer_modes(out), out / "transfer_modes.md"
+    return ReturnedTuple((decisions.transfer_modes(out), out / "transfer_modes.md"))
 
 
 def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, stiffness: float | None = None,
@@ -242,7 +243,7 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     build()
     findings = measurement.validate_measured(files, out, stiffness=stiffness, cycles=cycles)
     grades = json.loads((out / "measured.json").read_text())["grades"]
-    return {"grades": grades, "findings": findings, "report": out / "measured.md"}
+    return Returned(grades=grades, findings=findings, report=out / "measured.md")
 
 
 def engines(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, engines: Iterable[str] = (),
@@ -299,7 +300,7 @@ def hosts(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, 
     table = comparison.table(report)
     (folder / "hosts.json").write_text(json.dumps(report, indent=1))
     (folder / "hosts.md").write_text(table)
-    return {"report": report, "table": table, "written": [folder / "hosts.md", folder / "hosts.json"]}
+    return Returned(report=report, table=table, written=[folder / "hosts.md", folder / "hosts.json"])
 
 
 def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: float | None = 0.2

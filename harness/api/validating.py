@@ -8,7 +8,7 @@ from typing import Iterable, Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_masters, load
+from harness.api.choices import check_agreement, check_masters, load
 from harness.api.inputs import InputError
 from harness.api.results import ReferenceCheck, Validation
 from harness.description import scene as scene_files
@@ -115,11 +115,12 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         raise InputError(reference_traces.why_no_reference(name)
                          or f"no reference '{name}'{scene_files.did_you_mean(name, known)} (known: {', '.join(known)})")
     _inputs.choice(tolerance, "tolerance", VERDICTS)
-    if tolerance != "lever" and (_inputs.assignments(rtol) or _inputs.assignments(signals)):
+    rtol, signals = _inputs.tolerances(rtol, "rtol"), _inputs.names(signals, "signals")
+    if tolerance != "lever" and (rtol or signals):
         raise InputError(f"--rtol and --signals set the 'lever' verdict; --tolerance {tolerance} is fmpy's band, "
                          "which has its own figures and judges every signal")
     try:
-        rules = verdict.parse_rtol(_inputs.assignments(rtol), "--rtol")
+        rules = verdict.parse_rtol(rtol, "--rtol")
     except ValueError as error:
         raise InputError(str(error)) from None
     step = _inputs.step(step)
@@ -154,6 +155,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             spec = load(name, overrides)
             if master:
                 check_masters(master)
+            check_agreement(spec, master=master, step=step)
             try:
                 judged = reference_traces.run_scene(spec, master, step)
             except (SceneInvalid, NoModelExchange) as error:
@@ -172,13 +174,13 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             settings = verdict.settings_of(ref)
             findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
                                      window=(start, stop), transient=settings.transient,
-                                     rtol=verdict.Tolerances([settings.rules, rules]), signals=_inputs.assignments(signals),
+                                     rtol=verdict.Tolerances([settings.rules, rules]), signals=signals,
                                      kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label)
         except ValueError as error:
             raise InputError(str(error)) from None
         bands = {}
         findings.notes += reference_traces.provenance_notes(
-            ref, given if isinstance(given, Path) else None if result is not None else result, overrides, master, step)
+            ref, given if isinstance(given, Path) else getattr(result, "summary", None), overrides, master, step)
     else:
         findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
                                                   ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,

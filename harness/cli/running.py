@@ -71,7 +71,7 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
         done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference,
                        out=out or RESULTS / spec.name, progress=show_progress, stream=stream, latency=latency,
                        plots=not no_plots,
-                       notify=lambda kind, message: click.echo(f"{kind}: {message}", err=True))
+                       notify=_said_before_the_summary)
     except api.InputError as error:
         raise UserError(str(error)) from None
     except api.BuildError as error:
@@ -83,14 +83,21 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
     if done.outcome == "interrupted":
         click.echo(f"{result.failure}; what was computed is in {out}/ (marked interrupted)", err=True)
         sys.exit(INTERRUPTED_EXIT)
+    if done.outcome == "untrusted":
+        sys.exit(UNTRUSTED_EXIT)
     if done.outcome != "ok":
         click.echo(f"error: {result.failure}", err=True)
         if done.outcome == "refused":
             sys.exit(UserError.exit_code)
         click.echo(f"the traces computed before the failure are in {out / 'traces.csv'}", err=True)
         sys.exit(1)
-    if done.summary.get("untrusted"):
-        sys.exit(UNTRUSTED_EXIT)
+
+
+def _said_before_the_summary(kind: str, message: str):
+    """A run's warnings and notes on stderr as they come; the run's verdict NOT TO BE TRUSTED
+    is the summary's own line (stdout), not said twice."""
+    if not message.startswith(api.UNTRUSTED):
+        click.echo(f"{kind}: {message}", err=True)
 
 
 def _print_summary(summary: dict, out: Path):

@@ -11,26 +11,23 @@ Values may carry a unit, ``"15 deg"`` or ``"374.8 rpm"``; they are converted to 
 """
 from __future__ import annotations
 
-import difflib
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from harness.description import typed_values, units
 from harness.description.fmu_description import time_derivatives
+# the scene file as written (read, shape and types checked): its names are this module's too
+from harness.description.scene_file import (MERGED, OWN, SceneError, check_shape, did_you_mean, extend,  # noqa: F401
+                                            fmu_name, is_fmu_path, read_data, resolve)
 from harness.description.tables import MeasuredDataError, load_series, read_table
-from harness.paths import DATA, SCENES
+from harness.paths import DATA
 
 FEATURES = ("reference", "energy_balance", "plots")
 #: the ``[limits]`` a scene may set for the divergence guard (harness.engine.guard)
 LIMIT_KEYS = ("speed", "torque", "margin")
 LIMIT_UNITS = {"speed": "rad/s", "torque": "N.m", "margin": "1"}
-
-
-class SceneError(ValueError):
-    pass
 
 
 @dataclass(frozen=True)
@@ -50,17 +47,6 @@ class ComponentSpec:
     #: any FMU by path (``"/abs/X.fmu"``; in a scene file also relative to the file)
     fmu: str
     parameters: dict[str, Any] = field(default_factory=dict)
-
-
-def is_fmu_path(fmu: str) -> bool:
-    """True when ``fmu`` names a file (``X.fmu``, the extension in any case), not one of our
-    FMUs: a scene component's ``fmu``, a name given to ``lever validate``."""
-    return str(fmu).lower().endswith(".fmu")
-
-
-def fmu_name(fmu: str) -> str:
-    """The FMU's name: ``EngineShaft`` for ``EngineShaft`` and for ``/x/EngineShaft.fmu``."""
-    return Path(fmu).stem if is_fmu_path(fmu) else fmu
 
 
 @dataclass
@@ -127,6 +113,18 @@ class Scene:
     #: the ``--set`` assignments applied (``with_overrides``): name -> the value as given;
     #: where the values came from, not what the scene is (equal scenes compare equal)
     overrides: dict = field(default_factory=dict, compare=False)
+
+    def __repr__(self) -> str:
+        """In a line or two (a notebook's output): the components, the experiment, the
+        overrides and the file, not the notes and tables."""
+        e = self.experiment
+        text = (f"Scene({self.name}: {len(self.components)} components ("
+                + ", ".join(f"{n} {fmu_name(c.fmu)}" for n, c in self.components.items())
+                + f"), {len(self.connections)} connections, t = {e.start:g} ... {e.stop:g} s, step {e.step:g} s, "
+                f"master {e.master}, {len(self.record)} signals recorded"
+                + (f", --set {'; '.join(f'{k} = {v}' for k, v in self.overrides.items())}" if self.overrides else "")
+                + (f", from {self.path}" if self.path else "") + ")")
+        return text if len(text) <= 2000 else text[:1995] + "...)"
 
     def component_of(self, fmu: str) -> str | None:
         """Name of the (first) component built from FMU ``fmu``."""
@@ -274,7 +272,7 @@ def experiment_value(field_name: str, value, label: str):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected true or false")
         return value
     if field_name == "fmi":
-        if value not in FMI_EDITIONS or isinstance(value, bool):
+        if not isinstance(value, int) or isinstance(value, bool) or value not in FMI_EDITIONS:
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected 2 or 3 (the FMI edition of the "
                              "FMUs named by name: 2 in build/fmus, 3 in build/fmus3)")
         return int(value)
@@ -288,86 +286,6 @@ def experiment_value(field_name: str, value, label: str):
         raise SceneError(f"{label} = {units.kind_of_value(value)}: expected a time in seconds (a number, "
                          "or a number with a time unit, e.g. '500 ms')")
     return float(value)
-
-
-def resolve(name_or_path: str | Path) -> Path:
-    path = Path(name_or_path)
-    if path.suffix == ".toml" and path.exists():
-        return path
-    candidate = SCENES / f"{name_or_path}.toml"
-    if candidate.exists():
-        return candidate
-    known = sorted(p.stem for p in SCENES.glob("*.toml"))
-    raise SceneError(f"no scene '{name_or_path}'{did_you_mean(str(name_or_path), known)} (a .toml path or one of: "
-                     f"{', '.join(known)})")
-
-
-def did_you_mean(word: str, known) -> str:
-    """`` (did you mean 'X'?)`` for the name in ``known`` closest to a mistyped ``word``
-    (difflib's ratio of at least 0.6), else ``""``."""
-    close = difflib.get_close_matches(word, list(known), n=1)
-    return f" (did you mean '{close[0]}'?)" if close else ""
-
-
-#: what a variant (``extends = "base"``) does not take from its base: its identity
-OWN = ("name", "description", "extends")
-#: tables a variant merges key by key into its base's (components: each one's ``fmu`` and
-#: ``parameters``); any other table or value a variant states replaces its base's whole
-#: (an empty ``[bench]`` says: no benchmark plan)
-MERGED = ("experiment", "limits", "validation")
-
-
-def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
-    """The TOML table of the scene file ``path``, with what it inherits when it names a
-    base scene (``extends = "kavz685"``: a scene beside it or in resources/scenes, or a
-    .toml path relative to it) and states only what differs."""
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{path}: not a valid TOML file: {error}") from None
-    except UnicodeDecodeError as error:
-        raise SceneError(f"{path}: not a UTF-8 text file (byte {error.start}: {error.reason}); a scene is "
-                         "TOML in UTF-8") from None
-    except OSError as error:
-        raise SceneError(f"{path}: cannot read it ({error.strerror or error})") from None
-    check_shape(data, path)
-    # An FMU by path is relative to the file that names it (a base scene's to the base).
-    for spec in (data.get("components") or {}).values():
-        if isinstance(spec, dict) and isinstance(spec.get("fmu"), str) and is_fmu_path(spec["fmu"]):
-            spec["fmu"] = str((path.parent / Path(spec["fmu"]).expanduser()).resolve())
-    base_name = data.get("extends")
-    if base_name is None:
-        return data
-    if not isinstance(base_name, str) or not base_name:
-        raise SceneError(f"{path}: extends = {base_name!r}: expected the name or .toml path of a scene")
-    beside = path.parent / (base_name if base_name.endswith(".toml") else f"{base_name}.toml")
-    base_path = (beside if beside.exists() else resolve(base_name)).resolve()
-    chain = extending + (path.resolve(),)
-    if base_path in chain:
-        raise SceneError(f"{path}: extends {base_name}, which extends it back "
-                         f"({' -> '.join(p.stem for p in chain + (base_path,))})")
-    return extend(read_data(base_path, chain), data)
-
-
-def extend(base: dict, variant: dict) -> dict:
-    """The scene table of ``variant`` on top of ``base`` (see ``OWN`` and ``MERGED``)."""
-    merged = {key: value for key, value in base.items() if key not in OWN}
-    for key, value in variant.items():
-        if key == "extends":
-            continue
-        if key in MERGED:
-            merged[key] = {**base.get(key, {}), **value}
-        elif key == "components":
-            components = {name: {**spec, "parameters": dict(spec.get("parameters", {}))}
-                          for name, spec in base.get("components", {}).items()}
-            for name, spec in value.items():
-                old = components.get(name, {})
-                components[name] = {**old, **spec,
-                                    "parameters": {**old.get("parameters", {}), **spec.get("parameters", {})}}
-            merged[key] = components
-        else:
-            merged[key] = value
-    return merged
 
 
 def load(name_or_path: str | Path) -> Scene:
@@ -393,39 +311,6 @@ def load(name_or_path: str | Path) -> Scene:
                  record=list(data.get("record", [])), features=set(data.get("features", [])), path=path,
                  notes=data.get("notes", ""), bench=dict(data.get("bench", {})),
                  limits=dict(data.get("limits", {})), validation=dict(data.get("validation", {})))
-
-
-#: the shape of a scene file: key -> (what it must be, in words; test)
-_SHAPE = {
-    "name": ("a string", lambda v: isinstance(v, str)),
-    "description": ("a string", lambda v: isinstance(v, str)),
-    "notes": ("a string", lambda v: isinstance(v, str)),
-    "extends": ("the name or .toml path of a scene", lambda v: isinstance(v, str)),
-    "features": ("a list of strings", lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
-    "record": ("a list of strings", lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
-    "connections": ("a list of strings 'component.output -> component.input'",
-                    lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v)),
-    "experiment": ("a table", lambda v: isinstance(v, dict)),
-    "limits": ("a table", lambda v: isinstance(v, dict)),
-    "bench": ("a table", lambda v: isinstance(v, dict)),
-    "validation": ("a table of relative tolerances (mean, amplitude, order, tube), sub-tables by kind or signal",
-                   lambda v: isinstance(v, dict)),
-    "components": ("a table of components, each a table with fmu = \"<FMU name>\" and a [parameters] table",
-                   lambda v: isinstance(v, dict) and all(
-                       isinstance(c, dict) and isinstance(c.get("fmu", ""), str)
-                       and isinstance(c.get("parameters", {}), dict) for c in v.values())),
-}
-
-
-def check_shape(data: dict, path: Path):
-    """``SceneError`` naming the key when a scene file's table is not of the scene's shape
-    (``_SHAPE``; unknown keys too)."""
-    for key, value in data.items():
-        if key not in _SHAPE:
-            raise SceneError(f"{path}: unknown key '{key}' (a scene has: {', '.join(_SHAPE)})")
-        what, test = _SHAPE[key]
-        if not test(value):
-            raise SceneError(f"{path}: {key} = {units.kind_of_value(value)}: expected {what}")
 
 
 def parse_connection(text: str) -> Connection:

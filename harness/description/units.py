@@ -177,3 +177,33 @@ def kind_of_value(value) -> str:
     if isinstance(value, float) and not math.isfinite(value):
         return f"{value}"
     return repr(value)
+
+
+def same_value(given: str, reference: str) -> bool:
+    """Whether two values as a run's record writes them are the same quantity: "15.0 deg" is
+    "15 deg", "6.35 N*m*s/rad" is "6.35 N.m.s/rad", "0.2617993877991494 rad" is "15 deg" to
+    twelve digits - each converted to ``reference``'s unit (a parameter's declared unit as the
+    record writes it).  Numbers without a unit compare as numbers; a value that is neither
+    (a Fourier series' text, a file's name) as text; a number without a unit is never the
+    same as one with a unit (which unit it is in is not said)."""
+    given, reference = str(given).strip(), str(reference).strip()
+    if given == reference:
+        return True
+    numbers = [_plain_number(given), _plain_number(reference)]
+    if None not in numbers:
+        return math.isclose(numbers[0], numbers[1], rel_tol=1e-12, abs_tol=0.0)
+    parsed = split(reference)
+    if parsed is None or split(given) is None:
+        return False
+    try:
+        value = convert(given, parsed[1])
+    except UnitProblem:
+        return False
+    return math.isclose(value, parsed[0], rel_tol=1e-12, abs_tol=0.0)
+
+
+def _plain_number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None

@@ -68,3 +68,42 @@ class StepTimer:
             self._gc_started = clock.perf_counter()
         else:
             self.collections.append((len(self.wall), clock.perf_counter() - self._gc_started, info["generation"]))
+
+
+class PaceWatch:
+    """Says once how long a run will take when it will take long: after ``after`` seconds of
+    stepping, the run's own pace so far (simulated time per wall second) projected to its
+    stop time; ``say(message)`` is called when the whole would exceed ``longer_than``
+    seconds.  The clock is read every ``EVERY`` steps only."""
+
+    EVERY = 32
+
+    def __init__(self, stop: float, say, after: float = 1.0, longer_than: float = 10.0):
+        self.stop, self.say, self.after, self.longer_than = stop, say, after, longer_than
+        self.said = False
+        self._start = self._t0 = 0.0
+
+    def started(self, t: float):
+        self._t0, self._start = t, clock.perf_counter()
+
+    def stepped(self, n: int, t: float):
+        if self.said or n % self.EVERY:
+            return
+        elapsed = clock.perf_counter() - self._start
+        done = (t - self._t0) / (self.stop - self._t0) if self.stop > self._t0 else 1.0
+        if elapsed < self.after or not 0.0 < done < 1.0:
+            return
+        self.said = True
+        total = elapsed / done
+        if total > self.longer_than:
+            self.say(f"the run takes about {duration(total)} ({100 * done:.2g} % of t = {self._t0:g} ... "
+                     f"{self.stop:g} s done in {elapsed:.2g} s; about {duration(total - elapsed)} to go)")
+
+    def ended(self):
+        pass
+
+
+def duration(seconds: float) -> str:
+    """A wait in words to two digits: "8.4 s", "3.5 min", "1.2 h"."""
+    return f"{seconds:.2g} s" if seconds < 90 else f"{seconds / 60:.2g} min" if seconds < 5400 else \
+        f"{seconds / 3600:.2g} h"

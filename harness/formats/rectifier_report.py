@@ -11,7 +11,7 @@ from harness.description import scene_kinds
 from harness.description import scene as scenes
 from harness.formats import plotting
 from harness.formats.run_files import (description_of, files_line, identity_lines, reference_error_lines,
-                                       report_heading, run_identity, run_title, save_figure, write_run)
+                                       report_heading, run_identity, save_figure, title_of, write_run)
 from harness.judges.rectifier import analyse, errors
 
 
@@ -185,8 +185,7 @@ def plot(out, result, reference=None):
     name = scene_kinds.rectifier(scene)
     t = result.times
     tr = {k.split(".", 1)[1]: v for k, v in result.traces.items() if k.startswith(name + ".")}
-    title = run_title({"scene": scene.name, "master": result.master, "step_s": result.step,
-                       "overrides": scene.overrides})
+    title = title_of(result)
     elements = (("rocker", "1 rocker"), ("half_coupling", "2 half-couplings"), ("driven", "3 driven parts"),
                 ("torsion_end", "4 torsion output end"))
 

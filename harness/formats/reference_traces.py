@@ -41,6 +41,7 @@ import numpy as np
 from lever.fmus import registry
 
 from harness.description import scene as scenes
+from harness.description import units
 from harness.paths import FMUS, RESOURCES, SCENES
 
 REFERENCE_DIR = RESOURCES / "reference"
@@ -560,8 +561,9 @@ def provenance_notes(reference: ReferenceTraces, result, overrides, master: str 
     """Sentences saying when the judged result was made with other values than its
     reference (a scene's reference is made at the scene file's values, by the monolithic
     solver): a run ``lever validate`` made with ``--set``, or a ``--result`` CSV with a
-    lever run's summary.json beside it (what it ran); a CSV without one is said to be of
-    unknown making."""
+    lever run's summary.json beside it (what it ran), or a ``Run``'s summary (a dict); a CSV
+    without one is said to be of unknown making.  Values are compared as quantities
+    (``units.same_value``: "15.0 deg" is "15 deg"), not as text."""
     import json
 
     from harness.description import plan
@@ -582,6 +584,9 @@ def provenance_notes(reference: ReferenceTraces, result, overrides, master: str 
                     f"{Path(result).name}): it is judged as traces only"]
         said = f"{summary_path} (master {summary.get('master')}, step {summary.get('step_s')} s, lever " \
                f"{summary.get('lever_version')})"
+    elif isinstance(result, dict) and isinstance(result.get("parameters"), dict):     # a Run's summary
+        used = result["parameters"]
+        said = f"the Run given (master {result.get('master')}, step {result.get('step_s')} s)"
     elif result is None and overrides:
         used = plan.parameter_record(scenes.load(reference.name).with_overrides(list(overrides)))
         said = "this run (--set)"
@@ -589,7 +594,7 @@ def provenance_notes(reference: ReferenceTraces, result, overrides, master: str 
         return []
     differ = [f"{k} = {v['value']} ({v['source']}; the reference: {made[k]['value'] if k in made else 'not set'})"
               for k, v in used.items() if not k.startswith("experiment.")
-              and (k not in made or v["value"] != made[k]["value"])]
+              and (k not in made or not units.same_value(v["value"], made[k]["value"]))]
     if not differ:
         return [f"the result was made with its reference's parameter values ({said})"]
     return [f"the result was made with other values than its reference ({said}): " + "; ".join(differ)]

@@ -13,7 +13,7 @@ from harness.judges import fmu_reference, metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
 from harness.formats.run_files import (description_of, files_line, fmt, identity_lines, reference_error_lines,
-                                       report_heading, run_identity, run_title, save_figure, write_run)
+                                       report_heading, run_identity, save_figure, title_of, write_run)
 
 
 def summarize(result: RunResult, reference=None) -> dict:
@@ -203,8 +203,7 @@ def plot(out: Path, result: RunResult, reference=None):
     t = result.times
     tr = result.traces
     transient = result.scene.experiment.transient
-    title = run_title({"scene": result.scene.name, "master": result.master, "step_s": result.step,
-                       "overrides": result.scene.overrides})
+    title = title_of(result)
 
     # The drive side's torque is plotted as the torque it transmits, -tau1, so both curves share a sign.
     for filename, quantity, unit, a, b, sign in (("speeds.png", "speed", "rad/s", "w1", "w2", 1.0),

@@ -12,7 +12,7 @@ import numpy as np
 from harness.description import plan as plans
 from harness.engine.run import RunResult
 from harness.paths import FMUS
-from harness.engine import interrupt
+from harness.engine import interrupt, masters
 from harness.engine.traces import replaced as write_whole
 from harness.engine.traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
@@ -198,11 +198,22 @@ def _project_version() -> str:
 
 
 def run_title(summary: dict) -> str:
-    """A plot's title: scene, master, step and, on a second line, the values the run changed
+    """A plot's title: scene, master, step (an adaptive master's first step) and the
+    tolerance of a master that has one, and, on a second line, the values the run changed
     (``--set``), so that no plot of a changed run reads as the scene file's."""
     changed = "; ".join(f"{k} = {v}" for k, v in (summary.get("overrides") or {}).items())
-    return (f"{summary['scene']} - {summary['master']}, h = {summary['step_s']:g} s"
+    adaptive = summary["master"] in masters.MASTERS and masters.MASTERS[summary["master"]].adaptive
+    tolerance = summary.get("tolerance")
+    return (f"{summary['scene']} - {summary['master']}, {'first ' if adaptive else ''}h = {summary['step_s']:g} s"
+            + (f", tolerance {tolerance:g}" if tolerance is not None else "")
             + (f"\n--set {changed}" if changed else ""))
+
+
+def title_of(result: RunResult) -> str:
+    """``run_title`` of a run's result."""
+    return run_title({"scene": result.scene.name, "master": result.master, "step_s": result.step,
+                      "overrides": result.scene.overrides,
+                      "tolerance": (getattr(result, "options", None) or {}).get("tolerance")})
 
 
 def identity_lines(summary: dict) -> list[str]:

@@ -35,6 +35,7 @@ from scipy.interpolate import CubicSpline
 from harness.description import plan as plans
 from harness.description import scene_kinds
 from harness.engine import masters as master_family
+from harness.engine import observers
 from harness.engine.run import simulate
 from harness.judges import metrics, monolithic, rectifier
 from harness.judges import solution as solutions
@@ -222,12 +223,41 @@ def _fmu_hash(plan: plans.Plan) -> str:
     return digest.hexdigest()[:16]
 
 
-def _cached(plan, source, master, use_cache, make) -> MonolithicSolution:
+def _cache_path(plan, source, master) -> Path:
     e = plan.experiment
     grid = np.array([e.start, e.stop, grid_step(plan)])
     key = hashlib.sha256(json.dumps([cache_key(plan.scene, grid, 0.0, 0.0, f"{source} {master}"), _fmu_hash(plan),
                                      _code_hash(), list(plan.recorded)]).encode()).hexdigest()[:16]
-    path = solutions.CACHE / f"fmu-reference-{plan.name}-{key}.npz"
+    return solutions.CACHE / f"fmu-reference-{plan.name}-{key}.npz"
+
+
+def expected_wait(plan: plans.Plan, run) -> str | None:
+    """Before ``reference(plan, ...)`` makes a reference: what it runs and about how long that
+    takes, in words - from ``run``, a run of the scene just made (its wall time per
+    communication point, the FMUs' pace here): the extrapolated reference runs
+    ``EXTRAPOLATED_MASTER`` at 1, 1/2 and 1/4 of the grid step (``GRID_SHARE`` of the scene's
+    step), 28 times the points of a run at the scene's step; the Model Exchange one runs CVODE
+    twice on the grid, its own steps as its tolerance needs (the figure is the least it
+    takes).  None where it is cached and nothing is run."""
+    e = plan.experiment
+    h = grid_step(plan)
+    model_exchange = offers_model_exchange(plan)
+    source, master = ("model-exchange", None) if model_exchange else ("extrapolated", EXTRAPOLATED_MASTER)
+    if _cache_path(plan, source, master).exists():
+        return None
+    steps = (h,) * 2 if model_exchange else (h, h / 2, h / 4)      # the runs' steps (see the module's text)
+    points = sum(round((e.stop - e.start) / step) for step in steps)
+    pace = run.wall_time / max(1, len(run.times) - 1)
+    figure = points * pace
+    said = (f"about {observers.duration(figure)}" if not model_exchange else f"{observers.duration(figure)} or more")
+    runs = (f"{EXTRAPOLATED_MASTER} at steps {h:.4g}, {h / 2:.4g} and {h / 4:.4g} s" if not model_exchange else
+            f"me-cvode at rtol {ME_TOLERANCE:g} and {ME_CHECK_TOLERANCE:g} on a {h:.4g} s grid")
+    return (f"{said} ({runs}: {points:,} communication points, {points / max(1, len(run.times) - 1):.3g} times this "
+            f"run's, at its pace of {1e3 * pace:.3g} ms a point)")
+
+
+def _cached(plan, source, master, use_cache, make) -> MonolithicSolution:
+    path = _cache_path(plan, source, master)
     if use_cache and (cached := load_cached(path)) is not None:
         check = {k[len(CHECK):]: v for k, v in cached.traces.items() if k.startswith(CHECK)}
         traces = {k: v for k, v in cached.traces.items() if not k.startswith(CHECK)}

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from harness.description import plan as plans, scene_kinds
 from harness.description import scene as scenes
+from harness.description.scene_file import BENCH_KEYS
 from harness.engine import masters as master_family
 from harness.engine.system import MODEL_EXCHANGE
 from harness.judges import port_probe, stability
@@ -76,23 +77,6 @@ class Case:
         return case_key(self.kind, self.engine, self.step, self.tolerance)
 
 
-#: the keys of a scene's ``[bench]`` table, what each holds and its default (the scene
-#: format's reference page shows this table)
-KEYS = {
-    "steps": ("{master = [h, ...]}: the communication steps [s] each fixed-step master runs at",
-              "the ladder"),
-    "tolerances": ("{master = [tol, ...]}: the tolerances each adaptive or Model Exchange master runs at",
-                   "the ladder"),
-    "output_steps": ("{master = h}: the grid [s] a tolerance run records on", "the scene's step"),
-    "peers": ("{peer = [h, ...]}: the steps each peer engine runs at (`lever engines` names them)", "none"),
-    "peer_tolerances": ("{peer = [tol, ...]}: ECCO's tolerances [J per step]", "none"),
-    "monolithic_rtol": ("[rtol, ...]: the monolithic reference's tolerances (DOP853)", "[1e-4, 1e-6, 1e-8]"),
-    "monolithic_cvode_rtol": ("[rtol, ...]: the same equations under CVODE", "none"),
-    "target_error": ("the relative error the headline claims compare the masters at", "1e-3"),
-    "baseline": ("the master the headline ratios divide by", "jacobi"),
-    "repeats_limit_s": ("a case whose one run takes longer than this [s] runs once", "5"),
-}
-
 #: the ladder's tolerances where the scene's [bench] names none: (adaptive masters, Model Exchange)
 LADDER_TOLERANCES = {"co-simulation": (1e-2, 1e-3, 1e-4), "model exchange": (1e-4, 1e-6, 1e-8)}
 #: the ladder's steps: its largest, then halved this many times
@@ -149,10 +133,10 @@ def check(scene: scenes.Scene, only: list[str] | None = None):
     """``ValueError`` for a ``[bench]`` key or a master (in it or in ``only``) that is not
     known: what ``plan`` refuses, without making the plan."""
     table = dict(scene.bench)
-    unknown = sorted(set(table) - set(KEYS))
+    unknown = sorted(set(table) - set(BENCH_KEYS))
     if unknown:
         raise ValueError(f"scene '{scene.name}' [bench]: unknown key(s) {', '.join(unknown)} (known: "
-                         f"{', '.join(KEYS)})")
+                         f"{', '.join(BENCH_KEYS)})")
     try:
         master_family.check(*table.get("steps", {}), *table.get("tolerances", {}), *table.get("output_steps", {}))
     except master_family.UnknownMaster as error:
@@ -161,7 +145,7 @@ def check(scene: scenes.Scene, only: list[str] | None = None):
 
 
 def plan(scene: scenes.Scene, only: list[str] | None = None, fmu_dir: Path = FMUS, say=None) -> dict:
-    """The scene's benchmark plan, with defaults (``KEYS``); without steps and tolerances
+    """The scene's benchmark plan, with defaults (``scene_file.BENCH_KEYS``); without steps and tolerances
     in its ``[bench]``, the ladder (``ladder``).  ``dropped``: each master not run (asked
     for with ``only``, or in the ladder) and why."""
     table = dict(scene.bench)
