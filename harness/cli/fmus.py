@@ -1,4 +1,5 @@
-"""``lever build``, ``lever compliance``, ``lever badinputs``: the FMUs built and checked."""
+"""``lever build``, ``lever compliance``, ``lever badinputs``: the FMUs built and checked;
+``lever cache``: what the harness keeps of its computations."""
 from __future__ import annotations
 
 import sys
@@ -63,4 +64,27 @@ def bad_inputs(verbose):
         sys.exit(1)
 
 
-COMMANDS = (build, compliance, bad_inputs)
+def _size(count: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if count < 1000 or unit == "GB":
+            return f"{count:.0f} {unit}" if unit == "B" else f"{count:.1f} {unit}"
+        count /= 1000
+
+
+@click.command("cache", short_help="Where the cache is, its size; --clear empties it.")
+@click.option("--clear", is_flag=True, help="Remove what the cache holds (made again when needed).")
+def cache(clear):
+    """Where the harness keeps what it computes once - the references runs are measured
+    against, the benchmark's do-nothing twins - and how much it holds: LEVER_CACHE_DIR, else
+    the user's cache folder of this version (~/.cache/lever-cosim/<version> on Linux).  An
+    entry is keyed on the code and versions that made it: after an upgrade or a change to
+    the code the old entries are no longer read, and --clear frees their space."""
+    held = api.cache(clear)
+    click.echo(f"cache: {held['folder']}")
+    for name, part in held["parts"].items():
+        click.echo(f"  {name}: {part['files']} files, {_size(part['bytes'])} ({part['holds']})")
+    total = held["total"]
+    click.echo(f"{'removed' if clear else 'in all'}: {total['files']} files, {_size(total['bytes'])}")
+
+
+COMMANDS = (build, compliance, bad_inputs, cache)
