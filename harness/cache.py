@@ -6,13 +6,15 @@ Where: the folder ``LEVER_CACHE_DIR`` names, else the per-user cache folder of t
 version (``platformdirs.user_cache_dir``: ``~/.cache/lever-cosim/<version>`` on Linux,
 ``~/Library/Caches/lever-cosim/<version>`` on macOS) - never the checkout or the output
 folder, so a run with ``--out`` elsewhere leaves the project as it was.  ``lever cache``
-says where it is and its size; ``lever cache --clear`` empties it.
+says where it is and its size; ``lever cache --clear`` empties it, ``--clear-stale`` removes
+the entries of other code.
 
 What an entry is keyed on, besides its own inputs: ``code_digest()``, the digest of every
 source file of the packages that compute it (``harness``, ``lever``), of the scenes and data
 files the project ships, and the versions of the package, of Python and of the libraries that
-compute (``versions``) - a change to any of them (a fixed
-solver, an edited plan, an upgrade) misses the cache rather than answer from a stale entry.
+compute (``versions``) - a change to any of them (a fixed solver, an edited plan, an upgrade)
+misses the cache rather than answer from a stale entry.  The entries of one code are in a
+folder of their own (``entries``): what another code left is *stale*, never read again.
 """
 from __future__ import annotations
 
@@ -104,21 +106,47 @@ def code_digest() -> str:
     return digest_of(source_files(), versions())
 
 
+def entries(name: str) -> Path:
+    """Where the entries of the cache's part ``name`` computed by this code are kept: a
+    folder named by ``code_digest()`` in the part's."""
+    return part(name) / code_digest()
+
+
 def size() -> dict:
-    """What the cache holds: ``folder``, and for each part its ``files`` and ``bytes``
-    (``total`` both summed)."""
+    """What the cache holds: ``folder``, and for each part its ``files`` and ``bytes`` and
+    how many of them are stale (``stale_files``, ``stale_bytes``: left by other code);
+    ``total`` each summed."""
     parts = {}
     for name in PARTS:
-        files = [p for p in part(name).rglob("*") if p.is_file()] if part(name).is_dir() else []
-        parts[name] = {"files": len(files), "bytes": sum(p.stat().st_size for p in files)}
+        figures = dict.fromkeys(("files", "bytes", "stale_files", "stale_bytes"), 0)
+        for path in part(name).rglob("*") if part(name).is_dir() else ():
+            if not path.is_file():
+                continue
+            held = path.stat().st_size
+            figures["files"] += 1
+            figures["bytes"] += held
+            if path.relative_to(part(name)).parts[0] != code_digest():
+                figures["stale_files"] += 1
+                figures["stale_bytes"] += held
+        parts[name] = figures
     return {"folder": folder(), "parts": parts,
-            "total": {k: sum(p[k] for p in parts.values()) for k in ("files", "bytes")}}
+            "total": {k: sum(p[k] for p in parts.values()) for k in next(iter(parts.values()))}}
 
 
-def clear() -> dict:
-    """Remove every part of the cache (each is made again when needed); returns what it held
-    (``size()``).  Other files in the folder (a pip installation's FMUs) stay."""
+def clear(stale_only: bool = False) -> dict:
+    """Remove every entry of the cache (made again when needed), or (``stale_only``) those
+    other code left; returns what it held (``size()``).  Other files in the folder (a pip
+    installation's FMUs) stay."""
     held = size()
     for name in PARTS:
-        shutil.rmtree(part(name), ignore_errors=True)
+        if not stale_only:
+            shutil.rmtree(part(name), ignore_errors=True)
+        elif part(name).is_dir():
+            for other in part(name).iterdir():
+                if other.name == code_digest():
+                    continue
+                if other.is_dir():
+                    shutil.rmtree(other, ignore_errors=True)
+                else:
+                    other.unlink(missing_ok=True)
     return held

@@ -16,7 +16,7 @@ REPO = TESTS.parent
 #: The suite's cache (harness.cache: the references, the do-nothing twins), never the user's
 #: own: one folder that every worker of a run shares and the runs after it keep, as a user's
 #: cache is kept (a reference solved once serves every test that judges against it; an edit
-#: of the code keys new entries).  Set here, at import, in the controller and in each
+#: of the code keys new entries, and a run starts by removing those of older code).  Set here, at import, in the controller and in each
 #: worker alike, and inherited by every `lever` a test starts.
 TEST_CACHE = REPO / "build" / "tmp" / "test-cache"
 os.environ["LEVER_CACHE_DIR"] = str(TEST_CACHE)
@@ -347,6 +347,9 @@ SHARED_WORK = (
 
 
 def pytest_configure(config):
+    if not hasattr(config, "workerinput"):      # the controller, once a run: what older code cached goes
+        from harness import cache
+        cache.clear(stale_only=True)
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
                                        "(tests/conftest.py NUMERICS)")
     config.addinivalue_line("markers", "serial: run alone, after the tests run side by side "

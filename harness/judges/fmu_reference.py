@@ -222,7 +222,7 @@ def _cached(plan, source, master, use_cache, make) -> MonolithicSolution:
     # cache_key holds the code of every package that makes the reference (harness.cache.code_digest)
     key = hashlib.sha256(json.dumps([cache_key(plan.scene, grid, 0.0, 0.0, f"{source} {master}"), _fmu_hash(plan),
                                      list(plan.recorded)]).encode()).hexdigest()[:16]
-    path = cache.part(solutions.PART) / f"fmu-reference-{plan.name}-{key}.npz"
+    path = cache.entries(solutions.PART) / f"fmu-reference-{plan.name}-{key}.npz"
     if use_cache and (cached := load_cached(path)) is not None:
         check = {k[len(CHECK):]: v for k, v in cached.traces.items() if k.startswith(CHECK)}
         traces = {k: v for k, v in cached.traces.items() if not k.startswith(CHECK)}

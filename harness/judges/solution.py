@@ -55,7 +55,7 @@ def simd_in_use() -> str:
 
 
 def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
-    return cache.part(PART) / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
+    return cache.entries(PART) / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
 
 
 def load_cached(path: Path) -> MonolithicSolution | None:

@@ -107,7 +107,8 @@ def test_an_edited_plan_misses_the_cached_reference(own_cache, code_copy):
     cache.code_digest.cache_clear()
     after = monolithic.solve(spec, times)
     assert not after.info.get("cached")
-    assert len(list((own_cache / "references").glob("reference-kavz685-*.npz"))) == 2
+    stored = list((own_cache / "references").rglob("reference-kavz685-*.npz"))
+    assert len(stored) == 2 and len({p.parent for p in stored}) == 2        # one folder of entries a code
 
 
 def test_an_upgrade_misses_the_cache(monkeypatch):
@@ -152,21 +153,31 @@ def test_the_cache_is_where_lever_cache_dir_says_else_the_users_cache_of_this_ve
 def test_lever_cache_says_where_and_how_much_and_clears(lever, tmp_path, monkeypatch):
     folder = tmp_path / "cache"
     monkeypatch.setenv("LEVER_CACHE_DIR", str(folder))
-    (folder / "references").mkdir(parents=True)
-    (folder / "references" / "reference-x.npz").write_bytes(b"0" * 1500)
-    (folder / "do-nothing-twins" / "abc").mkdir(parents=True)
-    (folder / "do-nothing-twins" / "abc" / "EngineShaft.fmu").write_bytes(b"0" * 2500)
+    current = cache.entries("references")
+    assert current == folder / "references" / cache.code_digest()
+    current.mkdir(parents=True)
+    (current / "reference-x.npz").write_bytes(b"0" * 1500)
+    (folder / "references" / "other-code").mkdir()
+    (folder / "references" / "other-code" / "reference-x.npz").write_bytes(b"0" * 500)
+    (folder / "do-nothing-twins" / "other-code" / "abc").mkdir(parents=True)
+    (folder / "do-nothing-twins" / "other-code" / "abc" / "EngineShaft.fmu").write_bytes(b"0" * 2000)
     (folder / "fmus").mkdir()
     (folder / "fmus" / "kept.fmu").write_bytes(b"0")           # not the cache's: a pip installation's FMUs
     held = api.cache()
-    assert held["total"] == {"files": 2, "bytes": 4000} and held["folder"] == folder
+    assert held["folder"] == folder and held["cleared"] is None
+    assert held["total"] == {"files": 3, "bytes": 4000, "stale_files": 2, "stale_bytes": 2500}
     shown = lever("cache")
     assert shown.exit_code == 0 and f"cache: {folder}" in shown.output
-    assert "references: 1 files, 1.5 kB" in shown.output and "in all: 2 files, 4.0 kB" in shown.output
+    assert "references: 2 files, 2.0 kB" in shown.output
+    assert "in all: 3 files, 4.0 kB (2 files, 2.5 kB of them stale)" in shown.output
+    stale = lever("cache", "--clear-stale")
+    assert stale.exit_code == 0 and "removed: 2 files, 2.5 kB (stale)" in stale.output
+    assert [p.name for p in (folder / "references").iterdir()] == [cache.code_digest()]
+    assert api.cache()["total"] == {"files": 1, "bytes": 1500, "stale_files": 0, "stale_bytes": 0}
     cleared = lever("cache", "--clear")
-    assert cleared.exit_code == 0 and "removed: 2 files, 4.0 kB" in cleared.output
+    assert cleared.exit_code == 0 and "removed: 1 file, 1.5 kB" in cleared.output
     assert sorted(p.name for p in folder.iterdir()) == ["fmus"]
-    assert api.cache()["total"] == {"files": 0, "bytes": 0}
+    assert api.cache()["total"]["files"] == 0
 
 
 # -- the checkout stays as it was ----------------------------------------------------------------
@@ -211,7 +222,7 @@ def test_a_run_and_a_bench_of_a_users_scene_leave_the_checkout_as_it_was(fmu_dir
     bench = api.bench(folder / "user_driveline.toml", repeats=1, only=["jacobi"], peers=False, monolithic=False,
                       fmi_editions=False, out=tmp_path / "bench")
     assert bench["cases"]
-    made = list(cache.part("references").glob("fmu-reference-user_driveline-*.npz"))
+    made = list(cache.part("references").rglob("fmu-reference-user_driveline-*.npz"))
     assert len(made) == 1 and made[0].is_relative_to(tmp_path / "user-cache")
     monkeypatch.undo()           # the session's cache again, left out of the files compared
     after = _checkout_files()
@@ -222,6 +233,6 @@ def test_a_run_and_a_bench_of_a_users_scene_leave_the_checkout_as_it_was(fmu_dir
 
 def test_the_benchs_twins_go_to_the_cache(own_cache, fmu_dir):
     built = do_nothing_twins.twins(scenes.load("kavz685"), fmu_dir)
-    assert built.is_relative_to(own_cache / "do-nothing-twins")
+    assert built.is_relative_to(own_cache / "do-nothing-twins" / cache.code_digest())
     assert sorted(p.name for p in built.glob("*.fmu")) == ["EngineShaft.fmu", "LeverCoupling.fmu", "LoadShaft.fmu"]
     assert do_nothing_twins.twins(scenes.load("kavz685"), fmu_dir) == built          # built once, then reused

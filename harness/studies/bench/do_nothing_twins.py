@@ -145,8 +145,8 @@ def build_twin(fmu: Path, dest: Path) -> Path:
 def twins(scene: scenes.Scene, fmu_dir: Path = FMUS, cache: Path | None = None) -> Path:
     """A folder with a do-nothing twin of each of the scene's FMUs under the FMU's own file
     name (so ``System(scene, folder)`` runs the scene on them), built where missing, under
-    ``cache`` (default: the cache's part ``PART``)."""
-    cache = caches.part(PART) if cache is None else cache
+    ``cache`` (default: the cache's part ``PART``, its entries of this code)."""
+    cache = caches.entries(PART) if cache is None else cache
     files = sorted({spec.fmu for spec in scene.components.values() if scenes.is_fmu_path(spec.fmu)})
     if files:       # a twin stands in by name in the FMU folder; a file of the scene's own is run as it is
         raise ValueError(f"scene '{scene.name}' runs FMU files of its own ({', '.join(files)}): do-nothing twins "
