@@ -8,7 +8,6 @@ import math
 import numpy as np
 
 from harness.description import scene_kinds
-from harness.description import scene as scenes
 from harness.formats import plotting
 from harness.formats.run_files import (files_line, identity_lines, reference_error_lines, report_heading, run_title,
                                        save_figure, streamed_lines, summary_head, write_run)

@@ -14,7 +14,7 @@ import pytest
 from harness import api, cache, paths
 from harness.description import plan as plans
 from harness.description import scene as scenes
-from harness.judges import fmu_reference, monolithic, solution
+from harness.judges import fmu_reference, monolithic
 from harness.studies.bench import do_nothing_twins
 from harness.studies.cases import CaseLog
 
