@@ -7,7 +7,8 @@ installed with ``pip install .`` carries the same inputs inside itself
 (``harness/_project/``, read-only); it builds its FMUs into the per-user cache
 (``platformdirs.user_cache_dir``, e.g. ``~/.cache/lever-cosim/<version>/fmus``) and writes
 results under the folder it is run from (``./results``).  ``LEVER_FMU_DIR`` chooses
-the FMUs' folder in either layout.
+the FMUs' folder in either layout.  What the harness caches (references, the benchmark's
+twins) lives in the per-user cache in either layout, never in the checkout (``harness.cache``).
 """
 import os
 from pathlib import Path
@@ -24,18 +25,33 @@ DATA = RESOURCES / "data"
 BUILD = ROOT / "build"
 
 
+def version() -> str:
+    """The package's version (as installed; in a checkout run without an installation, the
+    ``lever`` package's)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        return installed("lever-cosim")
+    except PackageNotFoundError:
+        from lever import __version__
+        return __version__
+
+
+def user_cache() -> Path:
+    """The per-user cache folder of this version (``platformdirs.user_cache_dir``,
+    ``~/.cache/lever-cosim/<version>`` on Linux): one folder per version, so two installed
+    versions never rebuild or read each other's files."""
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("lever-cosim", appauthor=False, version=version()))
+
+
 def _fmu_dir() -> Path:
     chosen = os.environ.get("LEVER_FMU_DIR")
     if chosen:
         return Path(chosen).expanduser().resolve()
-    if not INSTALLED:
-        return BUILD / "fmus"
-    from importlib.metadata import version
-
-    import platformdirs
-
-    # one folder per version: two installed versions never rebuild each other's FMUs
-    return Path(platformdirs.user_cache_dir("lever-cosim", appauthor=False, version=version("lever-cosim"))) / "fmus"
+    return BUILD / "fmus" if not INSTALLED else user_cache() / "fmus"
 
 
 FMUS = _fmu_dir()

@@ -13,6 +13,14 @@ from lever.fmus.registry import NAMES as FMU_NAMES
 TESTS = Path(__file__).resolve().parent
 REPO = TESTS.parent
 
+#: The suite's cache (harness.cache: the references, the do-nothing twins), never the user's
+#: own: one folder that every worker of a run shares and the runs after it keep, as a user's
+#: cache is kept (a reference solved once serves every test that judges against it; an edit
+#: of the code keys new entries, and a run starts by removing those of older code).  Set here, at import, in the controller and in each
+#: worker alike, and inherited by every `lever` a test starts.
+TEST_CACHE = REPO / "build" / "tmp" / "test-cache"
+os.environ["LEVER_CACHE_DIR"] = str(TEST_CACHE)
+
 
 #: Tests whose outcome could move with numpy's SIMD dispatch: they compare what went through
 #: numpy's vectorised functions, reductions or FFTs with the physics' standard-library results,
@@ -89,6 +97,15 @@ SLOW = (
     "cli/test_api.py::test_numpy_scalars_are_numbers",
     "cli/test_notebook.py::test_the_example_notebook_runs_and_shows_what_it_says",
     "cli/test_guide_output.py::test_getting_started_shows_what_the_run_prints",
+    "cli/test_every_scene.py::test_the_api_without_out_returns_the_run_with_its_kinds_summary",
+    "cli/test_every_scene.py::test_the_api_with_out_writes_the_summary_the_api_returns",
+    "cli/test_every_scene.py::test_lever_run_writes_every_scene",
+    "cli/test_every_scene.py::test_a_streamed_run_of_each_kind_draws_its_kinds_plots",
+    "judges/test_cache.py::test_a_run_and_a_bench_of_a_users_scene_leave_the_checkout_as_it_was",
+    "judges/test_cache.py::test_an_edit_of_any_module_a_reference_runs_changes_the_digest",
+    "judges/test_cache.py::test_the_digest_reads_every_module_a_reference_runs",
+    "judges/test_cache.py::test_the_made_reference_the_twins_and_the_case_logs_are_keyed_on_the_code",
+    "judges/test_cache.py::test_the_benchs_twins_go_to_the_cache",
     "cli/test_command_line.py::test_a_study_says_how_long_it_will_take_before_it_runs",
     "cli/test_command_line.py::test_a_run_without_plots_lists_no_plots",
     "cli/test_command_line.py::test_a_sweep_says_how_long_it_will_take_before_it_runs",
@@ -341,6 +358,9 @@ SHARED_WORK = (
 
 
 def pytest_configure(config):
+    if not hasattr(config, "workerinput"):      # the controller, once a run: what older code cached goes
+        from harness import cache
+        cache.clear(stale_only=True)
     config.addinivalue_line("markers", "numerics: the outcome could move with numpy's SIMD dispatch "
                                        "(tests/conftest.py NUMERICS)")
     config.addinivalue_line("markers", "serial: run alone, after the tests run side by side "

@@ -26,9 +26,10 @@ to ``notify`` (default: Python's ``warnings``, shown at the caller's line) and a
 from __future__ import annotations
 
 # the api's parts, one job each: reading the arguments (inputs), the result types (results),
-# building the FMUs (building), the scenes and masters to choose from (choices), a run
+# building the FMUs (building), the cache (caching), the scenes and masters to choose from (choices), a run
 # (running), validation (validating), the studies, the exports and the checks
 from harness.api.building import NO_COMPILER, BuildError, build, fmu_path
+from harness.api.caching import cache
 from harness.api.checks import bad_inputs, compliance
 from harness.api.choices import check_masters, load, masters, scenes, scenes_list
 from harness.api.exports import export
@@ -44,7 +45,7 @@ __all__ = ["InputError", "UnknownSignal", "BuildError", "StudyInterrupted", "Run
            "BenchResult", "ReferenceCheck", "Signals", "build", "fmu_path", "scenes", "masters", "load", "run",
            "validate",
            "validate_each", "bench", "stability_map", "sweep", "study", "measured", "engines", "hosts", "export",
-           "compliance", "references", "fingerprints", "bad_inputs", "scenes_list"]
+           "compliance", "references", "fingerprints", "bad_inputs", "scenes_list", "cache"]
 
 
 def __dir__():

@@ -1,4 +1,5 @@
-"""``lever build``, ``lever compliance``, ``lever badinputs``: the FMUs built and checked."""
+"""``lever build``, ``lever compliance``, ``lever badinputs``: the FMUs built and checked;
+``lever cache``: what the harness keeps of its computations."""
 from __future__ import annotations
 
 import sys
@@ -63,4 +64,37 @@ def bad_inputs(verbose):
         sys.exit(1)
 
 
-COMMANDS = (build, compliance, bad_inputs)
+def _files(count: int) -> str:
+    return f"{count} file{'' if count == 1 else 's'}"
+
+
+def _size(count: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if count < 1000 or unit == "GB":
+            return f"{count:.0f} {unit}" if unit == "B" else f"{count:.1f} {unit}"
+        count /= 1000
+
+
+@click.command("cache", short_help="Where the cache is, its size; --clear empties it.")
+@click.option("--clear", is_flag=True, help="Remove what the cache holds (made again when needed).")
+@click.option("--clear-stale", is_flag=True, help="Remove only what other code or versions left (never read again).")
+def cache(clear, clear_stale):
+    """Where the harness keeps what it computes once - the references runs are measured
+    against, the benchmark's do-nothing twins - and how much it holds: LEVER_CACHE_DIR, else
+    the user's cache folder of this version (~/.cache/lever-cosim/<version> on Linux).  An
+    entry is kept for the code and versions that made it: after an upgrade or a change to
+    the code the old entries are stale, never read again, and --clear-stale frees their space."""
+    held = api.cache(clear or clear_stale, stale=clear_stale and not clear)
+    click.echo(f"cache: {held['folder']}")
+    for name, part in held["parts"].items():
+        click.echo(f"  {name}: {_files(part['files'])}, {_size(part['bytes'])} ({part['holds']})")
+    total = held["total"]
+    stale = f" ({_files(total['stale_files'])}, {_size(total['stale_bytes'])} of them stale)" if total["stale_files"] else ""
+    if held["cleared"] == "stale":
+        click.echo(f"removed: {_files(total['stale_files'])}, {_size(total['stale_bytes'])} (stale)")
+    else:
+        click.echo(f"{'removed' if held['cleared'] else 'in all'}: {_files(total['files'])}, {_size(total['bytes'])}"
+                   f"{stale}")
+
+
+COMMANDS = (build, compliance, bad_inputs, cache)

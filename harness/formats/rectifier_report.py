@@ -8,25 +8,15 @@ import math
 import numpy as np
 
 from harness.description import scene_kinds
-from harness.description import scene as scenes
 from harness.formats import plotting
-from harness.formats.run_files import (description_of, files_line, identity_lines, reference_error_lines,
-                                       report_heading, run_identity, save_figure, title_of, write_run)
+from harness.formats.run_files import (files_line, identity_lines, reference_error_lines, report_heading,
+                                       save_figure, streamed_lines, summary_head, title_of, write_run)
 from harness.judges.rectifier import analyse, errors
 
 
 def summarize(result, reference=None) -> dict:
     scene = result.scene
-    summary = {
-        "scene": scene.name, "description": description_of(scene), "master": result.master, "step_s": result.step,
-        "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient, "ok": result.ok,
-        "failure": result.failure, "diagnosis": result.diagnosis, "wall_time_s": result.wall_time,
-        "counters": result.counters,
-    }
-    summary.update(run_identity(result))
-    if result.unconnected_inputs:
-        summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
-                                         "note": scenes.unconnected_message(result.unconnected_inputs)}
+    summary = summary_head(result)
     if len(result.times) > 1:
         summary["freewheel"] = analyse(scene, result.times, result.traces)
         summary["energy_balance"] = summary["freewheel"]["energy_balance"]
@@ -57,6 +47,7 @@ def write_report(path, summary: dict):
                   "", "The traces up to the " + ("interruption" if interrupted else "failure") + " are in traces.csv."]
     if summary.get("unconnected_inputs"):
         lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
+    lines += streamed_lines(summary, "the engagement, the energy balance and the plots below use 1 row in {stride}")
     fw = summary.get("freewheel")
     if fw:
         d = fw["derived"]

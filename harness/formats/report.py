@@ -2,47 +2,26 @@
 in ``results/<scene>/``."""
 from __future__ import annotations
 
-import platform
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from harness.description import scene_kinds
-from harness.description import scene as scenes
 from harness.judges import fmu_reference, metrics, revolutions
 from harness.engine.run import RunResult
 from harness.formats import plotting, rectifier_report
-from harness.formats.run_files import (description_of, files_line, fmt, identity_lines, reference_error_lines,
-                                       report_heading, run_identity, save_figure, title_of, write_run)
+from harness.formats.run_files import (files_line, fmt, identity_lines, reference_error_lines, report_heading,
+                                       save_figure, streamed_lines, summary_head, title_of, write_run)
 
 
-def summarize(result: RunResult, reference=None) -> dict:
+def summarize_driveline(result: RunResult, reference=None) -> dict:
+    """summary.json of a driveline run (or of a scene of no known kind, which may still hold a
+    lever coupling: ``summarize`` says which kinds are which)."""
     scene = result.scene
     names = metrics.signals(result.scene)
-    summary = {
-        "scene": scene.name,
-        "description": description_of(scene),
-        "master": result.master,
-        "step_s": result.step,
-        "stop_s": scene.experiment.stop,
-        "transient_s": scene.experiment.transient,
-        "transient_note": getattr(scene.experiment, "transient_note", None),
-        "ok": result.ok,
-        "failure": result.failure,
-        "diagnosis": getattr(result, "diagnosis", None),
-        "wall_time_s": result.wall_time,
-        "counters": result.counters,
-        "python": platform.python_version(),
-    }
-    summary.update(run_identity(result))
-    if result.stream:
-        summary["stream"] = result.stream
-    if result.unconnected_inputs:
-        summary["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
-                                         "note": scenes.unconnected_message(result.unconnected_inputs)}
-    if result.unchecked_connections:
-        summary["unchecked_connections"] = {"connections": list(result.unchecked_connections),
-                                            "note": scenes.unchecked_message(result.unchecked_connections)}
+    summary = summary_head(result)
     if len(result.times) > 1:
         # by the traces' own names (component.variable): one naming of a signal everywhere
         summary["statistics"] = {full: metrics.statistics(result.times, result.traces, [full],
@@ -90,10 +69,7 @@ def write_report(path: Path, summary: dict):
         lines += ["", f"**Unconnected:** {summary['unconnected_inputs']['note']}."]
     if summary.get("unchecked_connections"):
         lines += ["", f"**Units not checked:** {summary['unchecked_connections']['note']}."]
-    if summary.get("stream"):
-        st = summary["stream"]
-        lines += ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; the statistics and "
-                  f"plots below use 1 row in {st['stride']}, the energy balance every row."]
+    lines += streamed_lines(summary, "the statistics and plots below use 1 row in {stride}, the energy balance every row")
     stats = summary.get("statistics")
     if stats:
         lines += ["", f"## Motion after the start-up transient (t >= {summary['transient_s']:g} s)", ""]
@@ -347,15 +323,35 @@ def _plot_spectrum(out: Path, result: RunResult, title: str, plt):
 
 
 def write_driveline(out: Path, result: RunResult, reference=None, plots: bool = True) -> dict:
-    return write_run(out, result, reference, summarize, write_report, plot, plots)
+    return write_run(out, result, reference, summarize_driveline, write_report, plot, plots)
 
 
-#: the run files' writer of each kind of scene (harness.description.scene_kinds)
-WRITERS = {"driveline": write_driveline, "rectifier": rectifier_report.write}
+@dataclass(frozen=True)
+class KindReport:
+    """What a kind of scene's run reports: its summary (``summarize(result, reference)``,
+    what summary.json holds) and its files (``write(out, result, reference, plots)``)."""
+    summarize: Callable[..., dict]
+    write: Callable[..., dict]
+
+
+#: each kind of scene's report (harness.description.scene_kinds.KINDS)
+REPORTS = {"driveline": KindReport(summarize_driveline, write_driveline),
+           "rectifier": KindReport(rectifier_report.summarize, rectifier_report.write)}
+
+
+def report_of(scene) -> KindReport:
+    """The report of ``scene``'s kind; a scene of no known kind (a user's FMU in a role of
+    the driveline) gets the driveline's, which leaves out what its roles do not give."""
+    return REPORTS.get(scene_kinds.kind_of(scene), REPORTS["driveline"])
+
+
+def summarize(result: RunResult, reference=None) -> dict:
+    """What summary.json holds for ``result``, by its kind of scene's report (a run from
+    Python without ``out`` gets it without any file written)."""
+    return report_of(result.scene).summarize(result, reference)
 
 
 def write(out: Path, result: RunResult, reference=None, plots: bool = True) -> dict:
     """A run's files in ``out`` (see ``harness.formats.run_files.write_run``), written by
-    its kind of scene's writer; a scene of no known kind gets the driveline's.  ``plots``:
-    false draws none."""
-    return WRITERS.get(scene_kinds.kind_of(result.scene), write_driveline)(out, result, reference, plots)
+    its kind of scene's report; ``plots``: false draws none."""
+    return report_of(result.scene).write(out, result, reference, plots)

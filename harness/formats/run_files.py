@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import json
 import math
+import platform
 from pathlib import Path
 
 import numpy as np
 
 from harness.description import plan as plans
+from harness.description import scene as scenes
 from harness.engine.run import RunResult
 from harness.paths import FMUS
 from harness.engine import interrupt, masters
@@ -175,6 +177,41 @@ def fmt(x, digits=4):
     if isinstance(x, float) and (abs(x) >= 1e4 or (0 < abs(x) < 1e-3)):
         return f"{x:.{digits - 1}e}"
     return f"{x:.{digits}g}"
+
+
+def summary_head(result: RunResult) -> dict:
+    """What every kind of scene's summary.json starts with: the scene, the master and step,
+    the times, how the run ended and what it cost, what it ran (``run_identity``), and where
+    they apply, how its traces were streamed and which inputs were left unconnected or
+    connected without a unit check."""
+    scene = result.scene
+    head = {
+        "scene": scene.name, "description": description_of(scene), "master": result.master, "step_s": result.step,
+        "stop_s": scene.experiment.stop, "transient_s": scene.experiment.transient,
+        "transient_note": getattr(scene.experiment, "transient_note", None), "ok": result.ok,
+        "failure": result.failure, "diagnosis": getattr(result, "diagnosis", None), "wall_time_s": result.wall_time,
+        "counters": result.counters, "python": platform.python_version(),
+    }
+    head.update(run_identity(result))
+    if result.stream:
+        head["stream"] = result.stream
+    if result.unconnected_inputs:
+        head["unconnected_inputs"] = {"inputs": list(result.unconnected_inputs),
+                                      "note": scenes.unconnected_message(result.unconnected_inputs)}
+    if result.unchecked_connections:
+        head["unchecked_connections"] = {"connections": list(result.unchecked_connections),
+                                         "note": scenes.unchecked_message(result.unchecked_connections)}
+    return head
+
+
+def streamed_lines(summary: dict, uses: str) -> list[str]:
+    """report.md's lines on traces streamed while running (none for a run that was not):
+    ``uses`` says what the report computed from the rows it kept (``{stride}``: 1 in so many)."""
+    if not summary.get("stream"):
+        return []
+    st = summary["stream"]
+    return ["", f"Traces streamed while running: {st['rows_written']} rows in traces.csv; "
+            f"{uses.format(stride=st['stride'])}."]
 
 
 def run_identity(result: RunResult) -> dict:

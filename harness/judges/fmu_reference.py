@@ -16,10 +16,11 @@ say - so that a run's error can be measured for any scene.
   coarser two (that extrapolation's error: on the high side in the asymptotic range).
 
 Both kinds are computed once on a uniform grid (``grid_step``) and cached by the scene, the FMU
-files, the grid and the code of the engine and of this package (as the monolithic reference
-is, ``harness.judges.solution``); a run's times are read from that grid, by a cubic spline
-between its points (its error estimated and added to the reference's own).  Where none can
-be had, ``ReferenceUnavailable`` says why in a sentence.
+files, the grid, the harness's and the physics' code and the versions (as the monolithic
+reference is, ``harness.judges.solution``; the cache's folder: ``harness.cache``); a run's
+times are read from that grid, by a cubic spline between its points (its error estimated and
+added to the reference's own).  Where none can be had, ``ReferenceUnavailable`` says why in a
+sentence.
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from harness import cache
 from harness.description import plan as plans
 from harness.description import scene_kinds
 from harness.engine import masters as master_family
@@ -208,14 +210,6 @@ def observed_orders(coarse: dict, middle: dict, fine: dict) -> dict:
 CHECK = "check::"
 
 
-def _code_hash() -> str:
-    engine = Path(simulate.__code__.co_filename).parent
-    digest = hashlib.sha256()
-    for path in sorted(engine.rglob("*.py")) + [Path(__file__)]:
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
 def _fmu_hash(plan: plans.Plan) -> str:
     digest = hashlib.sha256()
     for name in sorted(plan.paths):
@@ -226,9 +220,10 @@ def _fmu_hash(plan: plans.Plan) -> str:
 def _cache_path(plan, source, master) -> Path:
     e = plan.experiment
     grid = np.array([e.start, e.stop, grid_step(plan)])
+    # cache_key holds the code of every package that makes the reference (harness.cache.code_digest)
     key = hashlib.sha256(json.dumps([cache_key(plan.scene, grid, 0.0, 0.0, f"{source} {master}"), _fmu_hash(plan),
-                                     _code_hash(), list(plan.recorded)]).encode()).hexdigest()[:16]
-    return solutions.CACHE / f"fmu-reference-{plan.name}-{key}.npz"
+                                     list(plan.recorded)]).encode()).hexdigest()[:16]
+    return cache.entries(solutions.PART) / f"fmu-reference-{plan.name}-{key}.npz"
 
 
 def expected_wait(plan: plans.Plan, run) -> str | None:

@@ -1,9 +1,10 @@
-"""A monolithic reference solution (``Reference``: traces on the run's grid, how it was
-computed) and its cache: solutions are stored by a hash of everything they depend on -
-the scene's components, values and connections, the time grid, the solver's settings, the
-physics code (``physics_hash``), the reference solver's code (``solver_hash``) and numpy's
-SIMD dispatch in use (its last bits differ between levels, which the dispatch pass of the
-tests must see: docs/testing.md)."""
+"""A monolithic reference solution (``MonolithicSolution``: traces on the run's grid, how it
+was computed) and its cache (``harness.cache``'s ``references``): solutions are stored by a
+hash of everything they depend on - the scene's components, values and connections, the time
+grid, the solver's settings, the code that plans and solves them and the package's version
+(``harness.cache.code_digest``: every source file of the harness and of the physics) and
+numpy's SIMD dispatch in use (its last bits differ between levels, which the dispatch pass
+of the tests must see: docs/testing.md)."""
 from __future__ import annotations
 
 import hashlib
@@ -13,13 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from lever.physics import component_parameters
-
+from harness import cache
 from harness.description import scene as scenes
 from harness.engine.traces import replaced
-from harness.paths import RESULTS
 
-CACHE = RESULTS / ".cache"
+#: the part of the cache (``harness.cache.PARTS``) the references are stored in
+PART = "references"
 
 
 class ReferenceUnavailable(ValueError):
@@ -43,26 +43,9 @@ def cache_key(scene: scenes.Scene, times: np.ndarray, rtol: float, atol: float, 
         "grid": hashlib.sha256(np.ascontiguousarray(times, dtype=float).tobytes()).hexdigest(),
         "connections": sorted(str(c) for c in scene.connections),
         "rtol": rtol, "atol": atol, "method": method,
-        "physics": physics_hash(), "solver": solver_hash(), "simd": simd_in_use(),
+        "code": cache.code_digest(), "simd": simd_in_use(),
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-def _digest(paths) -> str:
-    digest = hashlib.sha256()
-    for path in paths:
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:16]
-
-
-def physics_hash() -> str:
-    return _digest(sorted(Path(component_parameters.__file__).parent.glob("*.py")))
-
-
-def solver_hash() -> str:
-    """The reference solver's code: every module of this package, so that none it uses can be
-    left out (a change to one it does not use costs a re-solve, not a stale solution)."""
-    return _digest(sorted(Path(__file__).parent.glob("*.py")))
 
 
 def simd_in_use() -> str:
@@ -72,7 +55,7 @@ def simd_in_use() -> str:
 
 
 def cache_path(scene: scenes.Scene, times, rtol, atol, method) -> Path:
-    return CACHE / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
+    return cache.entries(PART) / f"reference-{scene.name}-{cache_key(scene, times, rtol, atol, method)}.npz"
 
 
 def load_cached(path: Path) -> MonolithicSolution | None:
@@ -87,7 +70,7 @@ def load_cached(path: Path) -> MonolithicSolution | None:
 
 
 def store(path: Path, reference: MonolithicSolution):
-    CACHE.mkdir(parents=True, exist_ok=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
     meta = json.dumps({"wall_time": reference.wall_time, "n_rhs": reference.n_rhs, "method": reference.method,
                        "info": reference.info})
     # whole or not at all: a cache cut short by Ctrl-C would break every later run's reference

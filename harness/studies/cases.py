@@ -8,7 +8,7 @@ too, with its diagnosis, and the study goes on with the others.  A case stopped 
 Ctrl-C is recorded as interrupted - neither done nor failed: a re-run does it again.
 
 The log starts with a header naming what the study depends on (its *fingerprint*: scene,
-plan, versions); a log whose fingerprint differs is set aside (renamed, not deleted) and
+plan, versions, and the code that computes the cases: ``harness.cache.code_digest``); a log whose fingerprint differs is set aside (renamed, not deleted) and
 the study starts afresh, so a resumed study never mixes results of different set-ups.
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ import traceback
 from pathlib import Path
 from typing import Callable, Iterator
 
+from harness import cache
 from harness.engine import interrupt
 
 FAILED = "failed"
@@ -37,7 +38,9 @@ class CaseLog:
     def __init__(self, folder: Path, fingerprint: dict, resume: bool = True, name: str = "cases.jsonl"):
         self.path = Path(folder) / name
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.fingerprint = json.loads(json.dumps(fingerprint, sort_keys=True, default=_canonical))
+        # the code that computes the cases is part of what they depend on, whatever the study says
+        self.fingerprint = json.loads(json.dumps({**fingerprint, "code": cache.code_digest()}, sort_keys=True,
+                                                 default=_canonical))
         self._done: dict[str, dict] = {}
         self.set_aside: Path | None = None
         if self.path.exists():

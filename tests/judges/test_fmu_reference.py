@@ -22,7 +22,7 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "user_fmu"
 
 @pytest.fixture(autouse=True)
 def _cache_in_tmp(tmp_path, monkeypatch):
-    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")
+    monkeypatch.setenv("LEVER_CACHE_DIR", str(tmp_path / "cache"))
 
 
 def _plan(name: str, stop: float) -> plans.Plan:

@@ -144,7 +144,7 @@ def test_the_physics_never_imports_the_harness():
 def test_the_cli_has_every_command_and_no_other_name():
     from harness.cli import main
 
-    assert set(main.commands) == {"badinputs", "bench", "build", "compliance", "engines", "export-container",
+    assert set(main.commands) == {"badinputs", "bench", "build", "cache", "compliance", "engines", "export-container",
                                   "export-ssp", "fingerprint", "hosts", "measured", "reference", "run", "scenes",
                                   "stability", "study", "sweep", "validate"}
 
