@@ -1,0 +1,130 @@
+"""A trace's quantities from its own samples, whatever their times, and a reference as a
+function of time (the engineer's verdict, ``harness.judges.verdict``, judges a result with
+these).
+
+* ``mean``: the time average, the trapezoid rule over the samples' own times (a result with
+  uneven or sparse rows is averaged over the time each row stands for, not row by row);
+* ``amplitude``: ``(max - min) / 2`` of the samples;
+* ``orders``: the rotation orders by a least-squares fit of ``1, cos(k w t), sin(k w t)`` on
+  the samples' own times (no resampling, no uniform grid needed; the fit's matrix is
+  factorised once per set of times, so a perturbed trace on the same times costs a product).
+
+``Reference`` is a reference trace as a function of time: a shape-preserving cubic (PCHIP:
+no overshoot at a kink or an event) through its samples, with its own interpolation error
+estimated from the samples themselves (``error_at``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def unique_times(t: np.ndarray, y: np.ndarray | None = None):
+    """``t`` (and ``y``) with a time repeated at an event kept once, its later sample (the
+    value after the event, as fmpy's ``Input`` applies it from there on)."""
+    keep = np.ones(len(t), dtype=bool)
+    keep[:-1] = np.diff(t) > 0
+    return (t[keep], None if y is None else y[keep])
+
+
+def time_mean(t: np.ndarray, y: np.ndarray) -> float:
+    """The time average of ``y(t)`` over ``t[0] ... t[-1]`` (trapezoid rule)."""
+    span = float(t[-1] - t[0])
+    if span <= 0:
+        return float(np.mean(y))
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)) / span)
+
+
+def amplitude(y: np.ndarray) -> float:
+    return float((np.max(y) - np.min(y)) / 2)
+
+
+class OrderFit:
+    """The least-squares fit of the rotation ``orders`` at ``rotation`` [rad/s] on the times
+    ``t``: ``fit(y)`` -> {order: complex amplitude ``A e^(i phase)``, with the order's term
+    ``A cos(k w t + phase)``}."""
+
+    def __init__(self, t: np.ndarray, rotation: float, orders):
+        self.orders = tuple(orders)
+        columns = [np.ones_like(t)]
+        for k in self.orders:
+            columns += [np.cos(k * rotation * t), np.sin(k * rotation * t)]
+        matrix = np.column_stack(columns)
+        self._pinv = np.linalg.pinv(matrix)
+
+    def fit(self, y: np.ndarray) -> dict[int, complex]:
+        coefficients = self._pinv @ y
+        # a cos + b sin = Re((a - i b) e^(i k w t))
+        return {k: complex(coefficients[1 + 2 * j], -coefficients[2 + 2 * j]) for j, k in enumerate(self.orders)}
+
+
+@dataclass
+class Reference:
+    """One reference signal as a function of time, from its samples ``t``, ``y``."""
+    t: np.ndarray
+    y: np.ndarray
+
+    def __post_init__(self):
+        from scipy.interpolate import PchipInterpolator
+
+        self.t, self.y = unique_times(np.asarray(self.t, dtype=float), np.asarray(self.y, dtype=float))
+        self._f = PchipInterpolator(self.t, self.y, extrapolate=True) if len(self.t) > 1 else None
+        self._spline = None
+
+    def __call__(self, times) -> np.ndarray:
+        times = np.asarray(times, dtype=float)
+        if self._f is None:
+            return np.full(times.shape, float(self.y[0]) if len(self.y) else math.nan)
+        return self._f(np.clip(times, self.t[0], self.t[-1]))
+
+    def error_at(self, times) -> np.ndarray:
+        """The interpolant's own error at ``times``, estimated as its distance from a second
+        interpolant of higher order through the same samples (a not-a-knot cubic spline):
+        zero at the samples, largest midway, where the samples resolve the content worst."""
+        from scipy.interpolate import CubicSpline
+
+        times = np.asarray(times, dtype=float)
+        if len(self.t) < 4:
+            return np.full(times.shape, math.nan)
+        if self._spline is None:
+            self._spline = CubicSpline(self.t, self.y)
+        inside = np.clip(times, self.t[0], self.t[-1])
+        return np.abs(self._spline(inside) - self._f(inside))
+
+    def range_around(self, at: np.ndarray, before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference's smallest and largest value over ``at - before ... at + after``
+        (each time its own interval): its samples inside and the interpolant at both ends."""
+        low_t, high_t = at - before, at + after
+        ends = np.stack([self(low_t), self(at), self(high_t)])
+        low, high = np.min(ends, axis=0), np.max(ends, axis=0)
+        first = np.searchsorted(self.t, low_t, "right")
+        last = np.searchsorted(self.t, high_t, "left")
+        inner = np.flatnonzero(last > first)
+        if inner.size:
+            # running extremes over each interval's samples (intervals are short: a result step)
+            from numpy.lib.stride_tricks import sliding_window_view
+
+            width = int(np.max(last[inner] - first[inner]))
+            padded_low = np.concatenate([self.y, np.full(width, np.inf)])
+            padded_high = np.concatenate([self.y, np.full(width, -np.inf)])
+            count = last[inner] - first[inner]
+            mask = np.arange(width)[None, :] < count[:, None]
+            rows_low = sliding_window_view(padded_low, width)[first[inner]]
+            rows_high = sliding_window_view(padded_high, width)[first[inner]]
+            low[inner] = np.minimum(low[inner], np.min(np.where(mask, rows_low, np.inf), axis=1))
+            high[inner] = np.maximum(high[inner], np.max(np.where(mask, rows_high, -np.inf), axis=1))
+        return low, high
+
+
+def spacing(t: np.ndarray) -> str:
+    """"every 1 ms" or "every 0.5 ... 12 ms" - a trace's sampling in words."""
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if not steps.size:
+        return "one sample"
+    low, high = float(np.min(steps)), float(np.max(steps))
+    if high <= 1.01 * low:
+        return f"every {1e3 * float(np.median(steps)):.3g} ms"
+    return f"every {1e3 * low:.3g} ... {1e3 * high:.3g} ms"
