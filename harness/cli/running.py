@@ -110,8 +110,11 @@ def _print_summary(summary: dict, out: Path):
         quality = ref.get("quality") or (f"{ref.get('method')}; its own energy residual {balance:.1e}"
                                          if balance is not None else ref.get("method"))
         click.echo(f"  reference: {ref.get('source', 'monolithic')} - {quality}")
+        left = [n for n in stats if n not in errs]
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
-            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
+            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items())
+            + (f"; not covered: {', '.join(left)} (lever validate --result judges every recorded signal)"
+               if left else ""))
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")

@@ -41,6 +41,20 @@ def amplitude(y: np.ndarray) -> float:
     return float((np.max(y) - np.min(y)) / 2)
 
 
+_FITS: dict = {}
+
+
+def order_fit(t: np.ndarray, rotation: float, orders) -> "OrderFit":
+    """``OrderFit`` on ``t``, made once for the same times (every signal of a result shares
+    them; the last few are kept)."""
+    key = (len(t), float(t[0]), float(t[-1]), float(np.sum(t)), float(rotation), tuple(orders))
+    if key not in _FITS:
+        if len(_FITS) > 8:
+            _FITS.clear()
+        _FITS[key] = OrderFit(t, rotation, orders)
+    return _FITS[key]
+
+
 class OrderFit:
     """The least-squares fit of the rotation ``orders`` at ``rotation`` [rad/s] on the times
     ``t``: ``fit(y)`` -> {order: complex amplitude ``A e^(i phase)``, with the order's term
@@ -51,11 +65,11 @@ class OrderFit:
         columns = [np.ones_like(t)]
         for k in self.orders:
             columns += [np.cos(k * rotation * t), np.sin(k * rotation * t)]
-        matrix = np.column_stack(columns)
-        self._pinv = np.linalg.pinv(matrix)
+        # least squares by the thin QR factorisation, made once: a fit is then two products
+        self._q, self._r = np.linalg.qr(np.column_stack(columns))
 
     def fit(self, y: np.ndarray) -> dict[int, complex]:
-        coefficients = self._pinv @ y
+        coefficients = np.linalg.solve(self._r, self._q.T @ y)
         # a cos + b sin = Re((a - i b) e^(i k w t))
         return {k: complex(coefficients[1 + 2 * j], -coefficients[2 + 2 * j]) for j, k in enumerate(self.orders)}
 

@@ -282,11 +282,11 @@ def _frame(ref: sampled.Reference, t: np.ndarray, start: float, stop: float, rot
     frame = _Frame(t, at, own_t, own_y, sampled.time_mean(own_t, own_y), sampled.amplitude(own_y), magnitude,
                    low, high, error)
     if rotation:
-        own = sampled.OrderFit(own_t, rotation, ORDERS).fit(own_y)
-        frame.fit = sampled.OrderFit(t, rotation, ORDERS)
+        own = sampled.order_fit(own_t, rotation, ORDERS).fit(own_y)
+        frame.fit = sampled.order_fit(t, rotation, ORDERS)
         shown = frame.fit.fit(at)
         frame.orders = [(k, own[k], shown[k]) for k in ORDERS
-                        if abs(own[k]) >= LEADING * frame.amplitude and abs(own[k]) > 0]
+                        if abs(own[k]) >= LEADING * frame.amplitude and abs(own[k]) > NOISE_FLOOR * magnitude]
     return frame
 
 
