@@ -243,8 +243,8 @@ def _reference_said(ref, own_reference, findings) -> str:
     errors = [s.reference_error for s in findings.signals if s.reference_error == s.reference_error]
     worst = max(findings.signals, key=lambda s: s.reference_error / (s.power.band if s.power and s.power.band
                                                                       else 1.0), default=None) if errors else None
-    own = (f"; between its samples it errs by up to {worst.reference_error:.2g} on {worst.name}"
-           + (f" ({100 * worst.reference_error / worst.power.band:.2g} % of its tube)" if worst.power else "")
+    own = (f"; between its samples it errs by up to {worst.reference_error:.2g} on {worst.name}, estimated"
+           + (f": {100 * worst.reference_error / worst.power.band:.2g} % of its tube" if worst.power else "")
            if worst is not None else "")
     return f"{what}, {len(ref.outputs.times)} samples {sampled.spacing(ref.outputs.times)}{own}"
 

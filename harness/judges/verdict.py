@@ -261,6 +261,9 @@ class _Frame:
     high: np.ndarray
     #: the reference's own interpolation error at each result time
     error: np.ndarray
+    #: the reference's own interpolation error midway between its samples in the part (the
+    #: most it errs anywhere there)
+    own_error: float = 0.0
     fit: sampled.OrderFit | None = None
     #: (order, the reference's component on its own samples, at the result's times)
     orders: list = field(default_factory=list)
@@ -279,8 +282,9 @@ def _frame(ref: sampled.Reference, t: np.ndarray, start: float, stop: float, rot
     before, after = _lags(t, lag_cap)
     low, high = ref.range_around(t, before, after)
     error = np.nan_to_num(ref.error_at(t), nan=0.0)
+    midway = 0.5 * (own_t[1:] + own_t[:-1])
     frame = _Frame(t, at, own_t, own_y, sampled.time_mean(own_t, own_y), sampled.amplitude(own_y), magnitude,
-                   low, high, error)
+                   low, high, error, float(np.nan_to_num(np.max(ref.error_at(midway), initial=0.0))))
     if rotation:
         own = sampled.order_fit(own_t, rotation, ORDERS).fit(own_y)
         frame.fit = sampled.order_fit(t, rotation, ORDERS)
@@ -581,7 +585,7 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
                            else None,
                            float(np.sqrt(np.mean(error ** 2))) if finite else math.inf,
                            float(np.max(np.abs(error))) if finite else math.inf,
-                           float(np.max(frame.error)) if frame is not None and len(frame.error) else math.nan,
+                           frame.own_error if frame is not None else math.nan,
                            (units or {}).get(signal))
         verdict.signals.append(sv)
     verdict.blind_spots = blind_spots(verdict, t_ref, window_t, orders_said)
