@@ -13,7 +13,7 @@ VARIANTS = {
                       "load.narrowband_share=0.0"],
     "kavz685_stiff_1e6": ["experiment.stop=2.0", "experiment.master=trapezoidal-newton",
                           "experiment.transient=0.5", "coupling.stiffness=1e6", "coupling.damping=0.0"],
-    "kavz685_misalignment_edge": ["experiment.stop=2.0", "experiment.transient=0.5",
+    "kavz685_misalignment_edge": ["experiment.stop=2.0", "experiment.transient=0.5", "experiment.step=5e-4",
                                   "coupling.misalignment=43.2 deg", "load.order_share=0.0",
                                   "load.narrowband_share=0.0"],
 }
