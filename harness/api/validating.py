@@ -152,7 +152,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
                 made = given_traces.read_given(read.path.parent, "reference")
                 own_reference = (given_traces.sorted_reference(made),
                                  f"{made.path}, made for that run's parameters by `lever run`")
-            given = read.path
+            given = read
     except reference_traces.TraceFileError as error:
         raise InputError(str(error)) from None
     if own_reference is not None:
@@ -164,12 +164,9 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
                              f"({', '.join(sorted(missing))}) among its columns ({', '.join(ref.outputs.signals)})")
         span = (float(ref.outputs.times[0]), float(ref.outputs.times[-1]))
         ref.opt = reference_traces.Options(ref.opt.step, span[0], span[1], ref.opt.rel_tol)
-    if isinstance(given, Path):
-        try:
-            other = reference_traces.read_csv(given)
-        except reference_traces.TraceFileError as error:
-            raise InputError(str(error)) from None
-        judged = reference_traces.Result(other.times, other.signals, f"from {given}")
+    if isinstance(given, given_traces.Given):
+        judged = reference_traces.Result(given.traces.times, given.traces.signals, f"from {given.path}")
+        given = given.path
     elif given is not None:
         times, traces, how = given
         judged = reference_traces.Result(times, traces, how, failure=getattr(result, "failure", None))

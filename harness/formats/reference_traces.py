@@ -122,9 +122,12 @@ def read_csv(path: Path) -> Traces:
     if widths != [len(names)]:
         raise TraceFileError(f"{path}: rows have {widths} columns, the header {len(names)}")
     try:
-        data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
-    except ValueError as error:
-        raise TraceFileError(f"{path}: not a number ({error})") from None
+        data = np.array(rows[1:], dtype=float)      # numpy parses the cells (as float() does)
+    except ValueError:
+        try:
+            data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
+        except ValueError as error:         # the cell float() refuses, named
+            raise TraceFileError(f"{path}: not a number ({error})") from None
     return Traces(data[:, 0].copy(), {n: data[:, i].copy() for i, n in enumerate(names) if i})
 
 

@@ -74,38 +74,81 @@ class OrderFit:
         return {k: complex(coefficients[1 + 2 * j], -coefficients[2 + 2 * j]) for j, k in enumerate(self.orders)}
 
 
+def _hermite(t: np.ndarray, y: np.ndarray, slopes: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The cubic Hermite interpolant through ``(t, y)`` with ``slopes`` there, at ``at``
+    (inside ``t[0] ... t[-1]``)."""
+    k = np.clip(np.searchsorted(t, at, "right") - 1, 0, len(t) - 2)
+    h = t[k + 1] - t[k]
+    s = (at - t[k]) / h
+    s2, s3 = s * s, s * s * s
+    return ((2 * s3 - 3 * s2 + 1) * y[k] + (s3 - 2 * s2 + s) * h * slopes[k]
+            + (-2 * s3 + 3 * s2) * y[k + 1] + (s3 - s2) * h * slopes[k + 1])
+
+
+def _pchip_slopes(h: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Fritsch-Carlson slopes (as scipy's ``PchipInterpolator``): no overshoot - zero where the
+    data turn, a weighted harmonic mean of the neighbouring secants elsewhere."""
+    d = np.zeros(len(h) + 1)
+    if len(h) == 1:
+        d[:] = delta[0]
+        return d
+    w1, w2 = 2 * h[1:] + h[:-1], h[1:] + 2 * h[:-1]
+    same = delta[:-1] * delta[1:] > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d[1:-1] = np.where(same, (w1 + w2) / (w1 / delta[:-1] + w2 / delta[1:]), 0.0)
+    for end, (h0, h1, m0, m1) in ((0, (h[0], h[1], delta[0], delta[1])), (-1, (h[-1], h[-2], delta[-1], delta[-2]))):
+        slope = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        if np.sign(slope) != np.sign(m0):
+            slope = 0.0
+        elif np.sign(m0) != np.sign(m1) and abs(slope) > abs(3 * m0):
+            slope = 3 * m0
+        d[end] = slope
+    return d
+
+
+def _parabola_slopes(h: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Each sample's slope of the parabola through it and its neighbours (second order)."""
+    d = np.empty(len(h) + 1)
+    if len(h) == 1:
+        d[:] = delta[0]
+        return d
+    d[1:-1] = (h[:-1] * delta[1:] + h[1:] * delta[:-1]) / (h[:-1] + h[1:])
+    d[0] = delta[0] - h[0] * (delta[1] - delta[0]) / (h[0] + h[1])
+    d[-1] = delta[-1] + h[-1] * (delta[-1] - delta[-2]) / (h[-1] + h[-2])
+    return d
+
+
 @dataclass
 class Reference:
-    """One reference signal as a function of time, from its samples ``t``, ``y``."""
+    """One reference signal as a function of time, from its samples ``t``, ``y``: the
+    shape-preserving cubic (PCHIP) through them."""
     t: np.ndarray
     y: np.ndarray
 
     def __post_init__(self):
-        from scipy.interpolate import PchipInterpolator
-
         self.t, self.y = unique_times(np.asarray(self.t, dtype=float), np.asarray(self.y, dtype=float))
-        self._f = PchipInterpolator(self.t, self.y, extrapolate=True) if len(self.t) > 1 else None
-        self._spline = None
+        if len(self.t) > 1:
+            h = np.diff(self.t)
+            delta = np.diff(self.y) / h
+            self._slopes = _pchip_slopes(h, delta)
+            self._second = _parabola_slopes(h, delta) if len(self.t) > 2 else self._slopes
 
     def __call__(self, times) -> np.ndarray:
         times = np.asarray(times, dtype=float)
-        if self._f is None:
+        if len(self.t) < 2:
             return np.full(times.shape, float(self.y[0]) if len(self.y) else math.nan)
-        return self._f(np.clip(times, self.t[0], self.t[-1]))
+        return _hermite(self.t, self.y, self._slopes, np.clip(times, self.t[0], self.t[-1]))
 
     def error_at(self, times) -> np.ndarray:
         """The interpolant's own error at ``times``, estimated as its distance from a second
-        interpolant of higher order through the same samples (a not-a-knot cubic spline):
-        zero at the samples, largest midway, where the samples resolve the content worst."""
-        from scipy.interpolate import CubicSpline
-
+        cubic through the same samples (slopes of the parabola through each sample and its
+        neighbours: second order where PCHIP flattens a turn): zero at the samples, largest
+        midway, where the samples resolve the content worst."""
         times = np.asarray(times, dtype=float)
-        if len(self.t) < 4:
+        if len(self.t) < 3:
             return np.full(times.shape, math.nan)
-        if self._spline is None:
-            self._spline = CubicSpline(self.t, self.y)
         inside = np.clip(times, self.t[0], self.t[-1])
-        return np.abs(self._spline(inside) - self._f(inside))
+        return np.abs(_hermite(self.t, self.y, self._second, inside) - _hermite(self.t, self.y, self._slopes, inside))
 
     def range_around(self, at: np.ndarray, before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference's smallest and largest value over ``at - before ... at + after``

@@ -264,6 +264,9 @@ class _Frame:
     #: the reference's own interpolation error midway between its samples in the part (the
     #: most it errs anywhere there)
     own_error: float = 0.0
+    #: the reference's mean and amplitude at the result's times
+    shown_mean: float = math.nan
+    shown_amplitude: float = math.nan
     fit: sampled.OrderFit | None = None
     #: (order, the reference's component on its own samples, at the result's times)
     orders: list = field(default_factory=list)
@@ -284,7 +287,8 @@ def _frame(ref: sampled.Reference, t: np.ndarray, start: float, stop: float, rot
     error = np.nan_to_num(ref.error_at(t), nan=0.0)
     midway = 0.5 * (own_t[1:] + own_t[:-1])
     frame = _Frame(t, at, own_t, own_y, sampled.time_mean(own_t, own_y), sampled.amplitude(own_y), magnitude,
-                   low, high, error, float(np.nan_to_num(np.max(ref.error_at(midway), initial=0.0))))
+                   low, high, error, float(np.nan_to_num(np.max(ref.error_at(midway), initial=0.0))),
+                   sampled.time_mean(t, at), sampled.amplitude(at))
     if rotation:
         own = sampled.order_fit(own_t, rotation, ORDERS).fit(own_y)
         frame.fit = sampled.order_fit(t, rotation, ORDERS)
@@ -304,7 +308,7 @@ def _checks(frame: _Frame, y: np.ndarray, rtol: dict, sampling: str) -> list[Che
     checks = []
     scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
     allowed = rtol["mean"][0] * scale
-    shown, mean = sampled.time_mean(frame.t, frame.at), sampled.time_mean(frame.t, y)
+    shown, mean = frame.shown_mean, sampled.time_mean(frame.t, y)
     d = mean - shown
     if abs(shown - frame.mean) > SHOWN * allowed:
         checks.append(Check("mean", frame.mean, mean, d, allowed, True,
@@ -314,7 +318,7 @@ def _checks(frame: _Frame, y: np.ndarray, rtol: dict, sampling: str) -> list[Che
                             f"{mean:.6g} vs {shown:.6g} ({d:+.3g}, allowed +-{allowed:.3g})"))
     scale = _allowed_scale(frame.amplitude, frame.mean, magnitude=frame.magnitude)
     allowed = rtol["amplitude"][0] * scale
-    shown, amplitude = sampled.amplitude(frame.at), sampled.amplitude(y)
+    shown, amplitude = frame.shown_amplitude, sampled.amplitude(y)
     d = amplitude - shown
     if abs(shown - frame.amplitude) > SHOWN * allowed:
         checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, True,
@@ -390,13 +394,13 @@ def _smallest_failing(fails, start: float, limit: float, sign: float) -> float |
         if high > limit:
             return None
     for _ in range(40):
+        if high - low <= 5e-3 * high:
+            break
         middle = 0.5 * (low + high)
         if fails(sign * middle):
             high = middle
         else:
             low = middle
-        if high - low <= 2e-3 * high:
-            break
     return high
 
 
@@ -415,8 +419,10 @@ def power(frame: _Frame, judged, ref: sampled.Reference, rtol: dict, rotation: f
     dt = float(np.median(np.diff(frame.t))) if len(frame.t) > 1 else 1.0
     span = float(frame.t[-1] - frame.t[0])
     signs, by = {}, {}
-    for kind, first, limit in (("mean", 1e-4 * scale, 1e3 * scale), ("amplitude", 1e-4, 10.0),
-                               ("shift", 1e-3 * dt, 0.25 * span)):
+    # the doubling starts a little below where the tolerances put the answer
+    for kind, first, limit in (("mean", max(0.25 * rtol["mean"][0], 1e-6) * scale, 1e3 * scale),
+                               ("amplitude", max(0.25 * rtol["amplitude"][0], 1e-6), 10.0),
+                               ("shift", 0.05 * dt, 0.25 * span)):
         found = tuple(_smallest_failing(lambda x: bool(failing(kind, x)), first, limit, sign) for sign in (1.0, -1.0))
         signs[kind] = found
         failed = set()
