@@ -48,18 +48,14 @@ def read_given(path, role: str) -> Given:
 def sorted_reference(given: Given) -> Traces:
     """A reference's traces checked for judging: times sorted (a time repeated at an event is
     kept, its later row counts) and at least 2 samples; TraceFileError otherwise."""
-    import numpy as np
+    from harness.judges import sampled
 
     t = given.traces.times
     if len(t) < 2:
         raise TraceFileError(f"--reference {given.path}: {len(t)} row(s); a reference needs at least two")
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        i = int(back[0])
-        raise TraceFileError(f"--reference {given.path}: its times are not sorted (row {i + 2}, t = {t[i + 1]:.6g} s, "
-                             f"after t = {t[i]:.6g} s)")
-    if not np.all(np.isfinite(t)):
-        raise TraceFileError(f"--reference {given.path}: its time column has a value that is not a finite number")
+    problem = sampled.times_problem(t, "its")
+    if problem:
+        raise TraceFileError(f"--reference {given.path}: {problem}")
     return given.traces
 
 

@@ -29,6 +29,25 @@ def unique_times(t: np.ndarray, y: np.ndarray | None = None):
     return (t[keep], None if y is None else y[keep])
 
 
+def times_problem(t: np.ndarray, whose: str) -> str | None:
+    """Why the time column ``t`` cannot be judged as given (not finite, not sorted, a time
+    written three times or more), in a sentence about ``whose`` ("the result's"); None: it can."""
+    if not np.all(np.isfinite(t)):
+        bad = int(np.flatnonzero(~np.isfinite(t))[0])
+        return f"{whose} time column has a non-finite value ({t[bad]}) in row {bad + 1}"
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        i = int(back[0])
+        return (f"{whose} times are not sorted: row {i + 2} (t = {t[i + 1]:.6g} s) comes after t = {t[i]:.6g} s; "
+                "sort the rows by time (a time repeated at an event is fine)")
+    repeated = np.flatnonzero(t[2:] == t[:-2])
+    if repeated.size:
+        i = int(repeated[0])
+        return (f"{whose} time t = {t[i]:.6g} s appears three times or more (rows {i + 1} ...): an event has one "
+                "row before it and one after; which rows are meant cannot be told")
+    return None
+
+
 def time_mean(t: np.ndarray, y: np.ndarray) -> float:
     """The time average of ``y(t)`` over ``t[0] ... t[-1]`` (trapezoid rule)."""
     span = float(t[-1] - t[0])

@@ -25,6 +25,22 @@ UNIT_KINDS = {"rad/s": "speed", "N.m": "torque", "rad/s2": "acceleration", "rad"
 KINDS = tuple(dict.fromkeys(UNIT_KINDS.values()))
 
 
+#: a quantity smaller than this share of the signal's largest magnitude over the reference is
+#: judged against that share instead: below it a reference's figures are the solver's noise
+#: (a stalled shaft's speed, 1e-11 rad/s, is no ripple to hold a result to 2 % of)
+NOISE_FLOOR = 1e-3
+
+
+def allowed_scale(*values: float, magnitude: float = 0.0) -> float:
+    """What a relative tolerance is taken of: the first of ``values`` that is not zero (a
+    constant signal's amplitude is judged against its mean), at least ``NOISE_FLOOR`` of the
+    signal's largest ``magnitude``; 1 in the signal's unit for a signal zero throughout (as
+    the FMI cross-check takes one)."""
+    first = next((abs(v) for v in values if v != 0 and math.isfinite(v)), 0.0)
+    scale = max(first, NOISE_FLOOR * abs(magnitude))
+    return scale if scale > 0 else 1.0
+
+
 def kind_of_unit(unit: str | None) -> str:
     return UNIT_KINDS.get(unit or "", "other")
 

@@ -41,8 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness.judges import sampled
-from harness.judges.tolerances import (DEFAULT_RTOL, KINDS, QUANTITIES, UNIT_KINDS, ReferenceSettings, Rule,  # noqa: F401
-                                       Tolerances, kind_of_unit, parse_rtol, rule, rules_from_table, settings_of)
+from harness.judges.power import Power, power  # noqa: F401  (the verdict's power, re-exported)
+from harness.judges.tolerances import (DEFAULT_RTOL, KINDS, NOISE_FLOOR, QUANTITIES, UNIT_KINDS,  # noqa: F401
+                                       ReferenceSettings, Rule, Tolerances, allowed_scale as _allowed_scale,
+                                       kind_of_unit, parse_rtol, rule, rules_from_table, settings_of)
 from harness.judges.validation import JudgedSpan, match_columns, span_problems, value_problems
 
 #: largest share of the compared samples allowed outside the tube
@@ -87,42 +89,6 @@ class Check:
     #: False: the result's sampling cannot show this quantity (``detail`` says why); it
     #: neither passes nor fails the signal
     judged: bool = True
-
-
-@dataclass
-class Power:
-    """The smallest change of each kind the verdict fails (None: none it fails)."""
-    #: the tube's half-width
-    band: float
-    #: a shift of the mean, in the signal's unit (the larger of the two signs')
-    mean: float | None
-    #: a scaling of the ripple about the mean, relative
-    amplitude: float | None
-    #: a shift in time [s], and the phase it is at the first rotation order [deg]
-    shift_s: float | None
-    phase_deg: float | None
-    #: kind of change -> the checks that fail first under it ("mean", "amplitude", "shift")
-    by: dict = field(default_factory=dict)
-    #: kind -> (smallest failing positive change, smallest failing negative change's size)
-    signs: dict = field(default_factory=dict)
-
-    def _said(self, kind: str, form) -> str:
-        plus, minus = self.signs.get(kind, (None, None))
-        if plus is None and minus is None:
-            return "none"
-        if plus is not None and minus is not None and abs(plus - minus) <= 0.05 * max(plus, minus):
-            text = f"+-{form(max(plus, minus))}"
-        else:
-            text = "/".join(f"{sign}{form(x)}" if x is not None else f"{sign}none" for sign, x in (("+", plus),
-                                                                                                 ("-", minus)))
-        return text
-
-    def describe(self) -> str:
-        """"band +-0.566; catches mean +-0.107, amplitude +-2 %, time shift +-0.31 ms"."""
-        mean = self._said("mean", lambda x: f"{x:.3g}")
-        amplitude = self._said("amplitude", lambda x: f"{100 * x:.2g} %")
-        shift = self._said("shift", lambda x: f"{1e3 * x:.3g} ms")
-        return f"band +-{self.band:.3g}; catches mean {mean}, amplitude {amplitude}, time shift {shift}"
 
 
 @dataclass
@@ -210,29 +176,14 @@ class Verdict(JudgedSpan):
                                      "rtol": {q: {"value": v, "source": src} for q, (v, src) in s.rtol.items()},
                                      "rms_error": number(s.rms_error), "max_error": number(s.max_error),
                                      "reference_error": number(s.reference_error),
-                                     "unit": s.unit, "checks": [{k: number(v) for k, v in vars(c).items()} for c in s.checks],
+                                     "unit": s.unit,
+                                     "checks": [{k: number(v) for k, v in vars(c).items()} for c in s.checks],
                                      "power": None if s.power is None else {k: v for k, v in vars(s.power).items()}}
                             for s in self.signals}}
 
 
 def _percent(x: float) -> str:
     return f"{100 * x:+.3g} %"
-
-
-#: a quantity smaller than this share of the signal's largest magnitude over the reference is
-#: judged against that share instead: below it a reference's figures are the solver's noise
-#: (a stalled shaft's speed, 1e-11 rad/s, is no ripple to hold a result to 2 % of)
-NOISE_FLOOR = 1e-3
-
-
-def _allowed_scale(*values: float, magnitude: float = 0.0) -> float:
-    """What a relative tolerance is taken of: the first of ``values`` that is not zero (a
-    constant signal's amplitude is judged against its mean), at least ``NOISE_FLOOR`` of the
-    signal's largest ``magnitude``; 1 in the signal's unit for a signal zero throughout (as
-    the FMI cross-check takes one)."""
-    first = next((abs(v) for v in values if v != 0 and math.isfinite(v)), 0.0)
-    scale = max(first, NOISE_FLOOR * abs(magnitude))
-    return scale if scale > 0 else 1.0
 
 
 def _lags(t: np.ndarray, cap: float) -> tuple[np.ndarray, np.ndarray]:
@@ -385,63 +336,6 @@ def _start_up_tube(frame: _Frame, y: np.ndarray, rtol: dict) -> Check:
     return _tube("transient tube", frame, y, width, range_, rtol["tube"][0])
 
 
-def _smallest_failing(fails, start: float, limit: float, sign: float) -> float | None:
-    """The smallest x > 0 with ``fails(sign * x)``, by doubling from ``start`` up to ``limit``
-    and bisecting; None when nothing up to ``limit`` fails."""
-    low, high = 0.0, start
-    while not fails(sign * high):
-        low, high = high, 2 * high
-        if high > limit:
-            return None
-    for _ in range(40):
-        if high - low <= 5e-3 * high:
-            break
-        middle = 0.5 * (low + high)
-        if fails(sign * middle):
-            high = middle
-        else:
-            low = middle
-    return high
-
-
-def power(frame: _Frame, judged, ref: sampled.Reference, rtol: dict, rotation: float | None) -> Power:
-    """The smallest shift of the mean, scaling of the ripple and shift in time of the
-    reference at the result's times that the checks ``judged(values)`` fail, each sign on its
-    own: what a pass of this signal rules out."""
-    perturbed = {"mean": lambda d: frame.at + d,
-                 "amplitude": lambda e: frame.mean + (1 + e) * (frame.at - frame.mean),
-                 "shift": lambda s: ref(frame.t - s)}
-
-    def failing(kind, x):
-        return [c.quantity for c in judged(perturbed[kind](x)) if c.judged and not c.passed]
-
-    scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
-    dt = float(np.median(np.diff(frame.t))) if len(frame.t) > 1 else 1.0
-    span = float(frame.t[-1] - frame.t[0])
-    signs, by = {}, {}
-    # the doubling starts a little below where the tolerances put the answer
-    for kind, first, limit in (("mean", max(0.25 * rtol["mean"][0], 1e-6) * scale, 1e3 * scale),
-                               ("amplitude", max(0.25 * rtol["amplitude"][0], 1e-6), 10.0),
-                               ("shift", 0.05 * dt, 0.25 * span)):
-        found = tuple(_smallest_failing(lambda x: bool(failing(kind, x)), first, limit, sign) for sign in (1.0, -1.0))
-        signs[kind] = found
-        failed = set()
-        for sign, x in zip((1.0, -1.0), found):
-            if x is not None:
-                failed |= set(failing(kind, sign * x))
-        if failed:
-            by[kind] = sorted(failed)
-
-    def larger(kind):
-        values = [x for x in signs[kind] if x is not None]
-        return max(values) if values else None
-
-    shift = larger("shift")
-    phase = None if (shift is None or not rotation) else math.degrees(rotation * shift)
-    band = rtol["tube"][0] * _allowed_scale(2 * frame.amplitude, frame.mean, magnitude=frame.magnitude)
-    return Power(band, larger("mean"), larger("amplitude"), shift, phase, by, signs)
-
-
 def _rotation(references: dict, start: float, stop: float,
               rotation_signal: str | None) -> tuple[float | None, str]:
     """The driven shaft's mean speed over the window and a sentence on the orders (why none)."""
@@ -454,23 +348,6 @@ def _rotation(references: dict, start: float, stop: float,
         return None, (f"no rotation orders: the window holds {turns:.2g} revolutions of {rotation_signal}, fewer "
                       f"than {MIN_REVOLUTIONS:g}")
     return w, f"orders of {rotation_signal} at {w:.4g} rad/s over {turns:.3g} revolutions"
-
-
-def _result_times(t: np.ndarray) -> None:
-    """Refuses a time column that is not finite and sorted (``UnusableResult``)."""
-    if not np.all(np.isfinite(t)):
-        bad = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise UnusableResult(f"the result's time column has a non-finite value ({t[bad]}) in row {bad + 1}")
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        i = int(back[0])
-        raise UnusableResult(f"the result's times are not sorted: row {i + 2} (t = {t[i + 1]:.6g} s) comes after "
-                             f"t = {t[i]:.6g} s; sort the rows by time (a time repeated at an event is fine)")
-    repeated = np.flatnonzero((t[2:] == t[:-2]))
-    if repeated.size:
-        i = int(repeated[0])
-        raise UnusableResult(f"the result's time t = {t[i]:.6g} s appears three times or more (rows {i + 1} ...): "
-                             "an event has one row before it and one after; which rows are meant cannot be told")
 
 
 def judge(times, traces: dict, reference_times, reference: dict, *, window: tuple[float, float] | None = None,
@@ -487,8 +364,9 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
     result has; ``NothingToJudge`` when it has none, ValueError for a chosen one it lacks);
     ``kinds``: signal -> kind (``KINDS``) for tolerances by kind; ``rotation_signal``: the
     driven shaft's speed among the reference's signals, whose orders are judged; ``units``:
-    signal -> unit (for what is said and drawn).  ``UnusableResult`` for a result whose times are not sorted or that has fewer than
-    ``MIN_SAMPLES`` samples in a part of the window it is to be judged over."""
+    signal -> unit (for what is said and drawn).  ``UnusableResult`` for a result whose times
+    are not sorted or that has fewer than ``MIN_SAMPLES`` samples in a part of the window it is
+    to be judged over."""
     verdict = Verdict(name)
     t = np.asarray(times, dtype=float)
     t_ref = np.asarray(reference_times, dtype=float)
@@ -526,7 +404,9 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
                          f"(kinds: {', '.join(KINDS)}; signals: {', '.join(reference)})")
     if len(t) < 2:
         raise UnusableResult(f"the result has {len(t)} sample(s); at least {MIN_SAMPLES} in the window are needed")
-    _result_times(t)
+    problem = sampled.times_problem(t, "the result's")
+    if problem:
+        raise UnusableResult(problem)
     verdict.problems += span_problems(t, start, stop)
     if verdict.problems:
         return verdict
