@@ -51,7 +51,7 @@ class Power:
 #: multiples of a change found failing at which it is checked again: a verdict may fail a
 #: change and pass a larger one (a time shift near an event, a period later); the power stated
 #: is the smallest change from which on these all fail
-CHECKED_ABOVE = (1.02, 1.1, 1.25, 1.5, 2.0, 3.0, 4.0)
+CHECKED_ABOVE = (1.1, 1.5, 2.0, 4.0)
 
 
 def _smallest_failing(fails, start: float, limit: float, sign: float) -> float | None:
