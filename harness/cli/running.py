@@ -77,7 +77,7 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
     except api.BuildError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     result, out = done.result, done.out
-    _print_summary(done.summary, out)
+    _print_summary(done.summary, out, list(done.scene.record))
     for line in done.latency or ():
         click.echo(line)
     if done.outcome == "interrupted":
@@ -93,7 +93,7 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
         sys.exit(UNTRUSTED_EXIT)
 
 
-def _print_summary(summary: dict, out: Path):
+def _print_summary(summary: dict, out: Path, recorded: list[str] | None = None):
     click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
                f"wall time {summary['wall_time_s']:.2f} s")
     stats = summary.get("statistics") or {}
@@ -110,7 +110,7 @@ def _print_summary(summary: dict, out: Path):
         quality = ref.get("quality") or (f"{ref.get('method')}; its own energy residual {balance:.1e}"
                                          if balance is not None else ref.get("method"))
         click.echo(f"  reference: {ref.get('source', 'monolithic')} - {quality}")
-        left = [n for n in stats if n not in errs]
+        left = [n for n in (recorded if recorded is not None else stats) if n not in errs]
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
             f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items())
             + (f"; not covered: {', '.join(left)} (lever validate --result judges every recorded signal)"
