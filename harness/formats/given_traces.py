@@ -81,8 +81,8 @@ def provenance_notes(reference: ReferenceTraces, result, overrides, master: str 
             summary = json.loads(summary_path.read_text())
             used = summary["parameters"]
         except (OSError, ValueError, KeyError, TypeError):
-            return [f"what the result was made with is not known (no lever summary.json with its parameters beside "
-                    f"{Path(result).name}): it is judged as traces only"]
+            return [f"what the result was made with is not known (no summary.json of a lever run with its parameters "
+                    f"beside {Path(result).name}): it is judged as traces only"]
         said = f"{summary_path} (master {summary.get('master')}, step {summary.get('step_s')} s, lever " \
                f"{summary.get('lever_version')})"
     elif result is None and overrides:

@@ -1,5 +1,5 @@
 """The output docs/guide/validate-a-result.md and docs/validation.md show is what `lever
-validate` prints: each block marked ``<!-- lever validate output: FILE -->`` is remade from
+validate` prints: each block marked ``<!-- validate-output: FILE -->`` is remade from
 the committed reference (FILE built as the page says) and compared line by line."""
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def _write(folder, name: str):
 def _blocks():
     for page in PAGES:
         text = page.read_text()
-        for match in re.finditer(r"<!-- lever validate output: (\S+) -->\n```text\n(.*?)\n```", text, re.S):
+        for match in re.finditer(r"<!-- validate-output: (\S+) -->\n```text\n(.*?)\n```", text, re.S):
             yield pytest.param(page, match.group(1), match.group(2), id=f"{page.name}:{match.group(1)}")
 
 
