@@ -16,7 +16,8 @@ from the result's samples and from the reference at the same times, and the two 
   the samples' own times: the complex component within ``rtol.order`` of its magnitude, so an
   amplitude change of ``rtol.order`` or a phase change of about ``rtol.order`` rad fails;
 * ``tube``: every sample within ``rtol.tube`` of the reference's range in the window of the
-  reference over one result step either side (an importer one step late passes), at most
+  reference over one step either side - the result's (an importer one step late passes) or the
+  reference's, whichever is longer (it places an event no closer) - at most
   ``MAX_OUTSIDE`` of the samples outside and none beyond the tube by more than that range.
 
 A quantity the result's sampling cannot show is not judged, and says why: when the same
@@ -234,6 +235,10 @@ def _frame(ref: sampled.Reference, t: np.ndarray, start: float, stop: float, rot
     own_t, own_y = _own_samples(ref, start, stop)
     at = ref(t)
     before, after = _lags(t, lag_cap)
+    # nor can the reference place an event closer than its own samples around it
+    k = np.clip(np.searchsorted(ref.t, t, "right") - 1, 0, max(len(ref.t) - 2, 0))
+    spacing = np.minimum(ref.t[k + 1] - ref.t[k], lag_cap) if len(ref.t) > 1 else np.zeros(len(t))
+    before, after = np.maximum(before, spacing), np.maximum(after, spacing)
     low, high = ref.range_around(t, before, after)
     error = np.nan_to_num(ref.error_at(t), nan=0.0)
     midway = 0.5 * (own_t[1:] + own_t[:-1])
@@ -272,7 +277,12 @@ def _checks(frame: _Frame, y: np.ndarray, rtol: dict, sampling: str) -> list[Che
     allowed = rtol["amplitude"][0] * scale + frame.own_error
     shown, amplitude = frame.shown_amplitude, sampled.amplitude(y)
     d = amplitude - shown
-    if abs(shown - frame.amplitude) > SHOWN * allowed:
+    if frame.own_error > rtol["amplitude"][0] * scale:
+        checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, True,
+                            f"not judged: the reference's samples cannot show this ripple's peaks (between them it "
+                            f"errs by up to {frame.own_error:.3g}, more than the {rtol['amplitude'][0] * scale:.3g} "
+                            "allowed; a denser reference judges it)", judged=False))
+    elif abs(shown - frame.amplitude) > SHOWN * allowed:
         checks.append(Check("amplitude", frame.amplitude, amplitude, d, allowed, True,
                             _unshown("ripple amplitude", frame.amplitude, shown, allowed, sampling), judged=False))
     else:
