@@ -80,6 +80,9 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "judges/test_verdict_samples.py::test_the_stated_power_is_true_for_every_committed_reference",
+    "cli/test_validate_reference.py",
+    "project/test_validate_pages.py",
     "description/test_physics_checked_once.py::test_a_run_checks_each_components_parameters_once",
     "judges/test_verdict.py::test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives",
     "formats/test_run_identity.py",

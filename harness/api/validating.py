@@ -85,8 +85,8 @@ def fmu_file_model(path: Path) -> tuple[str, str]:
 def validate(name: str, *, overrides=None, master: str | None = None, step: float | str | None = None,
              result=None, tolerance: str = "lever",
              window: tuple[float | str | None, float | str | None] | str | None = None,
-             out: Path | str | None = None, rtol=None, signals=None) -> Validation:
-    """Judge NAME against its committed reference traces, as ``lever validate NAME``: run
+             out: Path | str | None = None, rtol=None, signals=None, reference=None) -> Validation:
+    """Judge NAME against its committed reference traces (or ``reference``), as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
     ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
     with a ``time`` field (``Run.array()``, fmpy's ``simulate_fmu``), a ``(times, {signal:
@@ -98,11 +98,17 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     (the band's figures).  ``window``: judge only ``(start, stop)`` of the reference's span
     (e.g. a shorter run; seconds or with a time unit, ``("0 s", "500 ms")``, or
     ``"START:STOP"``); ``out``: write validation.json, the result and a plot per failing
-    signal there.  ``repr()`` of what it returns says PASS or FAIL and why."""
+    signal there.  ``result`` may also be a lever results folder (its traces.csv; judged
+    against its reference.csv, the reference made for that run's parameters, unless
+    ``reference`` is given).  ``reference``: judge against these traces instead of the
+    committed ones - a CSV (a time column and named columns), a lever results folder (its
+    reference.csv), or any form ``result`` takes; NAME still says what the signals are (the
+    start-up transient, kinds, the driven shaft).  ``repr()`` of what it returns says PASS or
+    FAIL, why, and which reference judged."""
     from harness.engine.component import FmuUnusable
     from harness.engine.me_component import NoModelExchange
     from harness.engine.system import SceneInvalid
-    from harness.formats import reference_traces
+    from harness.formats import given_traces, reference_traces
     from harness.judges import validation, verdict
 
     if not isinstance(name, (str, _os.PathLike)):
@@ -131,12 +137,37 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         ref = reference_traces.read(name)
     except reference_traces.TraceFileError as error:
         raise InputError(str(error)) from None
-    if isinstance(given, Path):
-        try:
-            other = reference_traces.read_csv(given)
-        except reference_traces.TraceFileError as error:
-            raise InputError(str(error)) from None
-        judged = reference_traces.Result(other.times, other.signals, f"from {given}")
+    own_reference = None          # (traces, what they are) judging instead of the committed reference
+    try:
+        if reference is not None:
+            held = _inputs.result_traces(reference, "reference")
+            if isinstance(held, Path):
+                read = given_traces.read_given(held, "reference")
+                own_reference = (given_traces.sorted_reference(read), f"{read.path} (given)")
+            else:
+                own_reference = (given_traces.sorted_reference(given_traces.Given(
+                    reference_traces.Traces(*held[:2]), Path("(given)"))), "the traces given")
+        if isinstance(given, Path):
+            read = given_traces.read_given(given, "result")
+            if read.path.name == "traces.csv" and own_reference is None and (read.path.parent / "reference.csv").is_file():
+                made = given_traces.read_given(read.path.parent, "reference")
+                own_reference = (given_traces.sorted_reference(made),
+                                 f"{made.path}, made for that run's parameters by `lever run`")
+            given = read
+    except reference_traces.TraceFileError as error:
+        raise InputError(str(error)) from None
+    if own_reference is not None:
+        missing = set(ref.outputs.signals)
+        ref = reference_traces.ReferenceTraces(ref.name, ref.kind, own_reference[0], ref.opt, ref.inputs,
+                                               ref.description)
+        if not set(ref.outputs.signals) & missing:
+            raise InputError(f"reference {own_reference[1]}: none of {name}'s signals "
+                             f"({', '.join(sorted(missing))}) among its columns ({', '.join(ref.outputs.signals)})")
+        span = (float(ref.outputs.times[0]), float(ref.outputs.times[-1]))
+        ref.opt = reference_traces.Options(ref.opt.step, span[0], span[1], ref.opt.rel_tol)
+    if isinstance(given, given_traces.Given):
+        judged = reference_traces.Result(given.traces.times, given.traces.signals, f"from {given.path}")
+        given = given.path
     elif given is not None:
         times, traces, how = given
         judged = reference_traces.Result(times, traces, how, failure=getattr(result, "failure", None))
@@ -175,21 +206,45 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
                                      window=(start, stop), transient=settings.transient,
                                      rtol=verdict.Tolerances([settings.rules, rules]), signals=signals,
-                                     kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label)
+                                     kinds=settings.kinds, rotation_signal=settings.rotation_signal, name=label,
+                                     units=settings.units)
         except ValueError as error:
             raise InputError(str(error)) from None
         bands = {}
-        findings.notes += reference_traces.provenance_notes(
-            ref, given if isinstance(given, Path) else getattr(result, "summary", None), overrides, master, step)
+        findings.reference = _reference_said(ref, own_reference, findings)
+        if own_reference is None:
+            findings.notes += given_traces.provenance_notes(
+                ref, given if isinstance(given, Path) else getattr(result, "summary", None), overrides, master, step)
     else:
-        findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
-                                                  ref.outputs.signals, validation.TOLERANCES[tolerance], start, stop,
-                                                  (ref.opt.start, ref.opt.stop))
+        try:
+            findings, bands = validation.compare_span(label, judged.times, judged.traces, ref.outputs.times,
+                                                      ref.outputs.signals, validation.TOLERANCES[tolerance], start,
+                                                      stop, (ref.opt.start, ref.opt.stop))
+        except validation.TooSparse as error:
+            raise InputError(str(error)) from None
     if judged.failure:
         findings.problems.append(f"the run failed: {judged.failure}")
     if out is not None:
-        reference_traces.write_validation(out, findings, bands, judged, ref, write_result=result is None)
+        from harness.formats import validation_files
+
+        validation_files.write_validation(out, findings, bands, judged, ref, write_result=result is None)
     return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
+
+
+def _reference_said(ref, own_reference, findings) -> str:
+    """Which reference judged, how dense it is and its own error, in one line."""
+    from harness.judges import sampled
+
+    what = own_reference[1] if own_reference else (
+        f"the committed {ref.name}_ref.csv ({'the exact response' if ref.kind == 'fmu' else 'the monolithic solver'}, "
+        f"rtol {ref.opt.rel_tol:g})")
+    errors = [s.reference_error for s in findings.signals if s.reference_error == s.reference_error]
+    worst = max(findings.signals, key=lambda s: s.reference_error / (s.power.band if s.power and s.power.band
+                                                                      else 1.0), default=None) if errors else None
+    own = (f"; between its samples it errs by up to {worst.reference_error:.2g} on {worst.name}, estimated"
+           + (f": {100 * worst.reference_error / worst.power.band:.2g} % of its tube" if worst.power else "")
+           if worst is not None else "")
+    return f"{what}, {len(ref.outputs.times)} samples {sampled.spacing(ref.outputs.times)}{own}"
 
 
 def reference_names(names: Iterable[str] = ()) -> list[str]:
@@ -210,13 +265,19 @@ def reference_names(names: Iterable[str] = ()) -> list[str]:
 
 def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
                   result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
-                  out: Path | str | None = None, rtol=None, signals=None) -> Iterator[Validation]:
+                  out: Path | str | None = None, rtol=None, signals=None, reference=None) -> Iterator[Validation]:
     """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
     ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
     and the FMUs built before the first."""
     from harness.paths import RESULTS
 
-    chosen = reference_names(_inputs.names(names, "names"))
+    names = _inputs.names(names, "names")
+    if not names and result is not None:     # a lever results folder says which scene it ran
+        names = [_scene_of_run(result)]
+    if reference is not None and result is None:
+        raise InputError("--reference: judges a --result (a CSV or a lever results folder); a run lever validate "
+                         "makes itself is judged against NAME's committed reference")
+    chosen = reference_names(names)
     if result is not None and len(chosen) != 1:
         raise InputError("--result: name exactly one reference the CSV is to be compared with "
                          "(e.g. lever validate --result run.csv kavz685)")
@@ -231,7 +292,19 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
             folder = f"{model}-fmi{version.split('.')[0]}"
         target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_inputs.assignments(overrides), master=master, step=step, result=result,
-                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals)
+                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals, reference=reference)
+
+
+def _scene_of_run(result) -> str:
+    """The scene a lever results folder (or a traces.csv in one) ran, from its summary.json."""
+    import json
+
+    folder = Path(result) if Path(result).is_dir() else Path(result).parent
+    try:
+        return str(json.loads((folder / "summary.json").read_text())["scene"])
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"--result {result}: name the reference it is to be compared with (e.g. lever validate "
+                         "--result run.csv kavz685); no lever summary.json beside it says which scene it ran") from None
 
 
 def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:

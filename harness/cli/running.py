@@ -77,7 +77,7 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
     except api.BuildError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     result, out = done.result, done.out
-    _print_summary(done.summary, out)
+    _print_summary(done.summary, out, list(done.scene.record))
     for line in done.latency or ():
         click.echo(line)
     if done.outcome == "interrupted":
@@ -100,7 +100,7 @@ def _said_before_the_summary(kind: str, message: str):
         click.echo(f"{kind}: {message}", err=True)
 
 
-def _print_summary(summary: dict, out: Path):
+def _print_summary(summary: dict, out: Path, recorded: list[str] | None = None):
     click.echo(f"{summary['scene']}: master {summary['master']}, step {summary['step_s']:g} s, "
                f"wall time {summary['wall_time_s']:.2f} s")
     stats = summary.get("statistics") or {}
@@ -117,8 +117,11 @@ def _print_summary(summary: dict, out: Path):
         quality = ref.get("quality") or (f"{ref.get('method')}; its own energy residual {balance:.1e}"
                                          if balance is not None else ref.get("method"))
         click.echo(f"  reference: {ref.get('source', 'monolithic')} - {quality}")
+        left = [n for n in (recorded if recorded is not None else stats) if n not in errs]
         click.echo("  error vs reference (RMS, relative): " + ", ".join(
-            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items()))
+            f"{k} {100 * v['rms_relative']:.3g} %" for k, v in errs.items())
+            + (f"; not covered: {', '.join(left)} (lever validate --result judges every recorded signal)"
+               if left else ""))
     eb = summary.get("energy_balance")
     if eb:
         click.echo(f"  energy residual: {100 * eb['residual_relative']:.2g} % of the work in")
@@ -182,10 +185,17 @@ def reference(names, update):
 @click.option("--master", type=MASTER_CHOICE, default=None, help="Master for a scene (default: the scene's).")
 @click.option("--step", type=TIME, default=None, help="Communication step for a scene [s], or with a time unit, e.g. '1 ms' "
                    "(default: the scene's).")
-@click.option("--result", "result_csv", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="Validate this CSV from another tool's run of NAME instead of running it: a 'time' column and "
-                   "columns named like the reference's signals (component.variable for a scene, the FMU's "
-                   "variable names for an FMU; 'anything.variable' also matches an FMU's variable).")
+@click.option("--result", "result_csv", type=click.Path(exists=True, path_type=Path), default=None,
+              help="Validate this result instead of running NAME: a CSV from another tool's run (a 'time' column "
+                   "and columns named like the reference's signals: component.variable for a scene, the FMU's "
+                   "variable names for an FMU; 'anything.component.variable' and 'component_variable' match too) "
+                   "or a lever results folder (its traces.csv, judged against its reference.csv: the reference "
+                   "made for that run's parameters).")
+@click.option("--reference", "reference_path", type=click.Path(exists=True, path_type=Path), default=None,
+              help="Judge against this reference instead of NAME's committed one: a CSV (a time column and named "
+                   "columns) or a lever results folder (its reference.csv).  NAME still says what the signals are.")
+@click.option("--verbose", is_flag=True, help="Also print each signal's tolerances and power, and the whole "
+              "sentence on what the verdict cannot see (validation.json holds them all).")
 @click.option("--tolerance", type=click.Choice(["lever", "cross-check"]), default="lever", show_default=True,
               help="The verdict: 'lever' (per signal over the window after the start-up transient: mean, ripple "
                    "amplitude, leading rotation orders and a tube, each against a tolerance relative to it, with "
@@ -208,7 +218,8 @@ def reference(names, update):
                    "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")
-def validate(names, assignments, master, step, result_csv, tolerance, rtol, signals, window, measured, out):
+def validate(names, assignments, master, step, result_csv, reference_path, verbose, tolerance, rtol, signals, window,
+             measured, out):
     """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
     or a scene, with its master), or take --result, and judge each signal the result has
     against its committed reference trace: over the window after the start-up transient,
@@ -220,7 +231,9 @@ def validate(names, assignments, master, step, result_csv, tolerance, rtol, sign
     results/validate/<Model>-fmi<version>).
 
     Exit code: 0 only when every judged signal of every NAME passes; 1 when one fails;
-    2 on bad input (a result with none of the reference's signals among it)."""
+    2 on bad input (a result with none of the reference's signals among it, times not sorted,
+    too few samples for the window, a reference without a time column or without any of the
+    result's signals)."""
     if measured:
         print_measured([Path(n) for n in names], out or RESULTS / "validate" / "measured")
         return
@@ -229,11 +242,11 @@ def validate(names, assignments, master, step, result_csv, tolerance, rtol, sign
         with user_errors():
             for verdict in api.validate_each(names, overrides=list(assignments), master=master, step=step,
                                              result=result_csv, tolerance=tolerance, window=window, out=out,
-                                             rtol=list(rtol),
+                                             rtol=list(rtol), reference=reference_path,
                                              signals=[x.strip() for x in signals.split(",") if x.strip()]
                                              if signals else None):
                 if verdict.findings.KIND == "lever":
-                    _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out)
+                    _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out, verbose)
                 else:
                     _print_validation(verdict.name, verdict.findings, verdict.result, verdict.out)
                 all_passed &= verdict.passed
@@ -242,27 +255,68 @@ def validate(names, assignments, master, step, result_csv, tolerance, rtol, sign
     sys.exit(0 if all_passed else 1)
 
 
-def _print_verdict(name, verdict, result, out: Path):
-    """The engineer's verdict: per signal its verdict, the checks that failed, and its power;
-    the window, what the verdict cannot see, the signals not judged."""
+def _check_said(check) -> str:
+    """One check in a few words: the result's figure, the reference's, the difference, the allowed."""
+    if not check.judged:
+        return f"{check.quantity} not judged"
+    mark = "" if check.passed else "FAIL "
+    if check.quantity == "mean" or check.quantity == "amplitude":
+        return (f"{mark}{check.quantity} {check.result:.5g} vs {check.reference:.5g} ({check.difference:+.2g}, "
+                f"+-{check.allowed:.2g})")
+    if check.quantity.startswith("order"):
+        return f"{mark}{check.quantity} off by {check.difference:.2g} (+-{check.allowed:.2g})"
+    if check.passed:
+        return f"{check.quantity} ok"
+    return f"{mark}{check.quantity} {100 * check.result:.2g} % outside (<= {100 * check.allowed:g} %)"
+
+
+def _print_verdict(name, verdict, result, out: Path, verbose: bool = False):
+    """The engineer's verdict: a line a signal (each quantity: the result's, the reference's,
+    the difference, the allowed), which reference judged, one line on the power and one on what
+    cannot be seen; ``verbose``: each signal's tolerances and power, the whole blind-spot sentence."""
     click.echo(f"{name}: {result.how}")
+    if verdict.reference:
+        click.echo(f"  reference: {verdict.reference}")
     if verdict.window:
-        click.echo(f"  judged: t = {verdict.window[0]:g} ... {verdict.window[1]:g} s (mean, ripple amplitude, "
-                   "rotation orders, tube)" + (f"; the start-up t = {verdict.transient[0]:g} ... "
-                                               f"{verdict.transient[1]:g} s by its own tube" if verdict.transient else ""))
+        click.echo(f"  judged: t = {verdict.window[0]:g} ... {verdict.window[1]:g} s at the result's own samples "
+                   f"({verdict.sampling})" + (f"; the start-up t = {verdict.transient[0]:g} ... "
+                                              f"{verdict.transient[1]:g} s by its own tube" if verdict.transient else ""))
     for s in verdict.signals:
-        tolerances = ", ".join(f"{q} {v:g}" + ("" if src == "default" else f" ({src})") for q, (v, src) in s.rtol.items())
-        click.echo(f"  {s.name:22s} {'pass' if s.passed else 'FAIL'}  rtol {tolerances}")
-        for check in s.failed:
-            click.echo(f"    FAIL {check.quantity}: {check.detail}")
-        if s.power is not None:
-            click.echo(f"    {'pass' if s.passed else 'power'}: {s.power.describe()}")
+        orders = [c for c in s.checks if c.quantity.startswith("order") and c.judged and c.passed]
+        shown = [_check_said(c) for c in s.checks if not (c in orders)]
+        if orders:
+            shown.insert(2, f"orders {','.join(c.quantity.split()[1] for c in orders)} ok")
+        click.echo(f"  {s.name:21s} {'pass' if s.passed else 'FAIL'}  " + "; ".join(shown))
+        if verbose:
+            tolerances = ", ".join(f"{q} {v:g}" + ("" if src == "default" else f" ({src})")
+                                   for q, (v, src) in s.rtol.items())
+            click.echo(f"      rtol {tolerances}")
+            for check in s.checks:
+                click.echo(f"      {check.quantity}: {check.detail}")
+            if s.power is not None:
+                click.echo(f"      power: {s.power.describe()}")
+    powers = [s.power for s in verdict.signals if s.power is not None]
+    if powers and not verbose:
+        amplitude = [p.amplitude for p in powers if p.amplitude is not None]
+        shift = [p.shift_s for p in powers if p.shift_s is not None]
+        said = []
+        if amplitude:
+            said.append(f"ripple changes of {100 * min(amplitude):.2g} ... {100 * max(amplitude):.2g} %")
+        if shift:
+            said.append(f"time shifts of {1e3 * min(shift):.2g} ... {1e3 * max(shift):.2g} ms")
+        click.echo(f"  power: a pass rules out {', '.join(said) or 'no change'} and each mean moved by its "
+                   "tolerance (per signal: --verbose)")
     if verdict.not_judged:
         click.echo(f"  not judged (not in the result{' or not chosen' if verdict.chosen else ''}): "
                    f"{', '.join(verdict.not_judged)}")
     _print_problems_and_notes(verdict)
     if verdict.blind_spots:
-        click.echo(f"  {verdict.blind_spots}")
+        if verbose:
+            click.echo(f"  {verdict.blind_spots}")
+        else:
+            unjudged = [f"{s.name} {c.quantity}" for s in verdict.signals for c in s.unjudged]
+            click.echo(f"  cannot see: {verdict.blind_spots.split('; ')[0].split(': ', 2)[-1]}"
+                       + (f"; not shown by its sampling: {', '.join(unjudged)}" if unjudged else ""))
     failed = "; ".join(f"{s.name}: {', '.join(c.quantity for c in s.failed)}" for s in verdict.signals if not s.passed)
     summary = "PASS" if verdict.passed else "FAIL" + (f" ({failed})" if failed else "")
     click.echo(f"  {name}: {summary} over {verdict.describe_span()}; written to {out}/")

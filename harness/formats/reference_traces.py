@@ -23,7 +23,8 @@ monolithic reference solver (``harness.judges.monolithic``), never by running th
   coupling's outputs one step early: within the ``lever`` tolerance's horizontal step, see
   ``harness.judges.validation``);
 * a scene's reference is ``harness.judges.monolithic.solve`` of the scene (its recorded signals),
-  kept every ``k``-th communication step so that a 10 s scene keeps about 1000 rows.
+  kept every ``k``-th communication step so that a scene keeps about ``SCENE_ROWS`` rows:
+  dense enough to judge a result at its own sample times (``harness.judges.verdict``).
 
 The traces are regenerated only on purpose (``lever reference --update``);
 ``lever reference`` checks that the committed ones are what the project computes now.
@@ -41,7 +42,6 @@ import numpy as np
 from lever.fmus import registry
 
 from harness.description import scene as scenes
-from harness.description import units
 from harness.paths import FMUS, RESOURCES, SCENES
 
 REFERENCE_DIR = RESOURCES / "reference"
@@ -52,8 +52,10 @@ DIGITS = 9
 #: EPYC against traces made elsewhere), so 1e-5: a margin over that spread, still far below a
 #: physical change (a parameter moved by 1e-4 moves the torques by about that much)
 CURRENT_TOLERANCE = 1e-5
-#: a scene reference keeps about this many rows
-SCENE_ROWS = 1000
+#: a scene reference keeps about this many rows: a 10 s scene every 1 ms, 15 samples a period
+#: of KAVZ-685's 415-425 rad/s load band (the verdict's interpolant then errs by about 1 % of
+#: that band's amplitude, and says so), under 2 MB a file
+SCENE_ROWS = 10000
 RTOL = 1e-10
 
 
@@ -120,9 +122,12 @@ def read_csv(path: Path) -> Traces:
     if widths != [len(names)]:
         raise TraceFileError(f"{path}: rows have {widths} columns, the header {len(names)}")
     try:
-        data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
-    except ValueError as error:
-        raise TraceFileError(f"{path}: not a number ({error})") from None
+        data = np.array(rows[1:], dtype=float)      # numpy parses the cells (as float() does)
+    except ValueError:
+        try:
+            data = np.array([[float(cell) for cell in row] for row in rows[1:]], dtype=float)
+        except ValueError as error:         # the cell float() refuses, named
+            raise TraceFileError(f"{path}: not a number ({error})") from None
     return Traces(data[:, 0].copy(), {n: data[:, i].copy() for i, n in enumerate(names) if i})
 
 
@@ -553,202 +558,3 @@ def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None
     how = f"master {run.master}, step {run.step:g} s, {scene.experiment.start:g}...{scene.experiment.stop:g} s"
     # what the scene records (not what its features add, e.g. the energy balance's variables)
     return Result(run.times, {n: run.traces[n] for n in scene.record}, how, run.failure)
-
-
-# -- what a result was made with, against what its reference was made with ------------------
-
-def provenance_notes(reference: ReferenceTraces, result, overrides, master: str | None, step: float | None) -> list[str]:
-    """Sentences saying when the judged result was made with other values than its
-    reference (a scene's reference is made at the scene file's values, by the monolithic
-    solver): a run ``lever validate`` made with ``--set``, or a ``--result`` CSV with a
-    lever run's summary.json beside it (what it ran), or a ``Run``'s summary (a dict); a CSV
-    without one is said to be of unknown making.  Values are compared as quantities
-    (``units.same_value``: "15.0 deg" is "15 deg"), not as text."""
-    import json
-
-    from harness.description import plan
-
-    if reference.kind != "scene":
-        changed = {k: v for k, v in (a.split("=", 1) for a in overrides or () if "=" in a)}
-        return ([f"the run under test was made with other values than its reference (the FMU's defaults and the "
-                 f"reference's inputs): {', '.join(f'{k} = {v.strip()}' for k, v in changed.items())} (--set)"]
-                if changed else [])
-    made = plan.parameter_record(scenes.load(reference.name))
-    if isinstance(result, (str, Path)):
-        summary_path = Path(result).parent / "summary.json"
-        try:
-            summary = json.loads(summary_path.read_text())
-            used = summary["parameters"]
-        except (OSError, ValueError, KeyError, TypeError):
-            return [f"what the result was made with is not known (no lever summary.json with its parameters beside "
-                    f"{Path(result).name}): it is judged as traces only"]
-        said = f"{summary_path} (master {summary.get('master')}, step {summary.get('step_s')} s, lever " \
-               f"{summary.get('lever_version')})"
-    elif isinstance(result, dict) and isinstance(result.get("parameters"), dict):     # a Run's summary
-        used = result["parameters"]
-        said = f"the Run given (master {result.get('master')}, step {result.get('step_s')} s)"
-    elif result is None and overrides:
-        used = plan.parameter_record(scenes.load(reference.name).with_overrides(list(overrides)))
-        said = "this run (--set)"
-    else:
-        return []
-    differ = [f"{k} = {v['value']} ({v['source']}; the reference: {made[k]['value'] if k in made else 'not set'})"
-              for k, v in used.items() if not k.startswith("experiment.")
-              and (k not in made or not units.same_value(v["value"], made[k]["value"]))]
-    if not differ:
-        return [f"the result was made with its reference's parameter values ({said})"]
-    return [f"the result was made with other values than its reference ({said}): " + "; ".join(differ)]
-
-
-# -- writing a validation's results -----------------------------------------------------------
-
-def write_validation(out: Path, findings, bands: dict, result: Result, reference: ReferenceTraces,
-                     write_result: bool = True) -> list[Path]:
-    """``validation.json``, the result as ``<NAME>_out.csv`` (cross-check naming; unless
-    ``write_result`` is false) and one plot per failing signal with its band, in ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in out.glob("*.png"):
-        stale.unlink()
-    if findings.KIND == "lever":                    # the engineer's verdict (harness.judges.verdict)
-        return write_verdict(out, findings, result, reference, write_result)
-    written = _write_result_and_json(out, findings, result, reference, write_result)
-    if len(result.times):
-        for signal in findings.signals:
-            if not signal.passed:
-                written.append(plot_signal(out, reference, result, signal, bands[signal.name], findings.tolerance))
-    return written
-
-
-def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces, write_result: bool = True) -> list[Path]:
-    """``write_validation`` for the engineer's verdict: ``validation.json`` (every check, the
-    tolerances and their sources, the power), the result, and a plot per failing signal."""
-    written = _write_result_and_json(out, verdict, result, reference, write_result)
-    if len(result.times):
-        written += [plot_verdict_signal(out, reference, result, s, verdict) for s in verdict.signals if not s.passed]
-    return written
-
-
-def _write_result_and_json(out: Path, judged, result: Result, reference: ReferenceTraces,
-                           write_result: bool) -> list[Path]:
-    """What every verdict writes: the result's recorded outputs (``<name>_out.csv``, unless
-    the result came from a file) and ``validation.json`` (the verdict's ``to_dict`` and how
-    the result was made)."""
-    import json
-
-    written = []
-    if write_result and len(result.times):
-        path = out / f"{reference.name}_out.csv"
-        write_csv(path, Traces(result.times, {n: result.traces[n] for n in reference.outputs.signals
-                                             if n in result.traces}))
-        written.append(path)
-    summary = judged.to_dict()
-    summary["run"] = {"how": result.how, "failure": result.failure}
-    path = out / "validation.json"
-    path.write_text(json.dumps(summary, indent=2, default=float))
-    written.append(path)
-    return written
-
-
-def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, signal, verdict) -> Path:
-    """One failing signal: the reference, its tube over the judged window and the result over
-    the whole span above; the window's last revolutions (its last tenth without a shaft)
-    below, where a changed mean, ripple or phase shows."""
-    from harness.formats import plotting
-
-    plt = plotting.pyplot()
-    t_ref, y_ref = reference.outputs.times, np.asarray(reference.outputs.signals[signal.name], dtype=float)
-    t, y = result.times, np.asarray(result.traces[signal.column], dtype=float)
-    start, stop = verdict.window or verdict.transient       # the steady window, or a start-up-only span
-    inside = (t_ref >= start) & (t_ref <= stop)
-    width = signal.power.band if signal.power else 0.0
-    close = (2 * 2 * math.pi / verdict.rotation) if verdict.rotation else 0.1 * (stop - start)
-    fig, axes = plt.subplots(2, 1, figsize=(11, 7), layout="constrained")
-    for ax, (low, high) in zip(axes, ((t_ref[0], t_ref[-1]), (max(start, stop - close), stop))):
-        ax.fill_between(t_ref[inside], y_ref[inside] - width, y_ref[inside] + width, color="tab:green", alpha=0.25,
-                        lw=0, label=f"tube +-{width:.3g} (judged window)")
-        ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
-        ax.plot(t, y, color="tab:blue", lw=0.8, label="result")
-        ax.set_xlim(low, high)
-        shown = np.concatenate([y_ref[(t_ref >= low) & (t_ref <= high)], y[(t >= low) & (t <= high)]])
-        shown = shown[np.isfinite(shown)]
-        if shown.size and shown.max() > shown.min():
-            pad = 0.05 * (shown.max() - shown.min())
-            ax.set_ylim(shown.min() - pad - width, shown.max() + pad + width)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel(signal.name)
-        ax.grid(alpha=0.3)
-    plotting.legend_outside(axes[0])
-    failed = "; ".join(f"{c.quantity} {c.detail}" for c in signal.failed)
-    axes[0].set_title(f"{reference.name}: {signal.name} FAIL - {failed}", fontsize=8, wrap=True)
-    axes[1].set_title("the judged window's end" + (f"; a pass would have meant:\n{signal.power.describe()}"
-                                                   if signal.power else ""), fontsize=8)
-    fig.suptitle(f"result: {result.how}", fontsize=9)
-    path = out / f"{signal.name}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _finite_limits(*arrays) -> tuple[float, float] | None:
-    """The smallest and largest finite value of ``arrays``; None when there is none."""
-    values = np.concatenate([np.asarray(a, dtype=float).ravel() for a in arrays])
-    values = values[np.isfinite(values)]
-    return (float(values.min()), float(values.max())) if values.size else None
-
-
-def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, band, tolerance) -> Path:
-    """The reference, its band, the result and the samples outside the band: the whole span
-    above, a close-up around the first sample outside below."""
-    from harness.formats import plotting
-
-    plt = plotting.pyplot()
-    t_ref, y_ref = reference.outputs.times, reference.outputs.signals[finding.name]
-    column = next(c for c in (finding.name,) + tuple(k for k in result.traces if k.endswith("." + finding.name))
-                  if c in result.traces)
-    t, y = result.times, result.traces[column]
-    first = finding.outside_times[0] if finding.outside_times else finding.max_error_time
-    span = t_ref[-1] - t_ref[0]
-    half = max(0.025 * span, 10 * float(np.median(np.diff(t_ref)))) if len(t_ref) > 1 else 1.0
-    # no sample compared (the result's times miss the reference's): no close-up, and the
-    # whole plot over both spans, from their finite values only
-    windows = (None, (first - half, first + half) if math.isfinite(first) else None)
-    fig, axes = plt.subplots(2 if windows[1] else 1, 1, figsize=(11, 7 if windows[1] else 4), squeeze=False,
-                             layout="constrained")
-    axes = axes[:, 0]
-    for ax, window in zip(axes, windows):
-        ax.fill_between(band.t, band.low, band.high, color="tab:green", alpha=0.25, lw=0,
-                        label=f"band ({tolerance.name}: +-{band.width:.3g})")
-        ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label="reference")
-        ax.plot(t, y, color="tab:blue", lw=0.8, label="result")
-        if finding.outside_times:
-            times = np.array(finding.outside_times)
-            ax.plot(times, np.interp(times, t, y), "x", color="tab:red", ms=5, label="outside the band")
-        if window:
-            window = (max(window[0], t_ref[0]), min(window[1], t_ref[-1]))
-            ax.set_xlim(*window)
-            inside = (t_ref >= window[0]) & (t_ref <= window[1])
-            shown = np.concatenate([band.low[(band.t >= window[0]) & (band.t <= window[1])],
-                                    band.high[(band.t >= window[0]) & (band.t <= window[1])],
-                                    y[(t >= window[0]) & (t <= window[1])], y_ref[inside]])
-            shown = shown[np.isfinite(shown)]
-            if shown.size:
-                pad = 0.05 * (shown.max() - shown.min() or 1.0)
-                ax.set_ylim(shown.min() - pad, shown.max() + pad)
-            ax.set_title(f"close-up at t = {first:.4g} s", fontsize=9)
-        else:
-            x = _finite_limits(t_ref, t)
-            y_limits = _finite_limits(band.low, band.high, y_ref, y)
-            if x and x[1] > x[0]:
-                ax.set_xlim(*x)
-            if y_limits and y_limits[1] > y_limits[0]:
-                pad = 0.05 * (y_limits[1] - y_limits[0])
-                ax.set_ylim(y_limits[0] - pad, y_limits[1] + pad)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel(finding.name)
-        ax.grid(alpha=0.3)
-    plotting.legend_outside(axes[0])
-    axes[0].set_title(f"{reference.name}: {finding.name} - {finding.problem}", fontsize=9)
-    path = out / f"{finding.name}.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path

@@ -46,6 +46,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+class TooSparse(ValueError):
+    """A result whose samples are further apart than the band can judge: what lies between
+    them is never compared, so no verdict can be given."""
+
+
 @dataclass(frozen=True)
 class Tolerance:
     name: str
@@ -278,21 +283,30 @@ def compare_signal(name: str, t: np.ndarray, y: np.ndarray, t_ref: np.ndarray, y
     return SignalFinding(name, rms, peak, peak_time, fraction, n, b.width, passed, problem, outside_times), b
 
 
-def match_columns(reference_names: list[str], result_names: list[str]) -> tuple[dict[str, str], list[str]]:
+def match_columns(reference_names: list[str], result_names: list[str], said: bool = False):
     """Which result column carries each reference signal: the same name, or else the one
-    column named ``<anything>.<name>`` (a single FMU's variables as another tool names them,
-    e.g. ``coupling.tau1`` for ``tau1``).  Returns the mapping and the unmatched names."""
-    mapping, missing = {}, []
+    column another tool names it by - ``<anything>.<name>`` (a single FMU's variables, e.g.
+    ``coupling.tau1`` for ``tau1``; a model's prefix, ``kavz685.engine.w``), or the name with
+    its dots as underscores, alone or after a prefix (``engine_w``, as a container FMU names
+    its outputs).  Returns the mapping and the unmatched names (``said``: and the columns
+    matched by another naming, "engine_w as engine.w")."""
+    mapping, missing, matched = {}, [], []
+    flat = {c: c.replace(".", "_") for c in result_names}
     for name in reference_names:
         if name in result_names:
             mapping[name] = name
             continue
-        suffixed = [c for c in result_names if c.endswith("." + name)]
-        if len(suffixed) == 1:
-            mapping[name] = suffixed[0]
+        under = name.replace(".", "_")
+        for rule in (lambda c: c.endswith("." + name), lambda c: flat[c] == under,
+                     lambda c: flat[c].endswith("_" + under)):
+            found = [c for c in result_names if rule(c) and c not in mapping.values()]
+            if len(found) == 1:
+                mapping[name] = found[0]
+                matched.append(f"{found[0]} as {name}")
+                break
         else:
             missing.append(name)
-    return mapping, missing
+    return (mapping, missing, matched) if said else (mapping, missing)
 
 
 #: a result sample beyond this many times the reference's largest magnitude (plus 1) is no
@@ -365,6 +379,8 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
         findings.problems.append("the result's time column is not monotonic")
         return findings, bands
     findings.problems += span_problems(times, start, stop)
+    if tolerance.cross_check:
+        _dense_enough(times, start, stop, tolerance)
     mapping, missing = match_columns(list(reference), list(traces))
     for signal in missing:
         findings.problems.append(f"signal '{signal}' is missing from the result")
@@ -381,6 +397,22 @@ def compare(name: str, times: np.ndarray, traces: dict[str, np.ndarray], referen
     if tolerance.cross_check and findings.signals:
         findings.notes.append(cross_check_blind_spot(tolerance, reference_times, findings.signals))
     return findings, bands
+
+
+def _dense_enough(times: np.ndarray, start: float, stop: float, tolerance: Tolerance):
+    """``TooSparse`` when the result's longest step inside ``start ... stop`` is longer than
+    the band's horizontal tolerance: the band judges the result's samples only, and a result
+    that holds its values over a longer step is judged at next to none of its span."""
+    window = tolerance.dx * (stop - start) / (tolerance.num - 1)
+    inside = times[(times >= start) & (times <= stop)]
+    edges = np.concatenate([[start], inside, [stop]])
+    longest = float(np.max(np.diff(edges)))
+    if longest > window:
+        i = int(np.argmax(np.diff(edges)))
+        raise TooSparse(f"the result is too sparse for the {tolerance.name} band: its samples at t = {edges[i]:.6g} "
+                        f"and {edges[i + 1]:.6g} s are {longest:.3g} s apart, more than the band's horizontal "
+                        f"tolerance, {window:.3g} s ({tolerance.dx} of its {tolerance.num} points over "
+                        f"{start:g} ... {stop:g} s): what lies between is never compared")
 
 
 def cross_check_blind_spot(tolerance: Tolerance, reference_times: np.ndarray, signals: list[SignalFinding]) -> str:

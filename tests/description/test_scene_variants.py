@@ -8,12 +8,12 @@ from harness.description import scene as scenes
 
 #: each committed variant as its base with the variant's changes made by --set
 VARIANTS = {
-    "kavz685_stiff": ["experiment.step=5e-5", "experiment.master=adaptive-trapezoidal",
+    "kavz685_stiff": ["experiment.step=5e-5", "experiment.master=me-cvode",
                       "coupling.stiffness=1e5", "coupling.damping=0.0", "load.order_share=0.0",
                       "load.narrowband_share=0.0"],
-    "kavz685_stiff_1e6": ["experiment.stop=2.0", "experiment.master=trapezoidal-newton",
+    "kavz685_stiff_1e6": ["experiment.stop=2.0", "experiment.step=2.5e-4", "experiment.master=trapezoidal-newton",
                           "experiment.transient=0.5", "coupling.stiffness=1e6", "coupling.damping=0.0"],
-    "kavz685_misalignment_edge": ["experiment.stop=2.0", "experiment.transient=0.5",
+    "kavz685_misalignment_edge": ["experiment.stop=2.0", "experiment.transient=0.5", "experiment.step=5e-4",
                                   "coupling.misalignment=43.2 deg", "load.order_share=0.0",
                                   "load.narrowband_share=0.0"],
 }

@@ -242,7 +242,7 @@ def test_load_above_stall_torque_reverses_the_drive_without_nan():
 
 
 def test_step_load_on_a_tiny_inertia():
-    result = run.simulate(load("kavz685_step_tiny_inertia"))
+    result = run.simulate(load("kavz685_step_tiny_inertia"), "adaptive-trapezoidal")
     assert result.ok, result.failure
     # The trapezoidal rule rings step to step by +-0.3-0.4 N*m at the long steps it ends
     # with (A- but not L-stable): its last sample alone sits anywhere in that band (the last

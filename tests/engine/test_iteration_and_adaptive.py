@@ -158,7 +158,7 @@ def test_adaptive_trapezoidal_keeps_its_step_where_the_stiff_mode_is_unresolved(
 def test_adaptive_trapezoidal_steps_grow_back_after_an_event():
     # The tiny-inertia scene's torque step shrinks the steps to nanoseconds; they must grow
     # back by decades (a step-keeping rule that also held back growth took 100,000 steps).
-    result = run.simulate(scene.load("kavz685_step_tiny_inertia"))
+    result = run.simulate(scene.load("kavz685_step_tiny_inertia"), "adaptive-trapezoidal")
     assert result.ok, result.failure
     assert result.counters["steps"] < 2000, result.counters
 

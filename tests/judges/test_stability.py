@@ -209,7 +209,7 @@ def test_classification_criteria():
 
 def test_advisor_is_silent_on_stable_choices_and_adaptive_masters():
     assert stability.advise(scene.load("kavz685")) == []                      # jacobi-quadratic, 1 ms
-    assert stability.advise(scene.load("kavz685_stiff")) == []                # adaptive-trapezoidal
+    assert stability.advise(scene.load("kavz685_stiff")) == []                # me-cvode
     assert stability.advise(scene.load("kavz685_stiff"), "trapezoidal-newton", 5e-3) == []
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from harness import api
-from harness.formats import reference_traces
+from harness.formats import reference_traces, validation_files
 from harness.judges import verdict
 
 FIVE = ("engine.w", "load.w", "coupling.tau1", "coupling.tau2")
@@ -139,7 +139,9 @@ def test_a_window_shorter_than_two_revolutions_judges_no_orders_and_says_so(kavz
 def test_the_blind_spots_name_the_sampling_and_the_start_up(kavz):
     t, signals, _ = kavz
     said = _judge(kavz, {"coupling.tau2": signals["coupling.tau2"]}).blind_spots
-    assert said.startswith("cannot see: anything faster than 314 rad/s")
+    # the result's own samples (every 1 ms here) are what is compared
+    assert said.startswith("cannot see: anything faster than 3.14e+03 rad/s (half the sampling rate of the "
+                           "result's samples, every 1 ms")
     assert "before t = 2 s, anything but a departure from the start-up's tube" in said
     assert "signal(s) not judged" in said
 
@@ -148,7 +150,7 @@ def test_verdict_json_is_standard_and_carries_the_power(kavz, tmp_path):
     t, signals, ref = kavz
     judged = _judge(kavz, {"coupling.tau2": signals["coupling.tau2"] * 1.1})
     result = reference_traces.Result(t, {"coupling.tau2": signals["coupling.tau2"] * 1.1}, "given")
-    written = reference_traces.write_validation(tmp_path, judged, {}, result, ref)
+    written = validation_files.write_validation(tmp_path, judged, {}, result, ref)
     data = json.loads((tmp_path / "validation.json").read_text(),
                       parse_constant=lambda c: pytest.fail(f"validation.json holds {c}"))
     assert data["passed"] is False and data["signals"]["coupling.tau2"]["power"]["amplitude"] > 0

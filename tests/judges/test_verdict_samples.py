@@ -1,0 +1,179 @@
+"""The engineer's verdict judges the result's own samples: wrong results made by hand from the
+committed reference (zeros between its rows, spikes, chatter) fail naming the signal and the
+quantity; the exact solution on another grid passes; a result its sampling cannot judge is
+refused or its quantity "not judged"; the stated power is true for every committed reference."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from harness import api
+from harness.formats import reference_traces
+from harness.judges import sampled, validation, verdict
+
+
+@pytest.fixture(scope="module")
+def kavz():
+    ref = reference_traces.read("kavz685")
+    return ref.outputs.times, ref.outputs.signals, verdict.settings_of(ref)
+
+
+def _judge(kavz, times, traces, **options):
+    t, signals, settings = kavz
+    options.setdefault("with_power", False)
+    return verdict.judge(times, traces, t, signals, transient=settings.transient,
+                         rotation_signal=settings.rotation_signal, kinds=settings.kinds, **options)
+
+
+def _failed(judged) -> set[tuple[str, str]]:
+    return {(s.name, c.quantity) for s in judged.signals for c in s.failed}
+
+
+def test_the_reference_is_dense_enough_to_be_judged_against():
+    """Every committed scene reference keeps a sample at least every 1 ms (or its step) and no
+    file is larger than 2 MB."""
+    for name in reference_traces.all_names():
+        path = reference_traces.paths(name)["ref"]
+        assert path.stat().st_size < 2e6, name
+        t = reference_traces.read(name).outputs.times
+        assert np.max(np.diff(t)) <= 1e-3 + 1e-12, name
+
+
+def test_ninety_percent_zeros_between_the_references_rows_fail_on_the_mean(kavz):
+    """The reference's own 10 ms rows with nine rows of zeros between each pair: the result's
+    own mean is a tenth of the reference's."""
+    t, signals, _ = kavz
+    every = np.arange(len(t))
+    rows = every % 10 == 0
+    traces = {n: np.where(rows, v, 0.0) for n, v in signals.items()}
+    judged = _judge(kavz, t, traces)
+    assert not judged.passed
+    assert ("load.w", "mean") in _failed(judged) and ("coupling.tau2", "mean") in _failed(judged)
+    mean = next(c for c in judged.signals[5].checks if c.quantity == "mean")
+    assert mean.result == pytest.approx(0.1 * mean.reference, rel=0.05)
+
+
+def test_single_row_spikes_between_the_references_samples_fail_the_tube(kavz):
+    t, signals, _ = kavz
+    tau2 = signals["coupling.tau2"].copy()
+    spikes = np.arange(3000, 9000, 1500)            # four rows of 10 000 samples
+    tau2[spikes] += 1e4
+    judged = _judge(kavz, t, {"coupling.tau2": tau2})
+    assert _failed(judged) >= {("coupling.tau2", "tube")}
+    assert "more than the reference's range" in judged.failures()[-1]
+    assert judged.signals[0].max_error == pytest.approx(1e4, rel=1e-3)
+
+
+def test_chatter_on_every_other_row_fails_the_amplitude(kavz):
+    t, signals, _ = kavz
+    tau2 = signals["coupling.tau2"] + 5.0 * (-1.0) ** np.arange(len(t))
+    judged = _judge(kavz, t, {"coupling.tau2": tau2})
+    assert ("coupling.tau2", "amplitude") in _failed(judged)
+
+
+@pytest.mark.parametrize("offset, step", [(5, 10), (0, 12)])
+def test_the_exact_solution_on_another_grid_passes(kavz, offset, step):
+    """The reference's own rows (1 ms apart, the monolithic solution) taken every 10 ms from
+    5 ms on, or every 12 ms: the exact solution on another grid than the reference's 10 ms
+    one - it passes; what the grid cannot show is "not judged", not failed."""
+    t, signals, _ = kavz
+    rows = np.arange(offset, len(t), step)
+    # over the span the rows cover (from 5 ms on, the offset grid starts after the reference)
+    judged = _judge(kavz, t[rows], {n: v[rows] for n, v in signals.items()}, window=(t[rows[0]], t[rows[-1]]))
+    assert judged.passed, judged.failures()
+    for s in judged.signals:
+        for c in s.checks:
+            if c.judged and c.quantity in ("mean", "amplitude"):
+                assert abs(c.difference) <= 0.5 * c.allowed, (s.name, c.quantity, c.detail)
+
+
+def test_a_ripple_faster_than_the_results_sampling_is_not_judged_and_says_why(kavz):
+    """engine.a and load.a carry the 415-425 rad/s band; sampled every 20 ms its peaks are not
+    seen: the amplitude is "not judged", naming the sampling, never PASS or FAIL."""
+    t, signals, _ = kavz
+    rows = np.arange(0, len(t), 20)
+    judged = _judge(kavz, t[rows], {"load.a": signals["load.a"][rows]})
+    (amplitude,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    assert not amplitude.judged and "every 20 ms" in amplitude.detail
+    assert "load.a amplitude: not judged" in judged.blind_spots or "load.a amplitude" in judged.blind_spots
+
+
+def test_a_result_too_sparse_for_its_window_or_band_is_refused(kavz):
+    t, signals, _ = kavz
+    sparse = np.array([0.0, 10.0])
+    held = {n: np.array([v[0], v[0]]) for n, v in signals.items()}
+    with pytest.raises(verdict.UnusableResult, match=r"1 sample\(s\) in the steady window"):
+        _judge(kavz, sparse, held)
+    with pytest.raises(validation.TooSparse, match="too sparse for the cross-check band"):
+        validation.compare_span("x", sparse, held, t, signals, validation.TOLERANCES["cross-check"], 0.0, 10.0)
+    with pytest.raises(api.InputError, match="too sparse"):
+        api.validate("kavz685", result=(sparse, held), tolerance="cross-check")
+
+
+def test_unsorted_times_are_refused_and_an_event_pair_is_not(kavz):
+    t, signals, _ = kavz
+    swapped = t.copy()
+    swapped[[100, 101]] = swapped[[101, 100]]
+    with pytest.raises(verdict.UnusableResult, match="not sorted: row 102"):
+        _judge(kavz, swapped, {"load.w": signals["load.w"]})
+    event = np.insert(t, 5000, t[5000])
+    assert _judge(kavz, event, {"load.w": np.insert(signals["load.w"], 5000, signals["load.w"][5000])}).passed
+
+
+def test_another_tools_column_names_are_matched_and_said(kavz):
+    t, signals, _ = kavz
+    judged = _judge(kavz, t, {"engine_w": signals["engine.w"], "kavz685.coupling.tau2": signals["coupling.tau2"]})
+    assert [s.name for s in judged.signals] == ["engine.w", "coupling.tau2"] and judged.passed
+    assert any("engine_w as engine.w" in n and "kavz685.coupling.tau2 as coupling.tau2" in n for n in judged.notes)
+
+
+def test_the_order_fit_takes_the_samples_own_times():
+    """A sum of orders sampled at random times: the least-squares fit gives each component
+    (amplitude and phase) as built, by hand."""
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0.0, 2.0, 700))
+    w = 37.0
+    y = 5.0 + 2.0 * np.cos(w * t + 0.4) + 0.5 * np.cos(3 * w * t - 1.0)
+    fitted = sampled.OrderFit(t, w, (1, 2, 3, 4)).fit(y)
+    assert fitted[1] == pytest.approx(2.0 * np.exp(0.4j), abs=1e-9)
+    assert fitted[3] == pytest.approx(0.5 * np.exp(-1.0j), abs=1e-9)
+    assert abs(fitted[2]) < 1e-9
+    uneven = np.array([0.0, 1.0, 1.5, 4.0])
+    assert sampled.time_mean(uneven, np.array([0.0, 2.0, 2.0, 0.0])) == pytest.approx((1.0 + 1.0 + 2.5) / 4.0)
+
+
+def _references():
+    return reference_traces.all_names()
+
+
+@pytest.mark.parametrize("name", _references())
+def test_the_stated_power_is_true_for_every_committed_reference(name):
+    """For every committed reference, each signal: the reference itself passes, and changed by
+    1.1 times the stated power of each sign (mean, amplitude, time shift) it fails, by 0.9 times
+    it passes - judged by ``verdict.judge``, the path a result takes."""
+    ref = reference_traces.read(name)
+    settings = verdict.settings_of(ref)
+    t, signals = ref.outputs.times, ref.outputs.signals
+    options = dict(transient=settings.transient, rotation_signal=settings.rotation_signal, kinds=settings.kinds,
+                   rtol=verdict.Tolerances([settings.rules]))
+    itself = verdict.judge(t, signals, t, signals, **options)
+    assert itself.passed, itself.failures()
+    start = itself.window[0]
+    for s in itself.signals:
+        if s.power is None:
+            continue
+        reference = sampled.Reference(t, signals[s.name])
+        steady = t >= start - 1e-12
+        own_t = t[steady]
+        mean = sampled.time_mean(own_t, signals[s.name][steady])
+        change = {"mean": lambda x: signals[s.name] + np.where(steady, x, 0.0),
+                  "amplitude": lambda x: np.where(steady, mean + (1 + x) * (signals[s.name] - mean), signals[s.name]),
+                  "shift": lambda x: np.where(steady, reference(t - x), signals[s.name])}
+        for kind, make in change.items():
+            for sign, stated in zip((1.0, -1.0), s.power.signs[kind]):
+                if stated is None:
+                    continue
+                for factor, passes in ((1.1, False), (0.9, True)):
+                    judged = verdict.judge(t, {s.name: make(sign * factor * stated)}, t, signals, with_power=False,
+                                           **options)
+                    assert judged.passed is passes, (name, s.name, kind, sign, factor, stated, judged.failures())
