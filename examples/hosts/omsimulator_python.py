@@ -27,10 +27,12 @@ with tempfile.TemporaryDirectory() as tmp:
     subprocess.run([os.environ.get("LEVER", "lever"), "export-ssp", "kavz685", "--out", str(archive)],
                    check=True, stdout=subprocess.DEVNULL)
     model = SSP(str(archive))
-    model.newSolver({"name": "cvode", "method": "cvode", "tolerance": TOLERANCE, "stepSize": STEP})
+    model.newSolver({"name": "cvode", "method": "cvode", "tolerance": TOLERANCE})
     for component in ("engine", "coupling", "load"):
         model.setSolver(CRef("kavz685", component), "cvode")
     instance = model.instantiate()
+    # initial, smallest and largest step: a solver's "stepSize" would fix all three
+    instance.setVariableStepSize(1e-6, 1e-12, STEP)
     instance.setResultFile(str(out))
     instance.initialize()
     instance.simulate()
