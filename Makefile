@@ -59,6 +59,14 @@ test: test-dispatch
 test-dispatch: $(STAMP)
 	$(BIN)/python tests/numpy_dispatch.py $(PARALLEL)
 
+# The host recipes (examples/hosts/) in the hosts the environment names - PYFMI_PYTHON,
+# OMSIMULATOR, OMSIMULATOR_PYTHONPATH (docs/hosts.md) -, each result judged by `lever validate`
+# at the default verdict: prints the table host x recipe -> verdict.
+.PHONY: hosts
+hosts: $(STAMP)
+	$(BIN)/lever build
+	$(BIN)/python examples/hosts/run_recipes.py
+
 bench: $(STAMP)
 	$(BIN)/lever bench kavz685
 	$(BIN)/lever bench kavz685_stiff

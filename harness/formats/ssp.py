@@ -9,7 +9,9 @@ An exported archive holds
   experiment (start, stop; its step as OSP's ``FixedStepAlgorithm`` annotation, which
   libcosim reads).  The system's annotations: first OpenModelica's (``org.openmodelica``:
   a weakly coupled system, OMSimulator's fixed-step master at the scene's step - OMSimulator
-  reads the first annotation only, and adds no system without it), then ours (below);
+  reads the first annotation only, and adds no system without it; its SimulationInformation
+  carries a name, as OMSimulator's Python package asks of each entry of its solver list),
+  then ours (below);
 * ``resources/<Fmu>.fmu``, each configured to start at the scene's values
   (``harness.formats.configured_fmu``): an engine that applies no parameter binding (fmpy.ssp
   without a parameter set) or drops some (OMSimulator: Strings) still runs the scene.  An FMU
@@ -63,6 +65,8 @@ OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 #: OMSimulator's annotation namespace; it reads its elements by the prefix ``oms:``
 OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 OMS_ANNOTATION = "org.openmodelica"
+#: OMSimulator's fixed-step master of a weakly coupled system, which the export asks for
+OMS_MASTER = "oms-ma"
 #: the relative tolerance OMSimulator's fixed-step master is given (its schema requires one; it
 #: passes it to fmi2SetupExperiment, and our FMUs, stepping by closed forms and fixed
 #: substeps, take none): OMSimulator's own default
@@ -271,9 +275,12 @@ def _ssd(scene: scenes.Scene, descriptions: dict, sources: dict[str, str]) -> by
     # OpenModelica's first: OMSimulator reads the first annotation of a system only, and
     # adds no system it cannot tell weakly or strongly coupled
     oms = ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": OMS_ANNOTATION})
-    information = ET.SubElement(ET.SubElement(oms, _q("oms", "Annotations")), _q("oms", "SimulationInformation"))
+    # OMSimulator's Python package reads every SimulationInformation as an entry of its solver
+    # list and looks solvers up by name: one without a name makes its setSolver fail (KeyError)
+    information = ET.SubElement(ET.SubElement(oms, _q("oms", "Annotations")), _q("oms", "SimulationInformation"),
+                                {"name": OMS_MASTER})
     ET.SubElement(information, _q("oms", "FixedStepMaster"), {
-        "description": "oms-ma", "stepSize": _decimal(e.step), "relativeTolerance": _decimal(OMS_TOLERANCE)})
+        "description": OMS_MASTER, "stepSize": _decimal(e.step), "relativeTolerance": _decimal(OMS_TOLERANCE)})
     _lever_annotation(ET.SubElement(annotations, _q("ssc", "Annotation"), {"type": LEVER_ANNOTATION}), scene)
     if used_units:
         units = ET.SubElement(root, _q("ssd", "Units"))

@@ -88,6 +88,23 @@ def test_the_ssd_is_what_omsimulator_adds_as_a_weakly_coupled_system(archive):
     assert "<oms:FixedStepMaster " in text and "<ssc:Annotation type=\"org.openmodelica\">" in text
 
 
+def test_omsimulator_python_reads_every_simulation_information_as_a_named_solver(archive):
+    """OMSimulatorPython (utils.parseAnnotations) lists the attributes of every
+    oms:SimulationInformation of the system's org.openmodelica annotations as a solver, and its
+    generateJson looks each up by s["name"] once a component is given a solver (setSolver): an
+    entry without a name is a KeyError before any solver of the user's is found."""
+    system = ET.fromstring(_members(archive)["SystemStructure.ssd"]).find(f"{{{ssp.SSD}}}System")
+    solvers = [information.attrib
+               for annotation in system.findall(f"{{{ssp.SSD}}}Annotations/{{{ssp.SSC}}}Annotation")
+               if annotation.get("type") == "org.openmodelica"
+               for information in annotation.findall(f"{{{ssp.OMS}}}Annotations/{{{ssp.OMS}}}SimulationInformation")]
+    assert solvers, "the export writes OpenModelica's annotation"
+    user_solver = {"name": "cvode", "method": "cvode", "tolerance": 1e-6}
+    found = next((s for s in solvers + [user_solver] if s["name"] == "cvode"), None)
+    assert found is user_solver
+    assert [s["name"] for s in solvers] == ["oms-ma"]
+
+
 def test_the_archive_loads_back_with_its_scene_annotation_where_it_is_now_and_where_it_was(archive, tmp_path):
     loaded = ssp.read_scene(archive)
     assert loaded.experiment.master == scenes.load("kavz685").experiment.master
