@@ -273,9 +273,9 @@ def test_the_values_the_api_returns_for_a_scene_have_short_reprs(fmu_dir):
 def test_the_made_references_wait_is_said_before_it_is_made(fmu_dir, monkeypatch, tmp_path):
     from harness.description import plan as plans
     from harness.engine.run import simulate
-    from harness.judges import fmu_reference, solution
+    from harness.judges import fmu_reference
 
-    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")
+    monkeypatch.setenv("LEVER_CACHE_DIR", str(tmp_path / "cache"))
     plan = plans.check(scenes.load("kavz685").with_overrides(["experiment.stop=0.04"]))
     run = simulate(plan, "jacobi", 1e-3)
     said = fmu_reference.expected_wait(plan, run)
@@ -292,7 +292,7 @@ def test_the_made_references_wait_is_said_before_it_is_made(fmu_dir, monkeypatch
 
 
 def test_a_run_says_the_made_references_wait_before_the_wait(fmu_dir, monkeypatch, tmp_path):
-    from harness.judges import fmu_reference, monolithic, solution
+    from harness.judges import fmu_reference, monolithic
 
     def no_monolithic(plan, times, **_):
         raise monolithic.ReferenceUnavailable("no equations for it (as for a user's FMU)")
@@ -304,7 +304,7 @@ def test_a_run_says_the_made_references_wait_before_the_wait(fmu_dir, monkeypatc
         heard_when_made.extend(heard)
         return making(plan, times, **options)
 
-    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")
+    monkeypatch.setenv("LEVER_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(monolithic, "solve", no_monolithic)
     monkeypatch.setattr(fmu_reference, "reference", made)
     done = api.run("kavz685", master="jacobi", stop=0.04, notify=lambda kind, message: heard.append(message))
