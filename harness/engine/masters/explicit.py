@@ -371,7 +371,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             system.propagate_with(self._held_plan)
             self._inputs_unsent = True
         history.append((t, start))
-        if self.sends_ahead and not self._starting():
+        if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not _starting()
             self._send_ahead(t + h)
 
     def _start_step(self, t, h, points):
