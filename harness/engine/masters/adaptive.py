@@ -227,8 +227,20 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             self._step_stateful(t, h)
             self.system.propagate()
             end = [values[:] for values in live]
-            self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
-            difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
+            # the largest torque so far and the largest miss, as max() finds them (the first
+            # of equals kept, a NaN only where it comes first), without generator frames
+            scale = self._scale
+            for torques in start + end:
+                for x in torques:
+                    if abs(x) > scale:
+                        scale = abs(x)
+            self._scale = scale
+            difference = None
+            for ps, es in zip(predicted, end):
+                for p, e in zip(ps, es):
+                    miss = abs(p - e)
+                    if difference is None or miss > difference:
+                        difference = miss
             return fraction * difference / (self.tolerance * (self._scale or 1.0)), end
 
         h, error, end = self._controlled_step(t, self._clip(t, h), attempt)
