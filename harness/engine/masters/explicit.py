@@ -71,6 +71,11 @@ def _lagrange_basis(nodes) -> list[list[float]]:
     if len(nodes) == 2:
         x0, x1 = nodes
         return [_basis_2(x0, x1), _basis_2(x1, x0)]
+    return _lagrange_product(nodes)
+
+
+def _lagrange_product(nodes) -> list[list[float]]:
+    """``_lagrange_basis`` for any number of nodes, one factor at a time."""
     bases = []
     for j, xj in enumerate(nodes):
         basis = [1.0]
