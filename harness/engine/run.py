@@ -73,18 +73,15 @@ class Recorder:
         if stream is not None:
             from harness.engine.traces import CHUNK
             n_rows = min(n_rows, CHUNK)
-        # Record whole component buffers (a superset of the names), pick the names at the end.
+        # Record the system's whole output block (every component's buffer, a superset of
+        # the names) in one copy a step; pick the names at the end.
         self._columns = {}
-        self._copies = []
         offset = 0
         for comp, (_, values) in system.buffers.items():
-            if not len(values):
-                continue
-            view = np.ctypeslib.as_array(values)
-            self._copies.append((offset, offset + len(values), view))
             for var, i in ((v, system.index[(comp, v)]) for v in system.exposed[comp]):
                 self._columns[f"{comp}.{var}"] = offset + i
             offset += len(values)
+        self._block = np.ctypeslib.as_array(system.output_block) if offset else np.empty(0)
         missing = [n for n in names if n not in self._columns]
         if missing:
             raise KeyError(f"not exposed by the system: {', '.join(missing)}")
@@ -100,9 +97,7 @@ class Recorder:
         elif self.count == len(self.times):     # a variable-step run: grow
             self.times = np.concatenate([self.times, np.empty(len(self.times))])
             self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
-        row = self.rows[self.count]
-        for start, stop, view in self._copies:
-            row[start:stop] = view
+        self.rows[self.count] = self._block
         self.times[self.count] = t
         self.count += 1
         if self.count - self._checked >= self.CHECK_EVERY:
@@ -212,10 +207,11 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
             # is the stop time itself: start + n*step can miss it by an ulp (0.03 + 5*0.001
             # is 0.034999999999999996).
             stride = 500 if bar is not None else n_steps + 1
+            step_to, record, check, start, stop = driver.step, recorder.record, guard.check, e.start, e.stop
             for n in range(1, n_steps + 1):
-                driver.step(t_next=e.stop if n == n_steps else min(e.start + n * step, e.stop))
-                recorder.record(driver.t)
-                guard.check(driver.t, n)
+                step_to(t_next=stop if n == n_steps else min(start + n * step, stop))
+                record(driver.t)
+                check(driver.t, n)
                 if observer is not None:
                     observer.stepped(n, driver.t)
                 if interrupt.requested():

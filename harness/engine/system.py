@@ -239,7 +239,16 @@ class System:
             exposed[name] = [v for v in names if v not in depends] + [v for v in names if v in depends]
             self.input_dependent[name] = [v for v in names if v in depends]
         self.exposed = exposed
+        # Every component's output values are views into one block (in the order of
+        # ``buffers``), so that a recorder copies a step's outputs in one go.
         self.buffers = {name: self.components[name].real_buffer(names) for name, names in exposed.items()}
+        self.output_block = (ctypes.c_double * sum(len(names) for names in exposed.values()))()
+        offset = 0
+        for name, (vrs, _) in self.buffers.items():
+            count = len(vrs)
+            self.buffers[name] = (vrs, (ctypes.c_double * count).from_buffer(
+                self.output_block, offset * ctypes.sizeof(ctypes.c_double)))
+            offset += count
         self.index = {(name, var): i for name, names in exposed.items() for i, var in enumerate(names)}
 
         order = self.order = dependency_order(scene, self.feedthrough)
@@ -467,14 +476,16 @@ class System:
 
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""
-        if sources is None:
-            plan = self._full_plan
-        else:
-            key = tuple(sources)
-            plan = self._partial_plans.get(key)
-            if plan is None:
-                plan = self._partial_plans[key] = self._compile_plan(self._downstream_of(sources))
-        self.propagate_with(plan)
+        self.propagate_with(self._full_plan if sources is None else self.partial_plan(sources))
+
+    def partial_plan(self, sources) -> list[Visit]:
+        """The compiled propagation downstream of the components ``sources`` (what
+        ``propagate(sources)`` runs), for ``propagate_with``; valid until ``expose``."""
+        key = tuple(sources)
+        plan = self._partial_plans.get(key)
+        if plan is None:
+            plan = self._partial_plans[key] = self._compile_plan(self._downstream_of(sources))
+        return plan
 
     def _downstream_of(self, sources):
         if len(sources) == 1:

@@ -216,7 +216,8 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
 
     def _step_impl(self, t, h):
-        start = [list(inputs.values) for inputs in self.coupled_inputs]
+        live = self._live
+        start = [values[:] for values in live]
         speeds = self._read_speeds()
         points = list(self.history) + [(t, start)]
         fraction = self.MEAN_FRACTION[len(points) - 1]
@@ -225,9 +226,21 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             predicted = self._hold(t, h, points)
             self._step_stateful(t, h)
             self.system.propagate()
-            end = [list(inputs.values) for inputs in self.coupled_inputs]
-            self._scale = max(self._scale, *(abs(x) for torques in start + end for x in torques))
-            difference = max(abs(p - e) for ps, es in zip(predicted, end) for p, e in zip(ps, es))
+            end = [values[:] for values in live]
+            # the largest torque so far and the largest miss, as max() finds them (the first
+            # of equals kept, a NaN only where it comes first), without generator frames
+            scale = self._scale
+            for torques in start + end:
+                for x in torques:
+                    if abs(x) > scale:
+                        scale = abs(x)
+            self._scale = scale
+            difference = None
+            for ps, es in zip(predicted, end):
+                for p, e in zip(ps, es):
+                    miss = abs(p - e)
+                    if difference is None or miss > difference:
+                        difference = miss
             return fraction * difference / (self.tolerance * (self._scale or 1.0)), end
 
         h, error, end = self._controlled_step(t, self._clip(t, h), attempt)

@@ -83,10 +83,11 @@ class Master:
         self.n_rejected = 0
         self._stateful = [system.components[n] for n in system.stateful]
         self._feedthrough = [n for n in system.order if n in system.feedthrough]
-        self._feedthrough_components = [system.components[n] for n in self._feedthrough]
         # every component's doStep, compiled once (a step costs about 100 us: each
         # attribute lookup saved shows)
         self._steps = system.step_plan(system.components)
+        self._stateful_steps = system.step_plan(system.stateful)
+        self._feedthrough_steps = system.step_plan(self._feedthrough)
         #: set by a step that left the coupled inputs in their buffers only (a held plan)
         self._inputs_unsent = False
 
@@ -97,16 +98,16 @@ class Master:
     def step(self, h: float | None = None, t_next: float | None = None):
         """Advance by ``h`` (default: the master's step).  ``t_next`` may give the
         target time exactly, to avoid accumulating rounding in ``t``."""
-        h = self.h if h is None else h
-        target = self.t + h if t_next is None else t_next
-        taken = self._step_impl(self.t, target - self.t)
+        t = self.t
+        target = (t + (self.h if h is None else h)) if t_next is None else t_next
+        taken = self._step_impl(t, target - t)
         if self.system.has_dependent_outputs and not self.reads_recorded:
             # recorded outputs that depend on inputs (a shaft's acceleration on its torque)
             # were read before the step's last inputs were written: read them with those
             self.system.refresh_dependent(send=self._inputs_unsent)
             self._inputs_unsent = False
         # An adaptive master may take less than it was offered; it returns what it took.
-        self.t = target if taken is None else self.t + taken
+        self.t = target if taken is None else t + taken
         self.n_steps += 1
 
     def _step_impl(self, t: float, h: float):
@@ -140,9 +141,7 @@ class Master:
             component.free_state(state)
 
     def _step_stateful(self, t, h):
-        for component in self._stateful:
-            component.do_step(t, h)
+        self.system.step_with(self._stateful_steps, t, h)
 
     def _step_feedthrough(self, t, h):
-        for component in self._feedthrough_components:
-            component.do_step(t, h)
+        self.system.step_with(self._feedthrough_steps, t, h)

@@ -60,7 +60,22 @@ class GaussSeidelMaster(Master):
 
 def _lagrange_basis(nodes) -> list[list[float]]:
     """For each node ``x_j``: the coefficients (lowest power first) of the Lagrange basis
-    polynomial ``L_j`` (1 at ``x_j``, 0 at the other nodes)."""
+    polynomial ``L_j`` (1 at ``x_j``, 0 at the other nodes), the product of
+    ``(x - x_m) / (x_j - x_m)`` over the other nodes in their order, multiplied out term
+    by term.  Two and three nodes (the extrapolating masters' degrees 1 and 2) unrolled:
+    the same operations in the same order, fewer Python steps (an adaptive master makes
+    new weights on every step)."""
+    if len(nodes) == 3:
+        x0, x1, x2 = nodes
+        return [_basis_3(x0, x1, x2), _basis_3(x1, x0, x2), _basis_3(x2, x0, x1)]
+    if len(nodes) == 2:
+        x0, x1 = nodes
+        return [_basis_2(x0, x1), _basis_2(x1, x0)]
+    return _lagrange_product(nodes)
+
+
+def _lagrange_product(nodes) -> list[list[float]]:
+    """``_lagrange_basis`` for any number of nodes, one factor at a time."""
     bases = []
     for j, xj in enumerate(nodes):
         basis = [1.0]
@@ -74,6 +89,24 @@ def _lagrange_basis(nodes) -> list[list[float]]:
     return bases
 
 
+def _basis_2(xj, a):
+    """``_lagrange_basis``'s loop for the node ``xj`` and one other, ``a``."""
+    scale = 1.0 / (xj - a)
+    return [(0.0 - a * 1.0) * scale, (1.0 - a * 0.0) * scale]
+
+
+def _basis_3(xj, a, b):
+    """``_lagrange_basis``'s loop for the node ``xj`` and two others, ``a`` then ``b``."""
+    scale = 1.0 / (xj - a)
+    c0, c1 = (0.0 - a * 1.0) * scale, (1.0 - a * 0.0) * scale
+    scale = 1.0 / (xj - b)
+    return [(0.0 - b * c0) * scale, (c0 - b * c1) * scale, (c1 - b * 0.0) * scale]
+
+
+#: the first moment about the step's middle of ``x^k`` over [0, 1]: 1/(k + 2) - 1/2 (k + 1)
+_FIRST_MOMENTS = tuple(1.0 / (k + 2) - 0.5 / (k + 1) for k in range(8))
+
+
 def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, list]:
     """Weights ``(m_j, r_j, e_j)`` over past values ``u(t_j)`` of the polynomial ``p``
     through them: ``sum_j m_j u(t_j)`` is the mean of ``p`` over ``[t, t + h]``,
@@ -85,11 +118,19 @@ def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, l
     Adams-Bashforth weights: degree 1: -1/2, 3/2; degree 2: 5/12, -16/12, 23/12).
     Pure Python over the Lagrange basis: this runs on every step of an adaptive master."""
     nodes = [(x - t) / h for x in past_times]          # <= 0, scaled to the step
+    moments = _FIRST_MOMENTS if len(nodes) <= len(_FIRST_MOMENTS) else \
+        tuple(1.0 / (k + 2) - 0.5 / (k + 1) for k in range(len(nodes)))
     means, slopes, ends = [], [], []
     for basis in _lagrange_basis(nodes):
-        means.append(sum(c / (k + 1) for k, c in enumerate(basis)))
-        slopes.append(12.0 * sum(c * (1.0 / (k + 2) - 0.5 / (k + 1)) for k, c in enumerate(basis)))
-        ends.append(sum(basis))
+        # each sum from 0.0, lowest power first
+        mean = slope = end = 0.0
+        for k, c in enumerate(basis):
+            mean += c / (k + 1)
+            slope += c * moments[k]
+            end += c
+        means.append(mean)
+        slopes.append(12.0 * slope)
+        ends.append(end)
     return means, slopes, ends
 
 
@@ -162,6 +203,22 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._sends = system.send_plan(writes)
         self._sends_ahead = system.send_plan([writes[k] for k in self._ahead])
         self._sends_rest = system.send_plan([writes[k] for k in self._rest])
+        # The per-step work, flattened once: the live input buffers (copied into the
+        # history), and for each input sent ahead (component k, input i) its held buffer,
+        # the live one, n, and whether it takes a second derivative.
+        self._live = tuple(inputs.values for inputs in self.coupled_inputs)
+        self._ahead_inputs = tuple((k, i, self._held[k].values, self._live[k], self._held[k].n,
+                                    len(self._held[k].values) > 2 * self._held[k].n)
+                                   for k in self._ahead for i in range(self._held[k].n))
+        # For each held input (component k, input i), those not sent ahead apart: its held
+        # buffer, n, whether ramped, and the slots of its higher derivatives (set to 0).
+        self._held_inputs = tuple((k, i, held.values, held.n, held.ramped,
+                                   tuple(range(2 * held.n + i, len(held.values), held.n)))
+                                  for k, held in enumerate(self._held) for i in range(held.n))
+        self._rest_inputs = tuple(each for each in self._held_inputs if each[0] in self._rest)
+        # The derivative weights the last step used and the scaled nodes of their key:
+        # a fixed step's next pattern is recognised without rounding (``_derivatives``).
+        self._last_derivatives = None
 
     def _derivative_inputs(self, inputs) -> list[list]:
         """For each ``Inputs`` of ``inputs``: the value references of their declared time
@@ -187,28 +244,36 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         were not sent ahead."""
         weights = self._weights([p[0] for p in points], t, h)
         ends = [] if predict else None
-        held = self._held
-        for k in (self._rest if rest_only else range(len(held))):
-            values, n, ramped = held[k].values, held[k].n, held[k].ramped
-            column = [p[1][k] for p in points]       # this component's inputs at each point
-            component_ends = []
-            for i in range(n):
+        pasts = [p[1] for p in points]
+        unrolled = len(weights) == 3
+        if unrolled:
+            (m0, r0, e0), (m1, r1, e1), (m2, r2, e2) = weights
+            past0, past1, past2 = pasts
+        for k, i, values, n, ramped, higher in (self._rest_inputs if rest_only else self._held_inputs):
+            # each sum from 0.0 over the points in their order; three points unrolled
+            if unrolled:
+                u0, u1, u2 = past0[k][i], past1[k][i], past2[k][i]
+                mean = 0.0 + m0 * u0 + m1 * u1 + m2 * u2
+                change = 0.0 + r0 * u0 + r1 * u1 + r2 * u2       # slope * h
+                end = 0.0 + e0 * u0 + e1 * u1 + e2 * u2
+            else:
                 mean = change = end = 0.0
-                for (w_mean, w_slope, w_end), inputs in zip(weights, column):
-                    u = inputs[i]
+                for (w_mean, w_slope, w_end), inputs in zip(weights, pasts):
+                    u = inputs[k][i]
                     mean += w_mean * u
-                    change += w_slope * u         # slope * h
+                    change += w_slope * u
                     end += w_end * u
-                if ramped:
-                    values[i] = mean - 0.5 * change
-                    values[n + i] = change / h
-                    for j in range(2 * n + i, len(values), n):
-                        values[j] = 0.0           # higher derivatives: the ramp is all
-                else:
-                    values[i] = mean
-                component_ends.append(end)
+            if ramped:
+                values[i] = mean - 0.5 * change
+                values[n + i] = change / h
+                for j in higher:
+                    values[j] = 0.0           # higher derivatives: the ramp is all
+            else:
+                values[i] = mean
             if predict:
-                ends.append(component_ends)
+                if i == 0:
+                    ends.append([])
+                ends[-1].append(end)
         self.system.propagate_with(self._sends_rest if rest_only else self._sends)
         return ends
 
@@ -217,32 +282,57 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         coupling's torques are in the input buffers) and the derivatives there of the
         polynomial through the history and them: what the next step holds."""
         history = self.history
-        times = [p[0] for p in history] + [t_end]
-        scale = t_end - times[-2]
-        first, second = self._derivatives(times, scale)
-        for k in self._ahead:
-            values, n = self._held[k].values, self._held[k].n
-            now = self.coupled_inputs[k].values
-            column = [p[1][k] for p in history] + [now]
-            higher = len(values) > 2 * n
-            for i in range(n):
+        scale = t_end - history[-1][0]
+        first, second = self._derivatives(history, t_end, scale)
+        squared = scale * scale
+        if len(first) == 3:
+            # degree 2 unrolled: the same sums, in the same order, as the loop below
+            (f0, f1, f2), (s0, s1, s2) = first, second
+            past0, past1 = history[0][1], history[1][1]
+            for k, i, values, now, n, higher in self._ahead_inputs:
+                u0, u1, u2 = past0[k][i], past1[k][i], now[i]
+                values[i] = u2
+                values[n + i] = (0.0 + f0 * u0 + f1 * u1 + f2 * u2) / scale
+                if higher:
+                    values[2 * n + i] = (0.0 + s0 * u0 + s1 * u1 + s2 * u2) / squared
+        else:
+            past = [p[1] for p in history]
+            for k, i, values, now, n, higher in self._ahead_inputs:
                 rate = curvature = 0.0
-                for w_first, w_second, inputs in zip(first, second, column):
-                    u = inputs[i]
+                for w_first, w_second, inputs in zip(first, second, past):
+                    u = inputs[k][i]
                     rate += w_first * u
                     curvature += w_second * u
-                values[i] = now[i]
+                u = now[i]
+                rate += first[-1] * u
+                curvature += second[-1] * u
+                values[i] = u
                 values[n + i] = rate / scale
                 if higher:
-                    values[2 * n + i] = curvature / (scale * scale)
+                    values[2 * n + i] = curvature / squared
         self.system.propagate_with(self._sends_ahead)
         self._ahead_after = history[-1]
         # what was not sent ahead is still only in the buffers
         self._inputs_unsent = bool(self._rest)
 
-    def _derivatives(self, times, scale):
-        return self._cached(("d",) + tuple([round((x - times[-1]) / scale, 9) for x in times]),
-                            lambda: derivative_weights(times, scale))
+    def _derivatives(self, history, t_end, scale):
+        """The derivative weights at ``t_end`` through the history's times and it, cached by
+        the pattern of the times scaled to ``scale`` (see ``_cached``).  A pattern whose
+        scaled nodes lie within 1e-10 of the last one's key rounds to that key (the key's
+        9 digits leave 5e-10 either side), so a fixed step finds its weights without
+        rounding the nodes again."""
+        last = self._last_derivatives
+        if last is not None and len(last[0]) == len(history):
+            for point, node in zip(history, last[0]):
+                if not abs((point[0] - t_end) / scale - node) < 1e-10:
+                    break
+            else:
+                return last[1]
+        times = [p[0] for p in history] + [t_end]
+        key = tuple([round((x - t_end) / scale, 9) for x in times])
+        weights = self._cached(("d",) + key, lambda: derivative_weights(times, scale))
+        self._last_derivatives = (key[:-1], weights)
+        return weights
 
     def restore_states(self, states, t):
         super().restore_states(states, t)
@@ -259,6 +349,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         if weights is None:
             if len(self._weights_cache) > 32:      # variable steps: do not grow without bound
                 self._weights_cache.clear()
+                self._last_derivatives = None     # its weights are recomputed as the cache would
             weights = self._weights_cache[key] = compute()
         return weights
 
@@ -268,7 +359,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         return len(self.history) < self.degree and self._can_roll_back
 
     def _step_impl(self, t, h):
-        start = [list(inputs.values) for inputs in self.coupled_inputs]
+        start = [values[:] for values in self._live]
         history = self.history
         if self._starting():
             self._start_step(t, h, [*history, (t, start)])
@@ -285,7 +376,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             system.propagate_with(self._held_plan)
             self._inputs_unsent = True
         history.append((t, start))
-        if self.sends_ahead and not self._starting():
+        if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not _starting()
             self._send_ahead(t + h)
 
     def _start_step(self, t, h, points):
@@ -303,7 +394,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 self._hold(t, h, through)
                 self._step_stateful(t, h)
                 self.system.propagate()
-                through = points + [(t + h, [list(inputs.values) for inputs in self.coupled_inputs])]
+                through = points + [(t + h, [values[:] for values in self._live])]
         finally:
             self._free_states(states)
         self._step_feedthrough(t, h)
@@ -348,8 +439,9 @@ class MidpointPredictionMaster(JacobiMaster):
                 chains[(c.source, c.output)] = system.derivative_chain(c.source, c.output)
         system.expose([f"{source}.{v}" for (source, _), chain in chains.items() for v in chain[1:]])
         system.propagate()       # fill the buffers of the newly exposed outputs
-        # Per source and feedthrough target: the buffer indices of each input's Taylor terms.
-        self._predictions = []
+        # Per predicted input: its buffer, its position there, the source's output buffer and
+        # the indices there of its Taylor terms (the output, then its derivatives).
+        taylor = []
         predicted = {}
         for source in system.stateful:
             values = system.buffers[source][1]
@@ -357,23 +449,38 @@ class MidpointPredictionMaster(JacobiMaster):
             for share in system.writes[source]:
                 if share.component.name not in system.feedthrough:
                     continue
-                terms = [[system.index[(source, v)] for v in chains[(source, names[i])]] for i in share.positions]
-                self._predictions.append((values, share.values, terms))
+                taylor += [(share.values, k, values, tuple(system.index[(source, v)] for v in chains[(source, names[i])]))
+                           for k, i in enumerate(share.positions)]
                 predicted.setdefault(share.component, []).append(source)
-        # Each feedthrough target's predicted inputs sent in one call (its buffer's runs)
-        self._sends = [span for target, sources in predicted.items()
-                       for span in system.input_spans(target.name, sources)]
+        self._taylor = tuple(taylor)
+        # Each feedthrough target's predicted inputs sent in one call (its buffer's runs),
+        # then the propagation from the feedthrough components, both compiled once
+        self._sends = system.send_plan([span for target, sources in predicted.items()
+                                        for span in system.input_spans(target.name, sources)])
+        self._from_feedthrough = system.partial_plan(self._feedthrough)
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
         and propagate the coupling torques they give to the stateful components."""
         factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
-        for values, target_values, terms in self._predictions:
-            for k, indices in enumerate(terms):
-                target_values[k] = sum(f * values[i] for f, i in zip(factors, indices))
-        for span in self._sends:
-            span.component.write(span.vrs, span.values)
-        self.system.propagate(self._feedthrough)
+        f1, f2 = factors[1], factors[2]
+        for target_values, k, values, indices in self._taylor:
+            # the Taylor sum as sum() makes it (from 0.0, lowest term first); a shaft's
+            # angle and speed unrolled
+            if len(indices) == 3:
+                i0, i1, i2 = indices
+                target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
+            elif len(indices) == 2:
+                i0, i1 = indices
+                target_values[k] = 0.0 + values[i0] + f1 * values[i1]
+            else:
+                total = 0.0
+                for f, i in zip(factors, indices):
+                    total += f * values[i]
+                target_values[k] = total
+        propagate_with = self.system.propagate_with
+        propagate_with(self._sends)
+        propagate_with(self._from_feedthrough)
 
     def _step_impl(self, t, h):
         self._predict(0.5 * h)

@@ -126,6 +126,9 @@ class IterativeMaster(Master):
         # Evaluations write the held torques themselves: propagation only fills the
         # buffers; the converged end-of-step torques are sent once per step.
         self._held_plan = system.held_plan({inputs.component.name for inputs in self.coupled_inputs})
+        # the held torques' buffers, and their writes compiled once
+        self._live = tuple(inputs.values for inputs in self.coupled_inputs)
+        self._sends = system.send_plan(self.coupled_inputs)
 
     def counters(self) -> dict:
         return {**super().counters(), "jacobians": self.n_jacobians}
@@ -133,7 +136,7 @@ class IterativeMaster(Master):
     # u is a flat list over the coupled inputs, in the order of self.coupled_inputs (plain
     # lists: see _solve_linear)
     def current_inputs(self) -> list[float]:
-        return [v for inputs in self.coupled_inputs for v in inputs.values]
+        return [v for values in self._live for v in values]
 
     def evaluate(self, u, t, h, states, start, rolled):
         """Step the stateful components from their saved ``states`` holding ``u`` and
@@ -141,12 +144,11 @@ class IterativeMaster(Master):
         if rolled:
             self.restore_states(states, t)
         k = 0
-        for inputs in self.coupled_inputs:
-            values = inputs.values
+        for values in self._live:
             for i in range(len(values)):
                 values[i] = u[k]
                 k += 1
-            inputs.component.write(inputs.vrs, values)
+        self.system.propagate_with(self._sends)
         self._step_stateful(t, h)
         self.system.propagate_with(self._held_plan)     # the inputs' buffers now hold tau(t + h)
         end = self.current_inputs()
@@ -155,8 +157,7 @@ class IterativeMaster(Master):
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
         at the end of the step (the evaluations left the held ones in place)."""
-        for inputs in self.coupled_inputs:
-            inputs.component.write(inputs.vrs, inputs.values)
+        self.system.propagate_with(self._sends)
 
     def _guess(self, t, h, start):
         if len(self.history) < 2:
