@@ -208,11 +208,19 @@ class Guard:
 
     def __init__(self, system, master: str, step: float):
         self.master, self.step = master, step
-        scene = system.scene
-        limited = {b.variable: b for b in bounds(system.plan)}
-        missing = [v for v in limited if (v.partition(".")[0], v.partition(".")[2]) not in system.index]
+        self._system = system
+        self._limited = {b.variable: b for b in bounds(system.plan)}
+        missing = [v for v in self._limited if (v.partition(".")[0], v.partition(".")[2]) not in system.index]
         if missing:
             system.expose(missing)
+        self.watch()
+
+    def watch(self):
+        """Take the buffers to check from the system as it is wired now.  A master that
+        exposes outputs of its own re-plans the system's buffers, so the run calls this
+        again once the master is made (else the guard would read buffers no longer filled)."""
+        system, limited = self._system, self._limited
+        scene = system.scene
         checks, self._bounds = [], []
         for (component, variable), i in system.index.items():
             name = f"{component}.{variable}"

@@ -178,6 +178,7 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
         system.initialize()
         guard = Guard(system, master, step)     # before the master: it may expose outputs
         driver = master_family.make(master, system, step, **options)
+        guard.watch()                           # the master may have re-planned the buffers
         recorder = Recorder(system, names, n_steps + 1, stream=_stream(stream, plan, names, n_steps + 1))
         recorder.record(e.start)
         interrupt.check(e.start)

@@ -98,6 +98,23 @@ def test_the_guard_stops_within_one_step_and_keeps_the_traces(tmp_path):
     assert 0.01 < d["time"] < 0.3 and len(result.times) > 20
 
 
+@pytest.mark.parametrize("record", [None, ["coupling.tau2"]])
+def test_the_guard_watches_what_a_master_that_exposes_outputs_reads(record):
+    # jacobi-midpoint exposes the derivatives of the outputs it extrapolates; when the scene
+    # does not record them, that re-plans the system's buffers after the guard was made,
+    # and the guard must follow (else the run ends with an FMU refusing a runaway speed).
+    import dataclasses
+
+    spec = load("kavz685", "coupling.stiffness=1e5", "coupling.damping=0", "experiment.stop=0.1")
+    if record:
+        spec = dataclasses.replace(spec, record=record)
+    result = run.simulate(spec, "jacobi-midpoint", 4e-3)
+    d = result.diagnosis
+    assert not result.ok and result.failure_stage == "stepping" and d["kind"] == "bound"
+    assert result.failure.startswith("diverged: engine.w = ") and "master jacobi-midpoint" in result.failure
+    assert d["time"] == pytest.approx(0.012) == pytest.approx(result.times[-1])
+
+
 def test_an_fmu_refusal_gives_the_same_diagnosis():
     # Without physical bounds the guard checks finiteness only: the torque grows until the
     # shaft refuses it (its input range), and that refusal is diagnosed like a divergence.
