@@ -345,7 +345,7 @@ def _checks(frame: _Frame, t_res: np.ndarray, y_res: np.ndarray, rtol: dict) -> 
         for k, i, ref in frame.orders:
             got = complex(components[i])
             d = abs(got - ref)
-            allowed = rtol["order"][0] * abs(ref)
+            allowed = rtol["order"][0] * _allowed_scale(abs(ref), magnitude=frame.magnitude)
             phase = math.degrees(np.angle(got / ref)) if got != 0 else math.nan
             checks.append(Check(f"order {k}", abs(ref), abs(got), d, allowed, d <= allowed,
                                 f"amplitude {_percent(abs(got) / abs(ref) - 1)}, phase {phase:+.2g} deg: off by "
