@@ -75,36 +75,36 @@ GROUPS = {
     "verdict": (["harness/judges/verdict.py"],
                 [f"harness.judges.verdict.x_{f}__mutmut_*" for f in
                  ("_checks", "_frame", "power", "_smallest_failing", "_allowed_scale", "_tube", "_rotation")],
-                ["tests/judges/test_verdict.py", "tests/judges/test_verdict_closed_forms.py"]),
+                ["tests/judges/test_verdict_closed_forms.py", "tests/judges/test_verdict.py"]),
     # The reference made from the FMUs: its own error estimate (the check beside it), read
     # at a run's times, and said in words.
     "fmu-reference": (["harness/judges/fmu_reference.py"],
                       [f"harness.judges.fmu_reference.x_{f}__mutmut_*" for f in
                        ("_model_exchange", "_extrapolated", "observed_orders", "_at", "own_error", "figure",
                         "quality")],
-                      ["tests/judges/test_fmu_reference.py", "tests/judges/test_fmu_reference_own_error.py"]),
+                      ["tests/judges/test_fmu_reference_own_error.py", "tests/judges/test_fmu_reference.py"]),
     # The CVODE host's stepping loop: its output grid and event handling.
     "cvode-host": (["harness/studies/cvode_host.py"],
                    [f"harness.studies.cvode_host.x_{f}__mutmut_*" for f in ("_integrate", "_settle")],
-                   ["tests/fmus/test_me_cvode_roots.py", "tests/studies/test_cvode_host_grid.py"]),
+                   ["tests/studies/test_cvode_host_grid.py", "tests/fmus/test_me_cvode_roots.py"]),
     # The plan's start state and the run's record of where each value came from.
     "plan": (["harness/description/plan.py"],
              [f"harness.description.plan.x_{f}__mutmut_*" for f in
               ("_driveline", "parameter_record", "overridden", "_shown")],
-             ["tests/description/test_plan.py", "tests/description/test_plan_start_and_record.py",
+             ["tests/description/test_plan_start_and_record.py", "tests/description/test_plan.py",
               "tests/formats/test_run_identity.py"]),
     # The SSP export's configured FMUs (whole module).
     "ssp-configured": (["harness/formats/configured_fmu.py"], [],
-                       ["tests/formats/test_ssp_export.py", "tests/formats/test_ssp_export_twice.py"]),
+                       ["tests/formats/test_ssp_export_twice.py", "tests/formats/test_ssp_export.py"]),
     # The API's readers of numbers, counts and times.
     "api-inputs": (["harness/api/inputs.py"],
                    [f"harness.api.inputs.x_{f}__mutmut_*" for f in
                     ("number", "count", "seconds", "step", "window", "parse_window")],
-                   ["tests/cli/test_api.py", "tests/cli/test_api_time_inputs.py"]),
+                   ["tests/cli/test_api_time_inputs.py", "tests/cli/test_api.py"]),
     # The monolithic reference's choice of a stiff method.
     "stiff-switch": (["harness/judges/monolithic.py"],
                      [f"harness.judges.monolithic.x_{f}__mutmut_*" for f in ("stiff_method", "reference_method")],
-                     ["tests/judges/test_cvode.py", "tests/judges/test_stiff_switch.py"]),
+                     ["tests/judges/test_stiff_switch.py", "tests/judges/test_cvode.py"]),
 }
 
 
