@@ -19,7 +19,7 @@ import pytest
 
 from harness.description import scene as scenes
 from harness.formats import ssp
-from harness.formats.configured_fmu import configure
+from harness.formats.configured_fmu import configure, configured_guid
 
 STIFFNESS = 900.0
 
@@ -83,3 +83,23 @@ def test_fmpy_ssp_runs_the_archive_exported_again_as_the_fresh_one(archives):
         n for n in runs["again"].dtype.names if n.endswith("tau2"))
     assert np.array_equal(runs["again"][tau], runs["fresh"][tau])
     assert not np.allclose(runs["again"][tau], runs["first"][tau], rtol=1e-3)
+
+
+ORIGINAL = "{8c4e810f-3df3-4a00-8276-176fa3c9f000}"
+
+
+def test_a_configured_guid_is_a_uuid_of_the_original_and_the_values_whatever_their_order():
+    import uuid
+
+    guid = configured_guid(ORIGINAL, {"stiffness": 900.0, "damping": 2.0})
+    assert uuid.UUID(guid).version == 5
+    assert guid == configured_guid(ORIGINAL, {"damping": 2.0, "stiffness": 900.0})      # the same configuration
+    assert guid != configured_guid(ORIGINAL, {"stiffness": 900.5, "damping": 2.0})      # another value
+    assert guid != configured_guid(ORIGINAL, {"stiffness": 900.0})                     # fewer values
+    assert guid != configured_guid("{8c4e810f-3df3-4a00-8276-176fa3c9f001}", {"stiffness": 900.0, "damping": 2.0})
+    assert guid not in (ORIGINAL, ORIGINAL.strip("{}"))
+    # an FMI 3.0 instantiation token need not be a UUID: the configured one still is
+    token = configured_guid("lever-coupling-token", {"stiffness": 900.0})
+    assert uuid.UUID(token).version == 5
+    assert token != configured_guid("another token", {"stiffness": 900.0})             # derived from the token too
+    assert token == configured_guid("lever-coupling-token", {"stiffness": 900.0})

@@ -21,10 +21,11 @@ STIFF = ["coupling.stiffness=1e9", "coupling.damping=1e7"]
 STABILITY, BUDGET = 6.0, 100_000
 
 
-def _decay_by_differences(plan) -> float:
+def _decay_by_differences(plan, coupling=None) -> float:
+    """The fastest decay rate at the start; ``coupling``: another than the scene's own."""
     built = plan.driveline.physics.get()
     (phi1, w1), (phi2, w2) = plan.driveline.start.get()
-    driveline = Driveline(built.engine, lambda t: built.coupling, built.load)
+    driveline = Driveline(built.engine, lambda t: coupling or built.coupling, built.load)
     y0 = np.array([phi1, w1, phi2, w2, 0.0, 0.0, 0.0])
     jac = np.zeros((7, 7))
     for j in range(7):
@@ -41,8 +42,9 @@ def test_the_switch_comes_where_dop853_would_need_more_than_its_budget(name, sti
     plan = monolithic.planned(scenes.load(name).with_overrides(STIFF))
     decay = _decay_by_differences(plan)
     switch = BUDGET * STABILITY / decay                 # the span at which DOP853 would need BUDGET steps
-    for share, expected in ((0.95, "DOP853"), (1.05, stiff)):
-        times = np.linspace(0.0, share * switch, 11)
+    for share, expected, t0, n in ((0.95, "DOP853", 0.0, 11), (1.05, stiff, 0.0, 11), (0.95, "DOP853", 0.5, 2),
+                                   (1.05, stiff, 0.5, 2)):
+        times = np.linspace(t0, t0 + share * switch, n)     # the span counts, not where it starts
         method, note = monolithic.reference_method(plan, times)
         assert method == expected, (share, switch, note)
         if expected == "DOP853":
@@ -63,3 +65,25 @@ def test_a_scene_just_past_the_switch_is_solved_by_the_stiff_method(fmu_dir):
     assert solution.method.startswith("CVODE-BDF") and "stiff: a mode decays at" in solution.method
     assert np.array_equal(solution.times, times)
     assert np.all(np.isfinite(solution.traces["coupling.tau2"]))
+
+
+def test_a_driven_misalignment_is_judged_at_its_value_at_the_start(fmu_dir):
+    """The coupling's own misalignment parameter (35 deg) is not what it runs at: the source
+    drives it from 15 deg, and the decay is the coupling's there."""
+    plan = monolithic.planned(scenes.load("kavz685_misalignment_ramp").with_overrides(
+        STIFF + ["coupling.misalignment=35 deg"]))
+    source, family = plan.driveline.misalignment.get()
+    driven = _decay_by_differences(plan, family.at(source.value(0.0)))
+    assert abs(driven / _decay_by_differences(plan) - 1) > 5e-3       # the two differ
+    method, note = monolithic.reference_method(plan, np.array([0.0, 1.002 * BUDGET * STABILITY / driven]))
+    assert method == "CVODE-BDF"
+    assert float(note.split("decays at ")[1].split(" 1/s")[0]) == pytest.approx(driven, rel=2e-4)
+
+
+def test_a_driveline_without_a_decaying_mode_keeps_dop853_whatever_its_span(fmu_dir):
+    """No damping anywhere (coupling, engine line, load): no mode decays, so DOP853's
+    stability asks nothing of its step, over a million seconds as over one."""
+    plan = monolithic.planned(scenes.load("kavz685").with_overrides(
+        ["coupling.damping=0", "engine.torque_slope=0", "load.load_kind=constant"]))
+    assert _decay_by_differences(plan) < 1e-3
+    assert monolithic.reference_method(plan, np.array([0.0, 1e6])) == ("DOP853", "")
