@@ -72,6 +72,13 @@ RUN_BUILT_FMUS = (
 #: ``--durations=0`` on the shared two-core machine (docs/testing.md).  The rest keeps tests of
 #: every folder (tests/project/test_suite_lists.py).
 SLOW = (
+    "judges/test_verdict_closed_forms.py::test_the_stated_power_is_the_smallest_change_that_fails_by_hand",
+    "judges/test_verdict_closed_forms.py::test_the_stated_time_shift_is_where_the_highest_order_turns_past_its_tolerance",
+    "judges/test_stiff_switch.py",
+    "judges/test_fmu_reference_own_error.py",
+    "studies/test_cvode_host_grid.py",
+    "description/test_plan_start_and_record.py",
+    "formats/test_ssp_export_twice.py",
     "description/test_physics_checked_once.py::test_a_run_checks_each_components_parameters_once",
     "judges/test_verdict.py::test_a_changed_coupling_fails_on_the_five_columns_another_tool_gives",
     "formats/test_run_identity.py",
