@@ -1,4 +1,4 @@
-"""Mutation testing of the physics and the masters with mutmut (``make mutants``).
+"""Mutation testing of the physics, the masters and the judges with mutmut (``make mutants``).
 
 Outside CI's budget: it takes tens of minutes.  mutmut 3 imports the mutated code from
 ``mutants/`` by the module name of each file's path, so the project is staged first into
