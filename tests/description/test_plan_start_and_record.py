@@ -77,6 +77,22 @@ def test_the_record_of_the_plan_states_every_kind_of_override(fmu_dir):
     assert plans.overridden(unchanged) == {}
 
 
+def test_each_value_is_recorded_as_given_with_its_unit_and_its_source(fmu_dir):
+    """By hand from kavz685.toml and the FMUs' model descriptions: a number with the
+    variable's unit, a string or a count without one, a default as its description's start."""
+    scene = scenes.load("kavz685").with_overrides(["engine.w_start=40", "load.load_kind=constant"])
+    record = plans.parameter_record(scene, fmu_dir)
+    expected = {"engine.inertia": ("0.128 kg.m2", "scene file"), "coupling.transfer_mode": ("kinematic", "scene file"),
+                "load.seed": ("1", "scene file"), "coupling.support_deformation": ("0.03", "scene file"),
+                "engine.torque_lag": ("0 s", "default"), "load.band_high": ("450 rad/s", "default"),
+                "engine.characteristic": ("", "default"), "load.load_direction": ("active", "default"),
+                "load.tones": ("6", "default"), "engine.w_start": ("40 rad/s", "--set"),
+                "load.load_kind": ("constant", "--set")}
+    for key, (value, source) in expected.items():
+        assert record[key] == {"value": value, "source": source}, key
+    assert plans.overridden(record) == {"engine.w_start": "40 rad/s", "load.load_kind": "constant"}
+
+
 def test_summary_report_and_titles_state_every_kind_of_override(fmu_dir, tmp_path):
     done = api.run("kavz685", [f"{k}={v}" for k, v in EVERY_KIND.items()], reference=False, out=tmp_path,
                    plots=False, notify=lambda *_: None)
