@@ -81,11 +81,17 @@ GROUPS = {
     "fmu-reference": (["harness/judges/fmu_reference.py"],
                       [f"harness.judges.fmu_reference.x_{f}__mutmut_*" for f in
                        ("_model_exchange", "_extrapolated", "own_error", "quality")],
-                      ["tests/judges/test_fmu_reference_own_error.py", "tests/judges/test_fmu_reference.py"]),
+                      ["tests/judges/test_fmu_reference_own_error.py",
+                       "tests/judges/test_fmu_reference.py::test_errors_against_the_made_references_agree_with_the_"
+                       "monolithic_ones",
+                       "tests/judges/test_fmu_reference.py::test_a_run_off_the_reference_grid_is_read_by_spline_with_"
+                       "its_error_added"]),
     # The CVODE host's stepping loop: its output grid and event handling.
     "cvode-host": (["harness/studies/cvode_host.py"],
                    ["harness.studies.cvode_host.x__integrate__mutmut_*"],
-                   ["tests/studies/test_cvode_host_grid.py", "tests/fmus/test_me_cvode_roots.py"]),
+                   ["tests/studies/test_cvode_host_grid.py",
+                    "tests/fmus/test_me_cvode_roots.py::test_a_load_with_stiction_and_an_engine_on_its_table_run_through"
+                    "_cvode_root_finding"]),
     # The plan's start state and the run's record of where each value came from.
     "plan": (["harness/description/plan.py"],
              [f"harness.description.plan.x_{f}__mutmut_*" for f in
@@ -148,11 +154,14 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
 
 
 def _located(target: Path, test: str) -> list[str]:
-    """``test`` (tests/<folder>/test_x.py) in the staged tests: at its path, or by its file name
-    when the tests come from a checkout whose files sit elsewhere (``--tests-from`` an older one)."""
+    """``test`` (tests/<folder>/test_x.py, or one test of it: ``...py::test_name``) in the staged
+    tests: at its path, or by its file name when the tests come from a checkout whose files sit
+    elsewhere (``--tests-from`` an older one)."""
+    test, sep, node = test.partition("::")
     if (target / test).exists():
-        return [test]
-    return [str(path.relative_to(target)) for path in sorted((target / "tests").rglob(Path(test).name))]
+        return [test + sep + node]
+    return [str(path.relative_to(target)) + sep + node
+            for path in sorted((target / "tests").rglob(Path(test).name))]
 
 
 def score(target: Path, names: list[str]) -> str:
