@@ -103,3 +103,17 @@ def test_a_configured_guid_is_a_uuid_of_the_original_and_the_values_whatever_the
     assert uuid.UUID(token).version == 5
     assert token != configured_guid("another token", {"stiffness": 900.0})             # derived from the token too
     assert token == configured_guid("lever-coupling-token", {"stiffness": 900.0})
+
+
+def test_configuring_refuses_an_fmu_that_cannot_carry_values_and_a_value_that_does_not_fit_by_name(fmu_dir,
+                                                                                                   tmp_path):
+    plain = tmp_path / "Plain.fmu"            # our FMU without the shim's configuration: it cannot take the GUID
+    with zipfile.ZipFile(Path(fmu_dir) / "LeverCoupling.fmu") as src, zipfile.ZipFile(plain, "w") as out:
+        for info in src.infolist():
+            if info.filename != "resources/lever_shim.cfg":
+                out.writestr(info, src.read(info))
+    with pytest.raises(ValueError, match=r"^Plain\.fmu does not take configured start values"):
+        configure(plain, {"stiffness": 900.0}, tmp_path / "out" / "a.fmu")
+    with pytest.raises(ValueError, match="stiffness"):
+        configure(Path(fmu_dir) / "LeverCoupling.fmu", {"stiffness": "stiff"}, tmp_path / "out" / "b.fmu")
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
