@@ -73,6 +73,14 @@ def test_configuring_twice_keeps_the_earlier_values_the_later_do_not_name(fmu_di
     assert carried == {"stiffness": 640.0, "damping": 3.0}
     assert _started_at(twice, tmp_path / "u", "stiffness") == 640.0
     assert _started_at(twice, tmp_path / "v", "damping") == 3.0
+    # the shim's configuration is the original's but for the GUID line (where it finds Python stays)
+    with zipfile.ZipFile(Path(fmu_dir) / "LeverCoupling.fmu") as z:
+        original = z.read("resources/lever_shim.cfg").decode().splitlines()
+    with zipfile.ZipFile(twice) as z:
+        configured = z.read("resources/lever_shim.cfg").decode().splitlines()
+        guid = fmpy.read_model_description(str(twice)).guid
+    assert len(configured) == len(original) and sum(a != b for a, b in zip(original, configured)) == 1
+    assert [line for line in configured if line.startswith("guid=")] == [f"guid={guid}"]
 
 
 def test_fmpy_ssp_runs_the_archive_exported_again_as_the_fresh_one(archives):
