@@ -67,7 +67,7 @@ def test_the_fmu_exported_again_carries_the_new_value_everywhere(archives, tmp_p
 
 def test_configuring_twice_keeps_the_earlier_values_the_later_do_not_name(fmu_dir, tmp_path):
     once = configure(Path(fmu_dir) / "LeverCoupling.fmu", {"stiffness": 812.5, "damping": 3.0}, tmp_path / "1.fmu")
-    twice = configure(once, {"stiffness": 640.0}, tmp_path / "2.fmu")
+    twice = configure(once, {"stiffness": 640.0}, tmp_path / "a" / "folder" / "2.fmu")     # made where it is missing
     with zipfile.ZipFile(twice) as z:
         carried = json.loads(z.read("resources/lever_start_values.json"))
     assert carried == {"stiffness": 640.0, "damping": 3.0}

@@ -133,3 +133,12 @@ def test_the_stated_time_shift_is_where_the_highest_order_turns_past_its_toleran
     assert power.phase_deg == pytest.approx(math.degrees(W * power.shift_s), rel=1e-9)
     assert power.by["shift"] == ["order 3"]
     assert "phase" in power.describe() and f"{1e3 * power.shift_s:.3g} ms" in power.describe()
+
+
+def test_a_mean_tolerance_beyond_the_signals_own_size_is_stated_as_it_is():
+    """rtol.mean = 2: the mean may move by twice max(|mean|, amplitude), more than the
+    signal's largest value; the power says so rather than "none"."""
+    wide = verdicts.Tolerances([[verdicts.rule("", "mean", 2.0, "API"), verdicts.rule("", "tube", 100.0, "API")]])
+    power = _signal(_judge(_torque(T), rtol=wide, with_power=True)).power
+    amplitude = (np.ptp(_torque(T))) / 2
+    assert power.mean == pytest.approx(2.0 * max(np.mean(_torque(T)), amplitude), rel=1e-3)
