@@ -12,7 +12,8 @@ reference's samples (the result interpolated there), per signal:
 * ``order k``: the leading rotation orders, the components at k times the driven shaft's
   rotation frequency the run report computes (``metrics.spectrum``; orders whose amplitude
   is at least ``LEADING`` of the signal's ripple amplitude, below half the sampling rate):
-  the complex component within ``rtol.order`` of its magnitude, so an amplitude change of
+  the complex component within ``rtol.order`` of its magnitude (at least ``NOISE_FLOOR`` of the
+  signal's largest value), so an amplitude change of
   ``rtol.order`` or a phase change of about ``rtol.order`` rad fails;
 * ``tube``: every compared sample within ``rtol.tube`` of the reference's range in the
   window (``max - min`` there, not a start-up spike's), with the horizontal tolerance of one
