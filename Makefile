@@ -77,7 +77,7 @@ fuzz: $(STAMP)
 	$(BIN)/lever build
 	LEVER_FUZZ_SCALE=$${LEVER_FUZZ_SCALE:-20} $(BIN)/python -m pytest -q tests/physics/test_fuzz.py tests/cli/test_input_safety.py -k fuzz --hypothesis-show-statistics
 
-# Mutation testing (mutmut) of the physics and the masters with the tests that cover them:
+# Mutation testing (mutmut) of the physics, the masters and the judges with the tests that cover them:
 # tens of minutes, outside CI's budget and not part of `make test` (docs/testing.md).
 mutants: $(STAMP)
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,mutation]'

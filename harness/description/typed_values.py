@@ -68,15 +68,18 @@ def findings(label: str, var, value, given: str) -> list[str]:
 
 def typed(var, value, label: str):
     """``value`` as ``var``'s FMI call takes it: a float, an int, a bool or a str.  A
-    fraction given for an integer raises ``ValueError`` naming ``label`` (it is never
-    rounded)."""
+    fraction given for an integer, or a value that is no number, raises ``ValueError``
+    naming ``label`` (a fraction is never rounded)."""
     kind = CALL_TYPE[var.type]
-    if kind == "Real":
-        return float(value)
-    if kind == "Integer":
-        if isinstance(value, float) and value != int(value):
-            raise ValueError(f"{label} is an integer, got {value!r}")
-        return int(value)
+    if kind == "Integer" and isinstance(value, float) and value != int(value):
+        raise ValueError(f"{label} is an integer, got {value!r}")
+    try:
+        if kind == "Real":
+            return float(value)
+        if kind == "Integer":
+            return int(value)
+    except (TypeError, ValueError):     # float("stiff"): a message that names no parameter
+        raise ValueError(f"{label} = {value!r}: expected {'a number' if kind == 'Real' else 'an integer'}") from None
     if kind == "Boolean":
         return bool(value)
     return str(value)

@@ -50,8 +50,8 @@ def configured_guid(guid: str, values: dict[str, Any]) -> str:
     """The GUID of ``guid``'s FMU configured with ``values``."""
     try:
         namespace = uuid.UUID(guid.strip("{}"))
-    except ValueError:
-        namespace = uuid.NAMESPACE_OID
+    except ValueError:      # an FMI 3.0 token need not be a UUID: one of its own text
+        namespace = uuid.uuid5(uuid.NAMESPACE_OID, guid)
     return str(uuid.uuid5(namespace, json.dumps(values, sort_keys=True)))
 
 

@@ -13,7 +13,8 @@ from the result's samples and from the reference at the same times, and the two 
   reference's;
 * ``order k``: the leading rotation orders (k times the driven shaft's mean speed; orders
   whose amplitude is at least ``LEADING`` of the ripple amplitude), least-squares fitted on
-  the samples' own times: the complex component within ``rtol.order`` of its magnitude, so an
+  the samples' own times: the complex component within ``rtol.order`` of its magnitude (at least
+  ``NOISE_FLOOR`` of the signal's largest value, as for the mean and amplitude), so an
   amplitude change of ``rtol.order`` or a phase change of about ``rtol.order`` rad fails;
 * ``tube``: every sample within ``rtol.tube`` of the reference's range in the window of the
   reference over one step either side - the result's (an importer one step late passes) or the
@@ -299,7 +300,7 @@ def _checks(frame: _Frame, y: np.ndarray, rtol: dict, sampling: str) -> list[Che
         got_all = frame.fit.fit(y)
         for k, own, shown in frame.orders:
             got = got_all[k]
-            allowed = rtol["order"][0] * abs(own)
+            allowed = rtol["order"][0] * _allowed_scale(abs(own), magnitude=frame.magnitude)
             d = abs(got - shown)
             if abs(shown - own) > SHOWN * allowed:
                 checks.append(Check(f"order {k}", abs(own), abs(got), d, allowed, True,

@@ -8,13 +8,14 @@ t").  That is the check an FMU's indicators must pass: a mode entered never star
 zero indicator.
 
 ``run(fmu, fmi=2|3, ...)`` drives one FMU alone through fmpy's raw calls (FMI 2.0 or 3.0),
-its inputs held at their start values, and returns the outputs on an output grid and what
-the run took; a failure of CVODE or of a call raises ``HostFailure`` with CVODE's message
+its inputs held at their start values, and returns the outputs every ``step`` from 0 and at
+``stop`` itself, and what the run took; a failure of CVODE or of a call raises ``HostFailure`` with CVODE's message
 and the time.
 """
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -163,14 +164,16 @@ def _integrate(raw, host, nx, nz, out_vrs, outputs, stop, step, rtol, atol, max_
                    **(dict(eventsfn=roots, num_events=nz) if nz else {}))
     raw.getContinuousStates(x, nx)
     solver.init_step(0.0, np.array(x[:]))
-    n_out = int(round(stop / step))
+    # the last row at ``stop`` itself: k * step overshoots it (0.7 / 0.001 is 699.99..., 700 * 0.001
+    # is 0.70000000000000007), and a stop that is no whole number of steps ends on a shorter step
+    n_out = max(1, math.ceil(stop / step - 1e-9))
     times = [0.0]
     record = [host.get(out_vrs)]
     run = HostRun(np.empty(0), {})
     t = 0.0
     k = 1
     while k <= n_out:
-        target = k * step
+        target = stop if k == n_out else k * step
         result = solver.step(target, method="normal")
         if not result.success:
             raise HostFailure(f"CVODE stopped after t = {t:.9g} s: {result.message} (status {result.status}; "

@@ -1,4 +1,4 @@
-"""Mutation testing of the physics and the masters with mutmut (``make mutants``).
+"""Mutation testing of the physics, the masters and the judges with mutmut (``make mutants``).
 
 Outside CI's budget: it takes tens of minutes.  mutmut 3 imports the mutated code from
 ``mutants/`` by the module name of each file's path, so the project is staged first into
@@ -70,6 +70,51 @@ GROUPS = {
     "metrics": (["harness/judges/metrics.py", "harness/studies/bench/timing.py"],
                 ["harness.judges.metrics.x_*", "harness.studies.bench.timing.x__judge__mutmut_*"],
                 ["tests/judges/test_metrics_by_hand.py", "tests/studies/test_bench.py"]),
+    # The verdict's checks, their allowances and its stated power (the orders by magnitude
+    # and phase among them).
+    "verdict": (["harness/judges/verdict.py"],
+                [f"harness.judges.verdict.x_{f}__mutmut_*" for f in
+                 ("_checks", "_frame", "power", "_allowed_scale")],
+                ["tests/judges/test_verdict_closed_forms.py", "tests/judges/test_verdict.py"]),
+    # The reference made from the FMUs: its own error estimate (the check beside it), read
+    # at a run's times, and said in words.
+    "fmu-reference": (["harness/judges/fmu_reference.py"],
+                      [f"harness.judges.fmu_reference.x_{f}__mutmut_*" for f in
+                       ("_model_exchange", "_extrapolated", "own_error", "quality")],
+                      ["tests/judges/test_fmu_reference_own_error.py",
+                       "tests/judges/test_fmu_reference.py::test_errors_against_the_made_references_agree_with_the_"
+                       "monolithic_ones",
+                       "tests/judges/test_fmu_reference.py::test_a_run_off_the_reference_grid_is_read_by_spline_with_"
+                       "its_error_added"]),
+    # The CVODE host's stepping loop: its output grid and event handling.
+    "cvode-host": (["harness/studies/cvode_host.py"],
+                   ["harness.studies.cvode_host.x__integrate__mutmut_*"],
+                   ["tests/studies/test_cvode_host_grid.py",
+                    "tests/fmus/test_me_cvode_roots.py::test_a_load_with_stiction_and_an_engine_on_its_table_run_through"
+                    "_cvode_root_finding"]),
+    # The plan's start state and the run's record of where each value came from.
+    "plan": (["harness/description/plan.py"],
+             [f"harness.description.plan.x_{f}__mutmut_*" for f in
+              ("_driveline", "parameter_record", "overridden")],
+             ["tests/description/test_plan_start_and_record.py", "tests/description/test_plan.py",
+              "tests/formats/test_run_identity.py"]),
+    # The SSP export's configured FMUs: the values and the GUID a copy carries.
+    "ssp-configured": (["harness/formats/configured_fmu.py"],
+                       [f"harness.formats.configured_fmu.x_{f}__mutmut_*" for f in
+                        ("configure", "configured_guid", "_set_starts")],
+                       ["tests/formats/test_ssp_export_twice.py", "tests/formats/test_ssp_export.py"]),
+    # The API's readers of numbers, counts and times.
+    "api-inputs": (["harness/api/inputs.py"],
+                   [f"harness.api.inputs.x_{f}__mutmut_*" for f in
+                    ("number", "count", "seconds", "step")],
+                   # of test_api those that hand it times and numbers (its warnings' test counts the
+                   # frames inside the harness, and mutmut's trampoline adds one)
+                   ["tests/cli/test_api_time_inputs.py", "tests/cli/test_api.py::test_times_take_units_as_overrides_do",
+                    "tests/cli/test_api.py::test_numpy_scalars_are_numbers"]),
+    # The monolithic reference's choice of a stiff method.
+    "stiff-switch": (["harness/judges/monolithic.py"],
+                     [f"harness.judges.monolithic.x_{f}__mutmut_*" for f in ("stiff_method", "reference_method")],
+                     ["tests/judges/test_stiff_switch.py", "tests/judges/test_cvode.py"]),
 }
 
 
@@ -112,11 +157,14 @@ def stage(target: Path, tests_from: Path, mutate: list[str], tests: list[str]) -
 
 
 def _located(target: Path, test: str) -> list[str]:
-    """``test`` (tests/<folder>/test_x.py) in the staged tests: at its path, or by its file name
-    when the tests come from a checkout whose files sit elsewhere (``--tests-from`` an older one)."""
+    """``test`` (tests/<folder>/test_x.py, or one test of it: ``...py::test_name``) in the staged
+    tests: at its path, or by its file name when the tests come from a checkout whose files sit
+    elsewhere (``--tests-from`` an older one)."""
+    test, sep, node = test.partition("::")
     if (target / test).exists():
-        return [test]
-    return [str(path.relative_to(target)) for path in sorted((target / "tests").rglob(Path(test).name))]
+        return [test + sep + node]
+    return [str(path.relative_to(target)) + sep + node
+            for path in sorted((target / "tests").rglob(Path(test).name))]
 
 
 def score(target: Path, names: list[str]) -> str:

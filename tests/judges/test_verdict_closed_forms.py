@@ -1,0 +1,144 @@
+"""The verdict (harness/judges/verdict.py) held to closed forms on synthetic traces.
+
+The reference is a sum of rotation orders of a shaft turning at a constant speed, the
+result the same sum changed in one known way, sampled at the reference's own times (so
+what is judged is the change, whatever the verdict's sampling).  What each check must
+find follows by hand:
+
+* an order whose phase turns by d while its magnitude stays is off by |e^(i d) - 1| =
+  2 sin(d / 2) of its component: it fails beyond the order tolerance, whatever its
+  magnitude says, and the check states the magnitude unchanged and the phase turned;
+* an order scaled by (1 + e) is off by |e| of its component;
+* the mean allowed is ``rtol.mean`` of max(|mean|, ripple amplitude), the ripple amplitude
+  ``rtol.amplitude`` of the reference's, so the smallest failing mean shift and ripple
+  scaling (the verdict's stated power) are those products;
+* a time shift s turns order k by k w s: with the orders alone binding, the smallest
+  failing shift is 2 asin(rtol / 2) / (k w) for the highest leading order k, its phase at
+  the rotation w s.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from harness.judges import verdict as verdicts
+
+#: the driven shaft's speed [rad/s]: 5 revolutions a second, 10 in the 2 s window
+W = 2 * math.pi * 5.0
+T = np.linspace(0.0, 2.0, 4001)
+MEAN = 100.0
+#: order -> (magnitude, phase [rad]) of the reference's torque; all leading (>= 0.1 of the ripple)
+ORDERS = {1: (6.0, 0.3), 2: (2.5, -1.1), 3: (1.5, 2.0)}
+
+
+def _torque(t, orders=ORDERS, mean=MEAN):
+    return mean + sum(a * np.cos(k * W * t + p) for k, (a, p) in orders.items())
+
+
+def _judge(result, rtol=None, speed=None, with_power=False, **kwargs):
+    reference = {"coupling.tau2": _torque(T), "load.w": np.full_like(T, W)}
+    traces = {"coupling.tau2": result, "load.w": np.full_like(T, W) if speed is None else speed}
+    return verdicts.judge(T, traces, T, reference, rotation_signal="load.w", rtol=rtol,
+                          kinds={"coupling.tau2": "torque", "load.w": "speed"}, with_power=with_power, **kwargs)
+
+
+def _signal(verdict, name="coupling.tau2"):
+    return next(s for s in verdict.signals if s.name == name)
+
+
+def _check(signal, quantity):
+    return next(c for c in signal.checks if c.quantity == quantity)
+
+
+def test_the_orders_judged_are_the_leading_ones_at_their_magnitudes():
+    verdict = _judge(_torque(T))
+    assert verdict.passed and verdict.rotation == pytest.approx(W, rel=1e-12)
+    tau = _signal(verdict)
+    judged = {c.quantity: c for c in tau.checks if c.quantity.startswith("order")}
+    assert set(judged) == {"order 1", "order 2", "order 3"}
+    for k, (a, _) in ORDERS.items():
+        assert judged[f"order {k}"].reference == pytest.approx(a, rel=0.01)
+        assert judged[f"order {k}"].difference == pytest.approx(0.0, abs=1e-9)
+    # a constant speed's orders are the FFT's round-off: judged against the noise floor
+    # (NOISE_FLOOR of its magnitude), so a result off by round-off passes
+    noisy = _judge(_torque(T), speed=W * (1 + 1e-12 * np.sin(W * T + 0.4)))
+    assert noisy.passed, noisy.failures()
+    for check in _signal(noisy, "load.w").checks:
+        if check.quantity.startswith("order"):
+            assert check.allowed == pytest.approx(verdicts.DEFAULT_RTOL["order"] * verdicts.NOISE_FLOOR * W)
+
+
+@pytest.mark.parametrize("degrees", [2.0, -2.0, 4.0, -4.0, 10.0])
+def test_a_turned_order_fails_by_its_phase_alone(degrees):
+    turned = dict(ORDERS)
+    a, p = ORDERS[2]
+    turned[2] = (a, p + math.radians(degrees))
+    tau = _signal(_judge(_torque(T, turned)))
+    order = _check(tau, "order 2")
+    off = 2 * math.sin(math.radians(abs(degrees)) / 2)           # |e^(i d) - 1|
+    assert order.result == pytest.approx(order.reference, rel=1e-3)     # the magnitude is unchanged
+    assert order.difference / order.reference == pytest.approx(off, rel=0.01)
+    assert order.passed == (off <= verdicts.DEFAULT_RTOL["order"])
+    assert f"phase {degrees:+.2g} deg" in order.detail
+    for k in (1, 3):
+        assert _check(tau, f"order {k}").passed
+    assert tau.passed == order.passed
+
+
+@pytest.mark.parametrize("scale", [0.97, 1.03, 0.94, 1.06])
+def test_a_scaled_order_fails_by_its_magnitude(scale):
+    scaled = dict(ORDERS)
+    a, p = ORDERS[3]
+    scaled[3] = (a * scale, p)
+    order = _check(_signal(_judge(_torque(T, scaled))), "order 3")
+    assert order.difference / order.reference == pytest.approx(abs(scale - 1), rel=0.01)
+    assert order.result / order.reference == pytest.approx(scale, rel=1e-3)
+    assert order.passed == (abs(scale - 1) <= verdicts.DEFAULT_RTOL["order"])
+
+
+def test_the_mean_and_the_amplitude_are_judged_against_their_closed_form_allowances():
+    amplitude = (np.ptp(_torque(T))) / 2
+    allowed_mean = verdicts.DEFAULT_RTOL["mean"] * max(np.mean(_torque(T)), amplitude)   # the samples' mean
+    for shift, passes in ((0.9 * allowed_mean, True), (1.1 * allowed_mean, False), (-1.1 * allowed_mean, False)):
+        mean = _check(_signal(_judge(_torque(T) + shift)), "mean")
+        assert mean.allowed == pytest.approx(allowed_mean, rel=1e-9)
+        assert mean.difference == pytest.approx(shift, rel=1e-6) and mean.passed is passes
+    for e, passes in ((0.018, True), (0.022, False), (-0.022, False)):
+        check = _check(_signal(_judge(MEAN + (1 + e) * (_torque(T) - MEAN))), "amplitude")
+        assert check.reference == pytest.approx(amplitude, rel=1e-12)
+        assert check.difference / amplitude == pytest.approx(e, rel=1e-6) and check.passed is passes
+
+
+def test_the_stated_power_is_the_smallest_change_that_fails_by_hand():
+    amplitude = (np.ptp(_torque(T))) / 2
+    power = _signal(_judge(_torque(T), with_power=True)).power
+    assert power.mean == pytest.approx(verdicts.DEFAULT_RTOL["mean"] * max(np.mean(_torque(T)), amplitude), rel=1e-3)
+    assert power.by["mean"] == ["mean"]
+    assert power.amplitude == pytest.approx(verdicts.DEFAULT_RTOL["amplitude"], rel=1e-3)
+    assert power.by["amplitude"] == ["amplitude"]
+    assert power.band == pytest.approx(verdicts.DEFAULT_RTOL["tube"] * 2 * amplitude, rel=1e-9)
+
+
+def test_the_stated_time_shift_is_where_the_highest_order_turns_past_its_tolerance():
+    """With the mean, the amplitude and the tube left loose, only the orders judge a shift:
+    order 3 turns fastest, by 3 W s, and fails at 2 sin(3 W s / 2) = rtol."""
+    rtol = 0.05
+    loose = verdicts.Tolerances([[verdicts.rule("", "mean", 1.0, "API"), verdicts.rule("", "amplitude", 1.0, "API"),
+                                  verdicts.rule("", "tube", 10.0, "API"), verdicts.rule("", "order", rtol, "API")]])
+    power = _signal(_judge(_torque(T), rtol=loose, with_power=True)).power
+    shift = 2 * math.asin(rtol / 2) / (3 * W)
+    assert power.shift_s == pytest.approx(shift, rel=0.02)
+    assert power.phase_deg == pytest.approx(math.degrees(W * power.shift_s), rel=1e-9)
+    assert power.by["shift"] == ["order 3"]
+    assert "phase" in power.describe() and f"{1e3 * power.shift_s:.3g} ms" in power.describe()
+
+
+def test_a_mean_tolerance_beyond_the_signals_own_size_is_stated_as_it_is():
+    """rtol.mean = 2: the mean may move by twice max(|mean|, amplitude), more than the
+    signal's largest value; the power says so rather than "none"."""
+    wide = verdicts.Tolerances([[verdicts.rule("", "mean", 2.0, "API"), verdicts.rule("", "tube", 100.0, "API")]])
+    power = _signal(_judge(_torque(T), rtol=wide, with_power=True)).power
+    amplitude = (np.ptp(_torque(T))) / 2
+    assert power.mean == pytest.approx(2.0 * max(np.mean(_torque(T)), amplitude), rel=1e-3)
