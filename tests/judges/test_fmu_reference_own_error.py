@@ -14,12 +14,12 @@ import pytest
 
 from harness.description import plan as plans
 from harness.description import scene as scenes
-from harness.judges import fmu_reference, solution
+from harness.judges import fmu_reference
 
 
 @pytest.fixture(autouse=True)
 def _cache_in_tmp(tmp_path, monkeypatch):
-    monkeypatch.setattr(solution, "CACHE", tmp_path / "cache")
+    monkeypatch.setenv("LEVER_CACHE_DIR", str(tmp_path / "cache"))
 
 
 @pytest.fixture(scope="module")
