@@ -170,4 +170,5 @@ def test_a_mean_tolerance_beyond_the_signals_own_size_is_stated_as_it_is():
     power = _signal(_judge(_torque(T), rtol=wide, with_power=True)).power
     amplitude = (np.ptp(_torque(T))) / 2
     assert _stated(power.mean, 2.0 * max(MEAN, amplitude), slack=1e-12), power.mean
+    assert not _check(_signal(_judge(_torque(T) + power.mean, rtol=wide, with_power=False)), "mean").passed
     assert f"mean +-{power.mean:.3g}" in power.describe()
