@@ -52,6 +52,9 @@ class Power:
 #: change and pass a larger one (a time shift near an event, a period later); the power stated
 #: is the smallest change from which on these all fail
 CHECKED_ABOVE = (1.1, 1.5, 2.0, 4.0)
+#: the bisection stops when the passing and the failing change are this share of the failing
+#: one apart: the change stated fails and is at most this share above the smallest that does
+RESOLUTION = 5e-3
 
 
 def _smallest_failing(fails, start: float, limit: float, sign: float) -> float | None:
@@ -64,7 +67,7 @@ def _smallest_failing(fails, start: float, limit: float, sign: float) -> float |
             if high > limit:
                 return None
         for _ in range(40):
-            if high - low <= 5e-3 * high:
+            if high - low <= RESOLUTION * high:
                 break
             middle = 0.5 * (low + high)
             if fails(sign * middle):
