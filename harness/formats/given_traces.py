@@ -51,13 +51,13 @@ def sorted_reference(given: Given) -> Traces:
     kept, its later row counts) and at least 2 samples; TraceFileError otherwise."""
     from harness.judges import sampled
 
-    t = given.traces.times
+    t, signals, _ = sampled.repeated_rows_dropped(given.traces.times, given.traces.signals)
     if len(t) < 2:
         raise TraceFileError(f"--reference {given.path}: {len(t)} row(s); a reference needs at least two")
     problem = sampled.times_problem(t, "its")
     if problem:
         raise TraceFileError(f"--reference {given.path}: {problem}")
-    return given.traces
+    return Traces(t, signals)
 
 
 def provenance_notes(reference: ReferenceTraces, result, overrides, master: str | None, step: float | None) -> list[str]:

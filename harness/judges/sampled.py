@@ -29,6 +29,25 @@ def unique_times(t: np.ndarray, y: np.ndarray | None = None):
     return (t[keep], None if y is None else y[keep])
 
 
+def repeated_rows_dropped(t: np.ndarray, columns: dict) -> tuple[np.ndarray, dict, int]:
+    """``t`` and ``columns`` without the rows that repeat the row before them - the same time
+    and the same value in every column (a host that writes its last row again at the stop
+    time, as OMSimulator's CSV does) - and how many were dropped.  Rows that differ at one
+    time are kept: ``times_problem`` judges them."""
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2:
+        return t, columns, 0
+    repeat = np.zeros(len(t), dtype=bool)
+    repeat[1:] = t[1:] == t[:-1]
+    if not repeat.any():
+        return t, columns, 0
+    values = {name: np.asarray(y, dtype=float) for name, y in columns.items()}
+    for y in values.values():
+        repeat[1:] &= (y[1:] == y[:-1]) | (np.isnan(y[1:]) & np.isnan(y[:-1]))
+    keep = ~repeat
+    return t[keep], {name: y[keep] for name, y in values.items()}, int(repeat.sum())
+
+
 def times_problem(t: np.ndarray, whose: str) -> str | None:
     """Why the time column ``t`` cannot be judged as given (not finite, not sorted, a time
     written three times or more), in a sentence about ``whose`` ("the result's"); None: it can."""

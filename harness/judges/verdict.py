@@ -381,7 +381,10 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
     are not sorted or that has fewer than ``MIN_SAMPLES`` samples in a part of the window it is
     to be judged over."""
     verdict = Verdict(name)
-    t = np.asarray(times, dtype=float)
+    t, traces, repeated = sampled.repeated_rows_dropped(times, traces)
+    if repeated:
+        verdict.notes.append(f"{repeated} row(s) of the result repeat the row before them (the same time and "
+                             "values): read once")
     t_ref = np.asarray(reference_times, dtype=float)
     rtol = rtol or Tolerances()
     kinds = kinds or {}

@@ -120,6 +120,18 @@ def test_unsorted_times_are_refused_and_an_event_pair_is_not(kavz):
     assert _judge(kavz, event, {"load.w": np.insert(signals["load.w"], 5000, signals["load.w"][5000])}).passed
 
 
+def test_a_last_row_written_again_is_read_once_and_three_different_rows_at_a_time_are_refused(kavz):
+    # OMSimulator writes the stop time's row three times, the same values each time: one row
+    t, signals, _ = kavz
+    y = signals["load.w"]
+    again = np.concatenate([t, [t[-1], t[-1]]]), np.concatenate([y, [y[-1], y[-1]]])
+    judged = _judge(kavz, again[0], {"load.w": again[1]})
+    assert judged.passed and any("2 row(s) of the result repeat the row before them" in n for n in judged.notes)
+    differ = np.concatenate([y, [y[-1] + 1.0, y[-1]]])
+    with pytest.raises(verdict.UnusableResult, match="appears three times or more"):
+        _judge(kavz, again[0], {"load.w": differ})
+
+
 def test_another_tools_column_names_are_matched_and_said(kavz):
     t, signals, _ = kavz
     judged = _judge(kavz, t, {"engine_w": signals["engine.w"], "kavz685.coupling.tau2": signals["coupling.tau2"]})
