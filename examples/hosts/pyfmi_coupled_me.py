@@ -41,4 +41,5 @@ with tempfile.TemporaryDirectory() as tmp:
     result = coupled.simulate(final_time=STOP, options=options)
     table = np.column_stack([result["time"]] + [result[name] for name in RECORD])
 
-np.savetxt(out, table, delimiter=",", header=",".join(["time"] + RECORD), comments="")
+with open(out, "w") as f:      # a file, not a name: numpy resolves a name against the folder just removed
+    np.savetxt(f, table, delimiter=",", header=",".join(["time"] + RECORD), comments="")
