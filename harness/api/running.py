@@ -21,7 +21,8 @@ class RunNote(UserWarning):
     """A note about a run the command line prints before it (``Run.notes`` keeps them)."""
 
 
-def _warn(kind: str, message: str):
+def warn_note(kind: str, message: str):
+    """A warning or note said as a ``RunNote`` where the caller gave no ``notify``."""
     _warnings.warn(f"{kind}: {message}", RunNote, stacklevel=_inputs.user_stacklevel())
 
 
@@ -59,7 +60,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
 
     def say(kind: str, message: str):
         notes.append(f"{kind}: {message}")
-        (notify or _warn)(kind, message)
+        (notify or warn_note)(kind, message)
 
     spec = load(scene, overrides, stop=stop, strict=strict)
     chosen = master or spec.experiment.master

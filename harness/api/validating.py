@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import os as _os
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
 from harness.api.choices import check_agreement, check_masters, load
 from harness.api.inputs import InputError
 from harness.api.results import ReferenceCheck, Validation
+from harness.api.running import warn_note
 from harness.description import scene as scene_files
+from harness.engine.observers import PaceWatch
 from harness.paths import FMUS
 
 
@@ -85,7 +87,8 @@ def fmu_file_model(path: Path) -> tuple[str, str]:
 def validate(name: str, *, overrides=None, master: str | None = None, step: float | str | None = None,
              result=None, tolerance: str = "lever",
              window: tuple[float | str | None, float | str | None] | str | None = None,
-             out: Path | str | None = None, rtol=None, signals=None, reference=None) -> Validation:
+             out: Path | str | None = None, rtol=None, signals=None, reference=None,
+             notify: Callable[[str, str], None] | None = None) -> Validation:
     """Judge NAME against its committed reference traces (or ``reference``), as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
     ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
@@ -187,8 +190,10 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             if master:
                 check_masters(master)
             check_agreement(spec, master=master, step=step)
+            # a long run says how long, from its own pace, once it has one (as ``lever run``)
+            watch = PaceWatch(spec.experiment.stop, lambda message: (notify or warn_note)("note", message))
             try:
-                judged = reference_traces.run_scene(spec, master, step)
+                judged = reference_traces.run_scene(spec, master, step, observer=watch)
             except (SceneInvalid, NoModelExchange) as error:
                 raise InputError(str(error)) from None
     start, stop = ref.opt.start, ref.opt.stop
@@ -265,7 +270,8 @@ def reference_names(names: Iterable[str] = ()) -> list[str]:
 
 def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
                   result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
-                  out: Path | str | None = None, rtol=None, signals=None, reference=None) -> Iterator[Validation]:
+                  out: Path | str | None = None, rtol=None, signals=None, reference=None,
+                  notify: Callable[[str, str], None] | None = None) -> Iterator[Validation]:
     """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
     ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
     and the FMUs built before the first."""
@@ -292,7 +298,8 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
             folder = f"{model}-fmi{version.split('.')[0]}"
         target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_inputs.assignments(overrides), master=master, step=step, result=result,
-                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals, reference=reference)
+                       tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals, reference=reference,
+                       notify=notify)
 
 
 def _scene_of_run(result) -> str:

@@ -244,7 +244,7 @@ def validate(names, assignments, master, step, result_csv, reference_path, verbo
                                              result=result_csv, tolerance=tolerance, window=window, out=out,
                                              rtol=list(rtol), reference=reference_path,
                                              signals=[x.strip() for x in signals.split(",") if x.strip()]
-                                             if signals else None):
+                                             if signals else None, notify=_said_before_the_summary):
                 if verdict.findings.KIND == "lever":
                     _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out, verbose)
                 else:

@@ -551,10 +551,10 @@ def run_fmu(name: str, reference: ReferenceTraces, start_values: dict | None = N
 
 
 def run_scene(scene: scenes.Scene, master: str | None = None, step: float | None = None,
-              fmu_dir: Path = FMUS) -> Result:
+              fmu_dir: Path = FMUS, observer=None) -> Result:
     from harness.engine.run import simulate
 
-    run = simulate(scene, master, step, fmu_dir)
+    run = simulate(scene, master, step, fmu_dir, observer=observer)
     how = f"master {run.master}, step {run.step:g} s, {scene.experiment.start:g}...{scene.experiment.stop:g} s"
     # what the scene records (not what its features add, e.g. the energy balance's variables)
     return Result(run.times, {n: run.traces[n] for n in scene.record}, how, run.failure)

@@ -334,3 +334,17 @@ def test_a_long_run_says_how_long_from_its_own_pace_once(monkeypatch):
     quick.started(0.0)
     quick.stepped(32, 5.0)                # half done in 1 s: 2 s in all, nothing to say
     assert len(heard) == 1 and quick.said
+
+
+def test_validate_says_how_long_the_scene_it_runs_takes_before_the_wait(fmu_dir, monkeypatch, tmp_path):
+    # as `lever run`: a run of the scene that will take long says so from its own pace; the
+    # pace watch is set to speak at once here, the rule itself is tested with `lever run`
+    from harness.api import validating
+    from harness.engine.observers import PaceWatch
+
+    heard = []
+    monkeypatch.setattr(validating, "PaceWatch",
+                        lambda stop, say: PaceWatch(stop, say, after=0.0, longer_than=0.0))
+    api.validate("kavz685", overrides=["experiment.stop=0.2"], window=(0, 0.2), out=tmp_path / "v",
+                 notify=lambda kind, message: heard.append((kind, message)))
+    assert heard and heard[0][0] == "note" and heard[0][1].startswith("the run takes about"), heard
