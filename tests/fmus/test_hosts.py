@@ -61,8 +61,9 @@ ECOS_STEP = 1e-4
 def test_the_kavz685_scene_in_ecos_passes_lever_validate_at_its_stated_step(fmi, lever, fmu_dir, ecos_bin, tmp_path):
     """The whole scene (10 s) from our SSP export, with the FMI 2.0 FMUs or the FMI 3.0
     editions (the export of ``experiment.fmi = 3`` carries those), in a bare environment: at
-    the scene's 1 ms the default verdict names the larger ripple, at ``ECOS_STEP`` it passes."""
-    for step, verdict in ((None, "FAIL"), (ECOS_STEP, "PASS")):
+    the scene's 1 ms the default verdict names the larger ripple (FMI 2.0 only: ecos's FMI 3.0
+    run gives the same traces, tests/formats/test_peers.py), at ``ECOS_STEP`` it passes."""
+    for step, verdict in ((None, "FAIL"), (ECOS_STEP, "PASS"))[fmi - 2:]:
         spec = scene.load("kavz685").with_overrides([f"experiment.fmi={fmi}"]
                                                     + ([f"experiment.step={step}"] if step else []))
         archive = ssp.export(spec, tmp_path / "kavz685.ssp", fmu_dir)
