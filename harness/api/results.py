@@ -260,6 +260,9 @@ class StabilityMapResult(Returned):
         cases = len(getattr(result, "results", {}) or {})
         scene = getattr(getattr(result, "scene", None), "name", "?")
         lines = [f"StabilityMapResult({scene}: {cases} cases, {getattr(result, 'reused', 0)} of them from the case log"]
+        if agreed.get("no_prediction"):
+            lines.append(f"  {agreed['no_prediction']}")
+            lines += [f"  {line}" for line in agreed.get("advice", [])[:12]]
         if agreed.get("explicit_rows"):
             lines.append(f"  explicit masters: predicted edge inside the observed bracket in "
                          f"{agreed['explicit_bracketed']} of {agreed['explicit_rows']} rows; observed/predicted "

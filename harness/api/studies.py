@@ -86,13 +86,15 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     """``lever stability``: every case of the map classified against the edges the linear
     analysis predicts (empty sequences: the default plan's, ``dense``: denser), for any scene
     with our LeverCoupling between two shafts (FMUs of one's own are measured first:
-    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate); writes
+    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate).  Where such
+    an FMU refuses the probe runs, the map runs unpredicted: its cases at the scene's step
+    times 0.1 ... 100, ``["agreement"]["no_prediction"]`` the sentence naming the FMU and what
+    it refused, ``["agreement"]["advice"]`` what the observed runs say.  Writes
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written`` (a dict whose ``repr()`` says what
     ``lever stability`` prints)."""
     from harness.description import scene_kinds
-    from harness.judges import port_probe
     from harness.studies import stability_report, stabilitymap
 
     out = _inputs.folder(out)
@@ -110,10 +112,12 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
         plan = stabilitymap.default_plan(spec, dense, say=progress)
     except (scene_kinds.NotADriveline, ValueError) as error:
         raise InputError(str(error)) from None
-    except port_probe.ProbeRefused as error:
-        raise InputError(f"{error}: the map's steps are multiples of the coupling mode's period, which needs the "
-                         "port's inertia; lever run still runs the scene (without the advice)") from None
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
+    if h_omegas and not plan.predicted:
+        _, why = stabilitymap.linear_model(spec)
+        raise InputError(f"--h-omega: this map has no h*omega_n to run at, omega_n being unknown.  {why}  Leave "
+                         f"--h-omega out: the cases then run at the scene's step times "
+                         f"{', '.join(f'{r:g}' for r in plan.step_ratios)}")
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:
         raise InputError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "

@@ -68,12 +68,19 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
     stability.csv, stability_map.png and the resumable case log cases.jsonl.  Before the
     cases run it says how long they will take, about (each master timed on the scene).
     SCENE may be any scene with our LeverCoupling between two shafts: a shaft FMU of one's
-    own is measured first (its Model Exchange derivatives, or short probe runs)."""
+    own is measured first (its Model Exchange derivatives, or short probe runs); where it
+    refuses the probe runs, the map says so and shows the observed runs only, at the
+    scene's step times 0.1 ... 100."""
     with user_errors():
         done = api.stability_map(scene, stiffnesses=stiffnesses, dampings=dampings, h_omegas=h_omegas,
                                  masters=masters, dense=dense, min_steps=min_steps, refine=not no_refine, jobs=jobs,
                                  resume=not fresh, out=out, progress=click.echo if progress else None)
     agreed = done["agreement"]
+    if agreed.get("no_prediction"):
+        click.echo(agreed["no_prediction"])
+        click.echo("From the observed runs only:")
+        for line in agreed["advice"]:
+            click.echo(f"  {line}")
     if agreed["explicit_rows"]:
         click.echo(f"explicit masters: predicted edge inside the observed bracket in {agreed['explicit_bracketed']} "
                    f"of {agreed['explicit_rows']} rows; observed/predicted median {agreed['explicit_ratio_median']:.3g}")

@@ -97,8 +97,7 @@ def chain(scene: scenes.Scene, fmu_dir: Path = FMUS, say=None) -> Chain:
     if coupling is None:
         raise NoCouplingModel(what_is_needed(scene.name, f"it has no {COUPLING_FMU}"))
     (drive, drive_port), (driven, driven_port) = _port(scene, coupling, 1), _port(scene, coupling, 2)
-    law = component_parameters.coupling_of(*component_parameters.check_coupling(
-        scene_kinds.parameters(scene, coupling)))
+    law = _law(scene, coupling)
     plan = None
     sides, ports = [], []
     for name, port, ours in ((drive, drive_port, "EngineShaft"), (driven, driven_port, "LoadShaft")):
@@ -117,6 +116,23 @@ def chain(scene: scenes.Scene, fmu_dir: Path = FMUS, say=None) -> Chain:
         sides.append(Side(name, measured.inertia, max(0.0, measured.damping), 0.0, measured))
         ports.append(Port(str(path), port.phi, port.w, port.tau))
     return Chain(sides[0], sides[1], law.law.nominal_stiffness, law.damping, Wiring(*ports))
+
+
+def _law(scene: scenes.Scene, coupling: str):
+    return component_parameters.coupling_of(*component_parameters.check_coupling(
+        scene_kinds.parameters(scene, coupling)))
+
+
+def coupling_values(scene: scenes.Scene) -> tuple[float, float]:
+    """``(stiffness, damping)`` of the scene's coupling [N*m/rad, N*m*s/rad] (a tabulated
+    elastic law by its nominal stiffness), from its values alone: what a map of a scene
+    whose ports cannot be measured still sweeps about.  ``NoCouplingModel`` as ``chain``."""
+    coupling = scene.component_of(COUPLING_FMU)
+    if coupling is None:
+        raise NoCouplingModel(what_is_needed(scene.name, f"it has no {COUPLING_FMU}"))
+    _port(scene, coupling, 1), _port(scene, coupling, 2)
+    law = _law(scene, coupling)
+    return law.law.nominal_stiffness, law.damping
 
 
 def _our_side(scene: scenes.Scene, name: str, fmu: str) -> Side:

@@ -120,8 +120,15 @@ def probe(component: str, path: Path, start_values: dict, tau: str, w: str, step
     key = (str(path), path.stat().st_mtime if path.exists() else 0.0, tuple(sorted(
         (k, repr(v)) for k, v in start_values.items())), tau, w, float(step))
     if key not in _PROBED:
-        _PROBED[key] = (linearised(component, path, start_values, tau, w)
-                        or _probe(component, path, start_values, tau, w, step, say))
+        try:
+            _PROBED[key] = (linearised(component, path, start_values, tau, w)
+                            or _probe(component, path, start_values, tau, w, step, say))
+        except ProbeRefused as refusal:
+            # kept too: the map asks once for its plan and once for its sweep, and a
+            # refusal that does not settle costs all its probe steps each time
+            _PROBED[key] = refusal
+    if isinstance(_PROBED[key], ProbeRefused):
+        raise ProbeRefused(str(_PROBED[key]))
     return _PROBED[key]
 
 
@@ -184,7 +191,8 @@ def linearised(component: str, path: Path, start_values: dict, tau: str, w: str)
                      "Model Exchange derivatives")
 
 
-#: the ports probed in this process, by FMU file, its time, start values, port names and step
+#: the ports probed in this process (their PortModel, or the ProbeRefused they raised), by FMU file,
+#: its time, start values, port names and step
 _PROBED: dict = {}
 
 

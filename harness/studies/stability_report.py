@@ -1,7 +1,9 @@
 """The stability map's files (``lever stability``): stability.md (the agreement, the edges
 table, a class matrix), stability.csv (every case with its predicted spectral radius) and
 stability_map.png (a panel a master, observed classes with the predicted edges over them),
-from a ``harness.studies.stabilitymap.StabilityMap``."""
+from a ``harness.studies.stabilitymap.StabilityMap``.  A map without prediction (no linear
+model: ``StabilityMap.no_prediction`` says why) gets the same files with that sentence first,
+its predicted columns "not predicted", its edges observed only and the advice its runs give."""
 from __future__ import annotations
 
 import csv
@@ -16,14 +18,21 @@ from harness.studies.cases import FAILED
 from harness.studies.stabilitymap import (ENERGY_DRIFT, EXPLICIT, GROWTH_DIVERGENT, GROWTH_DRIFT, STATUSES,
                                           StabilityMap, agreement, predicted_growth, predicted_radius, unstable)
 
+#: what a map without prediction writes where a prediction would be
+NOT_PREDICTED = "not predicted"
+#: and where a figure of the linear model (omega_n, zeta, h*omega_n) would be
+UNKNOWN = "unknown"
+
 
 def write(out: Path, result: StabilityMap, fmu_dir: Path = FMUS, plots: bool = True) -> list[Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     agreed = agreement(result, fmu_dir)
-    paths = [_write_csv(out / "stability.csv", result, fmu_dir), _write_markdown(out / "stability.md", result, agreed)]
+    predicted = result.model is not None
+    paths = [_write_csv(out / "stability.csv", result, fmu_dir),
+             (_write_markdown if predicted else _write_observed_markdown)(out / "stability.md", result, agreed)]
     if plots:
-        paths.append(_plot(out / "stability_map.png", result))
+        paths.append((_plot if predicted else _plot_observed)(out / "stability_map.png", result))
     return paths
 
 
@@ -33,15 +42,21 @@ def _write_csv(path: Path, result: StabilityMap, fmu_dir) -> Path:
     with path.open("w", newline="") as f:
         writer = csv.DictWriter(f, fields)
         writer.writeheader()
-        for case in sorted(result.results, key=lambda c: (c.master, c.stiffness, -c.damping, c.h_omega)):
+        for case in sorted(result.results, key=lambda c: (c.master, c.stiffness, -c.damping, c.h_omega or c.step)):
             r = result.results[case]
-            model = result.model.with_coupling(case.stiffness, case.damping)
-            row = {"master": case.master, "stiffness": case.stiffness, "damping": case.damping, "h_omega": case.h_omega,
-                   "steps": case.steps,
-                   "omega_n": model.omega_n, "zeta": model.zeta, "step_s": model.step_for(case.h_omega),
-                   "predicted_rho": predicted_radius(result.model, case, fmu_dir),
-                   "predicted_growth": predicted_growth(predicted_radius(result.model, case, fmu_dir), case.steps),
-                   "predicted_edge": result.edges.get(case.row)}
+            if result.model is None:
+                row = {"master": case.master, "stiffness": case.stiffness, "damping": case.damping,
+                       "h_omega": UNKNOWN, "steps": case.steps, "omega_n": UNKNOWN, "zeta": UNKNOWN,
+                       "step_s": case.step, "predicted_rho": NOT_PREDICTED, "predicted_growth": NOT_PREDICTED,
+                       "predicted_edge": NOT_PREDICTED}
+            else:
+                model = result.model.with_coupling(case.stiffness, case.damping)
+                rho = predicted_radius(result.model, case, fmu_dir)
+                row = {"master": case.master, "stiffness": case.stiffness, "damping": case.damping,
+                       "h_omega": case.h_omega, "steps": case.steps,
+                       "omega_n": model.omega_n, "zeta": model.zeta, "step_s": model.step_for(case.h_omega),
+                       "predicted_rho": rho, "predicted_growth": predicted_growth(rho, case.steps),
+                       "predicted_edge": result.edges.get(case.row)}
             if r.get("status") == FAILED:
                 row.update({"class": "failed", "why": f"{r['error']} ({r['where']})"})
             else:
@@ -72,10 +87,6 @@ def summary_table(result: StabilityMap, agreed: dict) -> list[str]:
 
 def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
     plan, model = result.plan, result.model
-    counts = {}
-    for r in result.results.values():
-        key = "failed" if r.get("status") == FAILED else r["class"]
-        counts[key] = counts.get(key, 0) + 1
     lines = [f"# Stability map: {result.scene.name}", "",
              f"Linearised two-inertia model: I1 = {model.drive_inertia:g}, I2 = {model.driven_inertia:g} kg*m^2, "
              f"K1 = {model.engine_slope:g} N*m*s/rad, U12 = 1 (harness/stability.py states the linearisation). "
@@ -86,15 +97,9 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
              f"{', '.join(f'{b:.3g}' for b in plan.dampings)} N*m*s/rad; h*omega_n in "
              f"{', '.join(f'{x:g}' for x in plan.h_omegas)}" + (" plus 0.9 and 1.1 (where growth is slow: up to 2) times each predicted edge" if plan.refine else "")
              + f"; masters {', '.join(plan.masters)}.  Each case runs max({plan.min_steps}, {plan.periods:g} periods) "
-             f"steps (at most {plan.max_steps}).  {len(result.results)} cases: "
-             + ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
+             f"steps (at most {plan.max_steps}).  {len(result.results)} cases: " + _counts(result)
              + f" ({result.reused} reused from the case log; {result.wall_s:.0f} s).", "",
-             "Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
-             f"iteration did not converge) or the amplitude of the coupling torque "
-             f"{metrics.signals(result.scene)['tau2']} grew > {GROWTH_DIVERGENT:g}x "
-             "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
-             f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
-             "**stable** - neither.  Compared with the prediction, a case is *unstable* when divergent or growing "
+             _classes_text(result) + "  Compared with the prediction, a case is *unstable* when divergent or growing "
              f"(> {GROWTH_DRIFT:g}x); the predicted edge is where the spectral radius of the master's one-step map "
              "crosses 1.", ""]
     lines += ["## Agreement", ""]
@@ -165,6 +170,74 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
                     cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
                 zeta = result.model.with_coupling(c, b).zeta
                 lines.append(f"| {m} | {c:.4g} | {b:.3g} | {zeta:.3g} | " + " | ".join(cells) + " |")
+    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
+    if failed:
+        lines += ["", "## Cases that raised", ""]
+        lines += [f"- {c.key}: {r['error']} ({r['where']})" for c, r in failed]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _classes_text(result: StabilityMap) -> str:
+    """The criteria of the classes, for the markdown."""
+    return ("Classes: **divergent** - the run failed (non-finite value, an FMU refused a value, the coupling "
+            f"iteration did not converge) or the amplitude of the coupling torque "
+            f"{metrics.signals(result.scene)['tau2']} grew > {GROWTH_DIVERGENT:g}x "
+            "from the first quarter of the run to the last; **energy-drifting** - amplitude grew > "
+            f"{GROWTH_DRIFT:g}x, or the energy residual exceeds {100 * ENERGY_DRIFT:g} % of the engine's work; "
+            "**stable** - neither.")
+
+
+def _counts(result: StabilityMap) -> str:
+    counts = {}
+    for r in result.results.values():
+        key = "failed" if r.get("status") == FAILED else r["class"]
+        counts[key] = counts.get(key, 0) + 1
+    return ", ".join(f"{counts[k]} {k}" for k in (*STATUSES, "failed") if k in counts)
+
+
+def _write_observed_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
+    """stability.md of a map without prediction: why first, then what the runs showed."""
+    plan = result.plan
+    lines = [f"# Stability map: {result.scene.name} (observed runs only)", "", f"**{result.no_prediction}**", "",
+             f"Sweep: c in {', '.join(f'{c:.4g}' for c in plan.stiffnesses)} N*m/rad; b in "
+             f"{', '.join(f'{b:.3g}' for b in plan.dampings)} N*m*s/rad; steps: the scene's h = {plan.scene_step:g} s "
+             f"times {', '.join(f'{r:g}' for r in plan.step_ratios)}, scaled by sqrt({plan.scene_stiffness:.4g} / c) "
+             "(the coupling mode's frequency goes as sqrt(c): each stiffness's row covers the same range of "
+             f"h*omega_n, whatever the inertias); masters {', '.join(plan.masters)}.  Each case runs as many coupling "
+             f"periods as the scene's own run ({plan.scene_steps} steps at ratio 1), at least {plan.min_steps} and at "
+             f"most {plan.max_steps} steps.  {len(result.results)} cases: {_counts(result)} ({result.reused} reused "
+             f"from the case log; {result.wall_s:.0f} s).", "",
+             _classes_text(result) + "  A case is *unstable* when divergent or growing "
+             f"(> {GROWTH_DRIFT:g}x).", "",
+             "## Advice from the observed runs only", "",
+             "Not predicted: the largest step each master was seen stable at, below its first unstable case; a step "
+             "between two swept ones, or a longer run, may differ.", ""]
+    lines += [f"- {line}" for line in agreed["advice"]]
+    lines += ["", "## Edges", "",
+              "| master | c [N*m/rad] | b [N*m*s/rad] | predicted edge | observed: last stable h [s] | "
+              "first unstable h [s] | S/E/X/! |", "|---|---|---|---|---|---|---|"]
+    for r in agreed["observed_rows"]:
+        classes = "/".join(str(r["classes"].get(k, 0)) for k in (*STATUSES, FAILED))
+        lines.append(f"| {r['master']} | {r['stiffness']:.4g} | {r['damping']:.3g} | {NOT_PREDICTED} | "
+                     f"{_fmt(r['last_stable_step'])} | "
+                     f"{_fmt(r['first_unstable_step']) if r['first_unstable_step'] else 'none'} | {classes} |")
+    lines += ["", "## Cases", "",
+              "S stable, E energy-drifting, X divergent, ! failed (the case raised); columns: the step's ratio to "
+              "the scene's, at the scene's stiffness (the step of each case in stability.csv).", ""]
+    ratios = plan.step_ratios
+    lines.append("| master | c | b | h [s] | " + " | ".join(f"{r:g}" for r in ratios) + " |")
+    lines.append("|---|---|---|---|" + "---|" * len(ratios))
+    for m in plan.masters:
+        for c in plan.stiffnesses:
+            for b in plan.dampings:
+                row = plan.observed_cases(m, c, b)
+                cells = []
+                for case in row:
+                    r = result.results.get(case)
+                    cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
+                lines.append(f"| {m} | {c:.4g} | {b:.3g} | {row[0].step:.3g} ... {row[-1].step:.3g} | "
+                             + " | ".join(cells) + " |")
     failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
     if failed:
         lines += ["", "## Cases that raised", ""]
@@ -251,6 +324,52 @@ def _plot(path: Path, result: StabilityMap) -> Path:
     fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if ncols > 1 else 2, fontsize=8,
                frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_observed(path: Path, result: StabilityMap) -> Path:
+    """stability_map.png of a map without prediction: a panel a master, the observed class
+    of each case over its step and its coupling, and why there are no edges."""
+    import textwrap
+
+    from matplotlib.lines import Line2D
+
+    from harness.formats import plotting
+
+    plt = plotting.pyplot()
+    masters = result.plan.masters
+    rows = [(c, b) for c in result.plan.stiffnesses for b in result.plan.dampings]
+    ncols = min(3, len(masters))
+    nrows = math.ceil(len(masters) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), 0.3 * len(rows) * nrows + 2.6 * nrows + 1.2),
+                             squeeze=False, sharex=True, sharey=True, layout="constrained")
+    statuses = set()
+    for ax, master in zip(axes.flat, masters):
+        for case, r in result.results.items():
+            if case.master != master:
+                continue
+            status = "failed" if r.get("status") == FAILED else r["class"]
+            statuses.add(status)
+            ax.scatter(case.step, rows.index(case.row[1:]), s=70, marker="s", color=COLOURS[status],
+                       edgecolors="none", alpha=0.85)
+        ax.set_xscale("log")
+        ax.set_title(master, fontsize=10)
+        ax.grid(True, which="both", alpha=0.2)
+    for ax in axes[-1]:
+        ax.set_xlabel("communication step h [s]")
+    for ax in axes[:, 0]:
+        ax.set_yticks(range(len(rows)), [f"c={c:.4g}, b={b:.3g}" for c, b in rows], fontsize=8)
+        ax.set_ylim(-0.6, len(rows) - 0.4)
+    for ax in list(axes.flat)[len(masters):]:
+        ax.axis("off")
+    for ax in list(axes.flat)[:len(masters)]:
+        plotting.log_ticks(ax.xaxis)
+    handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in legend_classes(statuses)]
+    fig.legend(handles=handles, loc="outside lower center", ncol=max(1, len(handles)), fontsize=8, frameon=False)
+    fig.suptitle(f"Stability map: {result.scene.name} (observed classes only; edges not predicted)\n"
+                 + textwrap.fill(result.no_prediction, 110), fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

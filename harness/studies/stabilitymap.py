@@ -23,6 +23,16 @@ For comparing with the linear prediction a case counts as *unstable* when it is
 divergent or its amplitude grew more than ``GROWTH_DRIFT`` times (the energy residual
 measures accuracy, not the growth the spectral radius predicts).  Finished and failed
 cases are kept in a ``harness.studies.cases.CaseLog``; a re-run resumes.
+
+Where the linear model cannot be made (a shaft FMU of one's own refuses its probe runs:
+``port_probe.ProbeRefused``), the map is of observed runs only: no ``omega_n``, so no
+``h * omega_n`` and no edges; the cases run at the scene's step times ``step_ratios``,
+scaled by ``sqrt(c_scene / c)`` so that each stiffness's row covers the same range of
+``h * omega_n`` whatever the unknown inertias are (``omega_n`` of the coupling mode goes
+as ``sqrt(c)``), each as many steps as the scene's own run (so as many coupling periods),
+and ``StabilityMap.no_prediction`` says why nothing was predicted.  With the default
+ratios (0.1 ... 100) a scene whose own step is at h*omega_n of a few hundredths (as
+kavz685's) is swept over the range the predicted map covers.
 """
 from __future__ import annotations
 
@@ -40,7 +50,7 @@ from harness.description import scene_kinds
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.description import scene as scenes
-from harness.judges import coupling_scene, stability
+from harness.judges import coupling_scene, port_probe, stability
 from harness.engine import interrupt
 from harness.engine.system import CO_SIMULATION
 from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
@@ -74,9 +84,30 @@ class Plan:
     #: reach this factor (at most ``max_refine_steps``): near the edge growth is slow
     refine_growth: float = 10.0
     max_refine_steps: int = 6000
+    #: a map without prediction: its steps as multiples of ``scene_step`` at ``scene_stiffness``
+    #: (module docstring), and the scene's step count (its duration over its step)
+    step_ratios: list = field(default_factory=lambda: [0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0])
+    scene_step: float | None = None
+    scene_stiffness: float | None = None
+    scene_steps: int | None = None
 
     def steps_for(self, h_omega: float) -> int:
         return int(min(self.max_steps, max(self.min_steps, math.ceil(self.periods * 2.0 * math.pi / h_omega))))
+
+    @property
+    def predicted(self) -> bool:
+        """False: the plan of a map without prediction (no linear model of the scene)."""
+        return self.scene_step is None
+
+    def observed_cases(self, master: str, stiffness: float, damping: float) -> list["Case"]:
+        """A row of a map without prediction: the scene's step times each of ``step_ratios``,
+        scaled by ``sqrt(scene_stiffness / stiffness)``; as many steps as the scene's own run at
+        that ratio (at least ``min_steps``, at most ``max_steps``)."""
+        scale = math.sqrt(self.scene_stiffness / stiffness)
+        return [Case(master, stiffness, damping, None,
+                     int(min(self.max_steps, max(self.min_steps, math.ceil(self.scene_steps / ratio)))),
+                     step=float(f"{ratio * self.scene_step * scale:.4g}"))
+                for ratio in self.step_ratios]
 
     def fingerprint(self, scene: scenes.Scene) -> dict:
         """What a case's result depends on besides its key (the grids are not in it: a
@@ -87,12 +118,25 @@ class Plan:
                 "periods": self.periods, "refine_growth": self.refine_growth}
 
 
+def linear_model(scene: scenes.Scene, fmu_dir: Path = FMUS, say=None) -> tuple[stability.TwoInertia | None, str]:
+    """``(model, "")``: the scene's linear model (``stability.model_of``); ``(None, why)``
+    where a shaft FMU refuses the probe runs it needs - the map then runs its cases
+    unpredicted, and ``why`` is the sentence that says so, naming the FMU and what it refused."""
+    try:
+        return stability.model_of(scene, fmu_dir, say), ""
+    except port_probe.ProbeRefused as refusal:
+        return None, (f"No prediction was made: the scene's linear model needs its ports measured, and {refusal}; "
+                      "this map shows the observed runs only.")
+
+
 def default_plan(scene: scenes.Scene, dense: bool = False, fmu_dir: Path = FMUS, say=None) -> Plan:
     """The default sweep (a few minutes on 2 cores): the scene's stiffness, 1e4, 1e5 and
     1e6 N*m/rad; the scene's damping, a tenth of it and none; h*omega_n from 0.05 to 5;
-    every fixed-step master.  ``dense``: 7 stiffnesses, 5 dampings, 19 steps."""
-    model = stability.model_of(scene, fmu_dir, say)
-    c0, b0 = model.stiffness, model.damping
+    every fixed-step master.  ``dense``: 7 stiffnesses, 5 dampings, 19 steps.  Without a
+    linear model (``linear_model``), the plan of a map without prediction: the same
+    stiffnesses and dampings, steps from the scene's (``Plan.observed_cases``)."""
+    model, _ = linear_model(scene, fmu_dir, say)
+    c0, b0 = (model.stiffness, model.damping) if model is not None else coupling_scene.coupling_values(scene)
     if dense:
         stiffnesses = sorted({float(f"{c:.4g}") for c in np.geomspace(c0, 1e6, 7)})
         dampings = sorted({b0, b0 / 3.0, b0 / 10.0, b0 / 30.0, 0.0}, reverse=True)
@@ -101,7 +145,15 @@ def default_plan(scene: scenes.Scene, dense: bool = False, fmu_dir: Path = FMUS,
         stiffnesses = sorted({c0, 1e4, 1e5, 1e6})
         dampings = sorted({b0, b0 / 10.0, 0.0}, reverse=True)
         h_omegas = [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0]
-    return Plan([c for c in stiffnesses if c >= c0], dampings, h_omegas, list(FIXED_STEP_MASTERS))
+    plan = Plan([c for c in stiffnesses if c >= c0], dampings, h_omegas, list(FIXED_STEP_MASTERS))
+    if model is None:
+        experiment = scene.experiment
+        plan.h_omegas, plan.refine = [], False
+        plan.scene_step, plan.scene_stiffness = float(experiment.step), float(c0)
+        plan.scene_steps = max(1, round((experiment.stop - experiment.start) / experiment.step))
+        if dense:
+            plan.step_ratios = [float(f"{r:.3g}") for r in np.geomspace(0.03, 300.0, 17)]
+    return plan
 
 
 @dataclass(frozen=True)
@@ -109,11 +161,14 @@ class Case:
     master: str
     stiffness: float
     damping: float
-    h_omega: float
+    h_omega: float | None        # None in a map without prediction: omega_n is not known
     steps: int                   # communication steps the case runs
+    step: float | None = None    # the communication step [s] of a map without prediction
 
     @property
     def key(self) -> str:
+        if self.h_omega is None:
+            return case_key(self.master, self.stiffness, self.damping, "h", self.step, self.steps)
         return case_key(self.master, self.stiffness, self.damping, self.h_omega, self.steps)
 
     @property
@@ -137,10 +192,13 @@ def predictions(model: stability.TwoInertia, plan: Plan, fmu_dir: Path = FMUS) -
             for m in plan.masters for c in plan.stiffnesses for b in plan.dampings}
 
 
-def cases_of(plan: Plan, edges: dict, model: stability.TwoInertia, fmu_dir: Path = FMUS) -> list[Case]:
+def cases_of(plan: Plan, edges: dict, model: stability.TwoInertia | None, fmu_dir: Path = FMUS) -> list[Case]:
     """The plan's cases, plus (``refine``) two about each predicted edge below the
     largest swept step (at 0.9 times it and above it, see ``_above``), where the observed
-    edge is judged."""
+    edge is judged; a map without prediction (``model`` None): ``Plan.observed_cases``."""
+    if model is None:
+        return [case for m in plan.masters for c in plan.stiffnesses for b in plan.dampings
+                for case in plan.observed_cases(m, c, b)]
     out = []
     high = max(plan.h_omegas)
     for m in plan.masters:
@@ -221,8 +279,8 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
 
     coupling = scene.component_of(coupling_scene.COUPLING_FMU)
     spec = scene.with_overrides([f"{coupling}.stiffness={case.stiffness!r}", f"{coupling}.damping={case.damping!r}"])
-    model = stability.model_of(spec, fmu_dir)
-    step = model.step_for(case.h_omega)
+    model = None if case.h_omega is None else stability.model_of(spec, fmu_dir)
+    step = case.step if model is None else model.step_for(case.h_omega)
     n = case.steps
     balanced = scene_kinds.is_driveline(spec)      # the energy balance needs every equation
     spec = replace(spec, experiment=replace(spec.experiment, start=0.0, stop=n * step, transient=0.0),
@@ -238,7 +296,7 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     status, why = classify(growth, residual, result.failure, energy=balanced)
     return {"status": "ok", "class": status, "why": why, "growth": growth, "energy_residual": residual,
             "failure": result.failure, "step_s": step, "steps_planned": n, "steps_done": max(0, len(result.times) - 1),
-            "omega_n": model.omega_n, "zeta": model.zeta, "wall_s": wall}
+            "omega_n": model and model.omega_n, "zeta": model and model.zeta, "wall_s": wall}
 
 
 def _worker(scene, case, plan, fmu_dir):
@@ -251,11 +309,13 @@ def _worker(scene, case, plan, fmu_dir):
 class StabilityMap:
     scene: scenes.Scene
     plan: Plan
-    model: stability.TwoInertia
+    model: stability.TwoInertia | None             # None: a map without prediction
     edges: dict                     # (master, c, b) -> predicted edge or None
     results: dict = field(default_factory=dict)    # Case -> result dict
     reused: int = 0
     wall_s: float = 0.0
+    #: the sentence saying why nothing was predicted ("" where the model was made)
+    no_prediction: str = ""
 
 
 def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: bool = True,
@@ -270,8 +330,13 @@ def sweep(scene: scenes.Scene, plan: Plan, out: Path, jobs: int = 1, resume: boo
 def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
     say = progress or (lambda *_: None)
     started = clock.perf_counter()
-    model = stability.model_of(scene, fmu_dir, say)
-    edges = predictions(model, plan, fmu_dir)
+    model, no_prediction = linear_model(scene, fmu_dir, say)
+    if no_prediction:
+        say(no_prediction)
+    if (model is None) == plan.predicted:
+        raise ValueError("the plan does not fit the scene: " + (
+            no_prediction if model is None else "a plan without prediction for a scene whose model was made"))
+    edges = predictions(model, plan, fmu_dir) if model is not None else {}
     cases = cases_of(plan, edges, model, fmu_dir)
     log = CaseLog(out, plan.fingerprint(scene), resume=resume)
     if log.set_aside:
@@ -299,7 +364,8 @@ def _sweep(scene, plan, out, jobs, resume, fmu_dir, progress) -> StabilityMap:
         _run_pool(scene, plan, todo, jobs, log, record, fmu_dir)
     result = StabilityMap(scene, plan, model, edges,
                           {c: log.get(c.key) for c in cases if log.get(c.key) is not None},
-                          reused=len(cases) - len(todo), wall_s=clock.perf_counter() - started)
+                          reused=len(cases) - len(todo), wall_s=clock.perf_counter() - started,
+                          no_prediction=no_prediction)
     return result
 
 
@@ -313,7 +379,8 @@ def estimated_seconds(scene: scenes.Scene, plan: Plan, todo: list[Case], jobs: i
     diverges ends early and an implicit master iterates more on a stiffer coupling: an
     estimate, not a promise."""
     def timed(master: str, steps: int) -> float:
-        case = Case(master, plan.stiffnesses[0], plan.dampings[0], 0.5, steps)
+        case = (Case(master, plan.stiffnesses[0], plan.dampings[0], 0.5, steps) if plan.predicted else
+                replace(plan.observed_cases(master, plan.stiffnesses[0], plan.dampings[0])[0], steps=steps))
         started = clock.perf_counter()
         try:
             run_case(scene, case, plan, fmu_dir)
@@ -398,14 +465,69 @@ def edge_rows(result: StabilityMap, fmu_dir: Path = FMUS) -> list[dict]:
     return rows
 
 
+def observed_rows(result: StabilityMap) -> list[dict]:
+    """Per (master, c, b) of a map without prediction: the steps [s] of the last case
+    observed stable below the first observed unstable one (None: no such case), and the
+    count of each class."""
+    rows = []
+    for m in result.plan.masters:
+        for c in result.plan.stiffnesses:
+            for b in result.plan.dampings:
+                runs = sorted(((case.step, r) for case, r in result.results.items() if case.row == (m, c, b)),
+                              key=lambda item: item[0])
+                ran = [(h, r) for h, r in runs if r.get("status") != FAILED]
+                first_unstable = next((h for h, r in ran if unstable(r)), None)
+                last_stable = max((h for h, r in ran if first_unstable is None or h < first_unstable), default=None)
+                classes = {}
+                for _, r in runs:
+                    key = FAILED if r.get("status") == FAILED else r["class"]
+                    classes[key] = classes.get(key, 0) + 1
+                rows.append({"master": m, "stiffness": c, "damping": b, "last_stable_step": last_stable,
+                             "first_unstable_step": first_unstable, "largest_step": max((h for h, _ in ran), default=None),
+                             "classes": classes})
+    return rows
+
+
+def observed_advice(result: StabilityMap) -> list[str]:
+    """What the runs of a map without prediction say, one line a swept coupling: up to
+    which step each master was observed stable (below its first unstable case), and which
+    were unstable at every swept step.  Observed, not predicted: a longer run or a step
+    between two swept ones may still differ."""
+    lines = []
+    rows = observed_rows(result)
+    for c in result.plan.stiffnesses:
+        for b in result.plan.dampings:
+            row = [r for r in rows if (r["stiffness"], r["damping"]) == (c, b)]
+            stable = sorted((r for r in row if r["last_stable_step"] is not None),
+                            key=lambda r: -r["last_stable_step"])
+            never = [r["master"] for r in row if r["last_stable_step"] is None and r["first_unstable_step"] is not None]
+            text = f"c = {c:.4g} N*m/rad, b = {b:.3g} N*m*s/rad: "
+            text += ("observed stable up to h = " + ", ".join(
+                f"{r['last_stable_step']:.3g} s with {r['master']}"
+                + ("" if r["first_unstable_step"] else " (stable at every swept step)") for r in stable)
+                if stable else "no master observed stable at any swept step")
+            if never:
+                text += f"; unstable at every swept step: {', '.join(never)}"
+            lines.append(text)
+    return lines
+
+
 def agreement(result: StabilityMap, fmu_dir: Path = FMUS) -> dict:
-    """Prediction against observation.
+    """Prediction against observation; for a map without prediction (``result.model``
+    None) the same keys, empty, with ``no_prediction`` (the sentence why), ``observed_rows``
+    and ``advice`` (``observed_advice``).
 
     Case by case: a case is predicted to show instability when its spectral radius
     gives a growth over the run (``predicted_growth``) above ``GROWTH_DRIFT`` - what the
     classification can see in a finite run - and compared with observed *unstable*.
     Growth rates: where both grow measurably, the observed growth per step against the
     spectral radius.  Edges: the predicted edge against the observed bracket, per row."""
+    if result.model is None:
+        return {"by_master": {}, "mismatches": [], "edge_rows": [], "rates": [], "inconclusive": 0,
+                "explicit_bracketed": 0, "explicit_rows": 0, "explicit_ratio_median": None,
+                "explicit_ratio_range": None, "rate_ratio_median": None, "rate_ratio_range": None,
+                "no_prediction": result.no_prediction, "observed_rows": observed_rows(result),
+                "advice": observed_advice(result)}
     by_master, mismatches, rates = {}, [], []
     for case, r in result.results.items():
         if r.get("status") == FAILED:
