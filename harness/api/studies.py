@@ -86,14 +86,15 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     """``lever stability``: every case of the map classified against the edges the linear
     analysis predicts (empty sequences: the default plan's, ``dense``: denser), for any scene
     with our LeverCoupling between two shafts (FMUs of one's own are measured first:
-    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate).  Where such
-    an FMU refuses the probe runs, the map runs unpredicted: its cases at the scene's step
-    times 0.1 ... 100, ``["agreement"]["no_prediction"]`` the sentence naming the FMU and what
-    it refused, ``["agreement"]["advice"]`` what the observed runs say.  Writes
+    ``harness.judges.port_probe``; ``progress`` hears a long probe's estimate); writes
     stability.md, stability.csv, stability_map.png and cases.jsonl to ``out`` (default
     results/stability/<scene>), resuming from the case log unless ``resume`` is false.
     Returns ``result``, ``agreement`` and ``written`` (a dict whose ``repr()`` says what
-    ``lever stability`` prints)."""
+    ``lever stability`` prints).
+
+    Where such an FMU refuses the probe runs, the map runs unpredicted: its cases at the
+    scene's step times 0.1 ... 100, ``["agreement"]["no_prediction"]`` the sentence naming
+    the FMU and what it refused, ``["agreement"]["advice"]`` what the observed runs say."""
     from harness.description import scene_kinds
     from harness.studies import stability_report, stabilitymap
 

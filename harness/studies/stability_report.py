@@ -223,7 +223,8 @@ def _write_observed_markdown(path: Path, result: StabilityMap, agreed: dict) -> 
                      f"{_fmt(r['last_stable_step'])} | "
                      f"{_fmt(r['first_unstable_step']) if r['first_unstable_step'] else 'none'} | {classes} |")
     lines += ["", "## Cases", "",
-              "S stable, E energy-drifting, X divergent, ! failed (the case raised); columns: the step's ratio to "
+              "S stable, E energy-drifting, X divergent, ! failed (the case raised, or its run could not start); "
+              "columns: the step's ratio to "
               "the scene's, at the scene's stiffness (the step of each case in stability.csv).", ""]
     ratios = plan.step_ratios
     lines.append("| master | c | b | h [s] | " + " | ".join(f"{r:g}" for r in ratios) + " |")

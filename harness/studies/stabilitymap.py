@@ -19,6 +19,9 @@ energy residual:
   ``c*w*h`` torque bias does);
 * ``stable``: neither.
 
+A run that cannot start (a master that rolls steps back with an FMU that keeps no state,
+an FMU refusing a start value) shows nothing of stability: its case is recorded as failed.
+
 For comparing with the linear prediction a case counts as *unstable* when it is
 divergent or its amplitude grew more than ``GROWTH_DRIFT`` times (the energy residual
 measures accuracy, not the growth the spectral radius predicts).  Finished and failed
@@ -288,6 +291,10 @@ def run_case(scene: scenes.Scene, case: Case, plan: Plan, fmu_dir: Path = FMUS) 
     started = clock.perf_counter()
     result = simulate(spec, case.master, step, fmu_dir=fmu_dir)
     wall = clock.perf_counter() - started
+    if result.failure_stage == "initialisation":
+        # not a step made, so nothing observed of the master's stability: the case failed
+        return {"status": FAILED, "error": result.failure, "where": "the run could not start", "step_s": step,
+                "wall_s": wall}
     tau = result.traces.get(metrics.signals(spec)["tau2"], np.empty(0))
     growth = amplitude_growth(tau)
     residual = None
@@ -501,6 +508,7 @@ def observed_advice(result: StabilityMap) -> list[str]:
             stable = sorted((r for r in row if r["last_stable_step"] is not None),
                             key=lambda r: -r["last_stable_step"])
             never = [r["master"] for r in row if r["last_stable_step"] is None and r["first_unstable_step"] is not None]
+            not_run = [r["master"] for r in row if r["largest_step"] is None]
             text = f"c = {c:.4g} N*m/rad, b = {b:.3g} N*m*s/rad: "
             text += ("observed stable up to h = " + ", ".join(
                 f"{r['last_stable_step']:.3g} s with {r['master']}"
@@ -508,6 +516,8 @@ def observed_advice(result: StabilityMap) -> list[str]:
                 if stable else "no master observed stable at any swept step")
             if never:
                 text += f"; unstable at every swept step: {', '.join(never)}"
+            if not_run:
+                text += f"; no run could start (stability.md lists why): {', '.join(not_run)}"
             lines.append(text)
     return lines
 
