@@ -69,16 +69,16 @@ def zoom(ax, *series, pad: float = 0.08) -> None:
     ax.set_ylim(low - pad * span, high + pad * span)
 
 
-def log_ticks(axis) -> None:
+def log_ticks(axis, wide: float = 3.5) -> None:
     """A logarithmic axis labelled in plain numbers at 1, 2 and 5 of each decade (every digit
-    within less than a decade, 1 alone over more than 3.5), the minor ticks unlabelled:
-    matplotlib's own labels of a short log range put '2x10^-1' at every minor tick, running
-    into each other."""
+    within less than a decade, 1 alone over more than ``wide`` decades), the minor ticks
+    unlabelled: matplotlib's own labels of a short log range put '2x10^-1' at every minor
+    tick, running into each other."""
     from matplotlib import ticker
 
     low, high = axis.get_view_interval()
     decades = np.log10(max(high, 1e-300) / max(low, 1e-300)) if low > 0 else np.inf
-    subs = tuple(range(1, 10)) if decades < 1.0 else (1.0, 2.0, 5.0) if decades <= 3.5 else (1.0,)
+    subs = tuple(range(1, 10)) if decades < 1.0 else (1.0, 2.0, 5.0) if decades <= wide else (1.0,)
     axis.set_major_locator(ticker.LogLocator(base=10.0, subs=subs))
     axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
     axis.set_minor_formatter(ticker.NullFormatter())

@@ -167,15 +167,25 @@ def _write_markdown(path: Path, result: StabilityMap, agreed: dict) -> Path:
                 cells = []
                 for x in xs:
                     r = at.get((m, c, b, x))
-                    cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
+                    cells.append(_symbol(r))
                 zeta = result.model.with_coupling(c, b).zeta
                 lines.append(f"| {m} | {c:.4g} | {b:.3g} | {zeta:.3g} | " + " | ".join(cells) + " |")
-    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
-    if failed:
-        lines += ["", "## Cases that raised", ""]
-        lines += [f"- {c.key}: {r['error']} ({r['where']})" for c, r in failed]
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines + _failed_lines(result)) + "\n")
     return path
+
+
+def _symbol(r: dict | None) -> str:
+    """A case's letter in the markdown's class matrix (blank: not run)."""
+    return " " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]]
+
+
+def _failed_lines(result: StabilityMap) -> list[str]:
+    """The markdown's list of the cases that failed (raised, or their run could not start)."""
+    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
+    if not failed:
+        return []
+    return ["", "## Cases that raised or could not start", ""] + [f"- {c.key}: {r['error']} ({r['where']})"
+                                                                  for c, r in failed]
 
 
 def _classes_text(result: StabilityMap) -> str:
@@ -236,14 +246,10 @@ def _write_observed_markdown(path: Path, result: StabilityMap, agreed: dict) -> 
                 cells = []
                 for case in row:
                     r = result.results.get(case)
-                    cells.append(" " if r is None else SYMBOL["failed" if r.get("status") == FAILED else r["class"]])
+                    cells.append(_symbol(r))
                 lines.append(f"| {m} | {c:.4g} | {b:.3g} | {row[0].step:.3g} ... {row[-1].step:.3g} | "
                              + " | ".join(cells) + " |")
-    failed = [(c, r) for c, r in result.results.items() if r.get("status") == FAILED]
-    if failed:
-        lines += ["", "## Cases that raised", ""]
-        lines += [f"- {c.key}: {r['error']} ({r['where']})" for c, r in failed]
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines + _failed_lines(result)) + "\n")
     return path
 
 
@@ -274,27 +280,45 @@ def legend_classes(statuses) -> list[str]:
     return [k for k in COLOURS if k in set(statuses)]
 
 
+def _panels(masters: list, panel_height: float, margin: float):
+    """``(pyplot, figure, axes)``: one panel a master, three to a row (no blank panels
+    beside one), sharing their axes."""
+    from harness.formats import plotting
+
+    plt = plotting.pyplot()
+    ncols = min(3, len(masters))
+    nrows = math.ceil(len(masters) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), panel_height * nrows + margin),
+                             squeeze=False, sharex=True, sharey=True, layout="constrained")
+    return plt, fig, axes
+
+
+def _cases_on(ax, result: StabilityMap, master: str, where) -> set:
+    """Each case of ``master`` as a square of its class's colour at ``where(case)``; the
+    classes drawn."""
+    statuses = set()
+    for case, r in result.results.items():
+        if case.master != master:
+            continue
+        status = "failed" if r.get("status") == FAILED else r["class"]
+        statuses.add(status)
+        ax.scatter(*where(case), s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
+    return statuses
+
+
 def _plot(path: Path, result: StabilityMap) -> Path:
     from matplotlib.lines import Line2D
 
     from harness.formats import plotting
 
-    plt = plotting.pyplot()
     masters = result.plan.masters
-    ncols = min(3, len(masters))            # one panel a master, three to a row: no blank panels beside one
-    nrows = math.ceil(len(masters) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), 4.2 * nrows + 0.6), squeeze=False,
-                             sharex=True, sharey=True, layout="constrained")
+    plt, fig, axes = _panels(masters, 4.2, 0.6)
+    ncols = axes.shape[1]
     statuses = set()
     zetas = [result.model.with_coupling(c.stiffness, c.damping).zeta for c in result.results]
     for ax, master in zip(axes.flat, masters):
-        for case, r in result.results.items():
-            if case.master != master:
-                continue
-            status = "failed" if r.get("status") == FAILED else r["class"]
-            statuses.add(status)
-            zeta = result.model.with_coupling(case.stiffness, case.damping).zeta
-            ax.scatter(case.h_omega, zeta, s=70, marker="s", color=COLOURS[status], edgecolors="none", alpha=0.85)
+        statuses |= _cases_on(ax, result, master, lambda case: (
+            case.h_omega, result.model.with_coupling(case.stiffness, case.damping).zeta))
         for (m, c, b), edge in result.edges.items():
             if m == master and edge is not None:
                 ax.plot(edge, result.model.with_coupling(c, b).zeta, marker="|", color="k", ms=16, mew=1.6)
@@ -339,22 +363,12 @@ def _plot_observed(path: Path, result: StabilityMap) -> Path:
 
     from harness.formats import plotting
 
-    plt = plotting.pyplot()
     masters = result.plan.masters
     rows = [(c, b) for c in result.plan.stiffnesses for b in result.plan.dampings]
-    ncols = min(3, len(masters))
-    nrows = math.ceil(len(masters) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(max(5.2 * ncols, 7.5), 0.3 * len(rows) * nrows + 2.6 * nrows + 1.2),
-                             squeeze=False, sharex=True, sharey=True, layout="constrained")
+    plt, fig, axes = _panels(masters, 0.3 * len(rows) + 2.6, 1.2)
     statuses = set()
     for ax, master in zip(axes.flat, masters):
-        for case, r in result.results.items():
-            if case.master != master:
-                continue
-            status = "failed" if r.get("status") == FAILED else r["class"]
-            statuses.add(status)
-            ax.scatter(case.step, rows.index(case.row[1:]), s=70, marker="s", color=COLOURS[status],
-                       edgecolors="none", alpha=0.85)
+        statuses |= _cases_on(ax, result, master, lambda case: (case.step, rows.index(case.row[1:])))
         ax.set_xscale("log")
         ax.set_title(master, fontsize=10)
         ax.grid(True, which="both", alpha=0.2)
@@ -366,7 +380,7 @@ def _plot_observed(path: Path, result: StabilityMap) -> Path:
     for ax in list(axes.flat)[len(masters):]:
         ax.axis("off")
     for ax in list(axes.flat)[:len(masters)]:
-        plotting.log_ticks(ax.xaxis)
+        plotting.log_ticks(ax.xaxis, wide=2.0)       # steps in s are long labels: 1, 2, 5 crowd over 3 decades
     handles = [Line2D([], [], marker="s", ls="", color=COLOURS[k], label=k) for k in legend_classes(statuses)]
     fig.legend(handles=handles, loc="outside lower center", ncol=max(1, len(handles)), fontsize=8, frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes only; edges not predicted)\n"
