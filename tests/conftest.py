@@ -274,6 +274,7 @@ SLOW = (
     "judges/test_coupling_stability.py::test_an_fmu_refusing_its_probes_is_named_with_why",
     "judges/test_coupling_stability.py::test_a_long_probe_says_its_estimate_first",
     "judges/test_coupling_stability.py::test_an_fmu_offering_model_exchange_is_linearised_and_predicts_as_our_own",
+    "studies/test_unpredicted_stability_map.py",
     "judges/test_stability.py::test_advisor_warns_and_proposes_stable_choices",
     "judges/test_stability.py::test_lever_run_prints_the_advice",
     "judges/test_stability.py::test_lever_stability_runs_and_resumes",
