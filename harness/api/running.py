@@ -72,19 +72,22 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     if tolerance is not None:
         tolerance = _inputs.number(tolerance, "tolerance")
         if "tolerance" not in masters.MASTERS[chosen].options:
-            raise InputError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
+            raise InputError(f"{_inputs.named('tolerance')}: master '{chosen}' takes no tolerance (masters that do: "
                              + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
         if not (_math.isfinite(tolerance) and 0 < tolerance < 1):
-            raise InputError(f"tolerance={tolerance}: must lie in (0, 1)")
+            raise InputError(f"{_inputs.named('tolerance').given(str(tolerance))}: must lie in (0, 1)")
         options["tolerance"] = tolerance
     if stream and out is None:
-        raise InputError("stream: name the output folder (out=...) the traces are streamed to")
+        raise InputError(f"{_inputs.named('stream')}: name the output folder ({_inputs.named('out').given('...')}) "
+                         "the traces are streamed to")
     if latency and out is None:
-        raise InputError("latency: name the output folder (out=...) the latency tables are written to")
+        raise InputError(f"{_inputs.named('latency')}: name the output folder ({_inputs.named('out').given('...')}) "
+                         "the latency tables are written to")
     if latency:
         from harness.studies import latency as step_latency
         if observer is not None:
-            raise InputError("latency: it times the steps with its own observer; give no other observer")
+            raise InputError(f"{_inputs.named('latency')}: it times the steps with its own observer; give no other "
+                             "observer")
         observer = timer = step_latency.StepTimer()
     build()
     fmu_dir = spec.fmu_dir or FMUS
@@ -106,8 +109,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
             e = spec.experiment
             raise InputError(f"a step of {step or e.step:g} s over {e.stop - e.start:g} s makes {rows:,} rows of "
                              f"traces, about {needed / 2**30:.1f} GiB in memory, more than this machine has free "
-                             f"({free / 2**30:.1f} GiB): use --stream (writes traces.csv while running, keeps 1 row "
-                             "in k in memory), a larger --step or a shorter experiment.stop")
+                             f"({free / 2**30:.1f} GiB): use {_inputs.named('stream').on()} (writes traces.csv while "
+                             f"running, keeps 1 row in k in memory), a larger {_inputs.named('step')} or a shorter "
+                             "experiment.stop")
     if out is not None and not claimed:
         try:
             out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once

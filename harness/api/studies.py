@@ -116,13 +116,13 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     stiffnesses, dampings, h_omegas, masters = list(stiffnesses), list(dampings), list(h_omegas), list(masters)
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:
-        raise InputError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "
+        raise InputError(f"{_inputs.named('masters').given(', '.join(unknown))}: not a fixed-step master (known: "
                          f"{', '.join(stabilitymap.FIXED_STEP_MASTERS)})")
-    for name, values, low in (("--stiffness", stiffnesses, 0.0), ("--h-omega", h_omegas, 0.0)):
+    for name, values, low in (("stiffnesses", stiffnesses, 0.0), ("h_omegas", h_omegas, 0.0)):
         if any(not (_math.isfinite(v) and v > low) for v in values):
-            raise InputError(f"{name}: values must be finite and > {low:g}")
+            raise InputError(f"{_inputs.named(name)}: values must be finite and > {low:g}")
     if any(not (_math.isfinite(v) and v >= 0) for v in dampings):
-        raise InputError("--damping: values must be finite and >= 0")
+        raise InputError(f"{_inputs.named('dampings')}: values must be finite and >= 0")
     plan.stiffnesses = sorted(set(stiffnesses)) or plan.stiffnesses
     plan.dampings = sorted(set(dampings), reverse=True) or plan.dampings
     plan.h_omegas = sorted(set(h_omegas)) or plan.h_omegas
@@ -157,13 +157,13 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     out = _inputs.folder(out)
     try:
         chosen = sweeps.thin(sweeps.select(list(axes)), thin)
-        load(scene).with_overrides(extra)
+        load(scene).with_overrides(extra, _inputs.named("overrides"))
     except (ValueError, scene_files.SceneError) as error:
         raise InputError(str(error)) from None
     if stop is not None and not stop > 0:
-        raise InputError(f"stop={stop}: must be > 0 s")
+        raise InputError(f"{_inputs.named('stop').given(f'{stop:g}')}: must be > 0 s")
     try:
-        sweeps.check(chosen, scene, stop, extra)
+        sweeps.check(chosen, scene, stop, extra, named=(_inputs.named("stop"), _inputs.named("overrides")))
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
     build()
@@ -198,7 +198,8 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
 
         for lag in lags:
             if not (_math.isfinite(lag) and 0.0 <= lag <= 100.0):
-                raise InputError(f"--scan {lag}: engine.torque_lag must be in [0, 100] s")
+                raise InputError(f"{_inputs.named('lags').given(f'{lag:g}')}: engine.torque_lag must be in "
+                                 "[0, 100] s")
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
         (out / "runup.md").write_text(text + "\n")
@@ -206,7 +207,7 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
     if name not in ("transfer-modes", "reference-agreement"):
         raise InputError(f"no study '{name}' (known: transfer-modes, runup, reference-agreement)")
     if lags:
-        raise InputError("--scan applies to the runup study only")
+        raise InputError(f"{_inputs.named('lags')} applies to the runup study only")
     if name == "reference-agreement":
         from harness.studies import reference_agreement
 
@@ -235,7 +236,7 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     out = _inputs.folder(out) or RESULTS / "measured"
     stiffness = None if stiffness is None else _inputs.number(stiffness, "stiffness")
     if stiffness is not None and not (_math.isfinite(stiffness) and stiffness > 0):
-        raise InputError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+        raise InputError(f"{_inputs.named('stiffness').given(f'{stiffness:g}')}: must be > 0 N*m/rad")
     files = list(files) or measurement.default_files()
     _, unusable = measurement.pair_tables(files)
     if unusable:       # the files are at fault, not the model: bad input
@@ -263,7 +264,7 @@ def engines(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *
         raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
     build()
     if refused := [said for name in chosen if (said := peers.problem(name, spec, spec.fmu_dir or FMUS))]:
-        raise InputError("; ".join(refused) + " (--engine chooses the engines)")
+        raise InputError("; ".join(refused) + f" ({_inputs.named('engines')} chooses the engines)")
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
     return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
 
@@ -287,12 +288,12 @@ def hosts(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, 
     if unknown:
         raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
     if native_env not in ("bare", "set-up"):
-        raise InputError(f"native_env {native_env!r}: bare or set-up")
+        raise InputError(f"{_inputs.named('native_env').given(repr(native_env))}: bare or set-up")
     if fmu_dir is None:
         build()
     environment = comparison.set_up_environment() if native_env == "set-up" else None
     if refused := comparison.problems(spec, chosen, fmu_dir or spec.fmu_dir or FMUS):
-        raise InputError("; ".join(refused) + " (--host chooses the hosts)")
+        raise InputError("; ".join(refused) + f" ({_inputs.named('hosts')} chooses the hosts)")
     report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
                                    log=log or (lambda *_: None))
     folder = Path(out) if out else comparison.default_out(spec)
@@ -315,7 +316,7 @@ def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: f
     check_masters(*masters)
     stop = _inputs.seconds(stop, "stop")
     if stop is not None and not stop >= 0:
-        raise InputError(f"stop={stop}: must be >= 0 s (0: each scene's own length)")
+        raise InputError(f"{_inputs.named('stop').given(f'{stop:g}')}: must be >= 0 s (0: each scene's own length)")
     build()
     try:
         yield from fingerprint.fingerprints(list(names) or None, masters or None, stop or None)
