@@ -60,6 +60,20 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
         raise InputError(str(error)) from None
 
 
+def checked_plan(spec: scene_files.Scene, fmu_dir: Path | None = None):
+    """The scene's ``Plan`` (``harness.description.plan.check``, the FMUs of ``fmu_dir``,
+    default the scene's or the built ones); InputError saying every refusal (a parameter's
+    name, type, unit or range) before anything runs."""
+    from harness.description import plan as plans
+    from harness.engine.system import SceneInvalid
+    from harness.paths import FMUS
+
+    plan = plans.check(spec, fmu_dir=fmu_dir or spec.fmu_dir or FMUS)
+    if plan.refusals:
+        raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
+    return plan
+
+
 def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step: float | None = None):
     """InputError when ``master`` or ``step`` (``--master``, ``--step``) and the scene's
     ``--set experiment.master`` or ``experiment.step`` say different things: the record
@@ -105,12 +119,13 @@ def masters(fixed_step: bool = False) -> dict[str, str]:
     return {name: cls.description for name, cls in MASTERS.items()}
 
 
-def check_masters(*names: str):
-    """InputError when one of ``names`` is not a master."""
+def check_masters(*names: str, argument: str = "master"):
+    """InputError naming ``argument`` when one of ``names`` is not a master."""
     from harness.engine import masters
 
-    _inputs.names(names, "master")
+    _inputs.names(names, argument)
     try:
         masters.check(*names)
     except masters.UnknownMaster as error:
-        raise InputError(str(error)) from None
+        shown = repr(names[0]) if len(names) == 1 else repr(list(names))
+        raise InputError(f"{_inputs.named(argument).given(shown)}: {error}") from None

@@ -36,11 +36,11 @@ class UnknownSignal(InputError, KeyError):
 # -- how a refusal names an argument ------------------------------------------------------------
 
 #: keyword -> the command line's option for it, while the command line calls the API (``named_as_options``)
-_OPTIONS: ContextVar[Mapping[str, str]] = ContextVar("harness_api_options", default={})
+_OPTIONS: ContextVar[Mapping[str, str | Argument]] = ContextVar("harness_api_options", default={})
 
 
 @contextlib.contextmanager
-def named_as_options(options: Mapping[str, str]):
+def named_as_options(options: Mapping[str, str | Argument]):
     """Inside it, a refusal names an argument by the command line's option for it
     (``options``: keyword -> option, ``{"rtol": "--rtol", "overrides": "--set"}``): the
     command line calls the API and its user is told what they typed.  Elsewhere a refusal
@@ -54,7 +54,8 @@ def named_as_options(options: Mapping[str, str]):
 
 def named(keyword: str) -> Argument:
     """``keyword`` as the caller named it: itself, or its option inside ``named_as_options``."""
-    return Argument(_OPTIONS.get().get(keyword, keyword))
+    spelled = _OPTIONS.get().get(keyword, keyword)
+    return spelled if isinstance(spelled, Argument) else Argument(spelled)
 
 
 def _said(keyword: str, shown: str) -> str:

@@ -9,10 +9,9 @@ from typing import Callable
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_agreement, check_masters, load
+from harness.api.choices import check_agreement, check_masters, checked_plan, load
 from harness.api.inputs import InputError
 from harness.api.results import UNTRUSTED, Run
-from harness.description import plan as _plans
 from harness.description import scene as scene_files
 from harness.paths import FMUS
 
@@ -64,7 +63,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
 
     spec = load(scene, overrides, stop=stop, strict=strict)
     chosen = master or spec.experiment.master
-    check_masters(chosen)
+    # an unknown master is named where it was given: the argument, an override, the scene file
+    check_masters(chosen, argument="master" if master else _inputs.named("overrides").item("experiment.master")
+                  if "experiment.master" in spec.overrides else "experiment.master")
     step = _inputs.step(step)
     check_agreement(spec, master=master, step=step)
     out = _inputs.folder(out)
@@ -92,9 +93,7 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     build()
     fmu_dir = spec.fmu_dir or FMUS
     # the scene's names and values first: the stability advisor reads a sound scene only
-    plan = _plans.check(spec, fmu_dir=fmu_dir)
-    if plan.refusals:
-        raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
+    plan = checked_plan(spec, fmu_dir)
     if spec.experiment.transient_note:
         say("note", spec.experiment.transient_note)
     advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir, lambda text: say("note", text))

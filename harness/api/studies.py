@@ -10,7 +10,7 @@ from typing import Callable, Iterable, Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_masters, load
+from harness.api.choices import check_masters, checked_plan, load
 from harness.api.inputs import InputError
 from harness.api.results import BenchResult, Returned, ReturnedTuple, StabilityMapResult
 from harness.description import scene as scene_files
@@ -46,6 +46,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     spec = load(scene)
     repeats = _inputs.count(repeats, "repeats", 1, 20)
     only = _inputs.names(only, "only")
+    check_masters(*only, argument="only")
     out = _inputs.folder(out)
     try:
         benchmark.check_plan(spec, list(only))      # refuses unknown masters before anything runs
@@ -167,6 +168,7 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
     build()
+    checked_plan(load(scene, extra))          # the parameters' types, units and ranges, before any case runs
     out = Path(out or RESULTS / "sweep")
     _claim(out)
     try:
@@ -261,8 +263,10 @@ def engines(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *
     chosen = _inputs.names(engines, "engines") or list(comparison.ENGINES)
     unknown = [n for n in chosen if n not in comparison.ENGINES]
     if unknown:
-        raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
+        raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)}; "
+                         f"{_inputs.named('engines')} chooses the engines)")
     build()
+    checked_plan(spec)
     if refused := [said for name in chosen if (said := peers.problem(name, spec, spec.fmu_dir or FMUS))]:
         raise InputError("; ".join(refused) + f" ({_inputs.named('engines')} chooses the engines)")
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
@@ -286,11 +290,13 @@ def hosts(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, 
     chosen = tuple(_inputs.names(hosts, "hosts")) or comparison.HOSTS
     unknown = [n for n in chosen if n not in comparison.HOSTS]
     if unknown:
-        raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
+        raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)}; "
+                         f"{_inputs.named('hosts')} chooses the hosts)")
     if native_env not in ("bare", "set-up"):
         raise InputError(f"{_inputs.named('native_env').given(repr(native_env))}: bare or set-up")
     if fmu_dir is None:
         build()
+    checked_plan(spec, fmu_dir)
     environment = comparison.set_up_environment() if native_env == "set-up" else None
     if refused := comparison.problems(spec, chosen, fmu_dir or spec.fmu_dir or FMUS):
         raise InputError("; ".join(refused) + f" ({_inputs.named('hosts')} chooses the hosts)")
@@ -313,7 +319,7 @@ def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: f
 
     masters = _inputs.names(masters, "masters")
     names = _inputs.names(names, "names")
-    check_masters(*masters)
+    check_masters(*masters, argument="masters")
     stop = _inputs.seconds(stop, "stop")
     if stop is not None and not stop >= 0:
         raise InputError(f"{_inputs.named('stop').given(f'{stop:g}')}: must be >= 0 s (0: each scene's own length)")

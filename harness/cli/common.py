@@ -55,7 +55,8 @@ class TimeType(click.ParamType):
             return value
         option = param.opts[0] if param is not None and param.opts else "time"
         try:
-            return api_inputs.seconds(value, option)
+            with api_inputs.named_as_options({option: api_inputs.Argument(option, "=")}):      # --step='2 kg': ...
+                return api_inputs.seconds(value, option)
         except api.InputError as error:
             self.fail(str(error), param, ctx)
 

@@ -12,6 +12,8 @@ class Argument:
     """An argument as its caller names it: an option (``--rtol``, starts with a dash) or a
     keyword (``rtol``)."""
     name: str
+    #: between the name and a value given (None: a space after an option, "=" after a keyword)
+    separator: str | None = None
 
     @property
     def is_option(self) -> bool:
@@ -20,7 +22,8 @@ class Argument:
     def given(self, shown: str) -> str:
         """The argument with the value as given (``shown``, already written out):
         ``--rtol 'x'`` or ``rtol='x'``."""
-        return f"{self.name} {shown}" if self.is_option else f"{self.name}={shown}"
+        separator = self.separator if self.separator is not None else " " if self.is_option else "="
+        return f"{self.name}{separator}{shown}"
 
     def typed(self, text: str) -> str:
         """The argument with a text as typed: ``--window 0:2 kg`` or ``window='0:2 kg'``."""
