@@ -297,9 +297,10 @@ def override_text(value, label: str) -> str:
     if isinstance(value, numbers.Real):
         return repr(float(value))
     if isinstance(value, str):
+        value = value.strip()           # as --set reads its text
         for text in (value, f"'{value}'", f'"{value}"'):
-            read = scene_files.coerce(text.strip())
-            if isinstance(read, str) and read == value.strip():
+            read = scene_files.coerce(text)
+            if isinstance(read, str) and read == value:
                 return text
         raise InputError(f"{label}={_shown(value)}: a text value cannot begin or end with a quote")
     raise InputError(f"{label}={_shown(value)}: expected a number, True or False, or a string (a quantity with "

@@ -311,7 +311,7 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
     chosen = reference_names(names)
     if result is not None and len(chosen) != 1:
         raise InputError(f"{_inputs.named('result')}: name exactly one reference the CSV is to be compared with "
-                         "(e.g. lever validate --result run.csv kavz685)")
+                         f"(e.g. {_one_reference_named()})")
     span = _inputs.window(window)
     step = _inputs.step(step)
     if result is None and any(_fmu_file(name) is None for name in chosen):
@@ -336,8 +336,14 @@ def _scene_of_run(result) -> str:
         return str(json.loads((folder / "summary.json").read_text())["scene"])
     except (OSError, ValueError, KeyError, TypeError):
         raise InputError(f"{_inputs.named('result').typed(str(result))}: name the reference it is to be compared "
-                         "with (e.g. lever validate "
-                         "--result run.csv kavz685); no lever summary.json beside it says which scene it ran") from None
+                         f"with (e.g. {_one_reference_named()}); no lever summary.json beside it says which scene it "
+                         "ran") from None
+
+
+def _one_reference_named() -> str:
+    """A result judged against a named reference, as the caller writes it."""
+    return ("lever validate --result run.csv kavz685" if _inputs.named("result").is_option
+            else "validate_each(['kavz685'], result='run.csv')")
 
 
 def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:
