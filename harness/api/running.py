@@ -32,7 +32,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         observer=None, latency: bool = False, plots: bool = True) -> Run:
     """Run a scene as ``lever run`` does and return it (``Run``).
 
-    ``overrides``: ``{"coupling.misalignment": "20 deg"}`` or ``["coupling.stiffness=900"]``;
+    ``overrides``: ``{"coupling.misalignment": "20 deg"}`` (values with their types: a
+    number, a string with its unit, a name, True or False) or ``["coupling.stiffness=900"]``
+    (``--set`` texts, read as the command line reads them);
     ``master``: one of ``lever run --help``'s (default: the scene's); ``step``, ``stop``:
     the communication step and a shorter (or longer) run, in seconds or with a time unit
     (``"1 ms"``); ``reference``: solve the monolithic reference
