@@ -88,7 +88,8 @@ def count(value, argument: str, low: int, high: int | None = None) -> int:
         raise InputError(f"{_said(argument, _shown(value))}: expected a whole number "
                          f"{'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
     if value < low or (high is not None and value > high):
-        raise InputError(f"{_said(argument, str(value))}: must be {'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
+        raise InputError(f"{_said(argument, str(value))}: must be "
+                         f"{'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
     return int(value)
 
 
@@ -228,7 +229,8 @@ def result_traces(result, argument: str = "result") -> tuple[np.ndarray, dict[st
     elif isinstance(result, np.ndarray) and result.dtype.names:
         fields = result.dtype.names
         if "time" not in fields:
-            raise InputError(f"{named(argument)}: a structured array without a 'time' field (fields: {', '.join(fields)})")
+            raise InputError(f"{named(argument)}: a structured array without a 'time' field (fields: "
+                             f"{', '.join(fields)})")
         times, traces, how = result["time"], {n: result[n] for n in fields if n != "time"}, "the array given"
     elif hasattr(result, "columns") and hasattr(result, "to_numpy"):
         columns = [str(c) for c in result.columns]

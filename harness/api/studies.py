@@ -162,7 +162,7 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     except (ValueError, scene_files.SceneError) as error:
         raise InputError(str(error)) from None
     if stop is not None and not stop > 0:
-        raise InputError(f"{_inputs.named('stop').given(f'{stop:g}')}: must be > 0 s")
+        raise InputError(f"{_inputs.named('stop').given(str(stop))}: must be > 0 s")
     try:
         sweeps.check(chosen, scene, stop, extra, named=(_inputs.named("stop"), _inputs.named("overrides")))
     except scene_files.SceneError as error:
@@ -200,7 +200,7 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
 
         for lag in lags:
             if not (_math.isfinite(lag) and 0.0 <= lag <= 100.0):
-                raise InputError(f"{_inputs.named('lags').given(f'{lag:g}')}: engine.torque_lag must be in "
+                raise InputError(f"{_inputs.named('lags').given(str(lag))}: engine.torque_lag must be in "
                                  "[0, 100] s")
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
@@ -238,7 +238,7 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     out = _inputs.folder(out) or RESULTS / "measured"
     stiffness = None if stiffness is None else _inputs.number(stiffness, "stiffness")
     if stiffness is not None and not (_math.isfinite(stiffness) and stiffness > 0):
-        raise InputError(f"{_inputs.named('stiffness').given(f'{stiffness:g}')}: must be > 0 N*m/rad")
+        raise InputError(f"{_inputs.named('stiffness').given(str(stiffness))}: must be > 0 N*m/rad")
     files = list(files) or measurement.default_files()
     _, unusable = measurement.pair_tables(files)
     if unusable:       # the files are at fault, not the model: bad input
@@ -322,7 +322,7 @@ def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: f
     check_masters(*masters, argument="masters")
     stop = _inputs.seconds(stop, "stop")
     if stop is not None and not stop >= 0:
-        raise InputError(f"{_inputs.named('stop').given(f'{stop:g}')}: must be >= 0 s (0: each scene's own length)")
+        raise InputError(f"{_inputs.named('stop').given(str(stop))}: must be >= 0 s (0: each scene's own length)")
     build()
     try:
         yield from fingerprint.fingerprints(list(names) or None, masters or None, stop or None)

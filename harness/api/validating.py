@@ -41,7 +41,8 @@ def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> d
         var = variables.get(name)
         if var is None or var.causality not in ("parameter", "input"):
             known = [v.name for v in variables.values() if v.causality == "parameter"]
-            raise InputError(f"{_inputs.named('overrides').item(key)}: {model} has no parameter '{name}'{scene_files.did_you_mean(name, known)} "
+            raise InputError(f"{_inputs.named('overrides').item(key)}: {model} has no parameter '{name}'"
+                             f"{scene_files.did_you_mean(name, known)} "
                              f"(parameters: {', '.join(known)})")
         value = scene_files.coerce(raw)
         problems = scene_files.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
@@ -205,7 +206,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         start = start if low is None else low
         stop = stop if high is None else high
         if not (ref.opt.start <= start < stop <= ref.opt.stop):
-            shown = ":".join(f"{side:g}" if side is not None else "" for side in window)
+            shown = ":".join(str(side) if side is not None else "" for side in window)
             raise InputError(f"{_inputs.named('window').typed(shown)}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
     if tolerance == "lever":
@@ -258,7 +259,8 @@ def _check_chosen(signals: list[str], rules: list, reference: dict, columns) -> 
     targets = tolerances.Tolerances([rules]).unknown_targets(list(reference))
     if targets:
         raise InputError(f"{_inputs.named('rtol')}: tolerance for {', '.join(targets)}: neither a signal of the "
-                         f"reference nor a kind (kinds: {', '.join(tolerances.KINDS)}; signals: {', '.join(reference)})")
+                         f"reference nor a kind (kinds: {', '.join(tolerances.KINDS)}; signals: "
+                         f"{', '.join(reference)})")
 
 
 def _reference_said(ref, own_reference, findings) -> str:

@@ -42,7 +42,7 @@ def test_bad_input_raises_input_error_naming_the_parameter(fmu_dir):
         api.load("nope")
     with pytest.raises(api.InputError, match="master 'nonsense' is unknown"):
         api.run("kavz685", stop=0.1, master="nonsense")
-    with pytest.raises(api.InputError, match=r"^window='5:2': must lie in the reference's span"):
+    with pytest.raises(api.InputError, match=r"^window='5.0:2.0': must lie in the reference's span"):
         api.validate("kavz685", result=(np.arange(3.0), {}), window=(5.0, 2.0))
 
 
