@@ -186,7 +186,7 @@ def test_a_dict_override_is_taken_with_its_type():
 @pytest.mark.parametrize("value,said", [
     ("900", "coupling.stiffness = '900': expected a number in N.m/rad or a number with a unit"),
     (" 900 ", "coupling.stiffness = '900': expected a number in N.m/rad"),
-    ("9e2", "coupling.stiffness = '9e2': a value in e2"),        # read as 9 elementary charges squared
+    ("9e2", "coupling.stiffness = '9e2': expected a number in N.m/rad"),      # not 9 elementary charges squared
     (True, "coupling.stiffness = the boolean true: expected a number in N.m/rad"),
     (np.bool_(False), "coupling.stiffness = the boolean false: expected a number in N.m/rad"),
     ("900 kg", "coupling.stiffness = '900 kg': a value in kg"),
