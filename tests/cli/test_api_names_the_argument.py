@@ -10,8 +10,11 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from harness import api
+from test_input_safety import VALUES     # the corpus's generated values (this folder is on sys.path)
 
 SHORT = 0.05        # s: the runs here are about their input, not the motion
 
@@ -235,3 +238,38 @@ def test_a_stand_alone_fmus_overrides_keep_their_type_too(fmu_dir):
         api.validate("EngineShaft", overrides={"inertia": "0.3"})
     with pytest.raises(api.InputError, match=r"EngineShaft.inertia = the boolean true"):
         api.validate("EngineShaft", overrides={"inertia": True})
+
+
+# -- the corpus's generated values as dict overrides ---------------------------------------------------
+
+#: component parameters of kavz685: numbers in a unit (Real), a whole number, texts
+REAL = ["coupling.stiffness", "coupling.damping", "coupling.misalignment", "engine.inertia"]
+PARAMETERS = REAL + ["load.seed", "load.load_kind", "coupling.transfer_mode"]
+
+
+@settings(max_examples=80, derandomize=True, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(st.sampled_from(PARAMETERS + ["nothing.x"]), VALUES)
+def test_every_value_given_in_a_dict_override_keeps_its_type_or_is_refused_naming_it(fmu_dir, key, value):
+    """The corpus's values (booleans, texts with and without units, dates, lists, numbers):
+    the scene holds the value given, of its type (a text stripped as --set strips it), or
+    the call is refused naming the override; a numeric parameter the plan accepts holds a
+    number or a quantity with its unit, never a text of a number or a boolean."""
+    from harness.description import plan as plans
+    from harness.description import units
+
+    try:
+        spec = api.load("kavz685", {key: value})
+    except api.InputError as error:
+        assert str(error).startswith(f"overrides['{key}']"), str(error)
+        return
+    component, parameter = key.split(".", 1)
+    taken = spec.components[component].parameters[parameter]
+    given_value = value.strip() if isinstance(value, str) else value
+    assert type(taken) is type(given_value) and (taken == given_value or taken != taken), (value, taken)
+    refusals = plans.check(spec, fmu_dir=fmu_dir).refusals
+    if key in REAL and not refusals:
+        assert isinstance(taken, (int, float)) and not isinstance(taken, bool) or (
+            isinstance(taken, str) and units.split(taken) is not None), (value, taken)
+    if refusals:
+        assert any(key in refusal for refusal in refusals), refusals
