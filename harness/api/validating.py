@@ -147,17 +147,19 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     try:
         if reference is not None:
             held = _inputs.result_traces(reference, "reference")
+            said = _inputs.named("reference")
             if isinstance(held, Path):
-                read = given_traces.read_given(held, "reference")
-                own_reference = (given_traces.sorted_reference(read), f"{read.path} (given)")
+                read = given_traces.read_given(held, "reference", said)
+                own_reference = (given_traces.sorted_reference(read, said), f"{read.path} (given)")
             else:
                 own_reference = (given_traces.sorted_reference(given_traces.Given(
-                    reference_traces.Traces(*held[:2]), Path("(given)"))), "the traces given")
+                    reference_traces.Traces(*held[:2]), Path("(given)")), said), "the traces given")
         if isinstance(given, Path):
-            read = given_traces.read_given(given, "result")
+            said = _inputs.named("result")
+            read = given_traces.read_given(given, "result", said)
             if read.path.name == "traces.csv" and own_reference is None and (read.path.parent / "reference.csv").is_file():
-                made = given_traces.read_given(read.path.parent, "reference")
-                own_reference = (given_traces.sorted_reference(made),
+                made = given_traces.read_given(read.path.parent, "reference", said)
+                own_reference = (given_traces.sorted_reference(made, said),
                                  f"{made.path}, made for that run's parameters by `lever run`")
             given = read
     except reference_traces.TraceFileError as error:

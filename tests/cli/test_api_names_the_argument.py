@@ -102,6 +102,27 @@ def test_an_api_refusal_names_the_keyword_the_caller_wrote_not_the_command_lines
     assert "--" not in message, message
 
 
+def test_a_result_or_reference_file_that_cannot_be_read_is_named_as_the_argument(fmu_dir, tmp_path):
+    missing, empty = tmp_path / "missing.csv", tmp_path / "empty"
+    empty.mkdir()
+    for call, said in (
+            (lambda: api.validate("kavz685", result=missing), f"result={str(missing)!r}: no such file or folder"),
+            (lambda: api.validate("kavz685", result=empty), f"result={str(empty)!r}: a folder without traces.csv"),
+            (lambda: api.validate("kavz685", result=RESULT, reference=empty),
+             f"reference={str(empty)!r}: a folder without reference.csv"),
+            (lambda: api.validate("kavz685", result=RESULT, reference=(TIMES[:1], {"coupling.tau2": TIMES[:1]})),
+             "reference='(given)': 1 row(s); a reference needs at least two")):
+        with pytest.raises(api.InputError) as refused:
+            call()
+        assert str(refused.value).startswith(said), str(refused.value)
+
+
+def test_the_command_line_names_its_result_option_for_a_folder_without_traces(lever, fmu_dir, tmp_path):
+    (tmp_path / "empty").mkdir()
+    done = lever("validate", "kavz685", "--result", tmp_path / "empty", "--out", tmp_path / "out")
+    assert done.exit_code == 2 and f"--result {tmp_path / 'empty'}: a folder without traces.csv" in done.output
+
+
 def test_the_sweep_names_the_override_that_lowers_its_transient(fmu_dir):
     with pytest.raises(api.InputError) as refused:
         api.sweep(["stiffness"], stop=0.001)
