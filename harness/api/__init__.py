@@ -15,9 +15,13 @@ their results instead of printing them (the command line calls these)::
 Signals are named as the traces name them, ``component.variable`` (``coupling.tau2``),
 everywhere: traces, arrays, summary statistics, validation; a short name is taken where
 only one signal ends with it (``tau2``).  Times take units as scene overrides do
-(``step="1 ms"``), numbers may be numpy scalars.  Bad input (an unknown scene, parameter
-or master, a value out of its range, an argument of the wrong type) raises
-``InputError`` naming the argument, with the message the command line prints; nothing is
+(``step="1 ms"``), numbers may be numpy scalars.  A dict of overrides keeps its values'
+types: a number (a numpy scalar too) is a number, a string is text - a quantity where it
+carries its unit (``"20 deg"``), refused for a numeric parameter where it does not
+(``"900"``), as in a scene file - and a boolean is no number.  Bad input (an unknown scene,
+parameter or master, a value out of its range, an argument of the wrong type) raises
+``InputError`` naming the argument as the call wrote it (``rtol='x'``,
+``overrides['coupling.stiffness']``; the command line names its options); nothing is
 written unless an output folder is given (``out=``).  Notes the command line prints
 before a run (the stability advisor, a shortened run's transient, unconnected inputs) go
 to ``notify`` (default: Python's ``warnings``, shown at the caller's line) and are kept in

@@ -39,12 +39,13 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
     strict = _inputs.flag(strict, "strict")
     given = dict(a.split("=", 1) for a in assignments if "=" in a)
     given = {k.strip(): v.strip() for k, v in given.items()}
+    overrides_named = _inputs.named("overrides")
     if stop is not None:
         _refuse_both("stop", stop, "experiment.stop", given.get("experiment.stop"), _seconds_or_none)
         assignments.append(f"experiment.stop={stop!r}")
     if strict:
         _refuse_both("strict", True, "experiment.strict", given.get("experiment.strict"),
-                     lambda text: {"true": True, "false": False}.get(text))
+                     scene_files.coerce)
         assignments.append("experiment.strict=true")
     try:
         if isinstance(scene, scene_files.Scene):
@@ -54,9 +55,23 @@ def load(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, s
             spec = ssp.read_scene(scene)
         else:
             spec = scene_files.load(scene)
-        return spec.with_overrides(assignments)
+        return spec.with_overrides(assignments, overrides_named)
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
+
+
+def checked_plan(spec: scene_files.Scene, fmu_dir: Path | None = None):
+    """The scene's ``Plan`` (``harness.description.plan.check``, the FMUs of ``fmu_dir``,
+    default the scene's or the built ones); InputError saying every refusal (a parameter's
+    name, type, unit or range) before anything runs."""
+    from harness.description import plan as plans
+    from harness.engine.system import SceneInvalid
+    from harness.paths import FMUS
+
+    plan = plans.check(spec, fmu_dir=fmu_dir or spec.fmu_dir or FMUS)
+    if plan.refusals:
+        raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
+    return plan
 
 
 def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step: float | None = None):
@@ -66,14 +81,14 @@ def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step:
     another one in effect would be recorded as what it did not run."""
     if master is not None:
         _refuse_both("master", master, "experiment.master", spec.overrides.get("experiment.master"),
-                     lambda text: text.strip().strip("'\""))
+                     scene_files.coerce)
     if step is not None:
         _refuse_both("step", step, "experiment.step", spec.overrides.get("experiment.step"), _seconds_or_none)
 
 
 def _seconds_or_none(text: str) -> float | None:
     try:
-        return _inputs.seconds(text, "experiment")
+        return _inputs.seconds(scene_files.coerce(text), "experiment")
     except InputError:
         return None
 
@@ -89,8 +104,8 @@ def _refuse_both(argument: str, value, key: str, raw: str | None, read):
     if said == value and type(said) is type(value):
         return
     shown = f"{value:g} s" if isinstance(value, float) else repr(value)
-    raise InputError(f"{argument}={shown} (--{argument}) and --set {key}={raw} disagree: give one of them "
-                     f"(both set the experiment's {key.split('.', 1)[1]})")
+    raise InputError(f"{_inputs.named(argument).given(shown)} and {_inputs.named('overrides').item(key)}={raw} "
+                     f"disagree: give one of them (both set the experiment's {key.split('.', 1)[1]})")
 
 
 def masters(fixed_step: bool = False) -> dict[str, str]:
@@ -104,12 +119,13 @@ def masters(fixed_step: bool = False) -> dict[str, str]:
     return {name: cls.description for name, cls in MASTERS.items()}
 
 
-def check_masters(*names: str):
-    """InputError when one of ``names`` is not a master."""
+def check_masters(*names: str, argument: str = "master"):
+    """InputError naming ``argument`` when one of ``names`` is not a master."""
     from harness.engine import masters
 
-    _inputs.names(names, "master")
+    _inputs.names(names, argument)
     try:
         masters.check(*names)
     except masters.UnknownMaster as error:
-        raise InputError(str(error)) from None
+        shown = repr(names[0]) if len(names) == 1 else repr(list(names))
+        raise InputError(f"{_inputs.named(argument).given(shown)}: {error}") from None

@@ -6,16 +6,19 @@ Anything else is an ``InputError`` naming the argument, as the command line refu
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 import os
 import sys
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 
 from harness.description import scene as scene_files
+from harness.description.arguments import Argument
 
 
 class InputError(ValueError):
@@ -30,6 +33,36 @@ class UnknownSignal(InputError, KeyError):
         return self.args[0] if self.args else ""
 
 
+# -- how a refusal names an argument ------------------------------------------------------------
+
+#: keyword -> the command line's option for it, while the command line calls the API (``named_as_options``)
+_OPTIONS: ContextVar[Mapping[str, str | Argument]] = ContextVar("harness_api_options", default={})
+
+
+@contextlib.contextmanager
+def named_as_options(options: Mapping[str, str | Argument]):
+    """Inside it, a refusal names an argument by the command line's option for it
+    (``options``: keyword -> option, ``{"rtol": "--rtol", "overrides": "--set"}``): the
+    command line calls the API and its user is told what they typed.  Elsewhere a refusal
+    names the keyword the Python caller wrote (``rtol=``)."""
+    token = _OPTIONS.set(dict(options))
+    try:
+        yield
+    finally:
+        _OPTIONS.reset(token)
+
+
+def named(keyword: str) -> Argument:
+    """``keyword`` as the caller named it: itself, or its option inside ``named_as_options``."""
+    spelled = _OPTIONS.get().get(keyword, keyword)
+    return spelled if isinstance(spelled, Argument) else Argument(spelled)
+
+
+def _said(keyword: str, shown: str) -> str:
+    """``keyword=shown`` (``--option shown`` from the command line)."""
+    return named(keyword).given(shown)
+
+
 def _shown(value) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
@@ -39,23 +72,24 @@ def number(value, argument: str) -> float:
     """A real number from an int, a float or a numpy scalar (never a boolean or a string)."""
     if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
         return float(value)
-    raise InputError(f"{argument}={_shown(value)}: expected a number")
+    raise InputError(f"{_said(argument, _shown(value))}: expected a number")
 
 
 def flag(value, argument: str) -> bool:
     """True or False (a numpy boolean too; never a number or a string such as "no")."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
-    raise InputError(f"{argument}={_shown(value)}: expected True or False")
+    raise InputError(f"{_said(argument, _shown(value))}: expected True or False")
 
 
 def count(value, argument: str, low: int, high: int | None = None) -> int:
     """A whole number in [low, high] from an int or a numpy integer."""
     if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
-        raise InputError(f"{argument}={_shown(value)}: expected a whole number "
+        raise InputError(f"{_said(argument, _shown(value))}: expected a whole number "
                          f"{'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
     if value < low or (high is not None and value > high):
-        raise InputError(f"{argument}={value}: must be {'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
+        raise InputError(f"{_said(argument, str(value))}: must be "
+                         f"{'>= ' + str(low) if high is None else f'in [{low}, {high}]'}")
     return int(value)
 
 
@@ -71,15 +105,16 @@ def seconds(value, argument: str) -> float | None:
             value = float(text)
         except ValueError:
             try:
-                value = scene_files.experiment_value("stop", text, argument)
+                value = scene_files.experiment_value("stop", text, named(argument).name)
             except scene_files.SceneError as error:
-                raise InputError(str(error).replace(f"{argument} = ", f"{argument}=", 1)) from None
+                said = named(argument)
+                raise InputError(str(error).replace(f"{said} = ", said.given(""), 1)) from None
     elif not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
-        raise InputError(f"{argument}={_shown(value)}: expected a time in seconds (a number, or a string with a "
+        raise InputError(f"{_said(argument, _shown(value))}: expected a time in seconds (a number, or a string with a "
                          "time unit, e.g. '1 ms')")
     value = float(value)
     if not math.isfinite(value):
-        raise InputError(f"{argument}={value}: expected a finite time in seconds")
+        raise InputError(f"{_said(argument, str(value))}: expected a finite time in seconds")
     return value
 
 
@@ -87,7 +122,7 @@ def scene_argument(scene, argument: str = "scene"):
     """``scene`` when it is a name, a path or a ``Scene``; InputError otherwise."""
     if isinstance(scene, (str, os.PathLike, scene_files.Scene)):
         return scene
-    raise InputError(f"{argument}={_shown(scene)}: expected a scene's name (e.g. 'kavz685', `api.scenes()` lists "
+    raise InputError(f"{_said(argument, _shown(scene))}: expected a scene's name (e.g. 'kavz685', `api.scenes()` lists "
                      "them), a .toml or .ssp path, or a Scene")
 
 
@@ -97,7 +132,7 @@ def folder(out, argument: str = "out") -> Path | None:
         return None
     if isinstance(out, (str, os.PathLike)) and str(out).strip():
         return Path(out)
-    raise InputError(f"{argument}={_shown(out)}: expected a folder (a string or a pathlib.Path)")
+    raise InputError(f"{_said(argument, _shown(out))}: expected a folder (a string or a pathlib.Path)")
 
 
 def names(values, argument: str) -> list[str]:
@@ -109,10 +144,10 @@ def names(values, argument: str) -> list[str]:
     try:
         listed = [str(v) if isinstance(v, os.PathLike) else v for v in values]
     except TypeError:
-        raise InputError(f"{argument}={_shown(values)}: expected a name or a list of names") from None
+        raise InputError(f"{_said(argument, _shown(values))}: expected a name or a list of names") from None
     wrong = [v for v in listed if not isinstance(v, str)]
     if wrong:
-        raise InputError(f"{argument}: {_shown(wrong[0])} is not a name (a string)")
+        raise InputError(f"{named(argument)}: {_shown(wrong[0])} is not a name (a string)")
     return listed
 
 
@@ -121,7 +156,7 @@ def choice(value, argument: str, allowed: Iterable[str]) -> str:
     allowed = list(allowed)
     if not isinstance(value, str) or value not in allowed:
         hint = scene_files.did_you_mean(value, allowed) if isinstance(value, str) else ""
-        raise InputError(f"{argument}={_shown(value)}{hint}: one of {', '.join(allowed)}")
+        raise InputError(f"{_said(argument, _shown(value))}{hint}: one of {', '.join(allowed)}")
     return value
 
 
@@ -194,26 +229,27 @@ def result_traces(result, argument: str = "result") -> tuple[np.ndarray, dict[st
     elif isinstance(result, np.ndarray) and result.dtype.names:
         fields = result.dtype.names
         if "time" not in fields:
-            raise InputError(f"{argument}: a structured array without a 'time' field (fields: {', '.join(fields)})")
+            raise InputError(f"{named(argument)}: a structured array without a 'time' field (fields: "
+                             f"{', '.join(fields)})")
         times, traces, how = result["time"], {n: result[n] for n in fields if n != "time"}, "the array given"
     elif hasattr(result, "columns") and hasattr(result, "to_numpy"):
         columns = [str(c) for c in result.columns]
         if "time" not in columns:
-            raise InputError(f"{argument}: a table without a 'time' column (columns: {', '.join(columns)})")
+            raise InputError(f"{named(argument)}: a table without a 'time' column (columns: {', '.join(columns)})")
         times = result["time"].to_numpy()
         traces, how = {c: result[c].to_numpy() for c in columns if c != "time"}, "the table given"
     elif isinstance(result, (tuple, list)) and len(result) == 2 and isinstance(result[1], Mapping):
         times, traces, how = result[0], result[1], "given"
     else:
-        raise InputError(f"{argument}={_shown(result)}: expected a Run, a numpy structured array with a 'time' "
+        raise InputError(f"{_said(argument, _shown(result))}: expected a Run, a numpy structured array with a 'time' "
                          "field (as fmpy's simulate_fmu returns), a (times, {name: values}) pair, a DataFrame "
                          "with a 'time' column, or a CSV file's path")
-    times = _column(times, f"{argument}: the times")
+    times = _column(times, f"{named(argument)}: the times")
     out = {}
     for name, values in traces.items():
-        column = _column(values, f"{argument}: signal '{name}'")
+        column = _column(values, f"{named(argument)}: signal '{name}'")
         if column.shape != times.shape:
-            raise InputError(f"{argument}: signal '{name}' has {len(column)} values for {len(times)} times")
+            raise InputError(f"{named(argument)}: signal '{name}' has {len(column)} values for {len(times)} times")
         out[str(name)] = column
     return times, out, how
 
@@ -231,15 +267,46 @@ def _column(values, what: str) -> np.ndarray:
 # -- arguments every command reads the same way -----------------------------------------------
 
 def assignments(overrides, argument: str = "overrides") -> list[str]:
-    """``{"coupling.stiffness": 900}`` or ``["coupling.stiffness=900"]`` as ``--set`` strings
-    (``argument``: the name a refusal gives, the caller's: ``overrides``, ``rtol``)."""
+    """``{"coupling.stiffness": 900}`` or ``["coupling.stiffness=900"]`` as ``--set`` texts
+    (``argument``: the name a refusal gives, the caller's: ``overrides``, ``rtol``).  A
+    list's texts are read as the command line reads ``--set``; a dict's values keep their
+    type (``override_text``)."""
     if overrides is None:
         return []
     if isinstance(overrides, Mapping):
-        return [f"{k}={_plain(v)}" for k, v in overrides.items()]
+        for key in overrides:
+            if not isinstance(key, str):
+                raise InputError(f"{named(argument)}: {_shown(key)} is not a parameter's name (a string such as "
+                                 "'coupling.stiffness')")
+        return [f"{key}={override_text(value, named(argument).item(key))}" for key, value in overrides.items()]
     if isinstance(overrides, str):
         return [overrides]
     return names(overrides, argument)
+
+
+def override_text(value, label: str) -> str:
+    """A dict override's value as the ``--set`` text that reads back as the same type (the
+    scene's parameters check that type as a scene file's: ``harness.description.plan``): a
+    number (a numpy scalar too) as a number, True or False as true or false, a string as a
+    string - quoted where its text would read as a number or a boolean, so ``"900"`` is the
+    text '900', refused for a numeric parameter, while ``"900 N*m/rad"`` is a quantity
+    with its unit as ``--set`` takes it.  ``label`` names it in a refusal."""
+    value = _plain(value)
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        return repr(float(value))
+    if isinstance(value, str):
+        value = value.strip()           # as --set reads its text
+        for text in (value, f"'{value}'", f'"{value}"'):
+            read = scene_files.coerce(text)
+            if isinstance(read, str) and read == value:
+                return text
+        raise InputError(f"{label}={_shown(value)}: a text value cannot begin or end with a quote")
+    raise InputError(f"{label}={_shown(value)}: expected a number, True or False, or a string (a quantity with "
+                     "its unit, e.g. '20 deg', or a name)")
 
 
 def tolerances(rtol, argument: str = "rtol") -> list[str]:
@@ -249,12 +316,12 @@ def tolerances(rtol, argument: str = "rtol") -> list[str]:
     if isinstance(rtol, Mapping):
         for key, value in rtol.items():
             if not isinstance(key, str):
-                raise InputError(f"{argument}: {_shown(key)} is not a quantity's name (e.g. 'amplitude', "
+                raise InputError(f"{named(argument)}: {_shown(key)} is not a quantity's name (e.g. 'amplitude', "
                                  "'torque:mean')")
             number(value, f"{argument}[{key!r}]")
         return [f"{k}={_plain(v)}" for k, v in rtol.items()]
     if rtol is not None and not isinstance(rtol, (str, os.PathLike)) and not isinstance(rtol, Iterable):
-        raise InputError(f"{argument}={_shown(rtol)}: expected 'QUANTITY=VALUE' texts (e.g. 'amplitude=0.05'), "
+        raise InputError(f"{_said(argument, _shown(rtol))}: expected 'QUANTITY=VALUE' texts (e.g. 'amplitude=0.05'), "
                          "a list of them or a dict {quantity: number}")
     return assignments(rtol, argument)
 
@@ -267,39 +334,40 @@ def _plain(value):
 def step(step, label="step") -> float | None:
     """``step`` as seconds (units taken), checked as every communication step is."""
     step = seconds(step, label)
-    if step is not None and (problem := scene_files.step_problem(step, label)):
+    if step is not None and (problem := scene_files.step_problem(step, named(label).name)):
         raise InputError(problem)
     return step
 
 
-def window(window) -> tuple[float | None, float | None] | None:
+def window(window, argument: str = "window") -> tuple[float | None, float | None] | None:
     """``window`` as ``(start, stop)`` in seconds: from ``"START:STOP"`` or a pair whose
     sides are times (units taken) or None."""
     if window is None or isinstance(window, str):
-        return parse_window(window)
+        return parse_window(window, argument)
     if not (isinstance(window, (tuple, list)) and len(window) == 2):
-        raise InputError(f"window={window!r}: expected (start, stop) in seconds or 'START:STOP'")
-    return seconds(window[0], "window start"), seconds(window[1], "window stop")
+        raise InputError(f"{_said(argument, _shown(window))}: expected (start, stop) in seconds or 'START:STOP'")
+    return seconds(window[0], f"{argument} start"), seconds(window[1], f"{argument} stop")
 
 
-def parse_window(text: str | None) -> tuple[float | None, float | None] | None:
-    """``--window START:STOP`` (either side may be left empty: the reference's own end; a
-    side may carry a time unit, ``0:500 ms``)."""
+def parse_window(text: str | None, argument: str = "window") -> tuple[float | None, float | None] | None:
+    """``START:STOP`` (``--window``; either side may be left empty: the reference's own end;
+    a side may carry a time unit, ``0:500 ms``)."""
     if text is None:
         return None
+    said = named(argument).typed(str(text))
     parts = str(text).split(":")
     try:
         if len(parts) != 2:
             raise ValueError
-        low, high = (seconds(p, "--window") if p.strip() else None for p in parts)
+        low, high = (seconds(p, argument) if p.strip() else None for p in parts)
     except (ValueError, InputError):
-        raise InputError(f"--window {text}: expected START:STOP in seconds, e.g. 2:10 or 0:1 or 0:500 ms (an empty "
+        raise InputError(f"{said}: expected START:STOP in seconds, e.g. 2:10 or 0:1 or 0:500 ms (an empty "
                          "side: the reference's own start or stop)") from None
     for v in (low, high):
         if v is not None and not math.isfinite(v):
-            raise InputError(f"--window {text}: the times must be finite")
+            raise InputError(f"{said}: the times must be finite")
     if low is not None and high is not None and not high > low:
-        raise InputError(f"--window {text}: STOP must be > START")
+        raise InputError(f"{said}: STOP must be > START")
     return low, high
 
 

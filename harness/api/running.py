@@ -9,10 +9,9 @@ from typing import Callable
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_agreement, check_masters, load
+from harness.api.choices import check_agreement, check_masters, checked_plan, load
 from harness.api.inputs import InputError
 from harness.api.results import UNTRUSTED, Run
-from harness.description import plan as _plans
 from harness.description import scene as scene_files
 from harness.paths import FMUS
 
@@ -33,7 +32,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         observer=None, latency: bool = False, plots: bool = True) -> Run:
     """Run a scene as ``lever run`` does and return it (``Run``).
 
-    ``overrides``: ``{"coupling.misalignment": "20 deg"}`` or ``["coupling.stiffness=900"]``;
+    ``overrides``: ``{"coupling.misalignment": "20 deg"}`` (values with their types: a
+    number, a string with its unit, a name, True or False) or ``["coupling.stiffness=900"]``
+    (``--set`` texts, read as the command line reads them);
     ``master``: one of ``lever run --help``'s (default: the scene's); ``step``, ``stop``:
     the communication step and a shorter (or longer) run, in seconds or with a time unit
     (``"1 ms"``); ``reference``: solve the monolithic reference
@@ -64,7 +65,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
 
     spec = load(scene, overrides, stop=stop, strict=strict)
     chosen = master or spec.experiment.master
-    check_masters(chosen)
+    # an unknown master is named where it was given: the argument, an override, the scene file
+    check_masters(chosen, argument="master" if master else _inputs.named("overrides").item("experiment.master")
+                  if "experiment.master" in spec.overrides else "experiment.master")
     step = _inputs.step(step)
     check_agreement(spec, master=master, step=step)
     out = _inputs.folder(out)
@@ -72,26 +75,27 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     if tolerance is not None:
         tolerance = _inputs.number(tolerance, "tolerance")
         if "tolerance" not in masters.MASTERS[chosen].options:
-            raise InputError(f"--tolerance: master '{chosen}' takes no tolerance (masters that do: "
+            raise InputError(f"{_inputs.named('tolerance')}: master '{chosen}' takes no tolerance (masters that do: "
                              + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
         if not (_math.isfinite(tolerance) and 0 < tolerance < 1):
-            raise InputError(f"tolerance={tolerance}: must lie in (0, 1)")
+            raise InputError(f"{_inputs.named('tolerance').given(str(tolerance))}: must lie in (0, 1)")
         options["tolerance"] = tolerance
     if stream and out is None:
-        raise InputError("stream: name the output folder (out=...) the traces are streamed to")
+        raise InputError(f"{_inputs.named('stream')}: name the output folder ({_inputs.named('out').given('...')}) "
+                         "the traces are streamed to")
     if latency and out is None:
-        raise InputError("latency: name the output folder (out=...) the latency tables are written to")
+        raise InputError(f"{_inputs.named('latency')}: name the output folder ({_inputs.named('out').given('...')}) "
+                         "the latency tables are written to")
     if latency:
         from harness.studies import latency as step_latency
         if observer is not None:
-            raise InputError("latency: it times the steps with its own observer; give no other observer")
+            raise InputError(f"{_inputs.named('latency')}: it times the steps with its own observer; give no other "
+                             "observer")
         observer = timer = step_latency.StepTimer()
     build()
     fmu_dir = spec.fmu_dir or FMUS
     # the scene's names and values first: the stability advisor reads a sound scene only
-    plan = _plans.check(spec, fmu_dir=fmu_dir)
-    if plan.refusals:
-        raise InputError(str(SceneInvalid(spec.name, list(plan.refusals))))
+    plan = checked_plan(spec, fmu_dir)
     if spec.experiment.transient_note:
         say("note", spec.experiment.transient_note)
     advice = run_advice(spec, chosen, step or spec.experiment.step, fmu_dir, lambda text: say("note", text))
@@ -106,8 +110,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
             e = spec.experiment
             raise InputError(f"a step of {step or e.step:g} s over {e.stop - e.start:g} s makes {rows:,} rows of "
                              f"traces, about {needed / 2**30:.1f} GiB in memory, more than this machine has free "
-                             f"({free / 2**30:.1f} GiB): use --stream (writes traces.csv while running, keeps 1 row "
-                             "in k in memory), a larger --step or a shorter experiment.stop")
+                             f"({free / 2**30:.1f} GiB): use {_inputs.named('stream').on()} (writes traces.csv while "
+                             f"running, keeps 1 row in k in memory), a larger {_inputs.named('step')} or a shorter "
+                             "experiment.stop")
     if out is not None and not claimed:
         try:
             out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once

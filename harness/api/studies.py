@@ -10,7 +10,7 @@ from typing import Callable, Iterable, Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_masters, load
+from harness.api.choices import check_masters, checked_plan, load
 from harness.api.inputs import InputError
 from harness.api.results import BenchResult, Returned, ReturnedTuple, StabilityMapResult
 from harness.description import scene as scene_files
@@ -46,6 +46,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     spec = load(scene)
     repeats = _inputs.count(repeats, "repeats", 1, 20)
     only = _inputs.names(only, "only")
+    check_masters(*only, argument="only")
     out = _inputs.folder(out)
     try:
         benchmark.check_plan(spec, list(only))      # refuses unknown masters before anything runs
@@ -121,13 +122,13 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
                          f"{', '.join(f'{r:g}' for r in plan.step_ratios)}")
     unknown = [m for m in masters if m not in stabilitymap.FIXED_STEP_MASTERS]
     if unknown:
-        raise InputError(f"--master {', '.join(unknown)}: not a fixed-step master (known: "
+        raise InputError(f"{_inputs.named('masters').given(', '.join(unknown))}: not a fixed-step master (known: "
                          f"{', '.join(stabilitymap.FIXED_STEP_MASTERS)})")
-    for name, values, low in (("--stiffness", stiffnesses, 0.0), ("--h-omega", h_omegas, 0.0)):
+    for name, values, low in (("stiffnesses", stiffnesses, 0.0), ("h_omegas", h_omegas, 0.0)):
         if any(not (_math.isfinite(v) and v > low) for v in values):
-            raise InputError(f"{name}: values must be finite and > {low:g}")
+            raise InputError(f"{_inputs.named(name)}: values must be finite and > {low:g}")
     if any(not (_math.isfinite(v) and v >= 0) for v in dampings):
-        raise InputError("--damping: values must be finite and >= 0")
+        raise InputError(f"{_inputs.named('dampings')}: values must be finite and >= 0")
     plan.stiffnesses = sorted(set(stiffnesses)) or plan.stiffnesses
     plan.dampings = sorted(set(dampings), reverse=True) or plan.dampings
     plan.h_omegas = sorted(set(h_omegas)) or plan.h_omegas
@@ -162,16 +163,17 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     out = _inputs.folder(out)
     try:
         chosen = sweeps.thin(sweeps.select(list(axes)), thin)
-        load(scene).with_overrides(extra)
+        load(scene).with_overrides(extra, _inputs.named("overrides"))
     except (ValueError, scene_files.SceneError) as error:
         raise InputError(str(error)) from None
     if stop is not None and not stop > 0:
-        raise InputError(f"stop={stop}: must be > 0 s")
+        raise InputError(f"{_inputs.named('stop').given(str(stop))}: must be > 0 s")
     try:
-        sweeps.check(chosen, scene, stop, extra)
+        sweeps.check(chosen, scene, stop, extra, named=(_inputs.named("stop"), _inputs.named("overrides")))
     except scene_files.SceneError as error:
         raise InputError(str(error)) from None
     build()
+    checked_plan(load(scene, extra))          # the parameters' types, units and ranges, before any case runs
     out = Path(out or RESULTS / "sweep")
     _claim(out)
     try:
@@ -203,7 +205,8 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
 
         for lag in lags:
             if not (_math.isfinite(lag) and 0.0 <= lag <= 100.0):
-                raise InputError(f"--scan {lag}: engine.torque_lag must be in [0, 100] s")
+                raise InputError(f"{_inputs.named('lags').given(str(lag))}: engine.torque_lag must be in "
+                                 "[0, 100] s")
         text = runup.scan(lags) if lags else runup.markdown(runup.table())
         out.mkdir(parents=True, exist_ok=True)
         (out / "runup.md").write_text(text + "\n")
@@ -211,7 +214,7 @@ def study(name: str, out: Path | str | None = None, lags: Iterable[float] = ()) 
     if name not in ("transfer-modes", "reference-agreement"):
         raise InputError(f"no study '{name}' (known: transfer-modes, runup, reference-agreement)")
     if lags:
-        raise InputError("--scan applies to the runup study only")
+        raise InputError(f"{_inputs.named('lags')} applies to the runup study only")
     if name == "reference-agreement":
         from harness.studies import reference_agreement
 
@@ -240,7 +243,7 @@ def measured(files: Iterable[Path | str] = (), out: Path | str | None = None, st
     out = _inputs.folder(out) or RESULTS / "measured"
     stiffness = None if stiffness is None else _inputs.number(stiffness, "stiffness")
     if stiffness is not None and not (_math.isfinite(stiffness) and stiffness > 0):
-        raise InputError(f"--stiffness {stiffness}: must be > 0 N*m/rad")
+        raise InputError(f"{_inputs.named('stiffness').given(str(stiffness))}: must be > 0 N*m/rad")
     files = list(files) or measurement.default_files()
     _, unusable = measurement.pair_tables(files)
     if unusable:       # the files are at fault, not the model: bad input
@@ -265,10 +268,12 @@ def engines(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *
     chosen = _inputs.names(engines, "engines") or list(comparison.ENGINES)
     unknown = [n for n in chosen if n not in comparison.ENGINES]
     if unknown:
-        raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)})")
+        raise InputError(f"unknown engine {', '.join(unknown)} (known: {', '.join(comparison.ENGINES)}; "
+                         f"{_inputs.named('engines')} chooses the engines)")
     build()
+    checked_plan(spec)
     if refused := [said for name in chosen if (said := peers.problem(name, spec, spec.fmu_dir or FMUS))]:
-        raise InputError("; ".join(refused) + " (--engine chooses the engines)")
+        raise InputError("; ".join(refused) + f" ({_inputs.named('engines')} chooses the engines)")
     rows = comparison.compare(spec, chosen, step, repeats, spec.fmu_dir or FMUS, progress=progress)
     return comparison.write(Path(out) if out else comparison.default_out(spec), spec, rows)
 
@@ -290,14 +295,16 @@ def hosts(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, 
     chosen = tuple(_inputs.names(hosts, "hosts")) or comparison.HOSTS
     unknown = [n for n in chosen if n not in comparison.HOSTS]
     if unknown:
-        raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)})")
+        raise InputError(f"unknown host {', '.join(unknown)} (known: {', '.join(comparison.HOSTS)}; "
+                         f"{_inputs.named('hosts')} chooses the hosts)")
     if native_env not in ("bare", "set-up"):
-        raise InputError(f"native_env {native_env!r}: bare or set-up")
+        raise InputError(f"{_inputs.named('native_env').given(repr(native_env))}: bare or set-up")
     if fmu_dir is None:
         build()
+    checked_plan(spec, fmu_dir)
     environment = comparison.set_up_environment() if native_env == "set-up" else None
     if refused := comparison.problems(spec, chosen, fmu_dir or spec.fmu_dir or FMUS):
-        raise InputError("; ".join(refused) + " (--host chooses the hosts)")
+        raise InputError("; ".join(refused) + f" ({_inputs.named('hosts')} chooses the hosts)")
     report = comparison.time_hosts(spec, step, repeats, fmu_dir or spec.fmu_dir or FMUS, chosen, environment,
                                    log=log or (lambda *_: None))
     folder = Path(out) if out else comparison.default_out(spec)
@@ -317,10 +324,10 @@ def fingerprints(names: Iterable[str] = (), masters: Iterable[str] = (), stop: f
 
     masters = _inputs.names(masters, "masters")
     names = _inputs.names(names, "names")
-    check_masters(*masters)
+    check_masters(*masters, argument="masters")
     stop = _inputs.seconds(stop, "stop")
     if stop is not None and not stop >= 0:
-        raise InputError(f"stop={stop}: must be >= 0 s (0: each scene's own length)")
+        raise InputError(f"{_inputs.named('stop').given(str(stop))}: must be >= 0 s (0: each scene's own length)")
     build()
     try:
         yield from fingerprint.fingerprints(list(names) or None, masters or None, stop or None)

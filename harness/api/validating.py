@@ -35,13 +35,14 @@ def fmu_start_values(model: str, assignments, fmu_path: Path | None = None) -> d
     values = {}
     for assignment in _inputs.assignments(assignments):
         if "=" not in assignment:
-            raise InputError(f"--set {assignment!r}: expected name=value")
+            raise InputError(f"{_inputs.named('overrides').given(repr(assignment))}: expected name=value")
         key, raw = (x.strip() for x in assignment.split("=", 1))
         name = key.split(".", 1)[1] if key.startswith(model + ".") else key
         var = variables.get(name)
         if var is None or var.causality not in ("parameter", "input"):
             known = [v.name for v in variables.values() if v.causality == "parameter"]
-            raise InputError(f"--set {key}: {model} has no parameter '{name}'{scene_files.did_you_mean(name, known)} "
+            raise InputError(f"{_inputs.named('overrides').item(key)}: {model} has no parameter '{name}'"
+                             f"{scene_files.did_you_mean(name, known)} "
                              f"(parameters: {', '.join(known)})")
         value = scene_files.coerce(raw)
         problems = scene_files.value_findings(f"{model}.{name}", var, value)     # type, unit's dimension, range
@@ -124,12 +125,14 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         raise InputError(reference_traces.why_no_reference(name)
                          or f"no reference '{name}'{scene_files.did_you_mean(name, known)} (known: {', '.join(known)})")
     _inputs.choice(tolerance, "tolerance", VERDICTS)
+    overrides = _inputs.assignments(overrides)
     rtol, signals = _inputs.tolerances(rtol, "rtol"), _inputs.names(signals, "signals")
     if tolerance != "lever" and (rtol or signals):
-        raise InputError(f"--rtol and --signals set the 'lever' verdict; --tolerance {tolerance} is fmpy's band, "
-                         "which has its own figures and judges every signal")
+        raise InputError(f"{_inputs.named('rtol')} and {_inputs.named('signals')} set the 'lever' verdict; "
+                         f"{_inputs.named('tolerance').typed(tolerance)} is fmpy's band, which has its own figures "
+                         "and judges every signal")
     try:
-        rules = verdict.parse_rtol(rtol, "--rtol")
+        rules = verdict.parse_rtol(rtol, _inputs.named("rtol"))
     except ValueError as error:
         raise InputError(str(error)) from None
     step = _inputs.step(step)
@@ -144,17 +147,19 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     try:
         if reference is not None:
             held = _inputs.result_traces(reference, "reference")
+            said = _inputs.named("reference")
             if isinstance(held, Path):
-                read = given_traces.read_given(held, "reference")
-                own_reference = (given_traces.sorted_reference(read), f"{read.path} (given)")
+                read = given_traces.read_given(held, "reference", said)
+                own_reference = (given_traces.sorted_reference(read, said), f"{read.path} (given)")
             else:
                 own_reference = (given_traces.sorted_reference(given_traces.Given(
-                    reference_traces.Traces(*held[:2]), Path("(given)"))), "the traces given")
+                    reference_traces.Traces(*held[:2]), Path("(given)")), said), "the traces given")
         if isinstance(given, Path):
-            read = given_traces.read_given(given, "result")
+            said = _inputs.named("result")
+            read = given_traces.read_given(given, "result", said)
             if read.path.name == "traces.csv" and own_reference is None and (read.path.parent / "reference.csv").is_file():
-                made = given_traces.read_given(read.path.parent, "reference")
-                own_reference = (given_traces.sorted_reference(made),
+                made = given_traces.read_given(read.path.parent, "reference", said)
+                own_reference = (given_traces.sorted_reference(made, said),
                                  f"{made.path}, made for that run's parameters by `lever run`")
             given = read
     except reference_traces.TraceFileError as error:
@@ -179,7 +184,8 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
             build()
         if ref.kind == "fmu":
             if master or step:
-                raise InputError(f"--master/--step: {label} is an FMU run stand-alone at its _ref.opt step")
+                raise InputError(f"{_inputs.named('master')}/{_inputs.named('step')}: {label} is an FMU run "
+                                 "stand-alone at its _ref.opt step")
             try:
                 judged = reference_traces.run_fmu(name, ref, fmu_start_values(name, overrides, fmu_path=fmu_file),
                                                   fmu_path=fmu_file)
@@ -202,10 +208,11 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
         start = start if low is None else low
         stop = stop if high is None else high
         if not (ref.opt.start <= start < stop <= ref.opt.stop):
-            raise InputError(f"--window {window[0] if window[0] is not None else ''}:"
-                             f"{window[1] if window[1] is not None else ''}: must lie in the reference's span, "
+            shown = ":".join(str(side) if side is not None else "" for side in window)
+            raise InputError(f"{_inputs.named('window').typed(shown)}: must lie in the reference's span, "
                              f"{ref.opt.start:g} ... {ref.opt.stop:g} s, with START < STOP")
     if tolerance == "lever":
+        _check_chosen(signals, rules, ref.outputs.signals, judged.traces)
         try:
             settings = verdict.settings_of(ref)
             findings = verdict.judge(judged.times, judged.traces, ref.outputs.times, ref.outputs.signals,
@@ -234,6 +241,28 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
 
         validation_files.write_validation(out, findings, bands, judged, ref, write_result=result is None)
     return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
+
+
+def _check_chosen(signals: list[str], rules: list, reference: dict, columns) -> None:
+    """InputError naming ``signals`` or ``rtol`` as the caller did, for a chosen signal the
+    reference or the result lacks, or a tolerance for a signal or kind the reference does not
+    know (the verdict refuses them too, naming the command line's options)."""
+    from harness.judges import tolerances, validation
+
+    unknown = [s for s in signals if s not in reference]
+    if unknown:
+        raise InputError(f"{_inputs.named('signals').given(', '.join(unknown))}: not a signal of the reference (its "
+                         f"signals: {', '.join(reference)})")
+    mapping = validation.match_columns(list(reference), [str(c) for c in columns])[0]
+    absent = [s for s in signals if s not in mapping]
+    if absent:
+        raise InputError(f"{_inputs.named('signals').given(', '.join(absent))}: not in the result (its columns: "
+                         f"{', '.join(map(str, columns)) or 'none'})")
+    targets = tolerances.Tolerances([rules]).unknown_targets(list(reference))
+    if targets:
+        raise InputError(f"{_inputs.named('rtol')}: tolerance for {', '.join(targets)}: neither a signal of the "
+                         f"reference nor a kind (kinds: {', '.join(tolerances.KINDS)}; signals: "
+                         f"{', '.join(reference)})")
 
 
 def _reference_said(ref, own_reference, findings) -> str:
@@ -281,12 +310,12 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
     if not names and result is not None:     # a lever results folder says which scene it ran
         names = [_scene_of_run(result)]
     if reference is not None and result is None:
-        raise InputError("--reference: judges a --result (a CSV or a lever results folder); a run lever validate "
-                         "makes itself is judged against NAME's committed reference")
+        raise InputError(f"{_inputs.named('reference')}: judges a {_inputs.named('result')} (a CSV or a lever results "
+                         "folder); a run lever validate makes itself is judged against NAME's committed reference")
     chosen = reference_names(names)
     if result is not None and len(chosen) != 1:
-        raise InputError("--result: name exactly one reference the CSV is to be compared with "
-                         "(e.g. lever validate --result run.csv kavz685)")
+        raise InputError(f"{_inputs.named('result')}: name exactly one reference the CSV is to be compared with "
+                         f"(e.g. {_one_reference_named()})")
     span = _inputs.window(window)
     step = _inputs.step(step)
     if result is None and any(_fmu_file(name) is None for name in chosen):
@@ -310,8 +339,15 @@ def _scene_of_run(result) -> str:
     try:
         return str(json.loads((folder / "summary.json").read_text())["scene"])
     except (OSError, ValueError, KeyError, TypeError):
-        raise InputError(f"--result {result}: name the reference it is to be compared with (e.g. lever validate "
-                         "--result run.csv kavz685); no lever summary.json beside it says which scene it ran") from None
+        raise InputError(f"{_inputs.named('result').typed(str(result))}: name the reference it is to be compared "
+                         f"with (e.g. {_one_reference_named()}); no lever summary.json beside it says which scene it "
+                         "ran") from None
+
+
+def _one_reference_named() -> str:
+    """A result judged against a named reference, as the caller writes it."""
+    return ("lever validate --result run.csv kavz685" if _inputs.named("result").is_option
+            else "validate_each(['kavz685'], result='run.csv')")
 
 
 def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:

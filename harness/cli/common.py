@@ -23,11 +23,23 @@ class UserError(click.ClickException):
     exit_code = 2
 
 
+#: the API's keywords the commands take as options: a refusal names the option the user typed
+OPTIONS = {"overrides": "--set", "master": "--master", "masters": "--master", "step": "--step", "stop": "--stop",
+           "tolerance": "--tolerance", "rtol": "--rtol", "signals": "--signals", "window": "--window",
+           "result": "--result", "reference": "--reference", "out": "--out", "stream": "--stream",
+           "latency": "--latency", "strict": "--strict", "repeats": "--repeats", "only": "--only",
+           "stiffnesses": "--stiffness", "dampings": "--damping", "h_omegas": "--h-omega", "min_steps": "--min-steps",
+           "jobs": "--jobs", "axes": "--axis", "thin": "--thin", "workers": "--workers", "lags": "--scan",
+           "stiffness": "--stiffness", "engines": "--engine", "hosts": "--host", "native_env": "--native-env"}
+
+
 @contextlib.contextmanager
 def user_errors():
-    """``api.InputError`` ends the command with exit code 2 and its message."""
+    """``api.InputError`` ends the command with exit code 2 and its message, which names
+    the options the user typed (``OPTIONS``), not the API's keywords."""
     try:
-        yield
+        with api_inputs.named_as_options(OPTIONS):
+            yield
     except api.InputError as error:
         raise UserError(str(error)) from None
 
@@ -43,7 +55,8 @@ class TimeType(click.ParamType):
             return value
         option = param.opts[0] if param is not None and param.opts else "time"
         try:
-            return api_inputs.seconds(value, option)
+            with api_inputs.named_as_options({option: api_inputs.Argument(option, "=")}):      # --step='2 kg': ...
+                return api_inputs.seconds(value, option)
         except api.InputError as error:
             self.fail(str(error), param, ctx)
 

@@ -68,12 +68,10 @@ def run(scene, assignments, master, step, stop, tolerance, out, no_reference, st
         spec = api.load(scene, list(assignments), stop=stop, strict=strict)
     show_progress = sys.stderr.isatty() if progress is None else progress
     try:
-        done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference,
-                       out=out or RESULTS / spec.name, progress=show_progress, stream=stream, latency=latency,
-                       plots=not no_plots,
-                       notify=_said_before_the_summary)
-    except api.InputError as error:
-        raise UserError(str(error)) from None
+        with user_errors():
+            done = api.run(spec, master=master, step=step, tolerance=tolerance, reference=not no_reference,
+                           out=out or RESULTS / spec.name, progress=show_progress, stream=stream, latency=latency,
+                           plots=not no_plots, notify=_said_before_the_summary)
     except api.BuildError as error:
         raise click.ClickException(f"building the FMUs failed: {error}") from None
     result, out = done.result, done.out

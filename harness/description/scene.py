@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from harness.description import typed_values, units
+from harness.description.arguments import SET, Argument
 from harness.description.fmu_description import time_derivatives
 # the scene file as written (read, shape and types checked): its names are this module's too
 from harness.description.scene_file import (MERGED, OWN, SceneError, check_shape, did_you_mean, extend,  # noqa: F401
@@ -130,16 +131,17 @@ class Scene:
         """Name of the (first) component built from FMU ``fmu``."""
         return next((n for n, c in self.components.items() if fmu_name(c.fmu) == fmu), None)
 
-    def with_overrides(self, assignments: list[str]) -> "Scene":
+    def with_overrides(self, assignments: list[str], argument: Argument = SET) -> "Scene":
         """Apply ``component.parameter=value`` (or ``parameter=value`` when exactly one
-        component has it) and ``experiment.field=value`` assignments."""
+        component has it) and ``experiment.field=value`` assignments; a refusal names
+        ``argument`` as the caller gave it (``--set``, or the API's ``overrides``)."""
         components = {n: ComponentSpec(c.fmu, dict(c.parameters)) for n, c in self.components.items()}
         experiment = replace(self.experiment)
         limits = dict(self.limits)
         overrides = dict(self.overrides)
         for assignment in assignments:
             if "=" not in assignment:
-                raise SceneError(f"--set {assignment!r}: expected name=value")
+                raise SceneError(f"{argument.given(repr(assignment))}: expected name=value")
             key, raw = (s.strip() for s in assignment.split("=", 1))
             value = coerce(raw)
             if key.startswith("limits."):
@@ -148,20 +150,20 @@ class Scene:
                 continue
             if key.startswith("experiment."):
                 attr = key.split(".", 1)[1]
-                setattr(experiment, attr, experiment_value(attr, value, f"--set {key}"))
+                setattr(experiment, attr, experiment_value(attr, value, argument.item(key)))
                 overrides[key] = raw
                 continue
             if "." in key:
                 comp, param = key.split(".", 1)
                 if comp not in components:
-                    raise SceneError(f"--set {key}: no component '{comp}' in scene {self.name}"
+                    raise SceneError(f"{argument.item(key)}: no component '{comp}' in scene {self.name}"
                                      f"{did_you_mean(comp, components)} (components: {', '.join(components)})")
                 components[comp].parameters[param] = value
                 overrides[key] = raw
             else:
                 components_with = [n for n, c in components.items() if key in c.parameters]
                 if len(components_with) != 1:
-                    raise SceneError(f"--set {key}: name the component, e.g. coupling.{key}=... "
+                    raise SceneError(f"{argument.item(key)}: name the component, e.g. coupling.{key}=... "
                                      f"({'ambiguous: ' + ', '.join(components_with) if components_with else 'not set in the scene'})")
                 components[components_with[0]].parameters[key] = value
                 overrides[f"{components_with[0]}.{key}"] = raw

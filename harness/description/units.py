@@ -105,9 +105,16 @@ def si_unit(unit):
 
 
 def split(text: str) -> tuple[float, str] | None:
-    """``(number, unit)`` of a string "<number> <unit>", None when it is not of that form."""
+    """``(number, unit)`` of a string "<number> <unit>", None when it is not of that form -
+    also for a number written as text, "9e2" (not 9 in the unit e2, elementary charges squared)."""
     m = _QUANTITY.match(text) if isinstance(text, str) else None
-    return (float(m.group(1)), m.group(2)) if m else None
+    if m is None:
+        return None
+    try:
+        float(text)
+    except ValueError:
+        return float(m.group(1)), m.group(2)
+    return None
 
 
 def factor(unit: str, target: str | None) -> float:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from harness.description import scene as scenes
 from harness.description import units
+from harness.description.arguments import Argument
 from harness.formats.reference_traces import ReferenceTraces, TraceFileError, Traces, read_csv
 
 
@@ -29,34 +30,36 @@ def _summary(folder: Path) -> dict | None:
         return None
 
 
-def read_given(path, role: str) -> Given:
+def read_given(path, role: str, argument: Argument | None = None) -> Given:
     """``path`` as a ``role`` ("result" or "reference"): a CSV, or a lever results folder
     (its traces.csv for a result, its reference.csv for a reference); TraceFileError with a
-    sentence otherwise."""
+    sentence naming ``argument`` (default the option ``--<role>``) otherwise."""
+    argument = argument or Argument(f"--{role}")
     path = Path(path)
     if path.is_dir():
         name = "traces.csv" if role == "result" else "reference.csv"
         file = path / name
         if not file.is_file():
-            raise TraceFileError(f"--{role} {path}: a folder without {name} (a lever run's results folder holds "
+            raise TraceFileError(f"{argument.typed(str(path))}: a folder without {name} (a lever run's results folder holds "
                                  f"traces.csv and, when the run had a reference, reference.csv)")
         return Given(read_csv(file), file, _summary(path))
     if not path.is_file():
-        raise TraceFileError(f"--{role} {path}: no such file or folder")
+        raise TraceFileError(f"{argument.typed(str(path))}: no such file or folder")
     return Given(read_csv(path), path, _summary(path.parent))
 
 
-def sorted_reference(given: Given) -> Traces:
+def sorted_reference(given: Given, argument: Argument = Argument("--reference")) -> Traces:
     """A reference's traces checked for judging: times sorted (a time repeated at an event is
-    kept, its later row counts) and at least 2 samples; TraceFileError otherwise."""
+    kept, its later row counts) and at least 2 samples; TraceFileError naming ``argument``
+    otherwise."""
     from harness.judges import sampled
 
     t, signals, _ = sampled.repeated_rows_dropped(given.traces.times, given.traces.signals)
     if len(t) < 2:
-        raise TraceFileError(f"--reference {given.path}: {len(t)} row(s); a reference needs at least two")
+        raise TraceFileError(f"{argument.typed(str(given.path))}: {len(t)} row(s); a reference needs at least two")
     problem = sampled.times_problem(t, "its")
     if problem:
-        raise TraceFileError(f"--reference {given.path}: {problem}")
+        raise TraceFileError(f"{argument.typed(str(given.path))}: {problem}")
     return Traces(t, signals)
 
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from harness.description.arguments import Argument
+
 #: what a tolerance applies to
 QUANTITIES = ("mean", "amplitude", "order", "tube")
 #: the defaults (docs/validation.md#the-defaults-and-why):
@@ -48,7 +50,7 @@ def kind_of_unit(unit: str | None) -> str:
 @dataclass(frozen=True)
 class Rule:
     """One tolerance: ``quantity`` of ``target`` (a signal, a kind, or "" for every signal)
-    is ``value`` (relative), set by ``source`` ("default", "scene file", "--rtol", "API")."""
+    is ``value`` (relative), set by ``source`` ("default", "scene file", "--rtol", the API's "rtol")."""
     target: str
     quantity: str
     value: float
@@ -71,17 +73,21 @@ def rule(target: str, quantity: str, value, source: str) -> Rule:
     return Rule(target, quantity, number, source)
 
 
-def parse_rtol(texts, source: str = "--rtol") -> list[Rule]:
+def parse_rtol(texts, argument: Argument = Argument("--rtol")) -> list[Rule]:
     """``[TARGET:]QUANTITY=VALUE`` texts (``amplitude=0.05``, ``torque:mean=0.002``,
-    ``coupling.tau2:order=0.1``): TARGET a signal or a kind (``KINDS``), none: every signal."""
+    ``coupling.tau2:order=0.1``): TARGET a signal or a kind (``KINDS``), none: every signal.
+    ``argument``: what a refusal names and the rules' source (``--rtol``, the API's ``rtol``)."""
     rules = []
     for text in texts:
         if "=" not in str(text):
-            raise ValueError(f"--rtol {text!r}: expected [SIGNAL or KIND:]QUANTITY=VALUE, e.g. amplitude=0.05 "
-                             f"or coupling.tau2:mean=0.002 (quantities: {', '.join(QUANTITIES)})")
+            raise ValueError(f"{argument.given(repr(text))}: expected [SIGNAL or KIND:]QUANTITY=VALUE, e.g. "
+                             f"amplitude=0.05 or coupling.tau2:mean=0.002 (quantities: {', '.join(QUANTITIES)})")
         left, value = (s.strip() for s in str(text).split("=", 1))
         target, _, quantity = left.rpartition(":")
-        rules.append(rule(target.strip(), quantity.strip(), value, source))
+        try:
+            rules.append(rule(target.strip(), quantity.strip(), value, argument.name))
+        except ValueError as error:
+            raise ValueError(f"{argument.given(repr(text))}: {error}") from None
     return rules
 
 

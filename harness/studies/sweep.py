@@ -24,6 +24,7 @@ from pathlib import Path
 
 from harness.judges import metrics
 from harness.description import scene as scenes
+from harness.description.arguments import SET, Argument
 from harness.engine import interrupt
 from harness.studies.cases import CALIBRATION_STEPS, FAILED, CaseLog, case_key, collect, duration_text, step_cost
 from harness.studies.sweep_axes import Axis, default_axes, select, thin
@@ -158,17 +159,19 @@ def estimated_seconds(pending: list[dict], workers: int | None = None) -> float:
 
 
 def check(axes: list[Axis], scene: str = "kavz685", stop: float | None = None, extra: list[str] | None = None,
-          fmu_dir: Path = FMUS) -> list[dict]:
+          fmu_dir: Path = FMUS, named: tuple[Argument, Argument] = (Argument("--stop"), SET)) -> list[dict]:
     """The sweep's cases (``plan``), each checked as a run would check it: a bad scene,
-    assignment or experiment is a ``SceneError`` before anything runs."""
-    spec = scenes.load(scene).with_overrides(list(extra or []))
+    assignment or experiment is a ``SceneError`` before anything runs, naming ``stop`` and
+    ``extra`` as ``named`` (the command line's ``--stop`` and ``--set``, or the API's)."""
+    spec = scenes.load(scene).with_overrides(list(extra or []), named[1])
     cases = plan(axes, scene, stop, extra, fmu_dir)
     for case in cases:
-        _check_experiment(spec.experiment, spec.with_overrides(case["overrides"]).experiment, stop)
+        _check_experiment(spec.experiment, spec.with_overrides(case["overrides"]).experiment, stop, named)
     return cases
 
 
-def _check_experiment(scene: scenes.Experiment, e: scenes.Experiment, stop: float | None) -> None:
+def _check_experiment(scene: scenes.Experiment, e: scenes.Experiment, stop: float | None,
+                      named: tuple[Argument, Argument]) -> None:
     """Refuse, before anything runs, a case whose experiment no run could take.  A sweep
     compares steady amplitudes, so a --stop within the scene's start-up transient is
     refused, not met by shortening the transient as `lever run --stop` does (that would
@@ -176,9 +179,10 @@ def _check_experiment(scene: scenes.Experiment, e: scenes.Experiment, stop: floa
     findings = scenes.experiment_findings(e)
     if stop is not None and (e.transient_note is not None or (findings and not 0.0 <= e.transient < e.stop - e.start)):
         raise scenes.SceneError(
-            f"--stop {stop:g} s: the scene leaves its first experiment.transient = {scene.transient:g} s out of the "
-            f"amplitudes, so a case must run past it (allowed: --stop > {scene.start + scene.transient:g} s; or "
-            f"lower the transient with --set experiment.transient=...)")
+            f"{named[0].given(f'{stop:g} s')}: the scene leaves its first experiment.transient = {scene.transient:g} s "
+            f"out of the amplitudes, so a case must run past it (allowed: {named[0]} > "
+            f"{scene.start + scene.transient:g} s; or lower the transient with "
+            f"{named[1].item('experiment.transient')}=...)")
     if findings:
         raise scenes.SceneError("; ".join(findings))
 

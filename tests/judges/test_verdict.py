@@ -123,7 +123,7 @@ def test_the_api_refuses_a_result_with_nothing_to_judge_and_an_unknown_tolerance
                      rtol=["coupling.tau3:mean=0.1"])
     passed = api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4),
                           rtol={"torque:amplitude": 0.05})
-    assert passed.passed and passed.findings.signals[0].rtol["amplitude"] == (0.05, "--rtol")
+    assert passed.passed and passed.findings.signals[0].rtol["amplitude"] == (0.05, "rtol")
 
 
 def test_a_window_shorter_than_two_revolutions_judges_no_orders_and_says_so(kavz):
@@ -172,7 +172,8 @@ def test_a_stalled_signals_solver_noise_is_not_held_to_a_relative_tolerance():
 
 def test_tolerances_of_the_verdict_are_refused_with_the_cross_check_band(kavz):
     t, signals, _ = kavz
-    with pytest.raises(api.InputError, match="--rtol and --signals set the 'lever' verdict"):
+    with pytest.raises(api.InputError, match="^rtol and signals set the 'lever' verdict; tolerance='cross-check' is "
+                                             "fmpy's band"):
         api.validate("kavz685", result=(t, {"coupling.tau2": signals["coupling.tau2"]}), window=(0, 4),
                      tolerance="cross-check", rtol=["amplitude=0.1"])
 
