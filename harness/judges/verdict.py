@@ -96,6 +96,8 @@ class Check:
     #: False: the result's sampling cannot show this quantity (``detail`` says why); it
     #: neither passes nor fails the signal
     judged: bool = True
+    #: a tube's: the time [s] of its sample farthest beyond it (None: none beyond it)
+    at: float | None = None
 
 
 @dataclass
@@ -365,9 +367,10 @@ def _tube(label: str, frame: _Frame, y: np.ndarray, width: float, range_: float,
     worst = float(np.max(excess)) if len(y) else math.inf
     limit = max(range_, float(np.max(width)) if len(y) else 0.0)
     passed = bool(len(y)) and share <= MAX_OUTSIDE and worst <= limit
-    first = ""
+    first, at = "", None
     if outside.any():
         i = int(np.argmax(excess))
+        at = float(frame.t[i])
         first = (f", the farthest {worst:.3g} beyond it at t = {frame.t[i]:.6g} s"
                  + (f" (more than the reference's range {limit:.3g})" if worst > limit else ""))
     widest = float(np.max(width)) if len(y) else 0.0
@@ -375,7 +378,7 @@ def _tube(label: str, frame: _Frame, y: np.ndarray, width: float, range_: float,
     return Check(label, 0.0, share, share, MAX_OUTSIDE, passed,
                  f"{100 * share:.3g} % of the samples outside +-{widest - own:.3g} ({100 * rtol:.3g} % of the range"
                  + (f"; plus the reference's own error between its samples, up to {own:.2g}" if own else "")
-                 + f"; allowed {100 * MAX_OUTSIDE:g} %){first}")
+                 + f"; allowed {100 * MAX_OUTSIDE:g} %){first}", at=at)
 
 
 def _start_up_tube(frame: _Frame, y: np.ndarray, rtol: dict) -> Check:

@@ -62,6 +62,8 @@ def test_single_row_spikes_between_the_references_samples_fail_the_tube(kavz):
     assert _failed(judged) >= {("coupling.tau2", "tube")}
     assert "more than the reference's range" in judged.failures()[-1]
     assert judged.signals[0].max_error == pytest.approx(1e4, rel=1e-3)
+    (tube,) = [c for c in judged.signals[0].failed if c.quantity == "tube"]
+    assert tube.at in t[spikes]        # where its plot's close-up looks
 
 
 def test_chatter_on_every_other_row_fails_the_amplitude(kavz):
@@ -267,3 +269,4 @@ def test_the_powers_search_refuses_a_start_it_cannot_double_from():
     for start in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="start > 0"):
             power._smallest_failing(lambda x: True, start, 1.0, 1.0)
+
