@@ -59,8 +59,9 @@ def _write_result_and_json(out: Path, judged, result: Result, reference: Referen
 
 def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, signal, verdict) -> Path:
     """One failing signal: the reference, its tube over the judged window and the result over
-    the whole span above; the window's last revolutions (its last tenth without a shaft)
-    below, where a changed mean, ripple or phase shows."""
+    the whole span above; below, the window's last revolutions (its last tenth without a
+    shaft), where a changed mean, ripple or phase shows - or, when only a tube fails, the
+    revolutions about its sample farthest beyond it."""
     from harness.formats import plotting
 
     plt = plotting.pyplot()
@@ -70,8 +71,16 @@ def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, s
     inside = (t_ref >= start) & (t_ref <= stop)
     width = signal.power.band if signal.power else 0.0
     close = (2 * 2 * math.pi / verdict.rotation) if verdict.rotation else 0.1 * (stop - start)
+    tubes = [c for c in signal.failed if c.at is not None]
+    if tubes and len(tubes) == len(signal.failed):
+        farthest = tubes[0].at
+        zoom = (max(t_ref[0], farthest - 0.5 * close), min(t_ref[-1], farthest + 0.5 * close))
+        zoom_title = f"about the sample farthest beyond the {tubes[0].quantity}, t = {farthest:.4g} s"
+    else:
+        zoom = (max(start, stop - close), stop)
+        zoom_title = f"the judged window's last {zoom[1] - zoom[0]:.3g} s"
     fig, axes = plt.subplots(2, 1, figsize=(11, 7), layout="constrained")
-    for ax, (low, high) in zip(axes, ((t_ref[0], t_ref[-1]), (max(start, stop - close), stop))):
+    for ax, (low, high) in zip(axes, ((t_ref[0], t_ref[-1]), zoom)):
         ax.fill_between(t_ref[inside], y_ref[inside] - width, y_ref[inside] + width, color="tab:green", alpha=0.25,
                         lw=0, label=f"tube +-{width:.3g} (judged window)")
         ax.plot(t_ref, y_ref, color="tab:green", lw=1.0, label=f"reference ({len(t_ref)} samples)")
@@ -89,7 +98,7 @@ def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, s
     failed = ", ".join(c.quantity for c in signal.failed)
     axes[0].set_title(f"{reference.name}: {signal.name} FAILS on {failed} (validation.json has the figures)",
                       fontsize=9)
-    axes[1].set_title(f"the judged window's last {high - low:.3g} s", fontsize=9)
+    axes[1].set_title(zoom_title, fontsize=9)
     path = out / f"{signal.name}.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)

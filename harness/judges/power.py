@@ -28,6 +28,9 @@ class Power:
     by: dict = field(default_factory=dict)
     #: kind -> (smallest failing positive change, smallest failing negative change's size)
     signs: dict = field(default_factory=dict)
+    #: (samples the changes were judged at, the result's samples in the window) where the
+    #: search took a selection of a dense result's samples; None: all of them
+    searched_at: tuple[int, int] | None = None
 
     def _said(self, kind: str, form) -> str:
         plus, minus = self.signs.get(kind, (None, None))
@@ -45,7 +48,10 @@ class Power:
         mean = self._said("mean", lambda x: f"{x:.3g}")
         amplitude = self._said("amplitude", lambda x: f"{100 * x:.2g} %")
         shift = self._said("shift", lambda x: f"{1e3 * x:.3g} ms")
-        return f"band +-{self.band:.3g}; catches mean {mean}, amplitude {amplitude}, time shift {shift}"
+        said = f"band +-{self.band:.3g}; catches mean {mean}, amplitude {amplitude}, time shift {shift}"
+        if self.searched_at:
+            said += f" (searched at {self.searched_at[0]} of the result's {self.searched_at[1]} samples)"
+        return said
 
 
 #: multiples of a change found failing at which it is checked again: a verdict may fail a
@@ -60,6 +66,9 @@ RESOLUTION = 5e-3
 def _smallest_failing(fails, start: float, limit: float, sign: float) -> float | None:
     """The smallest x > 0 with ``fails(sign * x)`` and at ``CHECKED_ABOVE`` times it, by
     doubling from ``start`` up to ``limit`` and bisecting; None when no such x up to ``limit``."""
+    if not (math.isfinite(start) and math.isfinite(limit) and 0 < start):
+        raise ValueError(f"the power's search needs a finite start > 0 and a finite limit (start {start}, "
+                         f"limit {limit})")
     low, high = 0.0, start
     while True:
         while not fails(sign * high):
@@ -94,8 +103,11 @@ def power(frame, judged, ref, rtol: dict, rotation: float | None) -> Power:
         return [c.quantity for c in judged(perturbed[kind](x)) if c.judged and not c.passed]
 
     scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
-    dt = float(np.median(np.diff(frame.t))) if len(frame.t) > 1 else 1.0
+    # a time written twice (an event's two rows) is no step
+    steps = np.diff(frame.t)
+    steps = steps[steps > 0]
     span = float(frame.t[-1] - frame.t[0])
+    dt = float(np.median(steps)) if steps.size else max(span, 1.0)
     signs, by = {}, {}
     # the doubling starts a little below where the tolerances put the answer
     for kind, first, limit in (("mean", max(0.25 * rtol["mean"][0], 1e-6) * scale, 1e3 * scale),
@@ -117,4 +129,5 @@ def power(frame, judged, ref, rtol: dict, rotation: float | None) -> Power:
     shift = larger("shift")
     phase = None if (shift is None or not rotation) else math.degrees(rotation * shift)
     band = rtol["tube"][0] * _allowed_scale(2 * frame.amplitude, frame.mean, magnitude=frame.magnitude)
-    return Power(band, larger("mean"), larger("amplitude"), shift, phase, by, signs)
+    searched_at = None if frame.of_samples is None else (len(frame.t), frame.of_samples)
+    return Power(band, larger("mean"), larger("amplitude"), shift, phase, by, signs, searched_at)

@@ -65,6 +65,11 @@ MAX_LAG_SHARE = 0.01
 #: a quantity is judged when the reference at the result's times shows it within this share
 #: of its tolerance of the reference's own value
 SHOWN = 0.5
+#: the most samples the power's search judges its changes at: a denser result's power is
+#: searched at its samples nearest a grid as fine as the reference's own samples (or as this
+#: allows), each with the tube it has in the verdict - a change of the reference holds nothing
+#: finer than the reference, and a search judges each change some hundred times
+POWER_SAMPLES = 20_000
 
 
 class NothingToJudge(ValueError):
@@ -91,6 +96,8 @@ class Check:
     #: False: the result's sampling cannot show this quantity (``detail`` says why); it
     #: neither passes nor fails the signal
     judged: bool = True
+    #: a tube's: the time [s] of its sample farthest beyond it (None: none beyond it)
+    at: float | None = None
 
 
 @dataclass
@@ -223,6 +230,8 @@ class _Frame:
     fit: sampled.OrderFit | None = None
     #: (order, the reference's component on its own samples, at the result's times)
     orders: list = field(default_factory=list)
+    #: the samples of the result in the part, where these are a selection of them
+    of_samples: int | None = None
 
 
 def _own_samples(ref: sampled.Reference, start: float, stop: float) -> tuple[np.ndarray, np.ndarray]:
@@ -253,6 +262,35 @@ def _frame(ref: sampled.Reference, t: np.ndarray, start: float, stop: float, rot
         frame.orders = [(k, own[k], shown[k]) for k in ORDERS
                         if abs(own[k]) >= LEADING * frame.amplitude and abs(own[k]) > NOISE_FLOOR * magnitude]
     return frame
+
+
+def _power_frame(frame: _Frame, ref: sampled.Reference, rotation: float | None,
+                 most: int = POWER_SAMPLES) -> _Frame:
+    """``frame``, or for a result sampled finer than the reference (or at more than ``most``
+    samples) the same frame at the result's samples nearest a grid of the reference's own
+    spacing (at least the window's span / ``most``): each kept sample keeps its tube bounds
+    and the reference's error there; the reference's quantities as those samples show them are
+    worked out anew."""
+    t = frame.t
+    if len(t) < 2:
+        return frame
+    own_steps = np.diff(ref.t[(ref.t >= t[0]) & (ref.t <= t[-1])])
+    own_steps = own_steps[own_steps > 0]
+    spacing = float(np.median(own_steps)) if own_steps.size else 0.0
+    spacing = max(spacing, float(t[-1] - t[0]) / most)
+    grid = np.arange(t[0], t[-1], spacing) if spacing > 0 else t
+    keep = np.unique(np.append(np.clip(np.searchsorted(t, grid), 0, len(t) - 1), len(t) - 1))
+    if len(keep) >= 0.9 * len(t):
+        return frame
+    kept_t, at = t[keep], frame.at[keep]
+    thinned = _Frame(kept_t, at, frame.own_t, frame.own_y, frame.mean, frame.amplitude, frame.magnitude,
+                     frame.low[keep], frame.high[keep], frame.error[keep], frame.own_error,
+                     sampled.time_mean(kept_t, at), sampled.amplitude(at), of_samples=len(t))
+    if frame.fit is not None:
+        thinned.fit = sampled.order_fit(kept_t, rotation, ORDERS)
+        shown = thinned.fit.fit(at)
+        thinned.orders = [(k, own, shown[k]) for k, own, _ in frame.orders]
+    return thinned
 
 
 def _unshown(quantity: str, own: float, shown: float, allowed: float, sampling: str) -> str:
@@ -329,9 +367,10 @@ def _tube(label: str, frame: _Frame, y: np.ndarray, width: float, range_: float,
     worst = float(np.max(excess)) if len(y) else math.inf
     limit = max(range_, float(np.max(width)) if len(y) else 0.0)
     passed = bool(len(y)) and share <= MAX_OUTSIDE and worst <= limit
-    first = ""
+    first, at = "", None
     if outside.any():
         i = int(np.argmax(excess))
+        at = float(frame.t[i])
         first = (f", the farthest {worst:.3g} beyond it at t = {frame.t[i]:.6g} s"
                  + (f" (more than the reference's range {limit:.3g})" if worst > limit else ""))
     widest = float(np.max(width)) if len(y) else 0.0
@@ -339,7 +378,7 @@ def _tube(label: str, frame: _Frame, y: np.ndarray, width: float, range_: float,
     return Check(label, 0.0, share, share, MAX_OUTSIDE, passed,
                  f"{100 * share:.3g} % of the samples outside +-{widest - own:.3g} ({100 * rtol:.3g} % of the range"
                  + (f"; plus the reference's own error between its samples, up to {own:.2g}" if own else "")
-                 + f"; allowed {100 * MAX_OUTSIDE:g} %){first}")
+                 + f"; allowed {100 * MAX_OUTSIDE:g} %){first}", at=at)
 
 
 def _start_up_tube(frame: _Frame, y: np.ndarray, rtol: dict) -> Check:
@@ -478,12 +517,14 @@ def judge(times, traces: dict, reference_times, reference: dict, *, window: tupl
         with np.errstate(over="ignore", invalid="ignore"):
             error = y_all[in_span] - ref(t[in_span])
         finite = bool(np.all(np.isfinite(error)))
-        judged = None
+        judged = search = None
         if frame is not None:
-            def judged(values, frame=frame, tolerances=tolerances):
+            search = _power_frame(frame, ref, rotation)
+
+            def judged(values, frame=search, tolerances=tolerances):
                 return _checks(frame, values, tolerances, verdict.sampling)
         sv = SignalVerdict(signal, column, kinds.get(signal, "other"), tolerances, checks,
-                           power(frame, judged, ref, tolerances, rotation) if with_power and finite and judged
+                           power(search, judged, ref, tolerances, rotation) if with_power and finite and judged
                            else None,
                            float(np.sqrt(np.mean(error ** 2))) if finite else math.inf,
                            float(np.max(np.abs(error))) if finite else math.inf,

@@ -62,6 +62,8 @@ def test_single_row_spikes_between_the_references_samples_fail_the_tube(kavz):
     assert _failed(judged) >= {("coupling.tau2", "tube")}
     assert "more than the reference's range" in judged.failures()[-1]
     assert judged.signals[0].max_error == pytest.approx(1e4, rel=1e-3)
+    (tube,) = [c for c in judged.signals[0].failed if c.quantity == "tube"]
+    assert tube.at in t[spikes]        # where its plot's close-up looks
 
 
 def test_chatter_on_every_other_row_fails_the_amplitude(kavz):
@@ -189,3 +191,82 @@ def test_the_stated_power_is_true_for_every_committed_reference(name):
                     judged = verdict.judge(t, {s.name: make(sign * factor * stated)}, t, signals, with_power=False,
                                            **options)
                     assert judged.passed is passes, (name, s.name, kind, sign, factor, stated, judged.failures())
+
+
+def _dense(kavz, step: float, doubled: float | None = None):
+    """The committed reference through its own interpolant at every ``step`` - a host's dense
+    result of the exact solution; ``doubled``: every time written twice, ``doubled`` apart (a
+    host writing its outputs before and after each exchange)."""
+    t, signals, _ = kavz
+    dense_t = np.arange(t[0], t[-1] + 0.5 * step, step)
+    traces = {n: sampled.Reference(t, v)(dense_t) for n, v in signals.items()}
+    if doubled is not None:
+        dense_t = np.repeat(dense_t, 2)
+        dense_t[1::2] += doubled
+        traces = {n: np.repeat(v, 2) for n, v in traces.items()}
+    return dense_t, traces
+
+
+def test_a_dense_results_power_is_searched_at_a_selection_and_is_true_at_all_its_samples(kavz):
+    """A result sampled five times finer than the reference: the power's search judges its
+    changes at the samples nearest the reference's own 1 ms grid (saying so), and what it states
+    holds for the whole result - 1.1 times each stated change fails, 0.9 times passes, judged at
+    every sample."""
+    t, signals, settings = kavz
+    dense_t, traces = _dense(kavz, 2e-4)
+    chosen = ["load.a", "coupling.tau2"]
+    itself = _judge(kavz, dense_t, traces, signals=chosen, with_power=True)
+    assert itself.passed, itself.failures()
+    steady = dense_t >= itself.window[0] - 1e-12
+    for s in itself.signals:
+        searched, of = s.power.searched_at
+        assert of == np.count_nonzero(steady) and searched == pytest.approx(of / 5, rel=0.01)
+        assert f"searched at {searched} of the result's {of} samples" in s.power.describe()
+        reference = sampled.Reference(t, signals[s.name])
+        y = traces[s.name]
+        mean = sampled.time_mean(dense_t[steady], y[steady])
+        change = {"mean": lambda x: y + np.where(steady, x, 0.0),
+                  "amplitude": lambda x: np.where(steady, mean + (1 + x) * (y - mean), y),
+                  "shift": lambda x: np.where(steady, reference(dense_t - x), y)}
+        for kind, make in change.items():
+            stated = s.power.signs[kind][0]
+            for factor, passes in ((1.1, False), (0.9, True)):
+                judged = _judge(kavz, dense_t, {s.name: make(factor * stated)}, signals=[s.name])
+                assert judged.passed is passes, (s.name, kind, factor, stated, judged.failures())
+
+
+@pytest.mark.parametrize("apart", [0.0, 1e-8])
+def test_a_result_with_every_time_written_twice_gets_its_power_in_bounded_time(kavz, apart):
+    """A host that writes each row twice, at the same time or 1e-8 s apart (OMSimulator's weak
+    coupling does): the steps between its rows are 0 or 1e-8 s half the time, and the power's
+    search still starts from the result's true step - the same power as the result written
+    once, found in the same number of judgements."""
+    once_t, once = _dense(kavz, 1e-3)
+    twice_t, twice = _dense(kavz, 1e-3, doubled=apart)
+    chosen = ["engine.a"]
+    calls = []
+    real_checks = verdict._checks
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real_checks(*args, **kwargs)
+
+    powers = []
+    for times, traces in ((once_t, once), (twice_t, twice)):
+        calls.clear()
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(verdict, "_checks", counted)
+            (s,) = _judge(kavz, times, traces, signals=chosen, with_power=True).signals
+        powers.append((s.power, len(calls)))
+    (once_power, once_calls), (twice_power, twice_calls) = powers
+    assert twice_power.shift_s == pytest.approx(once_power.shift_s, rel=0.02)
+    assert twice_calls <= once_calls + 6
+
+
+def test_the_powers_search_refuses_a_start_it_cannot_double_from():
+    from harness.judges import power
+
+    for start in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="start > 0"):
+            power._smallest_failing(lambda x: True, start, 1.0, 1.0)
+
