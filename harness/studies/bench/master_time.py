@@ -1,0 +1,311 @@
+"""The master's own time, measured directly: runs of a case with every FMI call timed
+(``simulate(wrap_calls=...)``), the time outside the calls being the master's - its
+arithmetic, its Python, the recording and the guard.
+
+A difference of two noisy medians (a run's time less the calls priced in other loops) can
+come out at 2 % or 47 % for the same case; here the calls of the very run are timed, and
+what the timing itself adds is taken off by calibration:
+
+* a timed call's interval holds the call and the timer's own latency ``inside`` (an empty
+  interval, measured);
+* the wrapper costs ``wrapped - bare`` a call in all (a cheap callee timed wrapped and
+  bare), of which ``outside = wrapped - bare - inside`` falls outside the intervals, in
+  what would otherwise count as the master's;
+* the run tells an observer of each step (to take the stepping loop's calls alone): its
+  no-op call's cost is taken off too.
+
+So, each step, ``master = its time - its intervals - calls * outside - observer`` and
+``in_calls = its intervals - calls * inside``.  A step many times the median's was
+interrupted (another process's turn: a per-call processor clock would cost microseconds a
+read) and is set aside; of several runs the least master time a step (what is left of
+interruptions only adds).  ``trusted`` says whether the figure
+can be quoted, and where not, why: runs that disagree, or a correction as large as what
+it corrects."""
+from __future__ import annotations
+
+import statistics as stats
+import time as clock
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from harness.engine import masters as master_family
+from harness.engine.run import simulate
+from harness.engine.system import CO_SIMULATION
+from harness.paths import FMUS
+
+#: the largest spread (median over least) of the runs' master times a quoted figure allows
+MAX_SPREAD = 0.25
+#: the largest share of the raw master time the timing's correction may take
+MAX_CORRECTION = 0.5
+#: the largest share of steps set aside as interrupted (``kept_steps``) a quoted figure allows
+MAX_DROPPED = 0.1
+#: a step more than this many times the median step's time was interrupted
+OUTLIER = 4.0
+#: how many arguments each kind of call takes (the wrapper matches it: no ``*args``)
+ARITY = {"get": 4, "set": 4, "step": 4, "state": 2}
+
+
+class CallTimer:
+    """Wraps FMI calls (``wrap(component, kind, function)``, for ``simulate(wrap_calls=...)``)
+    so that each call's interval is added to ``spent[component][kind]`` and to ``total``,
+    and counted in ``made`` and ``calls``; as the run's observer it marks each step's end
+    (``marks``: the time, the intervals so far, the calls so far), so that the stepping
+    loop's calls are taken alone and each step's parts are known."""
+
+    def __init__(self, timer=clock.perf_counter):
+        self.timer = timer
+        self.spent: dict[str, dict[str, list]] = {}
+        self.made: dict[str, dict[str, list]] = {}
+        self.total, self.calls = [0.0], [0]
+        self.marks: list[tuple[float, float, int]] = []
+        self.window = None
+
+    def wrap(self, component: str, kind: str, function):
+        account = self.spent.setdefault(component, {}).setdefault(kind, [0.0])
+        count = self.made.setdefault(component, {}).setdefault(kind, [0])
+        return _timed(function, self.timer, account, count, self.total, self.calls, ARITY[kind])
+
+    # the run's observer
+    def started(self, t):
+        for kinds in (*self.spent.values(), *self.made.values()):
+            for cell in kinds.values():
+                cell[0] = 0
+        self.total[0], self.calls[0] = 0.0, 0
+        self.window = None
+        self.marks = [(self.timer(), 0.0, 0)]
+
+    def stepped(self, n, t):
+        self.marks.append((self.timer(), self.total[0], self.calls[0]))
+
+    def ended(self):
+        self.window = ({name: {kind: cell[0] for kind, cell in kinds.items()} for name, kinds in self.spent.items()},
+                       {name: {kind: cell[0] for kind, cell in kinds.items()} for name, kinds in self.made.items()})
+
+
+def _timed(function, timer, account: list, count: list, total: list, calls: list, arity: int):
+    # one shape per arity: the calibration times the same shapes
+    if arity == 4:
+        def timed(a, b, c, d):
+            started = timer()
+            status = function(a, b, c, d)
+            spent = timer() - started
+            account[0] += spent
+            total[0] += spent
+            count[0] += 1
+            calls[0] += 1
+            return status
+    else:
+        def timed(a, b):
+            started = timer()
+            status = function(a, b)
+            spent = timer() - started
+            account[0] += spent
+            total[0] += spent
+            count[0] += 1
+            calls[0] += 1
+            return status
+    return timed
+
+
+def _cheap(*args):
+    return 0
+
+
+def calibrate(timer=clock.perf_counter, n: int = 20000, repeats: int = 7) -> dict:
+    """What the timing adds, seconds a call (least of ``repeats`` loops of ``n``): for each
+    arity ``inside`` (the timer's latency within an interval) and ``outside`` (the rest of
+    the wrapper's cost), and ``observer`` (the mark a run makes at each step)."""
+    found = {}
+    for arity in (4, 2):
+        args = (None,) * arity
+        wrapped = _timed(_cheap, timer, [0.0], [0], [0.0], [0], arity)
+        bare_s = wrapped_s = inside_s = float("inf")
+        for _ in range(repeats):
+            started = timer()
+            for _ in range(n):
+                _cheap(*args)
+            bare_s = min(bare_s, timer() - started)
+            started = timer()
+            for _ in range(n):
+                wrapped(*args)
+            wrapped_s = min(wrapped_s, timer() - started)
+            empty = [0.0]
+            for _ in range(n):
+                began = timer()
+                empty[0] += timer() - began
+            inside_s = min(inside_s, empty[0])
+        inside = inside_s / n
+        found[arity] = {"inside": inside, "outside": max(0.0, (wrapped_s - bare_s) / n - inside)}
+    observer, bare_s, called_s = CallTimer(timer), float("inf"), float("inf")
+    for _ in range(repeats):
+        observer.marks = []
+        started = timer()
+        for k in range(n):
+            pass
+        bare_s = min(bare_s, timer() - started)
+        started = timer()
+        for k in range(n):
+            observer.stepped(k, 0.0)
+        called_s = min(called_s, timer() - started)
+    found["observer"] = max(0.0, (called_s - bare_s) / n)
+    return found
+
+
+@dataclass
+class MasterTime:
+    """A case's time split, measured directly (``measure``), per run: the master's seconds
+    a step ``masters``, the calls' ``in_calls``, the timing's cost taken off
+    ``corrections`` and the share of steps ``dropped`` as interrupted; ``calls``
+    component -> kind -> count and ``in_call`` component -> kind -> seconds (whole run) of
+    the run with the least master time; its ``steps`` and FMI ``fmu_calls``."""
+    master: str
+    step: float
+    tolerance: float | None
+    masters: list = field(default_factory=list)
+    in_calls: list = field(default_factory=list)
+    corrections: list = field(default_factory=list)
+    dropped: list = field(default_factory=list)
+    calls: dict = field(default_factory=dict)
+    in_call: dict = field(default_factory=dict)
+    steps: int = 0
+    fmu_calls: int = 0
+    calibration: dict = field(default_factory=dict)
+    failure: str | None = None
+
+    @property
+    def best(self) -> int:
+        return min(range(len(self.masters)), key=self.masters.__getitem__)
+
+    @property
+    def per_step(self) -> float:
+        """The master's seconds a step (the least of the runs)."""
+        return self.masters[self.best]
+
+    @property
+    def share(self) -> float:
+        """The master's share of its run's time (the run with the least master time)."""
+        k = self.best
+        return self.masters[k] / (self.masters[k] + self.in_calls[k])
+
+    @property
+    def spread(self) -> float:
+        """The runs' median master time over the least, less 1."""
+        return stats.median(self.masters) / self.per_step - 1.0
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the figure cannot be quoted (empty: it can)."""
+        if self.failure:
+            return [self.failure]
+        out = []
+        if len(self.masters) < 2:
+            out.append("a single run: its spread is unknown")
+        if self.per_step <= 0:
+            out.append(f"the master's time came out at {1e6 * self.per_step:.2f} us a step, not above zero "
+                       "(the timing's correction exceeds what it corrects)")
+            return out
+        if len(self.masters) >= 2 and self.spread > MAX_SPREAD:
+            out.append(f"the runs' master times spread {100 * self.spread:.0f} % (median over least; "
+                       f"at most {100 * MAX_SPREAD:.0f} % quoted): the machine is too busy")
+        k = self.best
+        if self.dropped[k] > MAX_DROPPED:
+            out.append(f"{100 * self.dropped[k]:.0f} % of the steps were interrupted (at most "
+                       f"{100 * MAX_DROPPED:.0f} % set aside): the machine is too busy")
+        correction = self.corrections[k]
+        if correction > MAX_CORRECTION * (self.per_step + correction):
+            out.append(f"the timing's own cost taken off ({1e6 * correction:.2f} us a step) is "
+                       f"{100 * correction / (self.per_step + correction):.0f} % of the raw master time "
+                       f"(at most {100 * MAX_CORRECTION:.0f} % quoted)")
+        return out
+
+    @property
+    def trusted(self) -> bool:
+        return not self.problems
+
+
+def step_parts(marks: list[tuple[float, float, int]], calibration: dict, state_calls: int = 0):
+    """Each step's master and call time from a run's ``marks`` (``CallTimer``), less what
+    the timing adds (``calibrate``): ``(masters, in_calls, corrections)`` a step.  The
+    calls are taken as four-argument ones; ``state_calls`` of the run's calls were
+    two-argument ones (spread evenly over the steps)."""
+    four, two, observer = calibration[4], calibration[2], calibration["observer"]
+    steps = len(marks) - 1
+    extra = (state_calls / steps) * (two["outside"] - four["outside"]) if steps else 0.0
+    extra_inside = (state_calls / steps) * (two["inside"] - four["inside"]) if steps else 0.0
+    masters, in_calls, corrections = [], [], []
+    for (t0, in0, n0), (t1, in1, n1) in zip(marks, marks[1:]):
+        calls = n1 - n0
+        correction = observer + calls * four["outside"] + extra
+        masters.append((t1 - t0) - (in1 - in0) - correction)
+        in_calls.append((in1 - in0) - calls * four["inside"] - extra_inside)
+        corrections.append(correction)
+    return masters, in_calls, corrections
+
+
+def kept_steps(masters: list, in_calls: list) -> list[int]:
+    """The steps not interrupted: those whose whole time is within ``OUTLIER`` times the
+    median step's (another process's turn on the processor, a page fault or a collection
+    of the garbage lands in a few steps and makes them many times as long)."""
+    totals = [m + c for m, c in zip(masters, in_calls)]
+    if not totals:
+        return []
+    limit = OUTLIER * stats.median(totals)
+    return [k for k, total in enumerate(totals) if total <= limit]
+
+
+def measure(scene, master: str, step: float, options: dict | None = None, fmu_dir: Path = FMUS,
+            runs: int = 3, tolerance: float | None = None, calibration: dict | None = None,
+            timer=clock.perf_counter) -> MasterTime:
+    """``runs`` runs of ``master`` at ``step`` on ``scene`` with every FMI call timed: the
+    master's own time a step, directly (see the module).  A Model Exchange master's calls
+    are not a co-simulation component's: its ``failure`` says so, and a failed run's."""
+    result = MasterTime(master, step, tolerance)
+    if master_family.master_class(master).interface != CO_SIMULATION:
+        result.failure = f"{master} integrates the FMUs in Model Exchange: its calls are not timed one by one"
+        return result
+    result.calibration = calibration = calibration or calibrate(timer)
+    for _ in range(runs):
+        timing = CallTimer(timer)
+        run = simulate(scene, master, step, fmu_dir, options=options, observer=timing, wrap_calls=timing.wrap)
+        if not run.ok:
+            result.failure = f"{master} failed in a timed run: {run.failure}"
+            return result
+        spent, made = timing.window
+        state_calls = sum(kinds.get("state", 0) for kinds in made.values())
+        masters, in_calls, corrections = step_parts(timing.marks, calibration, state_calls)
+        kept = kept_steps(masters, in_calls)
+        if not kept:
+            result.failure = f"{master}: no step to time"
+            return result
+        result.masters.append(sum(masters[k] for k in kept) / len(kept))
+        result.in_calls.append(sum(in_calls[k] for k in kept) / len(kept))
+        result.corrections.append(sum(corrections[k] for k in kept) / len(kept))
+        result.dropped.append(1.0 - len(kept) / len(masters))
+        if result.masters[-1] == min(result.masters):
+            result.calls, result.steps, result.fmu_calls = made, len(masters), int(run.counters.get("fmu_calls", 0))
+            result.in_call = {name: {kind: max(0.0, s - made[name][kind] * calibration[ARITY[kind]]["inside"])
+                                     for kind, s in kinds.items()} for name, kinds in spent.items()}
+    return result
+
+
+def split(timed: MasterTime, twins: dict[str, dict[str, float]], wall: float) -> dict[str, float] | None:
+    """``timed``'s shares as a run of ``wall`` seconds: ``master`` measured directly,
+    ``crossing`` the calls priced at the do-nothing twins' (component -> kind -> seconds a
+    call; at most each kind's measured time in the calls), ``slave`` the rest of the time
+    in the calls.  None where a call kind made has no twin price, or the figure is not
+    ``trusted``."""
+    if not timed.trusted:
+        return None
+    crossing = 0.0
+    for name, kinds in timed.calls.items():
+        for kind, count in kinds.items():
+            if not count:
+                continue
+            if kind not in twins.get(name, {}):
+                return None
+            crossing += min(count * twins[name][kind], timed.in_call[name][kind])
+    k = timed.best
+    per_step = timed.masters[k] + timed.in_calls[k]
+    crossing = min(crossing / timed.steps, timed.in_calls[k])
+    return {"crossing": wall * crossing / per_step, "slave": wall * (timed.in_calls[k] - crossing) / per_step,
+            "master": wall * timed.masters[k] / per_step}
