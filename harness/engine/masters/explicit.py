@@ -242,6 +242,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                                    tuple(range(2 * held.n + i, len(held.values), held.n)))
                                   for k, held in enumerate(self._held) for i in range(held.n))
         self._rest_inputs = tuple(each for each in self._held_inputs if each[0] in self._rest)
+        self._ahead_curved = any(each[5] for each in self._ahead_inputs)
         self.snapshot = snapshot_of(self._live)
         # The derivative weights the last step used and the scaled nodes of their key:
         # a fixed step's next pattern is recognised without rounding (``_derivatives``).
@@ -322,6 +323,14 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 values[n + i] = (0.0 + f0 * u0 + f1 * u1 + f2 * u2) / scale
                 if higher:
                     values[2 * n + i] = (0.0 + s0 * u0 + s1 * u1 + s2 * u2) / squared
+        elif len(first) == 2 and not self._ahead_curved:
+            # degree 1 (no second derivative) unrolled: the loop's sums in its order
+            f0, f1 = first
+            (_, past0), = history
+            for k, i, values, now, n, _ in self._ahead_inputs:
+                u1 = now[i]
+                values[i] = u1
+                values[n + i] = (0.0 + f0 * past0[k][i] + f1 * u1) / scale
         else:
             past = [p[1] for p in history]
             for k, i, values, now, n, higher in self._ahead_inputs:
@@ -349,17 +358,25 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         9 digits leave 5e-10 either side), so a fixed step finds its weights without
         rounding the nodes again."""
         last = self._last_derivatives
-        if last is not None and len(last[0]) == len(history) == 2:
-            # the loop below for two points (jacobi-quadratic's fixed step), unrolled
-            (n0, n1), (p0, p1) = last[0], history
-            if abs((p0[0] - t_end) / scale - n0) < 1e-10 and abs((p1[0] - t_end) / scale - n1) < 1e-10:
-                return last[1]
-        elif last is not None and len(last[0]) == len(history):
-            for point, node in zip(history, last[0]):
-                if not abs((point[0] - t_end) / scale - node) < 1e-10:
-                    break
-            else:
-                return last[1]
+        if last is not None:
+            nodes = last[0]
+            count = len(nodes)
+            if count == len(history):
+                # the loop for one and two points (jacobi-linear's and jacobi-quadratic's
+                # fixed step) unrolled
+                if count == 2:
+                    (n0, n1), (p0, p1) = nodes, history
+                    if abs((p0[0] - t_end) / scale - n0) < 1e-10 and abs((p1[0] - t_end) / scale - n1) < 1e-10:
+                        return last[1]
+                elif count == 1:
+                    if abs((history[0][0] - t_end) / scale - nodes[0]) < 1e-10:
+                        return last[1]
+                else:
+                    for point, node in zip(history, nodes):
+                        if not abs((point[0] - t_end) / scale - node) < 1e-10:
+                            break
+                    else:
+                        return last[1]
         times = [p[0] for p in history] + [t_end]
         key = tuple([round((x - t_end) / scale, 9) for x in times])
         weights = self._cached(("d",) + key, lambda: derivative_weights(times, scale))
@@ -482,35 +499,36 @@ class MidpointPredictionMaster(JacobiMaster):
                 taylor += [(share.values, k, values, tuple(system.index[(source, v)] for v in chains[(source, names[i])]))
                            for k, i in enumerate(share.positions)]
                 predicted.setdefault(share.component, []).append(source)
-        self._taylor = tuple(taylor)
+        # by their number of terms: a shaft's angle (three) and speed (two) unrolled
+        self._taylor3 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
+                              if len(indices) == 3)
+        self._taylor2 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
+                              if len(indices) == 2)
+        self._taylor_any = tuple(each for each in taylor if len(each[3]) not in (2, 3))
         # Each feedthrough target's predicted inputs sent in one call (its buffer's runs),
-        # then the propagation from the feedthrough components, both compiled once
+        # then the propagation from the feedthrough components: one plan, compiled once
         self._sends = system.send_plan([span for target, sources in predicted.items()
                                         for span in system.input_spans(target.name, sources)])
         self._from_feedthrough = system.partial_plan(self._feedthrough)
+        self._predicted_plan = self._sends + self._from_feedthrough
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
         and propagate the coupling torques they give to the stateful components."""
-        factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
-        f1, f2 = factors[1], factors[2]
-        for target_values, k, values, indices in self._taylor:
-            # the Taylor sum as sum() makes it (from 0.0, lowest term first); a shaft's
-            # angle and speed unrolled
-            if len(indices) == 3:
-                i0, i1, i2 = indices
-                target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
-            elif len(indices) == 2:
-                i0, i1 = indices
-                target_values[k] = 0.0 + values[i0] + f1 * values[i1]
-            else:
+        # each Taylor sum as sum() makes it (from 0.0, lowest term first)
+        f1, f2 = dt, dt * dt / 2.0
+        for target_values, k, values, i0, i1, i2 in self._taylor3:
+            target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
+        for target_values, k, values, i0, i1 in self._taylor2:
+            target_values[k] = 0.0 + values[i0] + f1 * values[i1]
+        if self._taylor_any:
+            factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
+            for target_values, k, values, indices in self._taylor_any:
                 total = 0.0
                 for f, i in zip(factors, indices):
                     total += f * values[i]
                 target_values[k] = total
-        propagate_with = self.system.propagate_with
-        propagate_with(self._sends)
-        propagate_with(self._from_feedthrough)
+        self.system.propagate_with(self._predicted_plan)
 
     def _step_impl(self, t, h):
         self._predict(0.5 * h)
