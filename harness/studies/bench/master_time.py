@@ -206,11 +206,11 @@ class MasterTime:
             return out
         if len(self.masters) >= 2 and self.spread > MAX_SPREAD:
             out.append(f"the runs' master times spread {100 * self.spread:.0f} % (median over least; "
-                       f"at most {100 * MAX_SPREAD:.0f} % quoted): the machine is too busy")
+                       f"at most {100 * MAX_SPREAD:.0f} % quoted)")
         k = self.best
         if self.dropped[k] > MAX_DROPPED:
             out.append(f"{100 * self.dropped[k]:.0f} % of the steps were interrupted (at most "
-                       f"{100 * MAX_DROPPED:.0f} % set aside): the machine is too busy")
+                       f"{100 * MAX_DROPPED:.0f} % set aside)")
         correction = self.corrections[k]
         if correction > MAX_CORRECTION * (self.per_step + correction):
             out.append(f"the timing's own cost taken off ({1e6 * correction:.2f} us a step) is "
@@ -221,6 +221,19 @@ class MasterTime:
     @property
     def trusted(self) -> bool:
         return not self.problems
+
+    def summary(self) -> dict:
+        """What a benchmark case keeps (plain data): the master's and the calls' seconds a
+        step and the master's share (the run with the least master time), the runs' master
+        times, their spread and the steps set aside, why the figure cannot be quoted, and
+        the calls by component and kind with the seconds spent in them."""
+        if self.failure or not self.masters:
+            return {"problems": self.problems or ["no timed run"]}
+        k = self.best
+        return {"master_per_step_s": self.per_step, "in_calls_per_step_s": self.in_calls[k], "share": self.share,
+                "runs_master_per_step_s": list(self.masters), "spread": self.spread, "dropped": self.dropped[k],
+                "correction_per_step_s": self.corrections[k], "problems": self.problems, "steps": self.steps,
+                "calls": self.calls, "in_call_s": self.in_call}
 
 
 def step_parts(marks: list[tuple[float, float, int]], calibration: dict, state_calls: int = 0):
@@ -288,24 +301,24 @@ def measure(scene, master: str, step: float, options: dict | None = None, fmu_di
     return result
 
 
-def split(timed: MasterTime, twins: dict[str, dict[str, float]], wall: float) -> dict[str, float] | None:
-    """``timed``'s shares as a run of ``wall`` seconds: ``master`` measured directly,
-    ``crossing`` the calls priced at the do-nothing twins' (component -> kind -> seconds a
-    call; at most each kind's measured time in the calls), ``slave`` the rest of the time
-    in the calls.  None where a call kind made has no twin price, or the figure is not
-    ``trusted``."""
-    if not timed.trusted:
+def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> dict[str, float] | None:
+    """A run of ``wall`` seconds split by ``timed`` (``MasterTime.summary()``): ``master``
+    its measured share, ``crossing`` the calls priced at the do-nothing twins' (component
+    -> kind -> seconds a call; each kind at most its measured time in the calls), ``slave``
+    the rest of the time in the calls.  None where the figure is not to be quoted
+    (``timed["problems"]``) or a call kind made has no twin price."""
+    if timed.get("problems"):
         return None
     crossing = 0.0
-    for name, kinds in timed.calls.items():
+    for name, kinds in timed["calls"].items():
         for kind, count in kinds.items():
             if not count:
                 continue
             if kind not in twins.get(name, {}):
                 return None
-            crossing += min(count * twins[name][kind], timed.in_call[name][kind])
-    k = timed.best
-    per_step = timed.masters[k] + timed.in_calls[k]
-    crossing = min(crossing / timed.steps, timed.in_calls[k])
-    return {"crossing": wall * crossing / per_step, "slave": wall * (timed.in_calls[k] - crossing) / per_step,
-            "master": wall * timed.masters[k] / per_step}
+            crossing += min(count * twins[name][kind], timed["in_call_s"][name][kind])
+    master, in_calls = timed["master_per_step_s"], timed["in_calls_per_step_s"]
+    crossing = min(crossing / timed["steps"], in_calls)
+    per_step = master + in_calls
+    return {"crossing": wall * crossing / per_step, "slave": wall * (in_calls - crossing) / per_step,
+            "master": wall * master / per_step}
