@@ -8,9 +8,9 @@ what the timing itself adds is taken off by calibration:
 
 * a timed call's interval holds the call and the timer's own latency ``inside`` (an empty
   interval, measured);
-* the wrapper costs ``wrapped - bare`` a call in all (a cheap callee timed wrapped and
-  bare), of which ``outside = wrapped - bare - inside`` falls outside the intervals, in
-  what would otherwise count as the master's;
+* the rest of the wrapper's cost, ``outside``, falls outside the intervals, in what would
+  otherwise count as the master's: a loop of wrapped calls of a cheap callee, less the time
+  in their intervals and less the loop's own;
 * the run tells an observer of each step (to take the stepping loop's calls alone): its
   no-op call's cost is taken off too.
 
@@ -83,66 +83,66 @@ class CallTimer:
 
 
 def _timed(function, timer, account: list, count: list, total: list, calls: list, arity: int):
-    # one shape per arity: the calibration times the same shapes
-    if arity == 4:
-        def timed(a, b, c, d):
-            started = timer()
-            status = function(a, b, c, d)
-            spent = timer() - started
-            account[0] += spent
-            total[0] += spent
-            count[0] += 1
-            calls[0] += 1
-            return status
-    else:
-        def timed(a, b):
-            started = timer()
-            status = function(a, b)
-            spent = timer() - started
-            account[0] += spent
-            total[0] += spent
-            count[0] += 1
-            calls[0] += 1
-            return status
+    """``function`` timed; the hot path's calls take four arguments, the state calls two
+    (wrapped through the four-argument shape; the calibration times the same shapes)."""
+    if arity == 2:
+        four = _timed(lambda a, b, c, d: function(a, b), timer, account, count, total, calls, 4)
+        return lambda a, b: four(a, b, None, None)
+
+    def timed(a, b, c, d):
+        started = timer()
+        status = function(a, b, c, d)
+        spent = timer() - started
+        account[0] += spent
+        total[0] += spent
+        count[0] += 1
+        calls[0] += 1
+        return status
     return timed
 
 
-def _cheap(*args):
+def _cheap(a, b, c=None, d=None):
     return 0
 
 
 def calibrate(timer=clock.perf_counter, n: int = 20000, repeats: int = 7) -> dict:
     """What the timing adds, seconds a call (least of ``repeats`` loops of ``n``): for each
-    arity ``inside`` (the timer's latency within an interval) and ``outside`` (the rest of
-    the wrapper's cost), and ``observer`` (the mark a run makes at each step)."""
+    arity ``inside``, the timer's latency within an interval (an empty one), and
+    ``outside``, the rest of the wrapper's cost - a loop of wrapped calls less the time in
+    their intervals and less the loop's own; and ``observer``, the mark a run makes at
+    each step."""
+    def loop_alone():
+        started = timer()
+        for _ in range(n):
+            pass
+        return timer() - started
+
     found = {}
     for arity in (4, 2):
-        args = (None,) * arity
-        wrapped = _timed(_cheap, timer, [0.0], [0], [0.0], [0], arity)
-        bare_s = wrapped_s = inside_s = float("inf")
+        account = [0.0]
+        wrapped = _timed(_cheap, timer, account, [0], [0.0], [0], arity)
+        outside_s = inside_s = float("inf")
         for _ in range(repeats):
+            empty_loop = loop_alone()
+            account[0] = 0.0
             started = timer()
-            for _ in range(n):
-                _cheap(*args)
-            bare_s = min(bare_s, timer() - started)
-            started = timer()
-            for _ in range(n):
-                wrapped(*args)
-            wrapped_s = min(wrapped_s, timer() - started)
+            if arity == 4:
+                for _ in range(n):
+                    wrapped(None, None, None, None)
+            else:
+                for _ in range(n):
+                    wrapped(None, None)
+            outside_s = min(outside_s, timer() - started - account[0] - empty_loop)
             empty = [0.0]
             for _ in range(n):
                 began = timer()
                 empty[0] += timer() - began
             inside_s = min(inside_s, empty[0])
-        inside = inside_s / n
-        found[arity] = {"inside": inside, "outside": max(0.0, (wrapped_s - bare_s) / n - inside)}
+        found[arity] = {"inside": inside_s / n, "outside": max(0.0, outside_s / n)}
     observer, bare_s, called_s = CallTimer(timer), float("inf"), float("inf")
     for _ in range(repeats):
         observer.marks = []
-        started = timer()
-        for k in range(n):
-            pass
-        bare_s = min(bare_s, timer() - started)
+        bare_s = min(bare_s, loop_alone())
         started = timer()
         for k in range(n):
             observer.stepped(k, 0.0)
