@@ -92,15 +92,18 @@ class Recorder:
         self._checked = 0
 
     def record(self, t: float):
-        if self.count == len(self.times) and self.stream is not None:
-            self._hand_on()
-        elif self.count == len(self.times):     # a variable-step run: grow
-            self.times = np.concatenate([self.times, np.empty(len(self.times))])
-            self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
-        self.rows[self.count] = self._block
-        self.times[self.count] = t
-        self.count += 1
-        if self.count - self._checked >= self.CHECK_EVERY:
+        count = self.count
+        if count == len(self.times):
+            if self.stream is not None:
+                self._hand_on()
+            else:                               # a variable-step run: grow
+                self.times = np.concatenate([self.times, np.empty(len(self.times))])
+                self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
+            count = self.count
+        self.rows[count] = self._block
+        self.times[count] = t
+        self.count = count = count + 1
+        if count - self._checked >= self.CHECK_EVERY:
             self.check()
 
     def check(self):
