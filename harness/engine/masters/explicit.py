@@ -499,6 +499,7 @@ class MidpointPredictionMaster(JacobiMaster):
                 taylor += [(share.values, k, values, tuple(system.index[(source, v)] for v in chains[(source, names[i])]))
                            for k, i in enumerate(share.positions)]
                 predicted.setdefault(share.component, []).append(source)
+        self._taylor = tuple(taylor)
         # by their number of terms: a shaft's angle (three) and speed (two) unrolled
         self._taylor3 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
                               if len(indices) == 3)
