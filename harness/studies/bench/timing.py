@@ -15,6 +15,7 @@ from harness.description import scene as scenes
 from harness.engine import interrupt
 from harness.engine import masters as master_family
 from harness.engine.run import RunResult, simulate
+from harness.engine.system import CO_SIMULATION
 from harness.judges import metrics
 from harness.judges import fmu_reference, monolithic, stability
 from harness.studies import trust
@@ -181,7 +182,7 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: P
     price()
     if twins is not None:
         case.prices = prices
-        if case.failure is None:
+        if case.failure is None and master_family.master_class(name).interface == CO_SIMULATION:
             # the split's master share measured directly, in runs of their own (every call timed)
             case.timed = master_time.measure(scene, name, step, options, fmu_dir, tolerance=tolerance,
                                              runs=TIMED_RUNS if len(case.wall_times) == repeats else 2).summary()
