@@ -77,10 +77,28 @@ def test_a_runs_master_time_is_what_the_master_spent(fmu_dir, monkeypatch, work,
     summary = timed.summary()
     assert summary["master_per_step_s"] == work and summary["share"] == 1.0
     # the split: the master's share of the run, nothing priced into the calls
-    split = master_time.split(summary, {"engine": {"get": 0.0, "set": 0.0, "step": 0.0},
-                                        "coupling": {"get": 0.0, "set": 0.0, "step": 0.0},
-                                        "load": {"get": 0.0, "set": 0.0, "step": 0.0}}, wall=2.0)
+    free = {name: {"get": 0.0, "set": 0.0, "step": 0.0} for name in ("engine", "coupling", "load")}
+    split, problem = master_time.split(summary, free, wall=2.0)
     assert split == ({"crossing": 0.0, "slave": 0.0, "master": 2.0} if quoted else None)
+    assert problem == (None if quoted else timed.problems[0])
+    if quoted:
+        # twins' prices above what was measured in the calls (none here): no split, and why
+        priced = {**free, "load": {"get": 0.0, "set": 0.0, "step": 1.0}}
+        assert master_time.split(summary, priced, wall=2.0) == (
+            None, "load's step calls priced at the do-nothing twins' (1000000.0 us a call) come to more than "
+                  "the time measured in them (0.0 us)")
+
+
+def test_a_split_by_hand():
+    # 100 steps of 20 us in the master and 80 us in 11 calls; the twins price the calls at 30 us a step
+    timed = {"problems": [], "steps": 100, "master_per_step_s": 20e-6, "in_calls_per_step_s": 80e-6,
+             "calls": {"c": {"get": 500, "step": 600}}, "in_call_s": {"c": {"get": 2e-3, "step": 6e-3}}}
+    twins = {"c": {"get": 2e-6, "step": 3.333e-6}}
+    split, problem = master_time.split(timed, twins, wall=0.02)
+    crossing = (500 * 2e-6 + 600 * 3.333e-6) / 100                  # 29.998 us a step
+    assert problem is None
+    assert split == pytest.approx({"crossing": 0.02 * crossing / 100e-6, "slave": 0.02 * (80e-6 - crossing) / 100e-6,
+                                   "master": 0.02 * 0.2})
 
 
 def test_a_model_exchange_master_is_not_timed_call_by_call():

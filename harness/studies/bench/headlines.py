@@ -44,11 +44,8 @@ def split_case(case: Case):
         return
     if case.timed is not None:
         twin_prices = floors.median_prices(case.prices["hollow"])
-        case.split = master_time.split(case.timed, twin_prices, case.wall)
-        if case.timed.get("problems"):
-            case.split_unreliable = "; ".join(case.timed["problems"]) + f": {case_noise(case)}"
-        elif case.split is None:
-            case.split_unreliable = "a kind of call the run made has no do-nothing price"
+        case.split, problem = master_time.split(case.timed, twin_prices, case.wall)
+        case.split_unreliable = f"{problem}: {case_noise(case)}" if problem else None
         return
     ours, twin_prices = floors.median_prices(case.prices["ours"]), floors.median_prices(case.prices["hollow"])
     case.split = floors.time_split(case.wall, case.calls_by_kind, ours, twin_prices)

@@ -307,24 +307,29 @@ def measure(scene, master: str, step: float, options: dict | None = None, fmu_di
     return result
 
 
-def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> dict[str, float] | None:
+def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple[dict | None, str | None]:
     """A run of ``wall`` seconds split by ``timed`` (``MasterTime.summary()``): ``master``
     its measured share, ``crossing`` the calls priced at the do-nothing twins' (component
-    -> kind -> seconds a call; each kind at most its measured time in the calls), ``slave``
-    the rest of the time in the calls.  None where the figure is not to be quoted
-    (``timed["problems"]``) or a call kind made has no twin price."""
+    -> kind -> seconds a call), ``slave`` the rest of the time in the calls; and why not
+    (``None`` and the reason): the figure is not to be quoted (``timed["problems"]``), a
+    call kind made has no twin price, or the twins' prices come to more than the time
+    measured in those calls (the prices and the runs saw different machines)."""
     if timed.get("problems"):
-        return None
+        return None, "; ".join(timed["problems"])
     crossing = 0.0
     for name, kinds in timed["calls"].items():
         for kind, count in kinds.items():
             if not count:
                 continue
             if kind not in twins.get(name, {}):
-                return None
-            crossing += min(count * twins[name][kind], timed["in_call_s"][name][kind])
+                return None, f"{name}'s {kind} calls have no do-nothing price"
+            priced, measured = count * twins[name][kind], timed["in_call_s"][name][kind]
+            if priced > measured:
+                return None, (f"{name}'s {kind} calls priced at the do-nothing twins' ({1e6 * priced / count:.1f} us "
+                              f"a call) come to more than the time measured in them ({1e6 * measured / count:.1f} us)")
+            crossing += priced
     master, in_calls = timed["master_per_step_s"], timed["in_calls_per_step_s"]
     crossing = min(crossing / timed["steps"], in_calls)
     per_step = master + in_calls
     return {"crossing": wall * crossing / per_step, "slave": wall * (in_calls - crossing) / per_step,
-            "master": wall * master / per_step}
+            "master": wall * master / per_step}, None
