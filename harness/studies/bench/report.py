@@ -189,7 +189,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
                   "loop at the case's step - the scene's for adaptive masters - just before and just after the "
                   "case's runs), and *slave*, the rest (our FMUs' work: the native entry, the FMI glue and the "
                   "physics).  A figure that cannot be quoted (timed runs that disagree by more than a quarter, "
-                  "a tenth of the steps interrupted, a correction as large as the master's time) is not shown, "
+                  "a fifth of the steps interrupted, a correction as large as the master's time) is not shown, "
                   "the reason beside it.", "",
                   "| engine | step / tol | run time | FMI calls per step | crossing | slave | master | master a step |",
                   "|---|---|---|---|---|---|---|---|"]
