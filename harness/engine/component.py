@@ -17,7 +17,7 @@ import tempfile
 from collections import deque
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 from fmpy import extract
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
@@ -369,6 +369,17 @@ class Component:
         vrs, values = self.real_buffer(names)
         self.read(vrs, values)
         return list(values)
+
+    def wrap_calls(self, wrap: Callable):
+        """Replace the hot path's C functions and the state calls by ``wrap(kind, function)``
+        (kind: get, set, step, state), e.g. to time every call; before any plan holds them
+        (``System(wrap_calls=...)``)."""
+        raw = self.raw
+        self.raw = raw._replace(get_real=wrap("get", raw.get_real), set_real=wrap("set", raw.set_real),
+                                do_step=wrap("step", raw.do_step))
+        self._get_state = wrap("state", self._get_state)
+        self._set_state = wrap("state", self._set_state)
+        self._free_state = wrap("state", self._free_state)
 
     # -- state (for masters that roll back) --------------------------------------------------
     # Raw calls like the hot path: an iterating master saves, restores and frees a state

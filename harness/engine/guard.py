@@ -228,13 +228,13 @@ class Guard:
             if name not in limited and not connected:
                 continue
             bound = limited.get(name) or Bound(name, math.inf, "", "finite")
-            checks.append((system.buffers[component][1], i, bound.limit, len(self._bounds)))
+            checks.append((system.buffers[component][1], i, -bound.limit, bound.limit, len(self._bounds)))
             self._bounds.append((component, scene.components[component].fmu, variable, bound))
         self._checks = tuple(checks)
 
     def check(self, t: float, step_index: int):
-        for values, i, limit, k in self._checks:
-            if not -limit <= values[i] <= limit:       # NaN fails both comparisons
+        for values, i, low, high, k in self._checks:
+            if not low <= values[i] <= high:           # NaN fails both comparisons
                 self._fail(k, values[i], t, step_index)
 
     def _fail(self, k, value, t, step_index):

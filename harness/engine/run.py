@@ -92,15 +92,18 @@ class Recorder:
         self._checked = 0
 
     def record(self, t: float):
-        if self.count == len(self.times) and self.stream is not None:
-            self._hand_on()
-        elif self.count == len(self.times):     # a variable-step run: grow
-            self.times = np.concatenate([self.times, np.empty(len(self.times))])
-            self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
-        self.rows[self.count] = self._block
-        self.times[self.count] = t
-        self.count += 1
-        if self.count - self._checked >= self.CHECK_EVERY:
+        count = self.count
+        if count == len(self.times):
+            if self.stream is not None:
+                self._hand_on()
+            else:                               # a variable-step run: grow
+                self.times = np.concatenate([self.times, np.empty(len(self.times))])
+                self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
+            count = self.count
+        self.rows[count] = self._block
+        self.times[count] = t
+        self.count = count = count + 1
+        if count - self._checked >= self.CHECK_EVERY:
             self.check()
 
     def check(self):
@@ -135,7 +138,8 @@ class Recorder:
 
 def simulate(scene: scenes.Scene | plans.Plan, master: str | None = None, step: float | None = None,
              fmu_dir: Path = FMUS, progress: bool = False, options: dict | None = None,
-             stream: Path | None = None, keep_partial: bool = False, observer=None) -> RunResult:
+             stream: Path | None = None, keep_partial: bool = False, observer=None,
+             wrap_calls=None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
     (for an adaptive master: its first step); ``options`` go to the master.  ``scene`` is
     a checked ``harness.description.plan.Plan`` (its FMUs where it found them) or a scene,
@@ -150,15 +154,17 @@ def simulate(scene: scenes.Scene | plans.Plan, master: str | None = None, step: 
 
     ``observer`` (e.g. ``harness.engine.observers.StepTimer``) is told when the stepping
     starts (``started(t)``), after every whole step (``stepped(n, t)``, the step recorded
-    and checked) and when it ends (``ended()``); without one the loop pays one test a step."""
+    and checked) and when it ends (``ended()``); without one the loop pays one test a step.
+    ``wrap_calls`` goes to the ``System`` (every FMI call wrapped, e.g. timed)."""
     with interrupt.deferred():
-        result = _simulate(scene, master, step, fmu_dir, progress, options, stream, observer)
+        result = _simulate(scene, master, step, fmu_dir, progress, options, stream, observer, wrap_calls)
     if result.interrupted and not keep_partial:
         raise Interrupted(result.diagnosis["time"])
     return result
 
 
-def _simulate(subject, master, step, fmu_dir, progress, options, stream, observer=None) -> RunResult:
+def _simulate(subject, master, step, fmu_dir, progress, options, stream, observer=None,
+              wrap_calls=None) -> RunResult:
     scene = subject.scene if isinstance(subject, plans.Plan) else subject
     e = scene.experiment
     master = master or e.master
@@ -169,7 +175,8 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
     names = list(plan.recorded)
     # refuses an unsound scene (SceneInvalid) first, and for a Model Exchange master an FMU
     # without that interface (NoModelExchange), before any FMU is instantiated
-    system = System(plan, record=names, interface=master_family.master_class(master).interface)
+    system = System(plan, record=names, interface=master_family.master_class(master).interface,
+                    wrap_calls=wrap_calls)
     n_steps = max(1, math.ceil((e.stop - e.start) / step - 1e-9))
     failure = stage = diagnosis = None
     recorder = driver = bar = calls_before = None

@@ -151,12 +151,15 @@ def dependency_order(scene: scenes.Scene, feedthrough: set[str]) -> list[str]:
 
 class System:
     def __init__(self, plan: plans.Plan | scenes.Scene, fmu_dir: Path = FMUS, logging_on: bool = False,
-                 record: list[str] | None = None, interface: str = CO_SIMULATION):
+                 record: list[str] | None = None, interface: str = CO_SIMULATION,
+                 wrap_calls: Callable | None = None):
         """The system of a checked scene (``harness.description.plan``; a scene is checked
         here, its FMUs in ``fmu_dir``); ``SceneInvalid`` when the plan has refusals.
         ``interface``: the FMUs instantiated for co-simulation (the default) or for Model
         Exchange (``harness.engine.me_component``; ``NoModelExchange`` for an FMU without
-        it, before any is instantiated)."""
+        it, before any is instantiated).  ``wrap_calls(component, kind, function)``, where
+        given, replaces each co-simulation component's FMI calls before any plan is
+        compiled (``Component.wrap_calls``: the benchmark times every call so)."""
         if not isinstance(plan, plans.Plan):
             plan = plans.check(plan, fmu_dir=fmu_dir)
         self.plan = plan
@@ -190,6 +193,11 @@ class System:
         try:
             for name in scene.components:
                 self.components[name] = kind(name, plan.paths[name], logging_on)
+                if wrap_calls is not None:
+                    if interface != CO_SIMULATION:
+                        raise ValueError("wrap_calls: only co-simulation components' calls are wrapped")
+                    self.components[name].wrap_calls(
+                        lambda call_kind, function, name=name: wrap_calls(name, call_kind, function))
         except Exception:
             self.free()
             raise

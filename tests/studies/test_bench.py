@@ -64,6 +64,7 @@ def _fewer_timed_steps(monkeypatch):
     monkeypatch.setattr(bench.floors, "call_floor", lambda scene, fmu_dir, n_steps=0, step=None:
                         floor(scene, n_steps=500, fmu_dir=fmu_dir, step=step))
     monkeypatch.setattr(timing, "PRICE_STEPS", 100)
+    monkeypatch.setattr(timing, "TIMED_RUNS", 2)
     monkeypatch.setattr(editions, "FLOOR_STEPS", 200)
     monkeypatch.setattr(editions, "PRICE_STEPS", 100)
     monkeypatch.setattr(editions, "CHUNK", 30)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import Callable
 
 from harness.engine.masters.base import MasterFailure
 from harness.engine.masters.explicit import ExtrapolatingJacobiMaster, lagrange_weights
@@ -195,6 +196,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         super().__init__(system, step, **options)
         self._init_control()
         self._speeds = self._bond_speeds()
+        self._read_speeds = _reader(self._speeds)
         self.bond_energy_residual = 0.0
 
     def _bond_speeds(self):
@@ -209,15 +211,12 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             speeds.append((system.buffers[target.name][1], index))
         return speeds
 
-    def _read_speeds(self):
-        return [values[i] if i is not None else 0.0 for values, i in self._speeds]
-
     def counters(self) -> dict:
         return {**super().counters(), "bond_energy_residual_J": self.bond_energy_residual}
 
     def _step_impl(self, t, h):
-        live = self._live
-        start = [values[:] for values in live]
+        snapshot = self.snapshot
+        start = snapshot()
         speeds = self._read_speeds()
         points = list(self.history) + [(t, start)]
         fraction = self.MEAN_FRACTION[len(points) - 1]
@@ -226,7 +225,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
             predicted = self._hold(t, h, points)
             self._step_stateful(t, h)
             self.system.propagate()
-            end = [values[:] for values in live]
+            end = snapshot()
             # the largest torque so far and the largest miss, as max() finds them (the first
             # of equals kept, a NaN only where it comes first), without generator frames
             scale = self._scale
@@ -258,6 +257,15 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         self.history.append((t, start))
         self._step_feedthrough(t, h)
         return h
+
+
+def _reader(speeds) -> Callable[[], list[float]]:
+    """A function that reads the bond speeds ``[(buffer, index or None)]``: the value at
+    each index, 0.0 where there is none; two speeds (a driveline's shafts) unrolled."""
+    if len(speeds) == 2 and all(i is not None for _, i in speeds):
+        (a, i), (b, j) = speeds
+        return lambda: [a[i], b[j]]
+    return lambda: [values[i] if i is not None else 0.0 for values, i in speeds]
 
 
 def _unit(component, name):

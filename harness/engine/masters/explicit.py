@@ -6,7 +6,7 @@ import ctypes
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 from harness.description.fmu_description import time_derivatives
 from harness.engine.masters.base import Master
@@ -118,6 +118,8 @@ def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, l
     Adams-Bashforth weights: degree 1: -1/2, 3/2; degree 2: 5/12, -16/12, 23/12).
     Pure Python over the Lagrange basis: this runs on every step of an adaptive master."""
     nodes = [(x - t) / h for x in past_times]          # <= 0, scaled to the step
+    if len(nodes) == 3:
+        return _extrapolation_weights_3(*nodes)
     moments = _FIRST_MOMENTS if len(nodes) <= len(_FIRST_MOMENTS) else \
         tuple(1.0 / (k + 2) - 0.5 / (k + 1) for k in range(len(nodes)))
     means, slopes, ends = [], [], []
@@ -131,6 +133,18 @@ def extrapolation_weights(past_times, t: float, h: float) -> tuple[list, list, l
         means.append(mean)
         slopes.append(12.0 * slope)
         ends.append(end)
+    return means, slopes, ends
+
+
+def _extrapolation_weights_3(x0, x1, x2) -> tuple[list, list, list]:
+    """``extrapolation_weights``' sums for three nodes (the quadratic's, on every step of an
+    adaptive master), unrolled: the same operations in the same order."""
+    m0, m1, m2 = _FIRST_MOMENTS[:3]
+    means, slopes, ends = [], [], []
+    for c0, c1, c2 in (_basis_3(x0, x1, x2), _basis_3(x1, x0, x2), _basis_3(x2, x0, x1)):
+        means.append(0.0 + c0 / 1 + c1 / 2 + c2 / 3)
+        slopes.append(12.0 * (0.0 + c0 * m0 + c1 * m1 + c2 * m2))
+        ends.append(0.0 + c0 + c1 + c2)
     return means, slopes, ends
 
 
@@ -148,6 +162,18 @@ def derivative_weights(times, scale: float) -> tuple[list, list]:
 def lagrange_weights(nodes, x: float) -> list[float]:
     """Weights of the values at ``nodes`` in the interpolating polynomial's value at ``x``."""
     return [math.prod((x - m) / (n - m) for m in nodes if m != n) for n in nodes]
+
+
+def snapshot_of(buffers) -> Callable[[], list[list[float]]]:
+    """A function that copies ``buffers`` (ctypes arrays) into lists of floats, as
+    ``[values[:] for values in buffers]`` does: for one- and two-value buffers (a driveline's
+    coupling torques) without the slices and the loop, which cost most of it."""
+    if all(len(values) == 1 for values in buffers):
+        if len(buffers) == 2:
+            a, b = buffers
+            return lambda: [[a[0]], [b[0]]]
+        return lambda: [[values[0]] for values in buffers]
+    return lambda: [values[:] for values in buffers]
 
 
 class ExtrapolatingJacobiMaster(JacobiMaster):
@@ -216,6 +242,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                                    tuple(range(2 * held.n + i, len(held.values), held.n)))
                                   for k, held in enumerate(self._held) for i in range(held.n))
         self._rest_inputs = tuple(each for each in self._held_inputs if each[0] in self._rest)
+        self._ahead_curved = any(each[5] for each in self._ahead_inputs)
+        self.snapshot = snapshot_of(self._live)
         # The derivative weights the last step used and the scaled nodes of their key:
         # a fixed step's next pattern is recognised without rounding (``_derivatives``).
         self._last_derivatives = None
@@ -288,13 +316,21 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         if len(first) == 3:
             # degree 2 unrolled: the same sums, in the same order, as the loop below
             (f0, f1, f2), (s0, s1, s2) = first, second
-            past0, past1 = history[0][1], history[1][1]
+            (_, past0), (_, past1) = history
             for k, i, values, now, n, higher in self._ahead_inputs:
                 u0, u1, u2 = past0[k][i], past1[k][i], now[i]
                 values[i] = u2
                 values[n + i] = (0.0 + f0 * u0 + f1 * u1 + f2 * u2) / scale
                 if higher:
                     values[2 * n + i] = (0.0 + s0 * u0 + s1 * u1 + s2 * u2) / squared
+        elif len(first) == 2 and not self._ahead_curved:
+            # degree 1 (no second derivative) unrolled: the loop's sums in its order
+            f0, f1 = first
+            (_, past0), = history
+            for k, i, values, now, n, _ in self._ahead_inputs:
+                u1 = now[i]
+                values[i] = u1
+                values[n + i] = (0.0 + f0 * past0[k][i] + f1 * u1) / scale
         else:
             past = [p[1] for p in history]
             for k, i, values, now, n, higher in self._ahead_inputs:
@@ -322,12 +358,25 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         9 digits leave 5e-10 either side), so a fixed step finds its weights without
         rounding the nodes again."""
         last = self._last_derivatives
-        if last is not None and len(last[0]) == len(history):
-            for point, node in zip(history, last[0]):
-                if not abs((point[0] - t_end) / scale - node) < 1e-10:
-                    break
-            else:
-                return last[1]
+        if last is not None:
+            nodes = last[0]
+            count = len(nodes)
+            if count == len(history):
+                # the loop for one and two points (jacobi-linear's and jacobi-quadratic's
+                # fixed step) unrolled
+                if count == 2:
+                    (n0, n1), (p0, p1) = nodes, history
+                    if abs((p0[0] - t_end) / scale - n0) < 1e-10 and abs((p1[0] - t_end) / scale - n1) < 1e-10:
+                        return last[1]
+                elif count == 1:
+                    if abs((history[0][0] - t_end) / scale - nodes[0]) < 1e-10:
+                        return last[1]
+                else:
+                    for point, node in zip(history, nodes):
+                        if not abs((point[0] - t_end) / scale - node) < 1e-10:
+                            break
+                    else:
+                        return last[1]
         times = [p[0] for p in history] + [t_end]
         key = tuple([round((x - t_end) / scale, 9) for x in times])
         weights = self._cached(("d",) + key, lambda: derivative_weights(times, scale))
@@ -353,20 +402,18 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             weights = self._weights_cache[key] = compute()
         return weights
 
-    def _starting(self) -> bool:
-        """Whether the history is still too short for the full degree and the stateful
-        components can roll back to make up for it."""
-        return len(self.history) < self.degree and self._can_roll_back
-
     def _step_impl(self, t, h):
-        start = [values[:] for values in self._live]
+        start = self.snapshot()
         history = self.history
-        if self._starting():
+        # While the history is too short for the full degree and the stateful components
+        # can roll back, a start-up step makes up for it.
+        if len(history) < self.degree and self._can_roll_back:
             self._start_step(t, h, [*history, (t, start)])
         else:
             # Sent ahead after the last step - unless something (a restored state, a
             # history set from outside) came in between.
-            ahead = self._ahead_after is not None and bool(history) and history[-1] is self._ahead_after
+            after = self._ahead_after
+            ahead = after is not None and bool(history) and history[-1] is after
             if not ahead or self._rest:
                 self._hold(t, h, [*history, (t, start)], predict=False, rest_only=ahead)
             self._ahead_after = None
@@ -376,7 +423,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             system.propagate_with(self._held_plan)
             self._inputs_unsent = True
         history.append((t, start))
-        if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not _starting()
+        if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not starting
             self._send_ahead(t + h)
 
     def _start_step(self, t, h, points):
@@ -394,7 +441,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                 self._hold(t, h, through)
                 self._step_stateful(t, h)
                 self.system.propagate()
-                through = points + [(t + h, [values[:] for values in self._live])]
+                through = points + [(t + h, self.snapshot())]
         finally:
             self._free_states(states)
         self._step_feedthrough(t, h)
@@ -453,34 +500,36 @@ class MidpointPredictionMaster(JacobiMaster):
                            for k, i in enumerate(share.positions)]
                 predicted.setdefault(share.component, []).append(source)
         self._taylor = tuple(taylor)
+        # by their number of terms: a shaft's angle (three) and speed (two) unrolled
+        self._taylor3 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
+                              if len(indices) == 3)
+        self._taylor2 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
+                              if len(indices) == 2)
+        self._taylor_any = tuple(each for each in taylor if len(each[3]) not in (2, 3))
         # Each feedthrough target's predicted inputs sent in one call (its buffer's runs),
-        # then the propagation from the feedthrough components, both compiled once
+        # then the propagation from the feedthrough components: one plan, compiled once
         self._sends = system.send_plan([span for target, sources in predicted.items()
                                         for span in system.input_spans(target.name, sources)])
         self._from_feedthrough = system.partial_plan(self._feedthrough)
+        self._predicted_plan = self._sends + self._from_feedthrough
 
     def _predict(self, dt):
         """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
         and propagate the coupling torques they give to the stateful components."""
-        factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
-        f1, f2 = factors[1], factors[2]
-        for target_values, k, values, indices in self._taylor:
-            # the Taylor sum as sum() makes it (from 0.0, lowest term first); a shaft's
-            # angle and speed unrolled
-            if len(indices) == 3:
-                i0, i1, i2 = indices
-                target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
-            elif len(indices) == 2:
-                i0, i1 = indices
-                target_values[k] = 0.0 + values[i0] + f1 * values[i1]
-            else:
+        # each Taylor sum as sum() makes it (from 0.0, lowest term first)
+        f1, f2 = dt, dt * dt / 2.0
+        for target_values, k, values, i0, i1, i2 in self._taylor3:
+            target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
+        for target_values, k, values, i0, i1 in self._taylor2:
+            target_values[k] = 0.0 + values[i0] + f1 * values[i1]
+        if self._taylor_any:
+            factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
+            for target_values, k, values, indices in self._taylor_any:
                 total = 0.0
                 for f, i in zip(factors, indices):
                     total += f * values[i]
                 target_values[k] = total
-        propagate_with = self.system.propagate_with
-        propagate_with(self._sends)
-        propagate_with(self._from_feedthrough)
+        self.system.propagate_with(self._predicted_plan)
 
     def _step_impl(self, t, h):
         self._predict(0.5 * h)

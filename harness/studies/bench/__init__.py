@@ -26,7 +26,7 @@ the target error); masters it does not name are left out.
 
 The package, one module a job: ``schedule`` (the plan, the Case, the case log), ``timing``
 (running and timing the cases, the side-by-side rounds), ``floors`` (the FMU-call floor and
-call prices, the time split), ``do_nothing_twins`` (the FMUs' do-nothing twins the floor and
+call prices, the time split), ``master_time`` (the master's own time, measured in runs with every call timed), ``do_nothing_twins`` (the FMUs' do-nothing twins the floor and
 the split are also timed on), ``editions`` (the FMUs' FMI 2.0 and FMI 3.0 editions side by
 side: floor, call prices, a run), ``headlines`` (the claims and what is no result),
 ``report`` (tables, bench.md/bench.json/bench.csv, the plot) and ``study`` (the whole

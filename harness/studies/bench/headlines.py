@@ -14,7 +14,7 @@ from harness.description import scene as scenes
 from harness.engine import masters as master_family
 from harness.judges import metrics
 from harness.studies import trust
-from harness.studies.bench import floors
+from harness.studies.bench import floors, master_time
 from harness.studies.bench.schedule import Case
 
 #: the monolithic engines (``timing.run_monolithic``): scipy's DOP853 and CVODE
@@ -33,9 +33,19 @@ def case_noise(case: Case, problems: list[str] | None = None) -> str:
 
 
 def split_case(case: Case):
-    """A master's time split from the prices measured around its runs; an impossible split
-    (a share below zero, priced calls above the run time) is kept aside with the reason."""
+    """A master's time split: the master's share measured directly (``case.timed``, every
+    call of its own runs timed), the time in the calls split into crossing and slave by
+    the do-nothing twins' prices; a figure that cannot be quoted (runs that disagree, too
+    many interrupted steps) is kept aside with the reason.  A case without that
+    measurement (a case log written before it) is split from the prices measured around
+    its runs, an impossible split (a share below zero, priced calls above the run time)
+    kept aside with the reason."""
     if not (case.prices and case.kind == "master" and case.calls_by_kind and case.wall_times):
+        return
+    if case.timed is not None:
+        twin_prices = floors.median_prices(case.prices["hollow"])
+        case.split, problem = master_time.split(case.timed, twin_prices, case.wall)
+        case.split_unreliable = f"{problem}: {case_noise(case)}" if problem else None
         return
     ours, twin_prices = floors.median_prices(case.prices["ours"]), floors.median_prices(case.prices["hollow"])
     case.split = floors.time_split(case.wall, case.calls_by_kind, ours, twin_prices)

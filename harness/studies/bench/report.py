@@ -29,7 +29,7 @@ def progress_line(case: Case) -> str:
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
            "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
            "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
-           "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "split_unreliable", "failure"]
+           "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "master_per_step_s", "split_unreliable", "failure"]
 
 
 def table_row(case: Case) -> dict:
@@ -54,6 +54,7 @@ def table_row(case: Case) -> dict:
             "calls_per_step": (sum(sum(k.values()) for k in case.calls_by_kind.values()) / case.steps
                                if case.calls_by_kind and case.steps else None),
             **{f"{part}_s": (split or {}).get(part) for part in ("crossing", "slave", "master")},
+            "master_per_step_s": (case.timed or {}).get("master_per_step_s") if split else None,
             "split_unreliable": case.split_unreliable, "failure": case.failure}
 
 
@@ -179,27 +180,32 @@ def markdown(result: dict, rows: list[dict]) -> str:
                   or (r["kind"] == "master" and r.get("unreliable") and r.get("calls_per_step"))]
     if split_rows:
         lines += ["", "## Where the time goes", "",
-                  "Each master's run time split by the calls it made, priced call by call (component and kind: "
-                  "get, set, step, state; each price timed call by call in the floor's loop at the case's step - "
-                  "the scene's for adaptive masters - just before and just after the case's runs, their mean): "
-                  "*crossing* the calls priced at the do-nothing twins of the FMUs (pythonfmu, an empty do_step), "
-                  "*slave* the same calls priced at our FMUs minus that (our FMUs' work: the native entry, the "
-                  "FMI glue and the physics), *master* the rest of the run time (the master's arithmetic and "
-                  "Python, recording).  A split that cannot be (a share below zero, priced calls above the run "
-                  "time: the prices and the runs saw different machines) is not shown.", "",
-                  "| engine | step / tol | run time | FMI calls per step | crossing | slave | master |",
-                  "|---|---|---|---|---|---|---|"]
+                  "Each master's run time split by where it went, measured in runs of the case with every FMI "
+                  "call timed (the timing's own cost calibrated and taken off; steps interrupted by other "
+                  "processes set aside; the least of the runs): *master* the time outside the calls (the "
+                  "master's arithmetic and Python, recording, the divergence guard), its microseconds a step "
+                  "beside it; the time in the calls split into *crossing*, the calls priced at the do-nothing "
+                  "twins of the FMUs (pythonfmu, an empty do_step; each price timed call by call in the floor's "
+                  "loop at the case's step - the scene's for adaptive masters - just before and just after the "
+                  "case's runs), and *slave*, the rest (our FMUs' work: the native entry, the FMI glue and the "
+                  "physics).  A figure that cannot be quoted (timed runs that disagree by more than a quarter, "
+                  "a fifth of the steps interrupted, a correction as large as the master's time) is not shown, "
+                  "the reason beside it.", "",
+                  "| engine | step / tol | run time | FMI calls per step | crossing | slave | master | master a step |",
+                  "|---|---|---|---|---|---|---|---|"]
         for r in split_rows:
             setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
             wall = r["wall_median_s"]
             calls = "" if r["calls_per_step"] is None else f"{r['calls_per_step']:.1f}"
             if r.get("split_unreliable"):
-                parts = f"unreliable: {r['split_unreliable']} | | "
+                parts = f"unreliable: {r['split_unreliable']} | | | "
             elif r.get("unreliable"):
-                parts = "unreliable: its run time is (above) | | "
+                parts = "unreliable: its run time is (above) | | | "
             else:
                 parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
                                    for part in ("crossing", "slave", "master"))
+                parts += (f" | {1e6 * r['master_per_step_s']:.1f} us" if r.get("master_per_step_s") is not None
+                          else " | ")
             shown = "unreliable" if r.get("unreliable") else f"{wall:.3f} s"
             lines.append(f"| {r['engine']} | {setting} | {shown} | {calls} | {parts} |")
     if c.get("baseline_step"):
@@ -278,7 +284,8 @@ def summary_lines(result: dict) -> list[str]:
             lines.append(f"  {case.label:34s} split unreliable: {case.split_unreliable}")
         elif case.split:
             lines.append(f"  {case.label:34s} " + ", ".join(
-                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master")))
+                f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master"))
+                + (f" ({1e6 * case.timed['master_per_step_s']:.1f} us a step)" if case.timed else ""))
     if claims.get("overhead_above_floor"):
         lines.append("  above the FMU-call floor: " + ", ".join(
             f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))

@@ -48,6 +48,9 @@ class Case:
     floor_times: list = field(default_factory=list)
     #: the machine's one-minute load average before and after the case's runs
     load: list = field(default_factory=list)
+    #: the master's own time measured directly (``master_time.measure(...).summary()``),
+    #: what the split is made of
+    timed: dict | None = None
     #: why the split is not shown (``trust.split_problems``), with the machine's noise
     split_unreliable: str | None = None
     #: the integrator and why (the monolithic CVODE's and the Model Exchange master's)

@@ -15,10 +15,11 @@ from harness.description import scene as scenes
 from harness.engine import interrupt
 from harness.engine import masters as master_family
 from harness.engine.run import RunResult, simulate
+from harness.engine.system import CO_SIMULATION
 from harness.judges import metrics
 from harness.judges import fmu_reference, monolithic, stability
 from harness.studies import trust
-from harness.studies.bench import floors
+from harness.studies.bench import floors, master_time
 from harness.studies.bench.schedule import Case
 
 
@@ -156,6 +157,11 @@ def master_options(scene, name: str, tolerance: float | None) -> tuple[dict, str
     return options, f"CVODE-{chosen[0]}: {chosen[1]}"
 
 
+#: the runs with every call timed that measure a master's own time (``master_time``): the
+#: least of three, their spread flags a busy machine
+TIMED_RUNS = 3
+
+
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
     """A master's case: its runs, each after the FMU-call floor at its step (the scene's
     for an adaptive master), and with ``twins`` (the do-nothing FMUs) the prices of a call
@@ -176,6 +182,10 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: P
     price()
     if twins is not None:
         case.prices = prices
+        if case.failure is None and master_family.master_class(name).interface == CO_SIMULATION:
+            # the split's master share measured directly, in runs of their own (every call timed)
+            case.timed = master_time.measure(scene, name, step, options, fmu_dir, tolerance=tolerance,
+                                             runs=TIMED_RUNS if len(case.wall_times) == repeats else 2).summary()
     case.method = method
     return case
 
