@@ -289,6 +289,7 @@ SLOW = (
     "judges/test_validate.py::test_external_csv_of_a_scene_passes_and_a_lagging_one_fails",
     "judges/test_validate.py::test_external_csv_of_an_fmu_with_prefixed_columns",
     "judges/test_validate.py::test_lever_reference_reports_every_committed_trace_current",
+    "judges/test_validate.py::test_a_references_head_is_the_whole_references_first_rows",
     "judges/test_validate.py::test_measured_option_checks_a_grade",
     "judges/test_validate.py::test_stiffer_coupling_in_the_scene_fails_the_deflection_and_the_ripple_not_the_mean_torque",
     "oracle/test_oracle_accuracy.py::test_each_master_keeps_its_measured_accuracy_on_the_default_scene",

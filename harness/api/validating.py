@@ -2,6 +2,7 @@
 or an FMU file judged against its committed reference traces."""
 from __future__ import annotations
 
+import math as _math
 import os as _os
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
@@ -350,22 +351,32 @@ def _one_reference_named() -> str:
             else "validate_each(['kavz685'], result='run.csv')")
 
 
-def references(names: Iterable[str] = (), update: bool = False) -> Iterator[ReferenceCheck]:
+def references(names: Iterable[str] = (), update: bool = False, until: float | None = None) -> Iterator[ReferenceCheck]:
     """``lever reference``: regenerate each reference trace (``names``: FMUs or scenes; none:
-    all) and compare it with the committed one; ``update``: write the stale ones."""
+    all) and compare it with the committed one; ``update``: write the stale ones.
+    ``until`` [s]: regenerate and compare each only up to that time (quicker; a change that
+    shows only later is not seen), never with ``update``."""
     from harness.formats import reference_traces
     from harness.judges.monolithic import ReferenceUnavailable
 
+    if until is not None and update:
+        raise InputError("until: a reference is updated whole; check up to a time, or update without it")
+    if until is not None and not (_math.isfinite(until) and until > 0):
+        raise InputError(f"until = {until:g} s: a time after the start, above 0 s")
     for name in reference_names(names):
         try:
-            fresh = reference_traces.generate(name)
+            fresh = reference_traces.generate(name, until)
         except (ReferenceUnavailable, scene_files.SceneError) as error:
             yield ReferenceCheck(name, "unavailable", reason=str(error))
             continue
+        except reference_traces.SpanError as error:
+            raise InputError(f"until: {error}") from None
         try:
             committed = reference_traces.read(name)
         except reference_traces.TraceFileError:
             committed = None
+        if committed is not None and until is not None:
+            committed = reference_traces.head(committed, until)
         diff = reference_traces.difference(committed, fresh)
         if diff.current:
             yield ReferenceCheck(name, "current")

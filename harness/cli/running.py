@@ -146,7 +146,9 @@ def files_written(summary: dict) -> str:
 @click.command("reference", short_help="Check the committed reference traces are current.")
 @click.argument("names", nargs=-1, metavar="[NAMES]...")
 @click.option("--update", is_flag=True, help="Regenerate the traces (all, or NAMES) and write them.")
-def reference(names, update):
+@click.option("--until", type=TIME, default=None, help="Check each trace up to this time only [s], or with a time "
+              "unit, e.g. '0.5 s': quicker, and a change that shows only later is not seen (not with --update).")
+def reference(names, update, until):
     """Check that the committed reference traces (resources/reference/) are what the project
     computes now; with --update, regenerate them and show what changed (per signal: max change).
 
@@ -154,7 +156,7 @@ def reference(names, update):
     Exit code without --update: 0 when every trace is current, 1 otherwise."""
     stale = []
     with user_errors():
-        for check in api.references(names, update):
+        for check in api.references(names, update, until):
             if check.status == "unavailable":
                 click.echo(f"{check.name}: no reference ({check.reason})")
                 continue

@@ -57,6 +57,8 @@ CURRENT_TOLERANCE = 1e-5
 #: that band's amplitude, and says so), under 2 MB a file
 SCENE_ROWS = 10000
 RTOL = 1e-10
+#: two sample times closer than this many communication steps are the same time
+_SAME_TIME = 1e-9
 
 
 # -- files ------------------------------------------------------------------------------------
@@ -93,6 +95,10 @@ def write_csv(path: Path, traces: Traces):
 
 class TraceFileError(ValueError):
     pass
+
+
+class SpanError(ValueError):
+    """A span asked of a reference that it cannot be made over."""
 
 
 def read_csv(path: Path) -> Traces:
@@ -392,13 +398,23 @@ def scene_grid(scene: scenes.Scene) -> np.ndarray:
     return np.minimum(e.start + points * e.step, e.stop)
 
 
-def generate_scene(scene: scenes.Scene) -> ReferenceTraces:
+def generate_scene(scene: scenes.Scene, until: float | None = None) -> ReferenceTraces:
+    """The scene's reference; ``until``: its rows up to that time only, solved as the whole
+    span is (the same grid, the method the whole span takes) and cut there (``head``)."""
     from harness.judges import monolithic
 
     if "reference" not in scene.features:
         raise monolithic.ReferenceUnavailable(f"scene '{scene.name}' does not declare the 'reference' feature")
     t = scene_grid(scene)
-    solved = monolithic.solve(scene, t)
+    plan = monolithic.planned(scene)
+    method = "DOP853"
+    if until is not None:
+        if monolithic.SOLVERS.get(plan.kind, monolithic.solve_driveline) is monolithic.solve_driveline:
+            method = monolithic.reference_method(plan, t)[0]     # a stiff span's solver even on its head
+        if until < t[1]:
+            raise SpanError(f"{until:g} s is before the second sample of '{scene.name}' (at {t[1]:g} s)")
+        t = t[t <= until + _SAME_TIME * scene.experiment.step]
+    solved = monolithic.solve(plan, t, method=method)
     signals = {n: solved.traces[n] for n in scene.record if n in solved.traces}
     # a reference may name recorded outputs that are a solver's own bookkeeping (an event
     # count): nothing to compare, so no trace
@@ -408,8 +424,9 @@ def generate_scene(scene: scenes.Scene) -> ReferenceTraces:
         raise monolithic.ReferenceUnavailable(f"scene '{scene.name}': the reference does not compute "
                                               + ", ".join(left_out))
     e = scene.experiment
-    return ReferenceTraces(scene.name, "scene", Traces(solved.times, signals), Options(e.step, e.start, e.stop, RTOL),
-                     None, scene.description)
+    made = ReferenceTraces(scene.name, "scene", Traces(solved.times, signals), Options(e.step, e.start, e.stop, RTOL),
+                           None, scene.description)
+    return made if until is None else head(made, until)
 
 
 def scene_names() -> list[str]:
@@ -429,10 +446,29 @@ def all_names() -> list[str]:
     return list(FMU_CASES) + scene_names()
 
 
-def generate(name: str) -> ReferenceTraces:
+def generate(name: str, until: float | None = None) -> ReferenceTraces:
+    """``name``'s reference as the project computes it now; ``until``: up to that time only
+    (``head``; a scene is solved that far only, an FMU case is cheap and made whole)."""
     if name in FMU_CASES:
-        return generate_fmu(name)
-    return generate_scene(scenes.load(name))
+        made = generate_fmu(name)
+        if until is not None and until < made.outputs.times[1]:
+            raise SpanError(f"{until:g} s is before the second sample of '{name}' (at {made.outputs.times[1]:g} s)")
+        return made if until is None else head(made, until)
+    return generate_scene(scenes.load(name), until)
+
+
+def head(reference: ReferenceTraces, until: float) -> ReferenceTraces:
+    """``reference``'s rows at or before time ``until`` (its options as they are: the whole
+    span's, still compared): what a reference made to ``until`` only is compared with."""
+    margin = _SAME_TIME * reference.opt.step
+
+    def cut(traces: Traces | None) -> Traces | None:
+        if traces is None:
+            return None
+        kept = traces.times <= until + margin
+        return Traces(traces.times[kept], {n: v[kept] for n, v in traces.signals.items()})
+    return ReferenceTraces(reference.name, reference.kind, cut(reference.outputs), reference.opt,
+                           cut(reference.inputs), reference.description)
 
 
 # -- is the committed reference current? --------------------------------------------------------

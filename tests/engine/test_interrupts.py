@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,9 +19,9 @@ from harness.engine import interrupt
 from harness.engine import traces as trace_files
 from harness.studies.cases import INTERRUPTED, CaseLog
 
-def _start(lever_process, *args) -> subprocess.Popen:
+def _start(lever_process, *args, **options) -> subprocess.Popen:
     # Its own session, as a terminal's foreground job: SIGINT goes to the whole group.
-    return lever_process.start(*args, start_new_session=True)
+    return lever_process.start(*args, start_new_session=True, **options)
 
 
 def _wait_for(condition, process: subprocess.Popen, timeout: float = 120.0):
@@ -29,6 +30,12 @@ def _wait_for(condition, process: subprocess.Popen, timeout: float = 120.0):
         assert process.poll() is None, process.communicate()
         assert time.monotonic() < deadline, "timed out waiting"
         time.sleep(0.05)
+
+
+def _simulated(progress: str) -> float:
+    """The simulated time the last progress bar in ``progress`` (stderr) shows; 0 before one."""
+    shown = re.findall(r"\| ([0-9.e+-]+)/[0-9.e+]+ s simulated", progress)
+    return float(shown[-1]) if shown else 0.0
 
 
 def _case_lines(path: Path) -> list[dict]:
@@ -47,11 +54,15 @@ def test_run_interrupted_keeps_the_computed_part(lever_process, tmp_path, fmu_di
     # 600 s simulated: minutes of stepping, so the SIGINT lands in the stepping loop
     # without plots (the Ctrl-C tests below draw them after an interruption): the run's
     # own files are what this test judges
-    process = _start(lever_process, "run", "kavz685", "--set", "experiment.stop=600", "--no-plots", "--no-progress",
-                     "--out", out)
-    _wait_for(lambda: (out / ".lever.lock").exists(), process)
-    time.sleep(1.5)
-    _, err, took = _interrupt(process)
+    # SIGINT once the progress bar says steps were taken (not a fixed wait after the start:
+    # under load the run had not begun to step 1.5 s after it took its folder's lock)
+    bar = tmp_path / "stderr.txt"
+    with bar.open("w") as stderr:
+        process = _start(lever_process, "run", "kavz685", "--set", "experiment.stop=600", "--no-plots", "--progress",
+                         "--out", out, stderr=stderr)
+        _wait_for(lambda: _simulated(bar.read_text()) > 0, process)
+        _, _, took = _interrupt(process)
+    err = bar.read_text()
     assert process.returncode == 130, err
     assert "interrupted at t = " in err and "Traceback" not in err
     summary = json.loads((out / "summary.json").read_text())

@@ -103,11 +103,47 @@ def test_columns_match_by_name_or_unique_suffix():
 
 # -- the committed references -------------------------------------------------------------------
 
+#: how far every reference is checked (``lever reference --until``): its head made as the whole
+#: span is made (the same grid and method, cut there), a fifth of the cost of the whole check
+HEAD = 0.2
+#: checked whole: the FMU cases (exact responses, cheap) and the default scene
+WHOLE = (*reference_traces.FMU_CASES, "kavz685")
+
+
 def test_lever_reference_reports_every_committed_trace_current(lever):
-    result = lever("reference")
-    assert result.exit_code == 0, result.output
+    heads = lever("reference", "--until", f"{HEAD} s")
+    assert heads.exit_code == 0, heads.output
     for name in reference_traces.all_names():
-        assert f"{name}: current" in result.output
+        assert f"{name}: current" in heads.output
+    whole = lever("reference", *WHOLE)
+    assert whole.exit_code == 0, whole.output
+    for name in WHOLE:
+        assert f"{name}: current" in whole.output
+
+
+def test_a_references_head_is_the_whole_references_first_rows(monkeypatch):
+    """What ``--until`` compares: the rows a solve to ``until`` gives are those of the whole
+    span's solve, to the 9 digits the files keep - for a misalignment source's driveline, a
+    load that sticks (mode switches) and the rectifier's own solver; and a span stiff enough
+    for another solver than DOP853 has its head solved by that solver too."""
+    from harness.judges import monolithic
+
+    for name, stop in (("kavz685_misalignment_ramp", 0.3), ("kavz685_stall_resistive", 0.3),
+                       ("freewheel_rectifier", 0.1)):
+        spec = scenes.load(name).with_overrides([f"experiment.stop={stop}"])
+        whole = reference_traces.generate_scene(spec)
+        made = reference_traces.generate_scene(spec, until=stop / 2)
+        assert made.outputs.times[-1] == pytest.approx(stop / 2) and len(made.outputs.times) < len(whole.outputs.times)
+        diff = reference_traces.difference(reference_traces.head(whole, stop / 2), made)
+        assert diff.current and not diff.problems, (name, diff)
+        assert max(c.relative for c in diff.changes) < 1e-8, (name, diff.changes)
+    # a span stiff past 0.1 s: the whole takes CVODE, and so does its head, short as it is
+    monkeypatch.setattr(monolithic, "stiff_method",
+                        lambda driveline, t0, y0, span, resisting: ("CVODE-BDF", "stiff") if span > 0.1 else None)
+    solve, methods = monolithic.solve, []
+    monkeypatch.setattr(monolithic, "solve", lambda *a, **k: methods.append(k.get("method")) or solve(*a, **k))
+    reference_traces.generate_scene(scenes.load("kavz685").with_overrides(["experiment.stop=0.2"]), until=0.01)
+    assert methods == ["CVODE-BDF"]
 
 
 def test_reference_files_are_in_the_cross_check_layout():
@@ -156,6 +192,12 @@ def test_stale_reference_is_reported_and_update_shows_the_change(lever, tmp_path
     assert "LeverCoupling: NOT current" in checked.output and "EngineShaft: current" in checked.output
     line = next(l for l in checked.output.splitlines() if l.strip().startswith("tau1"))
     assert line.split()[1:4] == ["max", "change", "2.5"] and line.endswith("t = 0.5 s")
+    # checked up to a time: the change is seen from its time on, not before
+    assert lever("reference", "--until", "0.4 s", "LeverCoupling").exit_code == 0
+    assert "LeverCoupling: NOT current" in lever("reference", "--until", "500 ms", "LeverCoupling").output
+    for refused, words in ((["--update"], "a reference is updated whole"), ([], "before the second sample")):
+        result = lever("reference", "--until", "0.4" if refused else "0.1 ms", *refused, "LeverCoupling")
+        assert result.exit_code == 2 and words in result.output and "Traceback" not in result.output, result.output
     assert lever("reference", "--update", "LeverCoupling").exit_code == 0
     assert "LeverCoupling: current" in lever("reference", "LeverCoupling").output
 
