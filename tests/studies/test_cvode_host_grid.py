@@ -1,7 +1,8 @@
 """The CVODE host's output grid (harness/studies/cvode_host.py): a row every ``step`` from 0,
 and the last exactly at ``stop`` - also where ``stop / step`` is no exact binary number
 (0.7 s at 1 ms: 0.7 / 0.001 = 699.999..., 701 rows ending at 0.7 s; 0.3 s at 0.1 s:
-2.999..., 4 rows) - a stop that is no whole number of steps (0.25 s at 0.1 s) ends on a shorter last step -
+2.999..., 4 rows) - a stop that is no whole number of steps (0.25 s at 0.1 s) ends on a shorter last step,
+and a stop shorter than one step (0.05 s at 0.1 s) is that one step -
 with each row's values those of the closed form of the FMU's motion
 at that row's time.
 
@@ -21,7 +22,7 @@ START = {"load_kind": "constant", "mean_torque": MEAN, "inertia": J, "w_start": 
 
 @pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("stop,step,rows", [(0.7, 1e-3, 701), (0.3, 0.1, 4), (0.5, 0.1, 6), (0.07, 0.01, 8),
-                                            (0.25, 0.1, 4)])
+                                            (0.25, 0.1, 4), (0.05, 0.1, 2)])
 def test_the_rows_are_every_step_and_the_last_is_the_stop(fmi, stop, step, rows, fmu_dir):
     path = (fmu_dir if fmi == 2 else me_hosts.fmi3_dir(fmu_dir)) / "LoadShaft.fmu"
     run = cvode_host.run(path, fmi, START, ["phi", "w"], stop, step)
@@ -35,3 +36,40 @@ def test_the_rows_are_every_step_and_the_last_is_the_stop(fmi, stop, step, rows,
     assert np.allclose(run.outputs["w"], W0 + a * t, rtol=1e-6, atol=1e-8)
     assert np.allclose(run.outputs["phi"], PHI0 + W0 * t + a * t ** 2 / 2, rtol=1e-6, atol=1e-8)
     assert run.events == 0 and run.restarts == 0
+
+
+@pytest.mark.parametrize("rtol,atol,within", [(1e-4, 1e-6, 1e-3), (1e-10, 1e-12, 1e-8)])
+def test_the_host_keeps_the_tolerances_it_is_given(rtol, atol, within, fmu_dir):
+    """With viscous friction b the speed decays to its end value exponentially, no polynomial
+    BDF integrates exactly: w(t) = w_end + (W0 - w_end) exp(-b t / J), w_end = (TAU - MEAN) / b,
+    phi(t) = PHI0 + w_end t + (W0 - w_end) J / b (1 - exp(-b t / J)).  The error follows the
+    tolerances asked for: within ``within`` of the speed's range at each, and the tight one
+    far below what CVODE's own defaults reach."""
+    b = 2.0
+    run = cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, {**START, "viscous_damping": b}, ["phi", "w"], 0.5, 0.01,
+                         rtol=rtol, atol=atol)
+    t = run.times
+    w_end = (TAU - MEAN) / b
+    decay = np.exp(-b * t / J)
+    w = w_end + (W0 - w_end) * decay
+    phi = PHI0 + w_end * t + (W0 - w_end) * J / b * (1.0 - decay)
+    span = np.ptp(w)
+    assert np.max(np.abs(run.outputs["w"] - w)) <= within * span
+    assert np.max(np.abs(run.outputs["phi"] - phi)) <= within * np.ptp(phi)
+    if rtol < 1e-6:     # and not by chance: the loose run is off by more than the tight one allows
+        loose = cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, {**START, "viscous_damping": b}, ["phi", "w"], 0.5,
+                               0.01, rtol=1e-4, atol=1e-6)
+        assert np.max(np.abs(loose.outputs["w"] - w)) > within * span
+
+
+def test_an_output_interval_may_take_thousands_of_internal_steps(fmu_dir):
+    """A random load (a multisine up to 450 rad/s) at rtol 1e-10: CVODE takes far more than
+    its default 500 internal steps to cross 0.5 s.  One output interval over the whole run
+    ends where the same run with a row every 10 ms ends (a second run of the host, each of
+    its intervals short)."""
+    start = {**START, "load_kind": "random", "random_amplitude": 5.0}
+    whole = cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, start, ["phi", "w"], 0.5, 0.5, rtol=1e-10, atol=1e-12)
+    rows = cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, start, ["phi", "w"], 0.5, 0.01, rtol=1e-10, atol=1e-12)
+    assert list(whole.times) == [0.0, 0.5] and len(rows.times) == 51
+    for name in ("phi", "w"):
+        assert whole.outputs[name][-1] == pytest.approx(rows.outputs[name][-1], rel=1e-8)
