@@ -73,3 +73,11 @@ def test_an_output_interval_may_take_thousands_of_internal_steps(fmu_dir):
     assert list(whole.times) == [0.0, 0.5] and len(rows.times) == 51
     for name in ("phi", "w"):
         assert whole.outputs[name][-1] == pytest.approx(rows.outputs[name][-1], rel=1e-8)
+
+
+def test_a_run_cvode_cannot_start_says_where_it_stopped(fmu_dir):
+    """Tolerances below double precision: CVODE refuses its first step, and the host's
+    failure says so from where it was, the start (t = 0 s), with CVODE's reason."""
+    with pytest.raises(cvode_host.HostFailure, match=r"^CVODE stopped after t = 0 s: .*accuracy.*\(status -2; after 0 "
+                                                     r"events\)$"):
+        cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, START, ["phi", "w"], 0.2, 0.1, rtol=1e-20, atol=1e-30)
