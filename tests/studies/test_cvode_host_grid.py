@@ -8,7 +8,10 @@ at that row's time.
 
 The FMU: the load shaft's Model Exchange edition alone, its drive torque held at
 ``TAU`` against a constant resistance ``MEAN``, no friction: J dw/dt = TAU - MEAN, so
-w(t) = w0 + (TAU - MEAN) t / J and phi(t) = phi0 + w0 t + (TAU - MEAN) t**2 / (2 J)."""
+w(t) = w0 + (TAU - MEAN) t / J and phi(t) = phi0 + w0 t + (TAU - MEAN) t**2 / (2 J); with
+viscous friction, an exponential decay in closed form (the tolerances kept); with Coulomb
+and static friction against a resistance table, a stop, a stick and a breakaway worked out
+by hand (the events, their log and the restarts)."""
 from __future__ import annotations
 
 import numpy as np
@@ -81,3 +84,40 @@ def test_a_run_cvode_cannot_start_says_where_it_stopped(fmu_dir):
     with pytest.raises(cvode_host.HostFailure, match=r"^CVODE stopped after t = 0 s: .*accuracy.*\(status -2; after 0 "
                                                      r"events\)$"):
         cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, START, ["phi", "w"], 0.2, 0.1, rtol=1e-20, atol=1e-30)
+
+
+#: the load shaft with friction against a resistance table: it slides to rest, sticks, and
+#: breaks away when the table turns the resistance into a drive
+STICK_SLIP = {"load_kind": "table", "table": "0:10; 0.2:10; 0.21:-30", "inertia": 0.5, "w_start": 3.0,
+              "phi_start": 0.25, "tau": 0.0, "friction_torque": 5.0, "breakaway_torque": 20.0}
+
+
+def test_events_by_hand_the_shaft_stops_sticks_and_breaks_away(fmu_dir):
+    """By hand (J = 0.5, Fc = 5, Fs = 20, no drive): sliding against 10 + 5 N*m the shaft
+    decelerates at 30 rad/s**2 from 3 rad/s and stops at t = 0.1 s (phi = 0.25 + 0.3 - 0.15
+    = 0.4); stuck, the net torque -Mc grows with the table from -10 at 0.2 s to 30 at 0.21 s
+    and reaches Fs = 20 at t = 0.2075 s; then a(tau) = 30 + 8000 tau (tau = t - 0.2075) until
+    0.21 s, where w = 0.1 rad/s and phi = 0.4 + 15 tau**2 + 4000 tau**3 / 3; after it
+    a = (30 - 5) / J = 50.  Two events, each restarting CVODE from the FMU's new state,
+    each with its time and its (zero) indicator in the log; none left exactly at zero."""
+    run = cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, STICK_SLIP, ["phi", "w"], 0.3, 0.01)
+    assert run.events == 2 and run.restarts == 2 and run.zero_after_event == []
+    assert [t for t, _ in run.log] == pytest.approx([0.1, 0.2075], abs=1e-6)
+    assert all(len(z) == 1 and abs(z[0]) < 1e-6 for _, z in run.log)
+    t = run.times
+    gain = 15 * 0.0025 ** 2 + 4000 * 0.0025 ** 3 / 3
+    w = np.select([t <= 0.1, t <= 0.2075, t >= 0.21], [3.0 - 30.0 * t, 0.0, 0.1 + 50.0 * (t - 0.21)], np.nan)
+    phi = np.select([t <= 0.1, t <= 0.2075, t >= 0.21],
+                    [0.25 + 3.0 * t - 15.0 * t ** 2, 0.4, 0.4 + gain + 0.1 * (t - 0.21) + 25.0 * (t - 0.21) ** 2],
+                    np.nan)
+    assert np.allclose(run.outputs["w"], w, rtol=0.0, atol=1e-6)
+    assert np.allclose(run.outputs["phi"], phi, rtol=0.0, atol=1e-6)
+    assert np.all(run.outputs["w"][(t > 0.1) & (t < 0.2075)] == 0.0)      # held at rest exactly
+
+
+def test_the_events_allowed_are_the_events_counted(fmu_dir):
+    """Two events (above): a host allowed two runs to the end, one allowed one stops at the
+    second, saying how many it allows and when it stopped."""
+    assert cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, STICK_SLIP, ["w"], 0.3, 0.01, max_events=2).events == 2
+    with pytest.raises(cvode_host.HostFailure, match=r"^more than 1 events by t = 0\.2075\d* s$"):
+        cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, STICK_SLIP, ["w"], 0.3, 0.01, max_events=1)
