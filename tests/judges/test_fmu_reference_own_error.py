@@ -61,3 +61,51 @@ def test_off_its_grid_the_spline_adds_to_the_stated_error(plan):
     truth = fmu_reference.reference(plan, off, source="monolithic")
     true_off = fmu_reference.figure(fmu_reference.errors(plan.scene, off, between.traces, truth))
     assert true_off <= own_off
+
+
+@pytest.mark.parametrize("master", ["adaptive", "me-cvode"])
+def test_a_master_without_a_fixed_order_is_not_extrapolated(master, plan):
+    """Richardson's step needs the order the runs converge with: an adaptive master (whose
+    order is its local one, not what halving its output step buys) and the Model Exchange
+    master are refused with the sentence, before any run."""
+    with pytest.raises(fmu_reference.ReferenceUnavailable) as refused:
+        fmu_reference.reference(plan, _grid(plan), source="extrapolated", master=master, use_cache=False)
+    assert str(refused.value) == (f"master '{master}' has no fixed convergence order to extrapolate with "
+                                  "(an adaptive or Model Exchange master)")
+
+
+def test_a_third_order_master_is_extrapolated_with_its_own_order(fmu_dir):
+    """jacobi-quadratic converges at order 3: the extrapolation fine + (fine - middle) / (2**3 - 1)
+    cancels the leading error term, so the made reference is at least ten times closer to the
+    monolithic one than the finest of its runs (step h / 4) on its own."""
+    from harness.engine.run import simulate
+
+    short = plans.check(scenes.load("kavz685").with_overrides(["experiment.stop=0.02"]), fmu_dir=fmu_dir)
+    h = fmu_reference.grid_step(short)
+    times = np.linspace(0.0, 0.02, int(round(0.02 / h)) + 1)
+    made = fmu_reference.reference(short, times, source="extrapolated", master="jacobi-quadratic", use_cache=False)
+    assert made.info["order"] == 3 and made.method.endswith("Richardson-extrapolated with order 3")
+    assert made.method.startswith(f"jacobi-quadratic at steps {h:.4g}, {h / 2:.4g}, {h / 4:.4g} s")
+    truth = fmu_reference.reference(short, times, source="monolithic", use_cache=False)
+    finest = simulate(short, "jacobi-quadratic", h / 4)
+    assert np.allclose(finest.times[::4], times, rtol=0.0, atol=1e-12)
+    alone = fmu_reference.figure(fmu_reference.errors(short.scene, times, {k: v[::4] for k, v in finest.traces.items()},
+                                                      truth))
+    extrapolated = fmu_reference.figure(fmu_reference.errors(short.scene, times, made.traces, truth))
+    assert extrapolated <= 0.1 * alone, (extrapolated, alone)
+
+
+def test_runs_off_their_order_are_refused_with_the_steps_and_orders_seen(fmu_dir):
+    """The freewheel's own integrator, not the master, sets its error: its runs converge
+    faster than the master's order 2.  The refusal names the steps (the grid's, by
+    ``grid_step``, halved twice) and each signal's observed order."""
+    short = plans.check(scenes.load("freewheel_rectifier").with_overrides(["experiment.stop=0.02"]), fmu_dir=fmu_dir)
+    h = fmu_reference.grid_step(short)
+    with pytest.raises(fmu_reference.ReferenceUnavailable) as refused:
+        fmu_reference.reference(short, np.linspace(0.0, 0.02, 101), source="extrapolated", use_cache=False)
+    said = str(refused.value)
+    assert said.startswith(f"no extrapolated reference: jacobi-linear at steps {h:.4g}, {h / 2:.4g}, {h / 4:.4g} s "
+                           "does not show its order 2 (observed: ")
+    assert said.endswith("; the runs are not in their asymptotic range")
+    observed = dict(item.rsplit(" ", 1) for item in said.split("(observed: ")[1].split(")")[0].split(", "))
+    assert observed and all(abs(float(o) - 2.0) > fmu_reference.ORDER_SLACK for o in observed.values())
