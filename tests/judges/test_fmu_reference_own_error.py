@@ -9,6 +9,8 @@ says in words.  Read at a run's own times off the reference's grid, the spline's
 added to it, never taken from it."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -45,6 +47,9 @@ def test_the_stated_own_error_is_not_zero_and_bounds_the_true_error(source, plan
     assert any(not np.array_equal(made.info["check"][k], made.traces[k]) for k in made.traces)
     said = fmu_reference.quality(made, own)
     assert f"about {100 * own:.2g} %" in said and "about 0 %" not in said
+    how = {"model-exchange": f"the same run at rtol={fmu_reference.ME_CHECK_TOLERANCE:g}",
+           "extrapolated": "the extrapolation from the coarser two runs"}[source]
+    assert said == f"{made.method}; its own error about {100 * own:.2g} % (RMS, relative: {how})"
     assert fmu_reference.summary(plan.scene, times, truth.traces, made)["reference"]["own_error_relative"] == own
 
 
@@ -83,8 +88,15 @@ def test_a_third_order_master_is_extrapolated_with_its_own_order(fmu_dir):
     short = plans.check(scenes.load("kavz685").with_overrides(["experiment.stop=0.02"]), fmu_dir=fmu_dir)
     h = fmu_reference.grid_step(short)
     times = np.linspace(0.0, 0.02, int(round(0.02 / h)) + 1)
+    started = time.perf_counter()
     made = fmu_reference.reference(short, times, source="extrapolated", master="jacobi-quadratic", use_cache=False)
+    elapsed = time.perf_counter() - started
     assert made.info["order"] == 3 and made.method.endswith("Richardson-extrapolated with order 3")
+    assert made.info["master"] == "jacobi-quadratic"
+    assert all(abs(o - 3.0) <= fmu_reference.ORDER_SLACK for o in made.info["observed_orders"].values())
+    # its cost: the three runs' steps (0.02 s at h, h / 2, h / 4) and their time, within the call's
+    assert made.n_rhs == sum(int(round(0.02 / (h / 2 ** k))) for k in range(3))
+    assert 0.0 < made.wall_time <= elapsed
     assert made.method.startswith(f"jacobi-quadratic at steps {h:.4g}, {h / 2:.4g}, {h / 4:.4g} s")
     truth = fmu_reference.reference(short, times, source="monolithic", use_cache=False)
     finest = simulate(short, "jacobi-quadratic", h / 4)
