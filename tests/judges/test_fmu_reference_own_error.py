@@ -34,10 +34,37 @@ def _grid(plan):
     return np.linspace(plan.experiment.start, plan.experiment.stop, int(round(0.1 / h)) + 1)
 
 
+def _runs_seen(monkeypatch) -> list:
+    """The runs a made reference is made of, as each came back (master, step, options, result)."""
+    seen = []
+    run = fmu_reference._grid_run
+
+    def watched(plan, master, step, options=None):
+        result = run(plan, master, step, options)
+        seen.append((master, step, options, result))
+        return result
+    monkeypatch.setattr(fmu_reference, "_grid_run", watched)
+    return seen
+
+
 @pytest.mark.parametrize("source", ["model-exchange", "extrapolated"])
-def test_the_stated_own_error_is_not_zero_and_bounds_the_true_error(source, plan):
+def test_the_stated_own_error_is_not_zero_and_bounds_the_true_error(source, plan, monkeypatch):
     times = _grid(plan)
+    seen = _runs_seen(monkeypatch)
     made = fmu_reference.reference(plan, times, source=source)
+    # what it says it is and what it cost: the runs it was made of
+    h = fmu_reference.grid_step(plan)
+    assert made.wall_time == pytest.approx(sum(result.wall_time for *_, result in seen), rel=1e-12)
+    if source == "model-exchange":
+        assert [(m, s, o) for m, s, o, _ in seen] == [("me-cvode", h, {"tolerance": fmu_reference.ME_TOLERANCE}),
+                                                     ("me-cvode", h, {"tolerance": fmu_reference.ME_CHECK_TOLERANCE})]
+        assert made.method == f"me-cvode rtol={fmu_reference.ME_TOLERANCE:g}" == "me-cvode rtol=1e-10"
+        assert made.n_rhs == seen[0][3].counters["rhs"] > 0
+    else:
+        assert [(m, s) for m, s, *_ in seen] == [(fmu_reference.EXTRAPOLATED_MASTER, h / 2 ** k) for k in range(3)]
+        assert made.method == (f"jacobi-linear at steps {h:.4g}, {h / 2:.4g}, {h / 4:.4g} s, "
+                               "Richardson-extrapolated with order 2")
+        assert made.n_rhs == sum(int(round(0.1 / (h / 2 ** k))) for k in range(3))
     truth = fmu_reference.reference(plan, times, source="monolithic")
     own = fmu_reference.own_error(plan.scene, made)
     true_error = fmu_reference.figure(fmu_reference.errors(plan.scene, made.times, made.traces, truth))
