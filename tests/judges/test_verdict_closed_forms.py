@@ -172,3 +172,30 @@ def test_a_mean_tolerance_beyond_the_signals_own_size_is_stated_as_it_is():
     assert _stated(power.mean, 2.0 * max(MEAN, amplitude), slack=1e-12), power.mean
     assert not _check(_signal(_judge(_torque(T) + power.mean, rtol=wide, with_power=False)), "mean").passed
     assert f"mean +-{power.mean:.3g}" in power.describe()
+
+
+def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
+    """A ripple M + A sin(2 pi f t) sampled once a period, each sample on a crest: the result's
+    samples show the reference's mean as M + A and its ripple as 0 (by hand), off by more
+    than half of what is allowed (the mean 1e-3 of max(M, A) = 0.1, the ripple 2 % of A
+    = 0.2 plus the reference's own error), so neither is judged - each check states the
+    reference's own value, the result's, and why - and the signal does not fail on them."""
+    m, a, f = 100.0, 10.0, 10.0
+    reference_t = np.linspace(0.0, 2.0, 20001)
+    t = 0.025 + np.arange(20) / f
+    judged = verdicts.judge(t, {"x": m + a * np.sin(2 * np.pi * f * t)}, reference_t,
+                            {"x": m + a * np.sin(2 * np.pi * f * reference_t)}, window=(t[0], t[-1]), with_power=False)
+    (signal,) = judged.signals
+    checks = {c.quantity: c for c in signal.checks}
+    mean, ripple = checks["mean"], checks["amplitude"]
+    assert not mean.judged and not ripple.judged and judged.passed
+    assert (mean.quantity, mean.reference, mean.difference, mean.allowed) == ("mean", pytest.approx(m, rel=1e-9),
+                                                                              pytest.approx(0.0, abs=1e-9),
+                                                                              pytest.approx(0.1, rel=1e-9))
+    assert mean.result == pytest.approx(m + a, rel=1e-12)
+    assert mean.detail == ("not judged: the result's samples (every 100 ms) show the reference's mean as 110, its own "
+                           "samples as 100 - off by more than half the 0.1 allowed")
+    assert ripple.reference == pytest.approx(a, rel=1e-6) and ripple.result == pytest.approx(0.0, abs=1e-9)
+    assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
+    assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
+                                    "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
