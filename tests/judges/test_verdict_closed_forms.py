@@ -199,3 +199,24 @@ def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
     assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
     assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
                                     "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
+
+
+def _square(t, first_rise):
+    """10 N*m, and 11 for 40 ms every 80 ms from ``first_rise`` on."""
+    return 10.0 + (np.mod(t - first_rise, 0.08) < 0.04).astype(float)
+
+
+@pytest.mark.parametrize("rise,passes", [(0.001, True), (0.005, True), (0.009, True), (0.02, False)])
+def test_the_reference_places_an_edge_no_closer_than_its_own_samples(rise, passes):
+    """A square wave whose edges fall between the reference's samples (every 10 ms, edges at
+    5 ms past them): a result sampled every 1 ms with its edges anywhere between the same two
+    samples (1 to 9 ms past) is within the tube - the reference cannot say where between
+    them the edge is - and one whose edges are a whole reference interval later (20 ms) is
+    not: a fifth of its samples sit on the other level."""
+    reference_t = np.round(np.arange(0.0, 1.0001, 0.01), 10)
+    t = np.round(np.arange(0.0, 1.00001, 0.001), 10)
+    judged = verdicts.judge(t, {"x": _square(t, rise)}, reference_t, {"x": _square(reference_t, 0.005)},
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    assert tube.detail.startswith("0 % of the samples outside" if passes else "19.3 % of the samples outside")
