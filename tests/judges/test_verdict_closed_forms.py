@@ -220,3 +220,22 @@ def test_the_reference_places_an_edge_no_closer_than_its_own_samples(rise, passe
     (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
     assert tube.passed is passes, tube.detail
     assert tube.detail.startswith("0 % of the samples outside" if passes else "19.3 % of the samples outside")
+
+
+def test_the_references_own_error_is_its_largest_between_any_two_of_its_samples():
+    """A ripple growing over the window (100 + 5 t sin(2 pi 20 t), 20 samples a period): the
+    ripple allowed is 2 % of it plus the reference's own error, its interpolant's largest
+    error midway between any two of its samples - read from the reference's own estimate
+    (``sampled.Reference.error_at``) at every midpoint, the last period's the largest, about
+    twice the first half's."""
+    from harness.judges import sampled
+
+    reference_t = np.round(np.arange(0.0, 2.00001, 0.0025), 10)
+    y = 100.0 + 5.0 * reference_t * np.sin(2 * np.pi * 20.0 * reference_t)
+    judged = verdicts.judge(reference_t, {"x": y}, reference_t, {"x": y}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    errors = sampled.Reference(reference_t, y).error_at(0.5 * (reference_t[1:] + reference_t[:-1]))
+    own = float(np.max(errors))
+    assert own > 1.5 * float(np.max(errors[: len(errors) // 2]))
+    assert ripple.allowed == pytest.approx(0.02 * ripple.reference + own, rel=1e-9)
+    assert ripple.detail.endswith(f"and the reference's own error {own:.2g})")
