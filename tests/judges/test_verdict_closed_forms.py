@@ -239,3 +239,40 @@ def test_the_references_own_error_is_its_largest_between_any_two_of_its_samples(
     assert own > 1.5 * float(np.max(errors[: len(errors) // 2]))
     assert ripple.allowed == pytest.approx(0.02 * ripple.reference + own, rel=1e-9)
     assert ripple.detail.endswith(f"and the reference's own error {own:.2g})")
+
+
+_EVERY_MS = np.round(np.arange(0.0, 2.00001, 0.001), 10)
+_FIVE_HZ = np.sin(2 * np.pi * 5.0 * _EVERY_MS)
+
+
+@pytest.mark.parametrize("reference,result,allowed,said,passes", [
+    # no ripple at all: the ripple is judged against 2 % of the mean, 100
+    (100.0 + 0.0 * _FIVE_HZ, 100.0 + 1.0 * _FIVE_HZ, 2.0, "1 vs 0 (+1, allowed +-2: 2 % of its mean, 100)", True),
+    (100.0 + 0.0 * _FIVE_HZ, 100.0 + 3.0 * _FIVE_HZ, 2.0, "3 vs 0 (+3, allowed +-2: 2 % of its mean, 100)", False),
+    # a ripple below the noise floor (1e-3 of the largest value, 0.1): 2 % of that floor
+    (100.0 + 1e-6 * _FIVE_HZ, 100.0 + 1e-3 * _FIVE_HZ, 0.002, "0.001 vs 1e-06 (+0.000999, allowed +-0.002: 2 % of the "
+     "noise floor, 0.1)", True),
+    (100.0 + 1e-6 * _FIVE_HZ, 100.0 + 3e-3 * _FIVE_HZ, 0.002, "0.003 vs 1e-06 (+0.003, allowed +-0.002: 2 % of the "
+     "noise floor, 0.1)", False)])
+def test_a_ripple_next_to_none_is_judged_against_the_mean_or_the_noise_floor(reference, result, allowed, said, passes):
+    """By hand: the ripple allowed is 2 % of the reference's ripple, of its mean where it has
+    none, and never less than 2 % of the noise floor (1e-3 of its largest value)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": result}, _EVERY_MS, {"x": reference}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    assert ripple.allowed == pytest.approx(allowed, rel=1e-6)
+    assert (ripple.passed, ripple.detail) == (passes, said)
+
+
+def test_a_ripple_the_references_samples_cannot_show_is_stated_and_not_judged():
+    """A 5 Hz ripple of 10 sampled by the reference five times a period (every 40 ms): its own
+    samples show the ripple as 10 sin(72 deg) = 9.51, and between them it errs by more than the
+    2 % allowed, so the ripple is not judged; the check states the reference's 9.51 and the
+    result's 10 (a result sampled every 1 ms)."""
+    reference_t = np.round(np.arange(0.0, 2.00001, 0.04), 10)
+    judged = verdicts.judge(_EVERY_MS, {"x": 100.0 + 10.0 * _FIVE_HZ}, reference_t,
+                            {"x": 100.0 + 10.0 * np.sin(2 * np.pi * 5.0 * reference_t)}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    assert not ripple.judged and judged.passed
+    assert ripple.reference == pytest.approx(10.0 * math.sin(math.radians(72.0)), rel=1e-9)
+    assert ripple.result == pytest.approx(10.0, rel=1e-9)
+    assert ripple.detail.startswith("not judged: the reference's samples cannot show this ripple's peaks")
