@@ -188,7 +188,7 @@ def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
     (signal,) = judged.signals
     checks = {c.quantity: c for c in signal.checks}
     mean, ripple = checks["mean"], checks["amplitude"]
-    assert not mean.judged and not ripple.judged and judged.passed
+    assert mean.judged is False and ripple.judged is False and mean.passed is True and judged.passed
     assert (mean.quantity, mean.reference, mean.difference, mean.allowed) == ("mean", pytest.approx(m, rel=1e-9),
                                                                               pytest.approx(0.0, abs=1e-9),
                                                                               pytest.approx(0.1, rel=1e-9))
@@ -272,7 +272,18 @@ def test_a_ripple_the_references_samples_cannot_show_is_stated_and_not_judged():
     judged = verdicts.judge(_EVERY_MS, {"x": 100.0 + 10.0 * _FIVE_HZ}, reference_t,
                             {"x": 100.0 + 10.0 * np.sin(2 * np.pi * 5.0 * reference_t)}, with_power=False)
     (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
-    assert not ripple.judged and judged.passed
-    assert ripple.reference == pytest.approx(10.0 * math.sin(math.radians(72.0)), rel=1e-9)
+    assert ripple.judged is False and ripple.passed is True and judged.passed
+    assert ripple.quantity == "amplitude"
+    shown = 10.0 * math.sin(math.radians(72.0))
+    assert ripple.reference == pytest.approx(shown, rel=1e-9)
     assert ripple.result == pytest.approx(10.0, rel=1e-9)
-    assert ripple.detail.startswith("not judged: the reference's samples cannot show this ripple's peaks")
+    assert ripple.difference == pytest.approx(10.0 - shown, rel=1e-9)
+    from harness.judges import sampled
+
+    own = float(np.max(sampled.Reference(reference_t, 100.0 + 10.0 * np.sin(2 * np.pi * 5.0 * reference_t))
+                       .error_at(0.5 * (reference_t[1:] + reference_t[:-1]))))
+    assert own > 0.02 * shown
+    assert ripple.allowed == pytest.approx(0.02 * shown + own, rel=1e-9)
+    assert ripple.detail == (f"not judged: the reference's samples cannot show this ripple's peaks (between them it "
+                             f"errs by up to {own:.3g}, more than the {0.02 * shown:.3g} allowed; a denser reference "
+                             "judges it)")
