@@ -287,3 +287,15 @@ def test_a_ripple_the_references_samples_cannot_show_is_stated_and_not_judged():
     assert ripple.detail == (f"not judged: the reference's samples cannot show this ripple's peaks (between them it "
                              f"errs by up to {own:.3g}, more than the {0.02 * shown:.3g} allowed; a denser reference "
                              "judges it)")
+
+
+def test_a_reference_its_samples_resolve_exactly_adds_no_error_of_its_own():
+    """A ramp 10 + 2 t over 2 s: both cubics through its samples are the line itself, so the
+    reference's own error is 0 and the ripple (half its range, 2) is allowed 2 % of it alone
+    (0.04), said without an own error; the mean 12 to 1e-3 of max(12, 2)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": 10.0 + 2.0 * _EVERY_MS}, _EVERY_MS, {"x": 10.0 + 2.0 * _EVERY_MS},
+                            with_power=False)
+    checks = {c.quantity: c for c in judged.signals[0].checks}
+    assert checks["amplitude"].allowed == pytest.approx(0.04, rel=1e-9)
+    assert checks["amplitude"].detail == "2 vs 2 (+0 %, allowed +-2 %)"
+    assert checks["mean"].detail == "12 vs 12 (+0, allowed +-0.012)"
