@@ -299,3 +299,27 @@ def test_a_reference_its_samples_resolve_exactly_adds_no_error_of_its_own():
     assert checks["amplitude"].allowed == pytest.approx(0.04, rel=1e-9)
     assert checks["amplitude"].detail == "2 vs 2 (+0 %, allowed +-2 %)"
     assert checks["mean"].detail == "12 vs 12 (+0, allowed +-0.012)"
+
+
+def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
+    """The result sampled every 1/30 s, 6 samples a revolution: its samples resolve order 1
+    (judged, off by nothing), but they show the reference's orders 2 and 3 off by more than
+    half of the 5 % of each allowed, so those are stated - the reference's own magnitude
+    (2.5 and 1.5 by hand), what the samples show - and not judged."""
+    t = np.round(np.arange(0.0, 2.00001, 1.0 / 30.0), 10)
+    judged = verdicts.judge(t, {"coupling.tau2": _torque(t), "load.w": np.full_like(t, W)}, T,
+                            {"coupling.tau2": _torque(T), "load.w": np.full_like(T, W)}, rotation_signal="load.w",
+                            kinds={"coupling.tau2": "torque", "load.w": "speed"})
+    tau = _signal(judged)
+    assert _check(tau, "order 1").judged is True and _check(tau, "order 1").passed
+    for k in (2, 3):
+        order = _check(tau, f"order {k}")
+        magnitude = ORDERS[k][0]
+        assert order.judged is False and order.passed is True
+        assert order.reference == pytest.approx(magnitude, rel=1e-3)
+        assert order.allowed == pytest.approx(0.05 * order.reference, rel=1e-9)
+        assert order.difference == pytest.approx(0.0, abs=1e-5 * magnitude)
+        assert abs(order.result - order.reference) > 0.5 * order.allowed
+        assert order.detail.startswith(f"not judged: the result's samples (every 33.3 ms) show the reference's "
+                                       f"order {k} as {order.result:.4g}, its own samples as {order.reference:.4g}")
+        assert order.detail.endswith("allowed (of the complex component)")
