@@ -322,3 +322,24 @@ def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
                                        f"order {k} as ")
         assert order.detail.endswith(f", its own samples as {order.reference:.4g} - off by more than half the "
                                      f"{order.allowed:.3g} allowed (of the complex component)")
+
+
+def test_an_order_scaled_is_said_as_its_change_in_amplitude_and_of_the_component():
+    """Order 2 scaled by 1.02, its phase kept: +2 % in amplitude, the phase unturned, off by
+    |1.02 - 1| = 2 % of the component (allowed 5 %)."""
+    orders = {**ORDERS, 2: (ORDERS[2][0] * 1.02, ORDERS[2][1])}
+    order = _check(_signal(_judge(_torque(T, orders))), "order 2")
+    assert order.passed and order.difference == pytest.approx(0.02 * ORDERS[2][0], rel=1e-6)
+    amplitude, phase, off = order.detail.split(", ", 2)[0], order.detail.split(", ")[1], order.detail.split(": ")[1]
+    assert amplitude == "amplitude +2 %" and off == "off by 2 % of the component (allowed 5 %)"
+    assert abs(float(phase.split()[1])) < 1e-9
+
+
+def test_the_tube_around_a_constant_is_of_its_mean():
+    """A constant 100 has no range: its tube is 5 % of the mean (+-5), so a result 0.5 above
+    it stays inside (the mean check is what fails it)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": 100.5 + 0.0 * _EVERY_MS}, _EVERY_MS, {"x": 100.0 + 0.0 * _EVERY_MS},
+                            with_power=False)
+    checks = {c.quantity: c for c in judged.signals[0].checks}
+    assert checks["tube"].passed and checks["tube"].detail.startswith("0 % of the samples outside +-5 ")
+    assert not checks["mean"].passed
