@@ -124,3 +124,14 @@ def test_the_api_refuses_them_before_anything_runs(argument, value, monkeypatch)
 def test_a_time_given_with_a_unit_is_the_runs_stop():
     assert api.load("kavz685", stop="20 ms").experiment.stop == pytest.approx(0.02, rel=1e-12)
     assert api.load("kavz685", stop=np.float32(0.25)).experiment.stop == pytest.approx(0.25, rel=1e-7)
+
+
+@pytest.mark.parametrize("value,label,said", [(0.0, "step", "step = 0.0 must be > 0 s"),
+                                              ("-1 ms", "step", "step = -0.001 must be > 0 s"),
+                                              (-2, "max_step", "max_step = -2.0 must be > 0 s")])
+def test_a_step_refused_is_named_as_the_caller_named_it(value, label, said):
+    """The refusal names the argument the caller handed (``step``), not the scene file's
+    ``experiment.step``, with the value in seconds."""
+    with pytest.raises(inputs.InputError) as refused:
+        inputs.step(value, label) if label != "step" else inputs.step(value)
+    assert str(refused.value) == said

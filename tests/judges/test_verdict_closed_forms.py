@@ -172,3 +172,174 @@ def test_a_mean_tolerance_beyond_the_signals_own_size_is_stated_as_it_is():
     assert _stated(power.mean, 2.0 * max(MEAN, amplitude), slack=1e-12), power.mean
     assert not _check(_signal(_judge(_torque(T) + power.mean, rtol=wide, with_power=False)), "mean").passed
     assert f"mean +-{power.mean:.3g}" in power.describe()
+
+
+def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
+    """A ripple M + A sin(2 pi f t) sampled once a period, each sample on a crest: the result's
+    samples show the reference's mean as M + A and its ripple as 0 (by hand), off by more
+    than half of what is allowed (the mean 1e-3 of max(M, A) = 0.1, the ripple 2 % of A
+    = 0.2 plus the reference's own error), so neither is judged - each check states the
+    reference's own value, the result's, and why - and the signal does not fail on them."""
+    m, a, f = 100.0, 10.0, 10.0
+    reference_t = np.linspace(0.0, 2.0, 20001)
+    t = 0.025 + np.arange(20) / f
+    judged = verdicts.judge(t, {"x": m + a * np.sin(2 * np.pi * f * t)}, reference_t,
+                            {"x": m + a * np.sin(2 * np.pi * f * reference_t)}, window=(t[0], t[-1]), with_power=False)
+    (signal,) = judged.signals
+    checks = {c.quantity: c for c in signal.checks}
+    mean, ripple = checks["mean"], checks["amplitude"]
+    assert mean.judged is False and ripple.judged is False and mean.passed is True and judged.passed
+    assert (mean.quantity, mean.reference, mean.difference, mean.allowed) == ("mean", pytest.approx(m, rel=1e-9),
+                                                                              pytest.approx(0.0, abs=1e-9),
+                                                                              pytest.approx(0.1, rel=1e-9))
+    assert mean.result == pytest.approx(m + a, rel=1e-12)
+    assert mean.detail == ("not judged: the result's samples (every 100 ms) show the reference's mean as 110, its own "
+                           "samples as 100 - off by more than half the 0.1 allowed")
+    assert ripple.reference == pytest.approx(a, rel=1e-6) and ripple.result == pytest.approx(0.0, abs=1e-9)
+    assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
+    assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
+                                    "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
+
+
+def _square(t, first_rise):
+    """10 N*m, and 11 for 40 ms every 80 ms from ``first_rise`` on."""
+    return 10.0 + (np.mod(t - first_rise, 0.08) < 0.04).astype(float)
+
+
+@pytest.mark.parametrize("rise,passes", [(0.001, True), (0.005, True), (0.009, True), (0.02, False)])
+def test_the_reference_places_an_edge_no_closer_than_its_own_samples(rise, passes):
+    """A square wave whose edges fall between the reference's samples (every 10 ms, edges at
+    5 ms past them): a result sampled every 1 ms with its edges anywhere between the same two
+    samples (1 to 9 ms past) is within the tube - the reference cannot say where between
+    them the edge is - and one whose edges are a whole reference interval later (20 ms) is
+    not: a fifth of its samples sit on the other level."""
+    reference_t = np.round(np.arange(0.0, 1.0001, 0.01), 10)
+    t = np.round(np.arange(0.0, 1.00001, 0.001), 10)
+    judged = verdicts.judge(t, {"x": _square(t, rise)}, reference_t, {"x": _square(reference_t, 0.005)},
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    assert tube.detail.startswith("0 % of the samples outside" if passes else "19.3 % of the samples outside")
+
+
+def test_the_references_own_error_is_its_largest_between_any_two_of_its_samples():
+    """A ripple growing over the window (100 + 5 t sin(2 pi 20 t), 20 samples a period): the
+    ripple allowed is 2 % of it plus the reference's own error, its interpolant's largest
+    error midway between any two of its samples - read from the reference's own estimate
+    (``sampled.Reference.error_at``) at every midpoint, the last period's the largest, about
+    twice the first half's."""
+    from harness.judges import sampled
+
+    reference_t = np.round(np.arange(0.0, 2.00001, 0.0025), 10)
+    y = 100.0 + 5.0 * reference_t * np.sin(2 * np.pi * 20.0 * reference_t)
+    judged = verdicts.judge(reference_t, {"x": y}, reference_t, {"x": y}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    errors = sampled.Reference(reference_t, y).error_at(0.5 * (reference_t[1:] + reference_t[:-1]))
+    own = float(np.max(errors))
+    assert own > 1.5 * float(np.max(errors[: len(errors) // 2]))
+    assert ripple.allowed == pytest.approx(0.02 * ripple.reference + own, rel=1e-9)
+    assert ripple.detail.endswith(f"and the reference's own error {own:.2g})")
+
+
+_EVERY_MS = np.round(np.arange(0.0, 2.00001, 0.001), 10)
+_FIVE_HZ = np.sin(2 * np.pi * 5.0 * _EVERY_MS)
+
+
+@pytest.mark.parametrize("reference,result,allowed,said,passes", [
+    # no ripple at all: the ripple is judged against 2 % of the mean, 100
+    (100.0 + 0.0 * _FIVE_HZ, 100.0 + 1.0 * _FIVE_HZ, 2.0, "1 vs 0 (+1, allowed +-2: 2 % of its mean, 100)", True),
+    (100.0 + 0.0 * _FIVE_HZ, 100.0 + 3.0 * _FIVE_HZ, 2.0, "3 vs 0 (+3, allowed +-2: 2 % of its mean, 100)", False),
+    # a ripple below the noise floor (1e-3 of the largest value, 0.1): 2 % of that floor
+    (100.0 + 1e-6 * _FIVE_HZ, 100.0 + 1e-3 * _FIVE_HZ, 0.002, "0.001 vs 1e-06 (+0.000999, allowed +-0.002: 2 % of the "
+     "noise floor, 0.1)", True),
+    (100.0 + 1e-6 * _FIVE_HZ, 100.0 + 3e-3 * _FIVE_HZ, 0.002, "0.003 vs 1e-06 (+0.003, allowed +-0.002: 2 % of the "
+     "noise floor, 0.1)", False)])
+def test_a_ripple_next_to_none_is_judged_against_the_mean_or_the_noise_floor(reference, result, allowed, said, passes):
+    """By hand: the ripple allowed is 2 % of the reference's ripple, of its mean where it has
+    none, and never less than 2 % of the noise floor (1e-3 of its largest value)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": result}, _EVERY_MS, {"x": reference}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    assert ripple.allowed == pytest.approx(allowed, rel=1e-6)
+    assert (ripple.passed, ripple.detail) == (passes, said)
+
+
+def test_a_ripple_the_references_samples_cannot_show_is_stated_and_not_judged():
+    """A 5 Hz ripple of 10 sampled by the reference five times a period (every 40 ms): its own
+    samples show the ripple as 10 sin(72 deg) = 9.51, and between them it errs by more than the
+    2 % allowed, so the ripple is not judged; the check states the reference's 9.51 and the
+    result's 10 (a result sampled every 1 ms)."""
+    reference_t = np.round(np.arange(0.0, 2.00001, 0.04), 10)
+    judged = verdicts.judge(_EVERY_MS, {"x": 100.0 + 10.0 * _FIVE_HZ}, reference_t,
+                            {"x": 100.0 + 10.0 * np.sin(2 * np.pi * 5.0 * reference_t)}, with_power=False)
+    (ripple,) = [c for c in judged.signals[0].checks if c.quantity == "amplitude"]
+    assert ripple.judged is False and ripple.passed is True and judged.passed
+    assert ripple.quantity == "amplitude"
+    shown = 10.0 * math.sin(math.radians(72.0))
+    assert ripple.reference == pytest.approx(shown, rel=1e-9)
+    assert ripple.result == pytest.approx(10.0, rel=1e-9)
+    assert ripple.difference == pytest.approx(10.0 - shown, rel=1e-9)
+    from harness.judges import sampled
+
+    own = float(np.max(sampled.Reference(reference_t, 100.0 + 10.0 * np.sin(2 * np.pi * 5.0 * reference_t))
+                       .error_at(0.5 * (reference_t[1:] + reference_t[:-1]))))
+    assert own > 0.02 * shown
+    assert ripple.allowed == pytest.approx(0.02 * shown + own, rel=1e-9)
+    assert ripple.detail == (f"not judged: the reference's samples cannot show this ripple's peaks (between them it "
+                             f"errs by up to {own:.3g}, more than the {0.02 * shown:.3g} allowed; a denser reference "
+                             "judges it)")
+
+
+def test_a_reference_its_samples_resolve_exactly_adds_no_error_of_its_own():
+    """A ramp 10 + 2 t over 2 s: both cubics through its samples are the line itself, so the
+    reference's own error is 0 and the ripple (half its range, 2) is allowed 2 % of it alone
+    (0.04), said without an own error; the mean 12 to 1e-3 of max(12, 2)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": 10.0 + 2.0 * _EVERY_MS}, _EVERY_MS, {"x": 10.0 + 2.0 * _EVERY_MS},
+                            with_power=False)
+    checks = {c.quantity: c for c in judged.signals[0].checks}
+    assert checks["amplitude"].allowed == pytest.approx(0.04, rel=1e-9)
+    assert checks["amplitude"].detail == "2 vs 2 (+0 %, allowed +-2 %)"
+    assert checks["mean"].detail == "12 vs 12 (+0, allowed +-0.012)"
+
+
+def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
+    """The result sampled every 1/30 s, 6 samples a revolution: its samples resolve order 1
+    (judged), but they show the reference's orders 2 and 3 off by more than
+    half of the 5 % of each allowed, so those are stated - the reference's own magnitude
+    (2.5 and 1.5 by hand), the allowance - and not judged."""
+    t = np.round(np.arange(0.0, 2.00001, 1.0 / 30.0), 10)
+    judged = verdicts.judge(t, {"coupling.tau2": _torque(t), "load.w": np.full_like(t, W)}, T,
+                            {"coupling.tau2": _torque(T), "load.w": np.full_like(T, W)}, rotation_signal="load.w",
+                            kinds={"coupling.tau2": "torque", "load.w": "speed"})
+    tau = _signal(judged)
+    assert _check(tau, "order 1").judged is True and _check(tau, "order 1").passed
+    for k in (2, 3):
+        order = _check(tau, f"order {k}")
+        magnitude = ORDERS[k][0]
+        assert order.judged is False and order.passed is True
+        assert order.reference == pytest.approx(magnitude, rel=1e-3)
+        assert order.allowed == pytest.approx(0.05 * order.reference, rel=1e-9)
+        assert order.detail.startswith(f"not judged: the result's samples (every 33.3 ms) show the reference's "
+                                       f"order {k} as ")
+        assert order.detail.endswith(f", its own samples as {order.reference:.4g} - off by more than half the "
+                                     f"{order.allowed:.3g} allowed (of the complex component)")
+
+
+def test_an_order_scaled_is_said_as_its_change_in_amplitude_and_of_the_component():
+    """Order 2 scaled by 1.02, its phase kept: +2 % in amplitude, the phase unturned, off by
+    |1.02 - 1| = 2 % of the component (allowed 5 %)."""
+    orders = {**ORDERS, 2: (ORDERS[2][0] * 1.02, ORDERS[2][1])}
+    order = _check(_signal(_judge(_torque(T, orders))), "order 2")
+    assert order.passed and order.difference == pytest.approx(0.02 * ORDERS[2][0], rel=1e-6)
+    amplitude, phase, off = order.detail.split(", ", 2)[0], order.detail.split(", ")[1], order.detail.split(": ")[1]
+    assert amplitude == "amplitude +2 %" and off == "off by 2 % of the component (allowed 5 %)"
+    assert abs(float(phase.split()[1])) < 1e-9
+
+
+def test_the_tube_around_a_constant_is_of_its_mean():
+    """A constant 100 has no range: its tube is 5 % of the mean (+-5), so a result 0.5 above
+    it stays inside (the mean check is what fails it)."""
+    judged = verdicts.judge(_EVERY_MS, {"x": 100.5 + 0.0 * _EVERY_MS}, _EVERY_MS, {"x": 100.0 + 0.0 * _EVERY_MS},
+                            with_power=False)
+    checks = {c.quantity: c for c in judged.signals[0].checks}
+    assert checks["tube"].passed and checks["tube"].detail.startswith("0 % of the samples outside +-5 ")
+    assert not checks["mean"].passed

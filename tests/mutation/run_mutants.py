@@ -202,6 +202,29 @@ def _row(module: str, c: Counter) -> str:
             f"{100.0 * c['killed'] / tested if tested else float('nan'):.1f} % |")
 
 
+def sampled(target: Path, mutate: list[str], names: list[str], n: int, seed: int) -> list[str]:
+    """``n`` of the mutants of ``mutate``'s files that match ``names``' globs (all when empty),
+    drawn by ``random.Random(seed).sample`` from their names in sorted order: the names mutmut
+    gives them, made here by its own mutation of each file (in ``target``, whose
+    pyproject.toml it reads)."""
+    import random
+
+    listing = ("import json, sys\n"
+               "from mutmut.mutation.file_mutation import mutate_file_contents\n"
+               "out = []\n"
+               "for path in sys.argv[1:]:\n"
+               "    module = path[:-3].replace('/', '.')\n"
+               "    made = mutate_file_contents(path, open(path).read(), None, None)\n"
+               "    out += [n if n.startswith(module) else module + '.' + n for n in made.mutant_names]\n"
+               "print(json.dumps(out))\n")
+    listed = subprocess.run([sys.executable, "-c", listing, *mutate], cwd=target, capture_output=True, text=True,
+                            check=True)
+    every = sorted(m for m in json.loads(listed.stdout) if not names or any(fnmatch.fnmatch(m, g) for g in names))
+    drawn = sorted(random.Random(seed).sample(every, min(n, len(every))))
+    print(f"{len(drawn)} of {len(every)} mutants, drawn with seed {seed}")
+    return drawn
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--label", default="current")
@@ -212,6 +235,10 @@ def main() -> int:
     parser.add_argument("--mutants", nargs="+", default=None, metavar="GLOB",
                         help="only the mutants whose names match these globs (a bounded subset of a group, "
                              "e.g. 'lever.physics.engine.*'; the same subset before and after)")
+    parser.add_argument("--sample", type=int, default=None, metavar="N",
+                        help="a random N of the group's mutants (of those --mutants selects), drawn with --seed: "
+                             "the same N before and after")
+    parser.add_argument("--seed", type=int, default=0, help="the seed of --sample's draw")
     args = parser.parse_args()
     subprocess.run([sys.executable, "-c", "from harness.cli import ensure_fmus; ensure_fmus(quiet=True)"],
                    cwd=REPO, check=True)
@@ -224,6 +251,8 @@ def main() -> int:
         target = REPO / "results" / "mutation" / args.label / group
         if not (args.keep and target.exists()):
             stage(target, args.tests_from.resolve(), mutate, tests)
+        if args.sample:
+            names = sampled(target, mutate, names, args.sample, args.seed)
         run = subprocess.run([sys.executable, "-m", "mutmut", "run", "--max-children", str(args.max_children), *names],
                              cwd=target, env=env)
         table = score(target, names)
