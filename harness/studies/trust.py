@@ -76,6 +76,10 @@ def relative_spread(s: dict) -> float | None:
     return (s["max"] - s["min"]) / s["median"]
 
 
+#: repeats within this share of their median are steady (``noise``)
+QUIET_SPREAD = 0.25
+
+
 def noise(load: dict | None, figures: dict | None = None, unit: str = "s") -> str:
     """Why a figure is not to be trusted, in words: the machine's load and the spread of
     the repeated figures behind it."""
@@ -85,7 +89,11 @@ def noise(load: dict | None, figures: dict | None = None, unit: str = "s") -> st
     if figures and figures.get("n", 0) > 1:
         parts.append(f"repeats spread {_num(figures['min'], unit)}-{_num(figures['max'], unit)} "
                      f"over {figures['n']} runs")
-    return "machine too noisy" + (f" ({'; '.join(parts)})" if parts else "")
+    # an idle machine whose repeats agree is no cause: say what it was, not that it was noisy
+    idle = bool(load and load.get("load_max") is not None and load["load_max"] < load.get("cpus", 1))
+    steady = not (figures and figures.get("n", 0) > 1) or (relative_spread(figures) or 0.0) <= QUIET_SPREAD
+    head = "not the machine's noise" if idle and steady else "machine too noisy"
+    return head + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def _num(x: float, unit: str) -> str:

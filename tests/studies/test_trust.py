@@ -199,3 +199,16 @@ def test_a_long_case_run_once_says_why_and_does_not_blame_the_machine():
     assert row["unreliable"].startswith("from 1 of 3 runs (one took 7.36 s: a long case is not repeated): "
                                         "the machine (load average 1.21-1.25 on"), row["unreliable"]
     assert "too noisy" not in row["unreliable"]
+
+
+def test_an_idle_machine_whose_repeats_agree_is_not_blamed():
+    """A figure left aside on a machine below one process a CPU, its repeats within a quarter
+    of each other, says what the machine was and does not call it noisy; busier, or with
+    repeats spread wider, it does."""
+    idle = {"cpus": 2, "load_min": 1.49, "load_max": 1.53}
+    steady = trust.spread([1.93, 2.0, 2.06])
+    assert trust.noise(idle, steady) == ("not the machine's noise (load average 1.49-1.53 on 2 CPUs; repeats "
+                                         "spread 1.930 s-2.060 s over 3 runs)")
+    assert trust.noise(idle, trust.spread([0.6, 0.7, 0.96])).startswith("machine too noisy")
+    assert trust.noise({"cpus": 2, "load_min": 1.9, "load_max": 2.1}, steady).startswith("machine too noisy")
+    assert trust.noise(None, steady).startswith("machine too noisy")

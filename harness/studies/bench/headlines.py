@@ -28,7 +28,8 @@ def case_noise(case: Case, problems: list[str] | None = None) -> str:
     loads = [x for x in case.load if x is not None]
     load = {"cpus": trust.cpus(), "load_min": min(loads), "load_max": max(loads)} if loads else None
     if problems and all(p.startswith("from ") for p in problems):
-        return trust.noise(load, None).replace("machine too noisy", "the machine", 1)
+        said = trust.noise(load, None)
+        return "the machine" + (said[said.index(" ("):] if " (" in said else "")
     return trust.noise(load, trust.spread(case.wall_times))
 
 
