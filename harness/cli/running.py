@@ -267,7 +267,8 @@ def _check_said(check) -> str:
         return f"{mark}{check.quantity} off by {check.difference:.2g} (+-{check.allowed:.2g})"
     if check.passed:
         return f"{check.quantity} ok"
-    return f"{mark}{check.quantity} {100 * check.result:.2g} % outside (<= {100 * check.allowed:g} %)"
+    return (f"{mark}{check.quantity} {100 * check.result:.2g} % outside (<= {100 * check.allowed:g} %)"
+            + (f", {check.also}" if check.also else ""))
 
 
 def _print_verdict(name, verdict, result, out: Path, verbose: bool = False):

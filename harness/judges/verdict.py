@@ -98,6 +98,8 @@ class Check:
     judged: bool = True
     #: a tube's: the time [s] of its sample farthest beyond it (None: none beyond it)
     at: float | None = None
+    #: a second criterion's failure in a few words (the start-up's envelope)
+    also: str = ""
 
 
 @dataclass
@@ -382,10 +384,51 @@ def _tube(label: str, frame: _Frame, y: np.ndarray, width: float, range_: float,
 
 
 def _start_up_tube(frame: _Frame, y: np.ndarray, rtol: dict) -> Check:
-    """The start-up transient's tube: as wide as the tube's tolerance of its own range."""
+    """The start-up transient's tube: as wide as the tube's tolerance of its own range; and
+    its envelope (``_envelope_misses``): a ringing near the sampling rate fits the tube's
+    range over a step either side whether the result rings or not."""
     range_ = float(np.ptp(frame.own_y))
     width = rtol["tube"][0] * _allowed_scale(range_, frame.mean, magnitude=frame.magnitude)
-    return _tube("transient tube", frame, y, width, range_, rtol["tube"][0])
+    check = _tube("transient tube", frame, y, width, range_, rtol["tube"][0])
+    missed, windows, window, first = _envelope_misses(frame, y, width)
+    if windows and missed / windows > MAX_OUTSIDE:
+        check.passed = False
+        check.at = first if check.at is None else check.at
+        check.also = f"envelope off in {missed} of {windows} spans"
+        check.detail += (f"; its envelope: in {missed} of {windows} spans of {1e3 * window:.3g} ms the result's "
+                         f"peak-to-peak is off the reference's by more than twice the tube, the first at "
+                         f"t = {first:.6g} s (a ringing lost, grown or damped otherwise)")
+    return check
+
+
+#: the start-up's envelope is compared over spans of this many result steps
+ENVELOPE_STEPS = 8
+
+
+def _envelope_misses(frame: _Frame, y: np.ndarray, width: float) -> tuple[int, int, float, float | None]:
+    """In consecutive spans of ``ENVELOPE_STEPS`` result steps, the result's peak-to-peak
+    against the reference's: at least its peak-to-peak at the result's times, at most its
+    range over a step either side, each less or more twice the tube's ``width`` and the
+    reference's own error.  Returns the spans missed, the spans, their length [s] and the
+    first missed span's start (None: none)."""
+    steps = np.diff(frame.t)
+    steps = steps[steps > 0]
+    if len(y) < 2 or not steps.size:
+        return 0, 0, 0.0, None
+    window = ENVELOPE_STEPS * float(np.median(steps))
+    span = np.floor((frame.t - frame.t[0]) / window).astype(int)
+    starts = np.flatnonzero(np.diff(span, prepend=-1))
+    def by_span(f, values):
+        return f.reduceat(values, starts)
+    counts = np.diff(np.append(starts, len(y)))
+    result = by_span(np.maximum, y) - by_span(np.minimum, y)
+    shown = by_span(np.maximum, frame.at) - by_span(np.minimum, frame.at)
+    widest = by_span(np.maximum, frame.high) - by_span(np.minimum, frame.low)
+    slack = 2 * (width + by_span(np.maximum, frame.error))
+    with np.errstate(invalid="ignore"):
+        missed = ((result < shown - slack) | (result > widest + slack) | ~np.isfinite(result)) & (counts >= 2)
+    first = float(frame.t[starts[np.argmax(missed)]]) if missed.any() else None
+    return int(np.count_nonzero(missed)), int(np.count_nonzero(counts >= 2)), window, first
 
 
 def _rotation(references: dict, start: float, stop: float,

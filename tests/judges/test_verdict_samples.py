@@ -270,3 +270,32 @@ def test_the_powers_search_refuses_a_start_it_cannot_double_from():
         with pytest.raises(ValueError, match="start > 0"):
             power._smallest_failing(lambda x: True, start, 1.0, 1.0)
 
+
+
+def test_a_start_up_ringing_lost_fails_its_envelope_and_one_off_in_phase_does_not():
+    """kavz685_stiff_1e6 rings at 3745 rad/s through its start-up, sampled 6.7 times a
+    period: the start-up's tube, a step either side, spans a third of a period, so a result
+    without the ringing would sit inside it. Its envelope - each 8 steps' peak-to-peak against
+    the reference's - fails a result whose ringing is gone after 10 ms (a master that damps
+    it away, as implicit Euler at this step does), and does not flag one whose ringing runs
+    half a period late (a master's phase error)."""
+    ref = reference_traces.read("kavz685_stiff_1e6")
+    settings = verdict.settings_of(ref)
+    t, signals = ref.outputs.times, ref.outputs.signals
+    options = dict(transient=settings.transient, rotation_signal=settings.rotation_signal, kinds=settings.kinds,
+                   signals=["engine.a"], with_power=False)
+    a = signals["engine.a"]
+    period = 2 * np.pi / 3745.0
+    width = int(round(period / np.median(np.diff(t))))
+    smooth = np.convolve(a, np.ones(width) / width, mode="same")
+    ringing = a - smooth
+
+    def start_up(result):
+        (s,) = verdict.judge(t, {"engine.a": result}, t, signals, **options).signals
+        return next(c for c in s.checks if c.quantity == "transient tube")
+
+    assert start_up(a).passed and "envelope" not in start_up(a).detail
+    lost = start_up(np.where((t > 0.01) & (t < 0.2), smooth, a))
+    assert not lost.passed and "its envelope: in " in lost.detail and lost.at is not None
+    late = np.where(t < 0.2, smooth + np.interp(t - 0.5 * period, t, ringing), a)
+    assert "envelope" not in start_up(late).detail
