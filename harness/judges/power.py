@@ -7,8 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from harness.judges.sampled import median_step
 from harness.judges.tolerances import allowed_scale as _allowed_scale
 
 
@@ -103,11 +102,8 @@ def power(frame, judged, ref, rtol: dict, rotation: float | None) -> Power:
         return [c.quantity for c in judged(perturbed[kind](x)) if c.judged and not c.passed]
 
     scale = _allowed_scale(max(abs(frame.mean), frame.amplitude), magnitude=frame.magnitude)
-    # a time written twice (an event's two rows) is no step
-    steps = np.diff(frame.t)
-    steps = steps[steps > 0]
     span = float(frame.t[-1] - frame.t[0])
-    dt = float(np.median(steps)) if steps.size else max(span, 1.0)
+    dt = median_step(frame.t) or max(span, 1.0)
     signs, by = {}, {}
     # the doubling starts a little below where the tolerances put the answer
     for kind, first, limit in (("mean", max(0.25 * rtol["mean"][0], 1e-6) * scale, 1e3 * scale),

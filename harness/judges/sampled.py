@@ -213,6 +213,14 @@ class Reference:
         return low, high
 
 
+def median_step(t: np.ndarray) -> float | None:
+    """The median step between the distinct times of ``t`` (a time written twice, an event's
+    two rows, is no step); None with fewer than two distinct times."""
+    steps = np.diff(np.asarray(t, dtype=float))
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else None
+
+
 def spacing(t: np.ndarray) -> str:
     """"every 1 ms" or "every 0.5 ... 12 ms" - a trace's sampling in words."""
     steps = np.diff(t)

@@ -276,10 +276,8 @@ def _power_frame(frame: _Frame, ref: sampled.Reference, rotation: float | None,
     t = frame.t
     if len(t) < 2:
         return frame
-    own_steps = np.diff(ref.t[(ref.t >= t[0]) & (ref.t <= t[-1])])
-    own_steps = own_steps[own_steps > 0]
-    spacing = float(np.median(own_steps)) if own_steps.size else 0.0
-    spacing = max(spacing, float(t[-1] - t[0]) / most)
+    spacing = max(sampled.median_step(ref.t[(ref.t >= t[0]) & (ref.t <= t[-1])]) or 0.0,
+                  float(t[-1] - t[0]) / most)
     grid = np.arange(t[0], t[-1], spacing) if spacing > 0 else t
     keep = np.unique(np.append(np.clip(np.searchsorted(t, grid), 0, len(t) - 1), len(t) - 1))
     if len(keep) >= 0.9 * len(t):
@@ -411,20 +409,18 @@ def _envelope_misses(frame: _Frame, y: np.ndarray, width: float) -> tuple[int, i
     range over a step either side, each less or more twice the tube's ``width`` and the
     reference's own error.  Returns the spans missed, the spans, their length [s] and the
     first missed span's start (None: none)."""
-    steps = np.diff(frame.t)
-    steps = steps[steps > 0]
-    if len(y) < 2 or not steps.size:
+    step = sampled.median_step(frame.t)
+    if len(y) < 2 or step is None:
         return 0, 0, 0.0, None
-    window = ENVELOPE_STEPS * float(np.median(steps))
+    window = ENVELOPE_STEPS * step
     span = np.floor((frame.t - frame.t[0]) / window).astype(int)
     starts = np.flatnonzero(np.diff(span, prepend=-1))
-    def by_span(f, values):
-        return f.reduceat(values, starts)
     counts = np.diff(np.append(starts, len(y)))
-    result = by_span(np.maximum, y) - by_span(np.minimum, y)
-    shown = by_span(np.maximum, frame.at) - by_span(np.minimum, frame.at)
-    widest = by_span(np.maximum, frame.high) - by_span(np.minimum, frame.low)
-    slack = 2 * (width + by_span(np.maximum, frame.error))
+    highest, lowest = np.maximum.reduceat, np.minimum.reduceat
+    result = highest(y, starts) - lowest(y, starts)
+    shown = highest(frame.at, starts) - lowest(frame.at, starts)
+    widest = highest(frame.high, starts) - lowest(frame.low, starts)
+    slack = 2 * (width + highest(frame.error, starts))
     with np.errstate(invalid="ignore"):
         missed = ((result < shown - slack) | (result > widest + slack) | ~np.isfinite(result)) & (counts >= 2)
     first = float(frame.t[starts[np.argmax(missed)]]) if missed.any() else None
