@@ -439,6 +439,8 @@ def scene_page() -> str:
             kind = "a master's name ([masters.md](masters.md))"
         if f.name == "fmi":
             kind = " or ".join(str(v) for v in scene.FMI_EDITIONS)
+        if f.name == "tolerance":
+            kind, default = "number in (0, 1)", "the master's own"
         rows.append([f"`{f.name}`", kind, unit, default])
     out.append(table(["field", "value", "unit", "default"], rows) + "\n")
     out.append("A time is a number in seconds or a number with a time unit (`\"500 ms\"`). `transient` is the "
@@ -447,7 +449,11 @@ def scene_page() -> str:
                "FMI 3.0 editions of the FMUs the scene names by name (`build/fmus3`, [fmus.md](../fmus.md#fmi-30-editions)"
                ") instead of the FMI 2.0 ones (`build/fmus`), with every master, and exports them so; an FMU named "
                "by path runs as the FMI version its model description states, whatever `fmi` says (a scene may "
-               "mix FMI 2.0 and 3.0 FMUs). `--set experiment.fmi=3` does it for a run.\n\n")
+               "mix FMI 2.0 and 3.0 FMUs). `--set experiment.fmi=3` does it for a run. `tolerance` is the relative "
+               "tolerance of the scene's own master where it takes one (an adaptive master's error a step, an "
+               "iterative master's coupling iteration, me-cvode's CVODE rtol; [masters.md](masters.md)); "
+               "another master run on the scene (`--master`) keeps its own default, and `--tolerance` "
+               "overrides it.\n\n")
 
     out.append("## [limits]\n\nBounds of the divergence guard, each > 0 (`inf` allowed); unset ones are "
                "derived from the scene.\n\n")

@@ -74,9 +74,11 @@ def checked_plan(spec: scene_files.Scene, fmu_dir: Path | None = None):
     return plan
 
 
-def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step: float | None = None):
-    """InputError when ``master`` or ``step`` (``--master``, ``--step``) and the scene's
-    ``--set experiment.master`` or ``experiment.step`` say different things: the record
+def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step: float | None = None,
+                    tolerance: float | None = None):
+    """InputError when ``master``, ``step`` or ``tolerance`` (``--master``, ``--step``,
+    ``--tolerance``) and the scene's ``--set experiment.master``, ``experiment.step`` or
+    ``experiment.tolerance`` say different things: the record
     (summary.json, report.md, the plots) states the ``--set`` values, so a run with
     another one in effect would be recorded as what it did not run."""
     if master is not None:
@@ -84,6 +86,9 @@ def check_agreement(spec: scene_files.Scene, *, master: str | None = None, step:
                      scene_files.coerce)
     if step is not None:
         _refuse_both("step", step, "experiment.step", spec.overrides.get("experiment.step"), _seconds_or_none)
+    if tolerance is not None:
+        _refuse_both("tolerance", tolerance, "experiment.tolerance", spec.overrides.get("experiment.tolerance"),
+                     _number_or_none, unit="")
 
 
 def _seconds_or_none(text: str) -> float | None:
@@ -93,7 +98,12 @@ def _seconds_or_none(text: str) -> float | None:
         return None
 
 
-def _refuse_both(argument: str, value, key: str, raw: str | None, read):
+def _number_or_none(text: str) -> float | None:
+    value = scene_files.coerce(text)
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def _refuse_both(argument: str, value, key: str, raw: str | None, read, unit: str = " s"):
     """InputError when ``--set key=raw`` (read as ``read(raw)``) is not ``value``, the
     ``argument`` also given."""
     if raw is None:
@@ -103,7 +113,7 @@ def _refuse_both(argument: str, value, key: str, raw: str | None, read):
         return
     if said == value and type(said) is type(value):
         return
-    shown = f"{value:g} s" if isinstance(value, float) else repr(value)
+    shown = f"{value:g}{unit}" if isinstance(value, float) else repr(value)
     raise InputError(f"{_inputs.named(argument).given(shown)} and {_inputs.named('overrides').item(key)}={raw} "
                      f"disagree: give one of them (both set the experiment's {key.split('.', 1)[1]})")
 

@@ -72,14 +72,25 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
     check_agreement(spec, master=master, step=step)
     out = _inputs.folder(out)
     options = {}
+    try:
+        masters.stated_options(chosen, spec.experiment)
+    except masters.TakesNoTolerance as error:
+        raise InputError(f"{spec.path or spec.name}: {error}") from None
     if tolerance is not None:
         tolerance = _inputs.number(tolerance, "tolerance")
         if "tolerance" not in masters.MASTERS[chosen].options:
             raise InputError(f"{_inputs.named('tolerance')}: master '{chosen}' takes no tolerance (masters that do: "
-                             + ", ".join(n for n, m in masters.MASTERS.items() if "tolerance" in m.options) + ")")
+                             + ", ".join(masters.takes_tolerance()) + ")")
         if not (_math.isfinite(tolerance) and 0 < tolerance < 1):
             raise InputError(f"{_inputs.named('tolerance').given(str(tolerance))}: must lie in (0, 1)")
+        check_agreement(spec, tolerance=tolerance)
         options["tolerance"] = tolerance
+    elif (spec.experiment.tolerance is not None and chosen != spec.experiment.master
+          and "tolerance" in masters.MASTERS[chosen].options):
+        say("note", f"experiment.tolerance = {spec.experiment.tolerance:g} is the scene's master's "
+                    f"({spec.experiment.master}); {chosen} runs at its own default "
+                    f"{masters.MASTERS[chosen].options['tolerance']:g} (give {_inputs.named('tolerance').given('...')} "
+                    "to set it)")
     if stream and out is None:
         raise InputError(f"{_inputs.named('stream')}: name the output folder ({_inputs.named('out').given('...')}) "
                          "the traces are streamed to")

@@ -65,6 +65,10 @@ class Experiment:
     #: the FMI edition of the FMUs the scene names by name: 2 (build/fmus) or 3 (their FMI
     #: 3.0 editions, build/fmus3); an FMU by path is what its file is
     fmi: int = 2
+    #: the relative tolerance of the scene's own master, where it takes one (an adaptive
+    #: master's error per step, an iterative one's coupling iteration, me-cvode's CVODE
+    #: rtol); unstated: the master's default.  Another master run on the scene keeps its own.
+    tolerance: float | None = None
 
     def __post_init__(self):
         self.transient_follows_length = self.transient is None
@@ -176,6 +180,9 @@ class Scene:
             if (experiment.start, experiment.stop) == (self.experiment.start, self.experiment.stop):
                 experiment.transient_note = self.experiment.transient_note
             _fit_transient(self.experiment, experiment)
+        set_keys = {a.split("=", 1)[0].strip() for a in assignments}
+        if experiment.master != self.experiment.master and "experiment.tolerance" not in set_keys:
+            experiment.tolerance = None     # the scene's tolerance was its own master's
         return replace(self, components=components, experiment=experiment, limits=limits, overrides=overrides)
 
 
@@ -263,8 +270,8 @@ def samples_parameter(value: dict, name: str) -> str:
 def experiment_value(field_name: str, value, label: str):
     """The experiment's field ``field_name`` from a scene's or ``--set``'s ``value``: a time
     (a number in s, or "<number> <time unit>": "500 ms"), the master's name, ``strict``
-    (true/false) or ``fmi`` (2 or 3); ``SceneError`` naming ``label`` and what is allowed
-    otherwise."""
+    (true/false), ``fmi`` (2 or 3) or ``tolerance`` (a number; its range is
+    ``experiment_findings``'); ``SceneError`` naming ``label`` and what is allowed otherwise."""
     if field_name == "master":
         if not isinstance(value, str):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected the name of a master (a string)")
@@ -278,8 +285,13 @@ def experiment_value(field_name: str, value, label: str):
             raise SceneError(f"{label} = {units.kind_of_value(value)}: expected 2 or 3 (the FMI edition of the "
                              "FMUs named by name: 2 in build/fmus, 3 in build/fmus3)")
         return int(value)
+    if field_name == "tolerance":
+        if not units.is_number(value):
+            raise SceneError(f"{label} = {units.kind_of_value(value)}: expected a relative tolerance in (0, 1), "
+                             "e.g. 1e-4")
+        return float(value)
     if field_name not in EXPERIMENT_TIMES:
-        fields = EXPERIMENT_TIMES + ("master", "strict", "fmi")
+        fields = EXPERIMENT_TIMES + ("master", "strict", "fmi", "tolerance")
         raise SceneError(f"{label}: the experiment has no field '{field_name}'{did_you_mean(field_name, fields)} "
                          f"(fields: {', '.join(fields)})")
     if isinstance(value, str):
@@ -409,6 +421,8 @@ def experiment_findings(e: Experiment) -> list[str]:
                         f"{TIME_RESOLUTION * max(abs(e.start), abs(e.stop)):g} s; or start nearer 0)")
     if not 0.0 <= e.transient < e.stop - e.start:
         findings.append(f"experiment.transient = {e.transient} s must be in [0, stop - start)")
+    if e.tolerance is not None and not (math.isfinite(e.tolerance) and 0.0 < e.tolerance < 1.0):
+        findings.append(f"experiment.tolerance = {e.tolerance} must be in (0, 1) (a relative tolerance)")
     return findings
 
 

@@ -141,7 +141,8 @@ def simulate(scene: scenes.Scene | plans.Plan, master: str | None = None, step: 
              stream: Path | None = None, keep_partial: bool = False, observer=None,
              wrap_calls=None) -> RunResult:
     """Run ``scene`` with ``master`` (default: the scene's) at communication step ``step``
-    (for an adaptive master: its first step); ``options`` go to the master.  ``scene`` is
+    (for an adaptive master: its first step); ``options`` go to the master, over what the
+    scene states for its own master (``experiment.tolerance``).  ``scene`` is
     a checked ``harness.description.plan.Plan`` (its FMUs where it found them) or a scene,
     checked here once with its FMUs in ``fmu_dir``.  The stability
     advice is not computed here: whoever shows it (``lever run``) asks
@@ -169,8 +170,8 @@ def _simulate(subject, master, step, fmu_dir, progress, options, stream, observe
     e = scene.experiment
     master = master or e.master
     step = float(step or e.step)
-    options = dict(options or {})
     master_family.check(master)     # an unknown master is said before the scene's findings
+    options = {**master_family.stated_options(master, e), **(options or {})}
     plan = subject if isinstance(subject, plans.Plan) else plans.check(scene, fmu_dir=fmu_dir)
     names = list(plan.recorded)
     # refuses an unsound scene (SceneInvalid) first, and for a Model Exchange master an FMU

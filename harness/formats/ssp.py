@@ -301,6 +301,7 @@ def _lever_annotation(annotation: ET.Element, scene: scenes.Scene) -> None:
     e = scene.experiment
     lever = ET.SubElement(annotation, _q("lever", "Scene"), {
         "master": e.master, "step": _number(e.step), "transient": _number(e.transient),
+        **({"tolerance": _number(e.tolerance)} if e.tolerance is not None else {}),
         "features": " ".join(sorted(scene.features))})
     for item in scene.record:
         ET.SubElement(lever, _q("lever", "Record"), {"variable": item})
@@ -457,6 +458,8 @@ def _scene_from(path: Path, where: Path) -> scenes.Scene:
         experiment.master = lever.get("master", experiment.master)
         experiment.step = float(lever.get("step", experiment.step))
         experiment.transient = float(lever.get("transient", experiment.transient))
+        if lever.get("tolerance") is not None:
+            experiment.tolerance = float(lever.get("tolerance"))
         record = [r.get("variable") for r in lever.iterfind(_q("lever", "Record"))]
         features = set((lever.get("features") or "").split())
         notes = lever.findtext(_q("lever", "Notes"), "")

@@ -221,13 +221,7 @@ def _validate(name, assignments=()):
     return findings, result
 
 
-#: scenes whose default run fails its own reference, with the reason (each scene file says it)
-KNOWN_FAILING = {"kavz685_stiff_1e6": "its undamped 3745 rad/s start-up ringing drifts in phase under the "
-                                      "trapezoidal rule (kavz685_stiff_1e6.toml)"}
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FAILING[n]))
-                                  if n in KNOWN_FAILING else n for n in reference_traces.all_names()])
+@pytest.mark.parametrize("name", reference_traces.all_names())
 def test_every_fmu_and_scene_validates_against_its_reference(fmu_dir, name):
     findings, _ = _validate(name)
     assert findings.passed, (findings.problems, findings.failed_signals)

@@ -11,7 +11,8 @@ from harness.engine.masters.explicit import (ExtrapolatingJacobiMaster, GaussSei
 from harness.engine.masters.iterative import (ImplicitFixedPointMaster, ImplicitNewtonMaster, InterfaceJacobian,
                                               IterativeMaster, TrapezoidalFixedPointMaster, TrapezoidalNewtonMaster)
 from harness.engine.masters.model_exchange import ModelExchangeCvodeMaster, choose_method
-from harness.engine.masters.registry import MASTERS, UnknownMaster, check, make, master_class
+from harness.engine.masters.registry import (MASTERS, TakesNoTolerance, UnknownMaster, check, make, master_class,
+                                             stated_options, takes_tolerance)
 
 __all__ = ["AdaptiveMaster", "AdaptiveTrapezoidalMaster", "StepControl", "Master", "MasterFailure",
            "ExtrapolatingJacobiMaster", "GaussSeidelMaster", "JacobiMaster", "LinearExtrapolationMaster",
@@ -19,4 +20,4 @@ __all__ = ["AdaptiveMaster", "AdaptiveTrapezoidalMaster", "StepControl", "Master
            "lagrange_weights",
            "ImplicitFixedPointMaster", "ImplicitNewtonMaster", "InterfaceJacobian", "IterativeMaster",
            "TrapezoidalFixedPointMaster", "TrapezoidalNewtonMaster", "ModelExchangeCvodeMaster", "choose_method", "MASTERS", "UnknownMaster", "check", "make",
-           "master_class"]
+           "master_class", "stated_options", "takes_tolerance", "TakesNoTolerance"]

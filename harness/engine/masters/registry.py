@@ -22,6 +22,10 @@ class UnknownMaster(ValueError):
     """A master name that is not in ``MASTERS``."""
 
 
+class TakesNoTolerance(ValueError):
+    """A scene states a tolerance for a master that takes none."""
+
+
 def check(*names: str):
     """Raise ``UnknownMaster`` naming every one of ``names`` that is not a master, and the known ones."""
     unknown = [name for name in names if name not in MASTERS]
@@ -32,6 +36,23 @@ def check(*names: str):
 def master_class(name: str) -> type[Master]:
     check(name)
     return MASTERS[name]
+
+
+def stated_options(name: str, experiment) -> dict:
+    """The options a scene's experiment states for master ``name``: its ``tolerance`` when
+    ``name`` is the scene's own master (another master run on the scene keeps its defaults).
+    ``TakesNoTolerance`` when the scene's master takes none."""
+    if experiment.tolerance is None or name != experiment.master:
+        return {}
+    if "tolerance" not in master_class(name).options:
+        raise TakesNoTolerance(f"experiment.tolerance = {experiment.tolerance:g}: master '{name}' takes no tolerance "
+                               f"(masters that do: {', '.join(takes_tolerance())})")
+    return {"tolerance": experiment.tolerance}
+
+
+def takes_tolerance() -> list[str]:
+    """The masters with a ``tolerance`` option."""
+    return [n for n, m in MASTERS.items() if "tolerance" in m.options]
 
 
 def make(name: str, system: System, step: float, **options) -> Master:
