@@ -77,7 +77,8 @@ def stability(scene, stiffnesses, dampings, h_omegas, masters, dense, min_steps,
                                  resume=not fresh, out=out, progress=click.echo if progress else None)
     agreed = done["agreement"]
     if agreed.get("no_prediction"):
-        click.echo(agreed["no_prediction"])
+        if not progress:        # with progress lines it was said first, before the cases ran
+            click.echo(agreed["no_prediction"])
         click.echo("From the observed runs only:")
         for line in agreed["advice"]:
             click.echo(f"  {line}")

@@ -156,6 +156,12 @@ def test_lever_stability_exits_0_and_says_it_first(refused_map, scenes_dir, leve
     assert said[0].startswith("No prediction was made: ") and WHY in said[0]
     assert said[1] == "From the observed runs only:" and "observed stable up to h = " in said[2]
     assert "prediction agrees" not in done.output and said[-1].startswith("written: ")
+    # with progress lines, said once, before anything else (the cases resumed from their log)
+    done = lever("stability", scenes_dir / "refusing1.toml", "--stiffness", STIFFNESS, "--damping", 0, "--master",
+                 "jacobi", "--master", "jacobi-linear", "--min-steps", 16, "--jobs", 1, "--out", out, "--progress")
+    assert done.exit_code == 0, done.output
+    said = done.output.splitlines()
+    assert said[0].startswith("No prediction was made: ") and done.output.count("No prediction was made: ") == 1
 
 
 def test_a_step_as_h_omega_is_refused_with_why(scenes_dir):
