@@ -299,3 +299,17 @@ def test_a_start_up_ringing_lost_fails_its_envelope_and_one_off_in_phase_does_no
     assert not lost.passed and "its envelope: in " in lost.detail and lost.at is not None
     late = np.where(t < 0.2, smooth + np.interp(t - 0.5 * period, t, ringing), a)
     assert "envelope" not in start_up(late).detail
+
+
+@pytest.mark.parametrize("copies", [2, 3])
+def test_the_sampling_said_is_the_results_and_rows_written_again_are_said_apart(copies):
+    """A host that writes each time twice (or thrice) 1e-8 s apart samples every 0.1 ms: the
+    line says so, and counts the rows written again; a uniform, an uneven and an event's
+    repeated time (0 s apart) are said as they are."""
+    grid = np.arange(0.0, 0.1 + 1e-12, 1e-4)
+    again = np.sort(np.concatenate([grid + 1e-8 * k for k in range(copies)]))
+    said = sampled.spacing(again)
+    assert said.startswith("every 0.1 ms; ") and f"; {(copies - 1) * grid.size} rows within 1e-08 s" in said
+    assert sampled.spacing(grid) == "every 0.1 ms"
+    assert sampled.spacing(np.array([0.0, 1e-3, 1e-3, 2e-3, 5e-3])) == "every 1 ... 3 ms"
+    assert sampled.spacing(np.array([0.0, 0.0])) == "one sample"
