@@ -222,6 +222,55 @@ def test_the_reference_places_an_edge_no_closer_than_its_own_samples(rise, passe
     assert tube.detail.startswith("0 % of the samples outside" if passes else "19.3 % of the samples outside")
 
 
+
+#: a reference sampled unevenly: at 0, 8 and 9 ms past every 10 ms, to 998 ms - intervals of
+#: 8, 1 and 1 ms, the first and the last 8 ms long
+UNEVEN = np.unique(np.concatenate([np.arange(0, 1000, 10), np.arange(8, 1000, 10), np.arange(9, 990, 10)])) / 1e3
+
+
+def _square_60(t, first_rise):
+    """10 N*m, and 11 for 30 ms every 60 ms from ``first_rise`` on."""
+    return 10.0 + (np.mod(t - first_rise, 0.06) < 0.03).astype(float)
+
+
+@pytest.mark.parametrize("rise,outside", [(0.0015, "0 %"), (0.0075, "0 %"), (0.0085, "3.3 %"), (0.0165, "29.7 %")])
+def test_an_unevenly_sampled_reference_places_each_edge_within_the_interval_around_it(rise, outside):
+    """The reference (``UNEVEN``) has its edges at 5 ms past every 10 ms (5, 35, ..., 995 ms):
+    each inside an 8 ms interval, between its samples at 0 and 8 ms past, the first interval
+    and the last among them.  A result every 1 ms whose edges lie anywhere in that interval
+    (1.5 or 7.5 ms past) is inside the tube at every sample - the reference can say no more
+    of where its edges are - and one whose edges come after the sample at 8 ms (8.5 ms past,
+    where the reference is already on the new level) is outside at that sample, 1 ms before
+    the next: 33 of the 999 samples (3.3 %); an edge a whole interval late (16.5 ms past), at
+    10 of each edge's 30 samples.  The interval is the one around each sample, not the one
+    before or after it (1 ms long there) nor any other."""
+    t = np.arange(0, 999) / 1e3
+    judged = verdicts.judge(t, {"x": _square_60(t, rise)}, UNEVEN, {"x": _square_60(UNEVEN, 0.005)},
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is (outside == "0 %"), tube.detail
+    assert tube.detail.startswith(f"{outside} of the samples outside"), tube.detail
+
+
+@pytest.mark.parametrize("delay,passes", [(0.004, True), (0.012, False)])
+def test_a_reference_of_two_samples_places_nothing_closer_than_the_share_of_the_window_a_lag_may_take(delay,
+                                                                                                          passes):
+    """Two samples, 10 at 0 s and 11 at 1 s: the reference is that straight line and cannot
+    place anything between them, but a lag is allowed at most 1 % of the window (10 ms): a
+    result every 1 ms delayed by 4 ms passes a tube of 0.1 % of the range that the result's
+    own step (1 ms) alone would fail (3 ms * 1 /s = 0.003 beyond its 0.001), and one delayed
+    by 12 ms does not (2 ms beyond: 0.002 > 0.001).  One sample, 10: a constant."""
+    t = np.arange(0, 1001) / 1e3
+    fine = verdicts.Tolerances([[verdicts.rule("", "tube", 0.001, "API")]])
+    line = np.array([0.0, 1.0])
+    judged = verdicts.judge(t, {"x": 10.0 + np.clip(t - delay, 0.0, None)}, line, {"x": 10.0 + line}, rtol=fine,
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    constant = verdicts.judge(t, {"x": np.full_like(t, 10.0)}, line[:1], {"x": [10.0]}, window=(0.0, 1.0),
+                              with_power=False)
+    assert all(c.passed for c in constant.signals[0].checks), [c.detail for c in constant.signals[0].checks]
+
 def test_the_references_own_error_is_its_largest_between_any_two_of_its_samples():
     """A ripple growing over the window (100 + 5 t sin(2 pi 20 t), 20 samples a period): the
     ripple allowed is 2 % of it plus the reference's own error, its interpolant's largest
