@@ -84,6 +84,17 @@ def test_the_orders_judged_are_the_leading_ones_at_their_magnitudes():
             assert check.allowed == pytest.approx(verdicts.DEFAULT_RTOL["order"] * verdicts.NOISE_FLOOR * W)
 
 
+
+@pytest.mark.parametrize("orders,judged", [
+    ({**ORDERS, 4: (0.5, 0.0)}, {1, 2, 3}),     # order 4 below a tenth of the ripple (at least 6), above the floor
+    ({1: (0.05, 0.3), 2: (0.02, -1.1)}, set()),  # both leading, below the noise floor (1e-3 of 100.07: 0.1)
+])
+def test_an_order_is_judged_when_it_leads_the_ripple_and_stands_above_the_noise_floor(orders, judged):
+    reference = {"coupling.tau2": _torque(T, orders), "load.w": np.full_like(T, W)}
+    verdict = verdicts.judge(T, reference, T, reference, rotation_signal="load.w", with_power=False,
+                             kinds={"coupling.tau2": "torque", "load.w": "speed"})
+    assert {int(c.quantity.split()[1]) for c in _signal(verdict).checks if c.quantity.startswith("order")} == judged
+
 @pytest.mark.parametrize("degrees", [2.0, -2.0, 4.0, -4.0, 10.0])
 def test_a_turned_order_fails_by_its_phase_alone(degrees):
     turned = dict(ORDERS)
@@ -199,6 +210,12 @@ def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
     assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
     assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
                                     "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
+    # a ripple of 1: the mean shown as 101, off by 1 - still more than half the 0.1 allowed
+    small = verdicts.judge(t, {"x": m + np.sin(2 * np.pi * f * t)}, reference_t,
+                           {"x": m + np.sin(2 * np.pi * f * reference_t)}, window=(t[0], t[-1]), with_power=False)
+    (mean,) = [c for c in small.signals[0].checks if c.quantity == "mean"]
+    assert mean.judged is False and mean.detail.startswith("not judged: the result's samples (every 100 ms) show the "
+                                                           "reference's mean as 101, its own samples as 100 - "), mean
 
 
 def _square(t, first_rise):
