@@ -131,6 +131,7 @@ def test_the_mean_and_the_amplitude_are_judged_against_their_closed_form_allowan
         mean = _check(_signal(_judge(_torque(T) + shift)), "mean")
         assert mean.allowed == pytest.approx(allowed_mean, rel=1e-9)
         assert mean.difference == pytest.approx(shift, rel=1e-6) and mean.passed is passes
+        assert (mean.reference, mean.result) == (pytest.approx(MEAN, rel=1e-12), pytest.approx(MEAN + shift, rel=1e-12))
     for e, passes in ((0.018, True), (0.022, False), (-0.022, False)):
         check = _check(_signal(_judge(MEAN + (1 + e) * (_torque(T) - MEAN))), "amplitude")
         assert check.reference == pytest.approx(amplitude, rel=1e-12)
