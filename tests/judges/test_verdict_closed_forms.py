@@ -136,6 +136,7 @@ def test_the_mean_and_the_amplitude_are_judged_against_their_closed_form_allowan
         check = _check(_signal(_judge(MEAN + (1 + e) * (_torque(T) - MEAN))), "amplitude")
         assert check.reference == pytest.approx(amplitude, rel=1e-12)
         assert check.difference / amplitude == pytest.approx(e, rel=1e-6) and check.passed is passes
+        assert check.result == pytest.approx((1 + e) * amplitude, rel=1e-12)
 
 
 def test_the_stated_power_is_the_smallest_change_that_fails_by_hand():
@@ -208,13 +209,17 @@ def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
     assert mean.detail == ("not judged: the result's samples (every 100 ms) show the reference's mean as 110, its own "
                            "samples as 100 - off by more than half the 0.1 allowed")
     assert ripple.reference == pytest.approx(a, rel=1e-6) and ripple.result == pytest.approx(0.0, abs=1e-9)
+    assert ripple.difference == pytest.approx(0.0, abs=1e-9) and ripple.passed is True     # shown 0, the result's 0
     assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
     assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
                                     "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
     # a ripple of 1: the mean shown as 101, off by 1 - still more than half the 0.1 allowed
     small = verdicts.judge(t, {"x": m + np.sin(2 * np.pi * f * t)}, reference_t,
                            {"x": m + np.sin(2 * np.pi * f * reference_t)}, window=(t[0], t[-1]), with_power=False)
-    (mean,) = [c for c in small.signals[0].checks if c.quantity == "mean"]
+    mean, ripple = [c for c in small.signals[0].checks if c.quantity in ("mean", "amplitude")]
+    assert ripple.judged is False and ripple.detail.startswith("not judged: the result's samples (every 100 ms) show "
+                                                               "the reference's ripple amplitude as 0, its own samples "
+                                                               "as 1 - ")     # off by 1: more than half the 0.02
     assert mean.judged is False and mean.detail.startswith("not judged: the result's samples (every 100 ms) show the "
                                                            "reference's mean as 101, its own samples as 100 - "), mean
 
@@ -389,6 +394,11 @@ def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
                                        f"order {k} as ")
         assert order.detail.endswith(f", its own samples as {order.reference:.4g} - off by more than half the "
                                      f"{order.allowed:.3g} allowed (of the complex component)")
+    # the result is the reference at its samples (to its interpolation there, 1e-6): its order 2 is
+    # the one they show of the reference (order 3, at the six samples' Nyquist limit, is not fitted alike)
+    order = _check(tau, "order 2")
+    assert order.difference == pytest.approx(0.0, abs=1e-5 * ORDERS[2][0])
+    assert f"show the reference's order 2 as {order.result:.4g}, its own" in order.detail
 
 
 def test_an_order_scaled_is_said_as_its_change_in_amplitude_and_of_the_component():
