@@ -75,6 +75,7 @@ def test_the_orders_judged_are_the_leading_ones_at_their_magnitudes():
     for k, (a, _) in ORDERS.items():
         assert judged[f"order {k}"].reference == pytest.approx(a, rel=0.01)
         assert judged[f"order {k}"].difference == pytest.approx(0.0, abs=1e-9)
+        assert judged[f"order {k}"].allowed == pytest.approx(verdicts.DEFAULT_RTOL["order"] * a, rel=0.01)
     # a constant speed's orders are the FFT's round-off: judged against the noise floor
     # (NOISE_FLOOR of its magnitude), so a result off by round-off passes
     noisy = _judge(_torque(T), speed=W * (1 + 1e-12 * np.sin(W * T + 0.4)))
