@@ -273,7 +273,23 @@ def test_an_unevenly_sampled_reference_places_each_edge_within_the_interval_arou
                             with_power=False)
     (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
     assert tube.passed is (outside == "0 %"), tube.detail
-    assert tube.detail.startswith(f"{outside} of the samples outside"), tube.detail
+    assert tube.detail.startswith(f"{outside} of the samples outside +-0.05 (5 % of the range;"), tube.detail
+
+
+@pytest.mark.parametrize("spike,passes", [(0.9, True), (1.2, False)])
+def test_one_sample_beyond_the_tube_by_more_than_the_references_range_fails(spike, passes):
+    """The square wave above, the result on its edges' intervals, one sample (1 of 999: within
+    the 1 % allowed outside) on the upper level raised by ``spike``: beyond the tube (5 % of
+    the range 1) by spike - 0.05, which within the range (0.85) passes and beyond it (1.15),
+    a spike between the reference's samples, fails."""
+    t = np.arange(0, 999) / 1e3
+    y = _square_60(t, 0.0035)
+    y[500] += spike
+    assert y[500] == 11.0 + spike
+    judged = verdicts.judge(t, {"x": y}, UNEVEN, {"x": _square_60(UNEVEN, 0.005)}, with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    assert tube.detail.startswith("0.1 % of the samples outside") and "at t = 0.5 s" in tube.detail
 
 
 @pytest.mark.parametrize("delay,passes", [(0.004, True), (0.012, False)])
