@@ -73,7 +73,7 @@ GROUPS = {
     # The verdict's checks, their allowances and its stated power (the orders by magnitude
     # and phase among them).  Of test_verdict.py all but the runs of changed couplings
     # (12 s of simulation a surviving mutant would pay; the closed forms judge what they do),
-    # so that the group's 498 mutants run in about an hour on one core.
+    # so that the group's 498 mutants run in about 35 minutes on one shared core.
     "verdict": (["harness/judges/verdict.py"],
                 [f"harness.judges.verdict.x_{f}__mutmut_*" for f in
                  ("_checks", "_frame", "power", "_allowed_scale")],
