@@ -10,6 +10,8 @@ parameter binding) runs the re-exported archive exactly as the fresh one."""
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -125,3 +127,23 @@ def test_configuring_refuses_an_fmu_that_cannot_carry_values_and_a_value_that_do
     with pytest.raises(ValueError, match="stiffness"):
         configure(Path(fmu_dir) / "LeverCoupling.fmu", {"stiffness": "stiff"}, tmp_path / "out" / "b.fmu")
     assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+def test_a_configured_fmu_is_written_where_the_temporary_folder_is_another_file_system(fmu_dir, tmp_path,
+                                                                                       monkeypatch):
+    """The copy is written beside its destination and renamed there (a rename cannot cross file
+    systems): with the temporary folder on a RAM disk (/dev/shm, tmpfs) and the destination
+    on disk, it is made all the same and nothing is left in either folder but the FMU."""
+    shm = Path("/dev/shm")
+    if not shm.is_dir() or shm.stat().st_dev == tmp_path.stat().st_dev:
+        pytest.skip("no RAM disk on another file system than the tests' folder")
+    elsewhere = Path(tempfile.mkdtemp(dir=shm))
+    monkeypatch.setattr(tempfile, "tempdir", str(elsewhere))
+    try:
+        made = configure(Path(fmu_dir) / "LeverCoupling.fmu", {"stiffness": 812.5}, tmp_path / "c.fmu")
+        assert list(elsewhere.iterdir()) == []
+    finally:
+        shutil.rmtree(elsewhere)
+    assert list(tmp_path.iterdir()) == [made]
+    with zipfile.ZipFile(made) as z:
+        assert json.loads(z.read("resources/lever_start_values.json")) == {"stiffness": 812.5}

@@ -75,6 +75,7 @@ def test_the_orders_judged_are_the_leading_ones_at_their_magnitudes():
     for k, (a, _) in ORDERS.items():
         assert judged[f"order {k}"].reference == pytest.approx(a, rel=0.01)
         assert judged[f"order {k}"].difference == pytest.approx(0.0, abs=1e-9)
+        assert judged[f"order {k}"].allowed == pytest.approx(verdicts.DEFAULT_RTOL["order"] * a, rel=0.01)
     # a constant speed's orders are the FFT's round-off: judged against the noise floor
     # (NOISE_FLOOR of its magnitude), so a result off by round-off passes
     noisy = _judge(_torque(T), speed=W * (1 + 1e-12 * np.sin(W * T + 0.4)))
@@ -83,6 +84,17 @@ def test_the_orders_judged_are_the_leading_ones_at_their_magnitudes():
         if check.quantity.startswith("order"):
             assert check.allowed == pytest.approx(verdicts.DEFAULT_RTOL["order"] * verdicts.NOISE_FLOOR * W)
 
+
+
+@pytest.mark.parametrize("orders,judged", [
+    ({**ORDERS, 4: (0.5, 0.0)}, {1, 2, 3}),     # order 4 below a tenth of the ripple (at least 6), above the floor
+    ({1: (0.05, 0.3), 2: (0.02, -1.1)}, set()),  # both leading, below the noise floor (1e-3 of 100.07: 0.1)
+])
+def test_an_order_is_judged_when_it_leads_the_ripple_and_stands_above_the_noise_floor(orders, judged):
+    reference = {"coupling.tau2": _torque(T, orders), "load.w": np.full_like(T, W)}
+    verdict = verdicts.judge(T, reference, T, reference, rotation_signal="load.w", with_power=False,
+                             kinds={"coupling.tau2": "torque", "load.w": "speed"})
+    assert {int(c.quantity.split()[1]) for c in _signal(verdict).checks if c.quantity.startswith("order")} == judged
 
 @pytest.mark.parametrize("degrees", [2.0, -2.0, 4.0, -4.0, 10.0])
 def test_a_turned_order_fails_by_its_phase_alone(degrees):
@@ -120,10 +132,12 @@ def test_the_mean_and_the_amplitude_are_judged_against_their_closed_form_allowan
         mean = _check(_signal(_judge(_torque(T) + shift)), "mean")
         assert mean.allowed == pytest.approx(allowed_mean, rel=1e-9)
         assert mean.difference == pytest.approx(shift, rel=1e-6) and mean.passed is passes
+        assert (mean.reference, mean.result) == (pytest.approx(MEAN, rel=1e-12), pytest.approx(MEAN + shift, rel=1e-12))
     for e, passes in ((0.018, True), (0.022, False), (-0.022, False)):
         check = _check(_signal(_judge(MEAN + (1 + e) * (_torque(T) - MEAN))), "amplitude")
         assert check.reference == pytest.approx(amplitude, rel=1e-12)
         assert check.difference / amplitude == pytest.approx(e, rel=1e-6) and check.passed is passes
+        assert check.result == pytest.approx((1 + e) * amplitude, rel=1e-12)
 
 
 def test_the_stated_power_is_the_smallest_change_that_fails_by_hand():
@@ -196,9 +210,19 @@ def test_what_the_results_sampling_cannot_show_is_stated_and_not_judged():
     assert mean.detail == ("not judged: the result's samples (every 100 ms) show the reference's mean as 110, its own "
                            "samples as 100 - off by more than half the 0.1 allowed")
     assert ripple.reference == pytest.approx(a, rel=1e-6) and ripple.result == pytest.approx(0.0, abs=1e-9)
+    assert ripple.difference == pytest.approx(0.0, abs=1e-9) and ripple.passed is True     # shown 0, the result's 0
     assert ripple.allowed == pytest.approx(0.02 * a, rel=1e-3)
     assert ripple.detail.startswith("not judged: the result's samples (every 100 ms) show the reference's ripple "
                                     "amplitude as 0, its own samples as 10 - off by more than half the 0.2 allowed")
+    # a ripple of 1: the mean shown as 101, off by 1 - still more than half the 0.1 allowed
+    small = verdicts.judge(t, {"x": m + np.sin(2 * np.pi * f * t)}, reference_t,
+                           {"x": m + np.sin(2 * np.pi * f * reference_t)}, window=(t[0], t[-1]), with_power=False)
+    mean, ripple = [c for c in small.signals[0].checks if c.quantity in ("mean", "amplitude")]
+    assert ripple.judged is False and ripple.detail.startswith("not judged: the result's samples (every 100 ms) show "
+                                                               "the reference's ripple amplitude as 0, its own samples "
+                                                               "as 1 - ")     # off by 1: more than half the 0.02
+    assert mean.judged is False and mean.detail.startswith("not judged: the result's samples (every 100 ms) show the "
+                                                           "reference's mean as 101, its own samples as 100 - "), mean
 
 
 def _square(t, first_rise):
@@ -221,6 +245,71 @@ def test_the_reference_places_an_edge_no_closer_than_its_own_samples(rise, passe
     assert tube.passed is passes, tube.detail
     assert tube.detail.startswith("0 % of the samples outside" if passes else "19.3 % of the samples outside")
 
+
+
+#: a reference sampled unevenly: at 0, 8 and 9 ms past every 10 ms, to 998 ms - intervals of
+#: 8, 1 and 1 ms, the first and the last 8 ms long
+UNEVEN = np.unique(np.concatenate([np.arange(0, 1000, 10), np.arange(8, 1000, 10), np.arange(9, 990, 10)])) / 1e3
+
+
+def _square_60(t, first_rise):
+    """10 N*m, and 11 for 30 ms every 60 ms from ``first_rise`` on."""
+    return 10.0 + (np.mod(t - first_rise, 0.06) < 0.03).astype(float)
+
+
+@pytest.mark.parametrize("rise,outside", [(0.0015, "0 %"), (0.0075, "0 %"), (0.0085, "3.3 %"), (0.0165, "29.7 %")])
+def test_an_unevenly_sampled_reference_places_each_edge_within_the_interval_around_it(rise, outside):
+    """The reference (``UNEVEN``) has its edges at 5 ms past every 10 ms (5, 35, ..., 995 ms):
+    each inside an 8 ms interval, between its samples at 0 and 8 ms past, the first interval
+    and the last among them.  A result every 1 ms whose edges lie anywhere in that interval
+    (1.5 or 7.5 ms past) is inside the tube at every sample - the reference can say no more
+    of where its edges are - and one whose edges come after the sample at 8 ms (8.5 ms past,
+    where the reference is already on the new level) is outside at that sample, 1 ms before
+    the next: 33 of the 999 samples (3.3 %); an edge a whole interval late (16.5 ms past), at
+    10 of each edge's 30 samples.  The interval is the one around each sample, not the one
+    before or after it (1 ms long there) nor any other."""
+    t = np.arange(0, 999) / 1e3
+    judged = verdicts.judge(t, {"x": _square_60(t, rise)}, UNEVEN, {"x": _square_60(UNEVEN, 0.005)},
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is (outside == "0 %"), tube.detail
+    assert tube.detail.startswith(f"{outside} of the samples outside +-0.05 (5 % of the range;"), tube.detail
+
+
+@pytest.mark.parametrize("spike,passes", [(0.9, True), (1.2, False)])
+def test_one_sample_beyond_the_tube_by_more_than_the_references_range_fails(spike, passes):
+    """The square wave above, the result on its edges' intervals, one sample (1 of 999: within
+    the 1 % allowed outside) on the upper level raised by ``spike``: beyond the tube (5 % of
+    the range 1) by spike - 0.05, which within the range (0.85) passes and beyond it (1.15),
+    a spike between the reference's samples, fails."""
+    t = np.arange(0, 999) / 1e3
+    y = _square_60(t, 0.0035)
+    y[500] += spike
+    assert y[500] == 11.0 + spike
+    judged = verdicts.judge(t, {"x": y}, UNEVEN, {"x": _square_60(UNEVEN, 0.005)}, with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    assert tube.detail.startswith("0.1 % of the samples outside") and "at t = 0.5 s" in tube.detail
+
+
+@pytest.mark.parametrize("delay,passes", [(0.004, True), (0.012, False)])
+def test_a_reference_of_two_samples_places_nothing_closer_than_the_share_of_the_window_a_lag_may_take(delay,
+                                                                                                          passes):
+    """Two samples, 10 at 0 s and 11 at 1 s: the reference is that straight line and cannot
+    place anything between them, but a lag is allowed at most 1 % of the window (10 ms): a
+    result every 1 ms delayed by 4 ms passes a tube of 0.1 % of the range that the result's
+    own step (1 ms) alone would fail (3 ms * 1 /s = 0.003 beyond its 0.001), and one delayed
+    by 12 ms does not (2 ms beyond: 0.002 > 0.001).  One sample, 10: a constant."""
+    t = np.arange(0, 1001) / 1e3
+    fine = verdicts.Tolerances([[verdicts.rule("", "tube", 0.001, "API")]])
+    line = np.array([0.0, 1.0])
+    judged = verdicts.judge(t, {"x": 10.0 + np.clip(t - delay, 0.0, None)}, line, {"x": 10.0 + line}, rtol=fine,
+                            with_power=False)
+    (tube,) = [c for c in judged.signals[0].checks if c.quantity == "tube"]
+    assert tube.passed is passes, tube.detail
+    constant = verdicts.judge(t, {"x": np.full_like(t, 10.0)}, line[:1], {"x": [10.0]}, window=(0.0, 1.0),
+                              with_power=False)
+    assert all(c.passed for c in constant.signals[0].checks), [c.detail for c in constant.signals[0].checks]
 
 def test_the_references_own_error_is_its_largest_between_any_two_of_its_samples():
     """A ripple growing over the window (100 + 5 t sin(2 pi 20 t), 20 samples a period): the
@@ -322,6 +411,11 @@ def test_orders_the_results_sampling_cannot_show_are_stated_and_not_judged():
                                        f"order {k} as ")
         assert order.detail.endswith(f", its own samples as {order.reference:.4g} - off by more than half the "
                                      f"{order.allowed:.3g} allowed (of the complex component)")
+    # the result is the reference at its samples (to its interpolation there, 1e-6): its order 2 is
+    # the one they show of the reference (order 3, at the six samples' Nyquist limit, is not fitted alike)
+    order = _check(tau, "order 2")
+    assert order.difference == pytest.approx(0.0, abs=1e-5 * ORDERS[2][0])
+    assert f"show the reference's order 2 as {order.result:.4g}, its own" in order.detail
 
 
 def test_an_order_scaled_is_said_as_its_change_in_amplitude_and_of_the_component():

@@ -71,11 +71,26 @@ GROUPS = {
                 ["harness.judges.metrics.x_*", "harness.studies.bench.timing.x__judge__mutmut_*"],
                 ["tests/judges/test_metrics_by_hand.py", "tests/studies/test_bench.py"]),
     # The verdict's checks, their allowances and its stated power (the orders by magnitude
-    # and phase among them).
+    # and phase among them).  Of test_verdict.py all but the runs of changed couplings
+    # (12 s of simulation a surviving mutant would pay; the closed forms judge what they do),
+    # so that the group's 498 mutants run in about 35 minutes on one shared core.
     "verdict": (["harness/judges/verdict.py"],
                 [f"harness.judges.verdict.x_{f}__mutmut_*" for f in
                  ("_checks", "_frame", "power", "_allowed_scale")],
-                ["tests/judges/test_verdict_closed_forms.py", "tests/judges/test_verdict.py"]),
+                ["tests/judges/test_verdict_closed_forms.py"]
+                + [f"tests/judges/test_verdict.py::test_{t}" for t in (
+                    "a_change_just_beyond_the_stated_power_fails_and_just_within_passes",
+                    "a_four_percent_larger_ripple_fails_naming_the_amplitude_and_two_percent_less_passes",
+                    "the_start_up_spike_does_not_set_the_steady_windows_tube",
+                    "a_result_with_some_signals_is_judged_on_those_and_lists_the_rest",
+                    "tolerances_by_signal_kind_and_source_in_that_order",
+                    "the_api_refuses_a_result_with_nothing_to_judge_and_an_unknown_tolerance_target",
+                    "a_window_shorter_than_two_revolutions_judges_no_orders_and_says_so",
+                    "the_blind_spots_name_the_sampling_and_the_start_up",
+                    "verdict_json_is_standard_and_carries_the_power",
+                    "a_stalled_signals_solver_noise_is_not_held_to_a_relative_tolerance",
+                    "tolerances_of_the_verdict_are_refused_with_the_cross_check_band",
+                    "a_scenes_validation_table_sets_its_tolerances_and_a_bad_one_is_refused")]),
     # The reference made from the FMUs: its own error estimate (the check beside it), read
     # at a run's times, and said in words.
     "fmu-reference": (["harness/judges/fmu_reference.py"],

@@ -14,6 +14,8 @@ and static friction against a resistance table, a stop, a stick and a breakaway 
 by hand (the events, their log and the restarts)."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,80 @@ def test_the_events_allowed_are_the_events_counted(fmu_dir):
     assert cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, STICK_SLIP, ["w"], 0.3, 0.01, max_events=2).events == 2
     with pytest.raises(cvode_host.HostFailure, match=r"^more than 1 events by t = 0\.2075\d* s$"):
         cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, STICK_SLIP, ["w"], 0.3, 0.01, max_events=1)
+
+
+class _FaultyFmu:
+    """An FMU that breaks the promises the host checks, standing in for fmpy's raw model and
+    the FMI edition's calls (``_integrate``'s two seams): x' = 1 from x = 0; its indicators
+    are x - 0.5 and 1 + x; at the event (x = 0.5, t = 0.5 s) it resets x to 0 and enters a
+    mode whose first indicator is exactly 0 from then on - the zero a mode entered must
+    never start at.  ``settles=False``: it asks for another event round every round."""
+
+    def __init__(self, settles=True):
+        self.settles, self.mode, self.x, self.t = settles, 0, 0.0, 0.0
+
+    def setTime(self, t):
+        self.t = t
+
+    def setContinuousStates(self, x, nx):
+        self.x = x[0]
+
+    def getContinuousStates(self, x, nx):
+        x[0] = self.x
+
+    def getEventIndicators(self, z, nz):
+        z[0] = self.x - 0.5 if self.mode == 0 else 0.0
+        z[1] = 1.0 + self.x
+
+    def enterEventMode(self):
+        pass
+
+    def enterContinuousTimeMode(self):
+        pass
+
+    def derivatives(self, dx, nx):
+        dx[0] = 1.0
+
+    def event_update(self):
+        changed = self.mode == 0
+        self.mode, self.x = 1, 0.0 if changed else self.x
+        return not self.settles, False, changed
+
+    def get(self, vrs):
+        return [self.x]
+
+
+def _faulty_run(fmu):
+    from sksundae.cvode import CVODE
+
+    return cvode_host._integrate(fmu, fmu, 1, 2, [0], ["x"], 1.0, 0.25, 1e-8, 1e-10, 10, CVODE)
+
+
+def test_an_indicator_left_at_zero_after_an_event_is_reported_with_its_time():
+    """The event at t = 0.5 s (x = 0.5) located by CVODE's root finding, x reset (one restart),
+    then the first indicator exactly 0: reported as (0.5 s, [0]), the other one not; the
+    rows by hand: x = t up to the event, t - 0.5 after it."""
+    run = _faulty_run(_FaultyFmu())
+    assert run.events == 1 and run.restarts == 1
+    assert len(run.zero_after_event) == 1
+    t, zeros = run.zero_after_event[0]
+    assert t == pytest.approx(0.5, abs=1e-9) and zeros == [0]
+    assert list(run.times) == [0.0, 0.25, 0.5, 0.75, 1.0]
+    assert np.allclose(run.outputs["x"], [0.0, 0.25, 0.0, 0.25, 0.5], rtol=0.0, atol=1e-8)
+
+
+def test_an_fmu_whose_event_never_settles_is_a_failure_saying_when():
+    with pytest.raises(cvode_host.HostFailure,
+                       match=r"^the FMU still asked for event iterations after 100 rounds at t = 0\.5 s$"):
+        _faulty_run(_FaultyFmu(settles=False))
+
+
+def test_sundials_warnings_go_to_stderr_unless_the_user_sends_them_elsewhere(fmu_dir, monkeypatch):
+    """SUNDIALS prints its warnings (``t + h = t``, ...) to stdout, among a host's rows, unless
+    its logger's variable says otherwise: the host sets it to stderr, and keeps a user's own."""
+    monkeypatch.delenv("SUNLOGGER_WARNING_FILENAME", raising=False)
+    cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, START, ["w"], 0.1, 0.1)
+    assert os.environ["SUNLOGGER_WARNING_FILENAME"] == "stderr"
+    monkeypatch.setenv("SUNLOGGER_WARNING_FILENAME", "/dev/null")
+    cvode_host.run(fmu_dir / "LoadShaft.fmu", 2, START, ["w"], 0.1, 0.1)
+    assert os.environ["SUNLOGGER_WARNING_FILENAME"] == "/dev/null"
