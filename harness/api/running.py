@@ -124,49 +124,56 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
                              f"({free / 2**30:.1f} GiB): use {_inputs.named('stream').on()} (writes traces.csv while "
                              f"running, keeps 1 row in k in memory), a larger {_inputs.named('step')} or a shorter "
                              "experiment.stop")
+    claimed_here = None
     if out is not None and not claimed:
+        held = outputs.holds(Path(out))
         try:
             out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once
         except outputs.OutputError as error:
             raise InputError(str(error)) from None
-    if observer is None:        # a long run says how long, from its own pace, once it has one
-        observer = PaceWatch(spec.experiment.stop, lambda message: say("note", message))
+        claimed_here = None if held else out
     try:
-        result = simulate(plan, master, step, progress=progress, options=options,
-                          stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
-                          observer=observer)
-    except (SceneInvalid, NoModelExchange, FmuUnusable) as error:
-        # FmuUnusable: an FMU file without its binary here, or of another build
+        if observer is None:        # a long run says how long, from its own pace, once it has one
+            observer = PaceWatch(spec.experiment.stop, lambda message: say("note", message))
+        try:
+            result = simulate(plan, master, step, progress=progress, options=options,
+                              stream=Path(out) / "traces.csv" if stream else None, keep_partial=True,
+                              observer=observer)
+        except (SceneInvalid, NoModelExchange, FmuUnusable) as error:
+            # FmuUnusable: an FMU file without its binary here, or of another build
+            if out is not None:
+                outputs.abandon(Path(out))           # refused before the run: no empty folder left
+            raise InputError(f"{error}: run it with a co-simulation master (e.g. jacobi-quadratic)"
+                             if isinstance(error, NoModelExchange) else str(error)) from None
+        result.warnings = advice
+        if result.unconnected_inputs:
+            say("warning", scene_files.unconnected_message(result.unconnected_inputs))
+        if result.unchecked_connections:
+            say("note", scene_files.unchecked_message(result.unchecked_connections))
+        solution = None
+        try:
+            if "reference" in spec.features and reference and not stream and result.ok:
+                try:
+                    solution = monolithic.solve(plan, result.times)
+                except monolithic.ReferenceUnavailable as error:
+                    solution = _made_reference(plan, result, str(error), say)
+        except KeyboardInterrupt:
+            say("note", "interrupted while solving the reference: the run's results are written without it")
+            result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
+            result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
         if out is not None:
-            outputs.abandon(Path(out))           # refused before the run: no empty folder left
-        raise InputError(f"{error}: run it with a co-simulation master (e.g. jacobi-quadratic)"
-                         if isinstance(error, NoModelExchange) else str(error)) from None
-    result.warnings = advice
-    if result.unconnected_inputs:
-        say("warning", scene_files.unconnected_message(result.unconnected_inputs))
-    if result.unchecked_connections:
-        say("note", scene_files.unchecked_message(result.unchecked_connections))
-    solution = None
-    try:
-        if "reference" in spec.features and reference and not stream and result.ok:
-            try:
-                solution = monolithic.solve(plan, result.times)
-            except monolithic.ReferenceUnavailable as error:
-                solution = _made_reference(plan, result, str(error), say)
-    except KeyboardInterrupt:
-        say("note", "interrupted while solving the reference: the run's results are written without it")
-        result.failure_stage, result.failure = "interrupted", f"interrupted after the run, at t = {result.times[-1]:.6g} s"
-        result.diagnosis = {"kind": "interrupted", "time": float(result.times[-1]), "message": result.failure}
-    if out is not None:
-        summary = report.write(Path(out), result, solution, plots=plots)
-    else:
-        summary = report.summarize(result, solution)
-    if summary.get("untrusted"):
-        say("warning", f"{UNTRUSTED}: {summary['untrusted']}")
-    done = Run(result, solution, summary, Path(out) if out is not None else None, notes)
-    if latency:
-        done.latency = step_latency.report(Path(out), timer, result)
-    return done
+            summary = report.write(Path(out), result, solution, plots=plots)
+        else:
+            summary = report.summarize(result, solution)
+        if summary.get("untrusted"):
+            say("warning", f"{UNTRUSTED}: {summary['untrusted']}")
+        done = Run(result, solution, summary, Path(out) if out is not None else None, notes)
+        if latency:
+            done.latency = step_latency.report(Path(out), timer, result)
+        return done
+    finally:
+        if claimed_here is not None:     # a caller's process goes on: its folder is free again
+            outputs.release(claimed_here)
 
 
 def _made_reference(plan, run, why: str, say):

@@ -40,7 +40,6 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     time at the target error, best master, ...; ``fmi_editions``) and writes bench.csv,
     bench.md, bench.json and work_precision.png to ``out`` (default results/bench/<scene>),
     resuming from its cases.jsonl unless ``resume`` is false."""
-    from harness.formats import outputs
     from harness.studies import bench as benchmark
 
     spec = load(scene)
@@ -54,12 +53,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
         raise InputError(str(error)) from None
     build()
     out = Path(out) if out is not None else benchmark.default_out(spec)
-    if not claimed:
-        try:
-            out = outputs.claim(out)
-        except outputs.OutputError as error:
-            raise InputError(str(error)) from None
-    with _resumable(out):
+    with _claimed(out, already=claimed) as out, _resumable(out):
         result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
                                  progress=progress or (lambda *_: None), out=out, resume=resume,
                                  fmi_editions=fmi_editions)
@@ -68,15 +62,26 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     return BenchResult(result)
 
 
-def _claim(out: Path) -> Path:
-    """``out`` made, proven writable and locked for this process (InputError when it cannot
-    be, or another lever is writing there)."""
+@_contextlib.contextmanager
+def _claimed(out: Path, already: bool = False) -> Iterator[Path]:
+    """``out`` made, proven writable and locked for the body (InputError when it cannot be,
+    or another lever is writing there), then free again - unless this process held it
+    before, or ``already`` (the caller claimed it)."""
     from harness.formats import outputs
 
+    if already:
+        yield Path(out)
+        return
+    held = outputs.holds(Path(out))
     try:
-        return outputs.claim(Path(out))
+        out = outputs.claim(Path(out))
     except outputs.OutputError as error:
         raise InputError(str(error)) from None
+    try:
+        yield out
+    finally:
+        if not held:        # a caller's process goes on (a notebook): no lock or open file left behind
+            outputs.release(out)
 
 
 def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnesses: Iterable[float] = (),
@@ -135,10 +140,10 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     plan.masters = list(dict.fromkeys(masters)) or plan.masters
     plan.min_steps = min_steps
     plan.refine = refine
-    out = _claim(out or stabilitymap.default_out(spec))
-    with _resumable(out):
-        result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
-    written = stability_report.write(out, result)
+    with _claimed(out or stabilitymap.default_out(spec)) as out:
+        with _resumable(out):
+            result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
+        written = stability_report.write(out, result)
     return StabilityMapResult(result=result, agreement=stabilitymap.agreement(result), written=written)
 
 
@@ -175,9 +180,8 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     build()
     checked_plan(load(scene, extra))          # the parameters' types, units and ranges, before any case runs
     out = Path(out or RESULTS / "sweep")
-    _claim(out)
     try:
-        with _resumable(out):
+        with _claimed(out), _resumable(out):
             return Returned(sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers,
                                          dask=dask, progress=progress, resume=resume))
     except scene_files.SceneError as error:

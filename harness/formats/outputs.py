@@ -99,6 +99,11 @@ def abandon(out: Path):
         _created.discard(key)
 
 
+def holds(out: Path) -> bool:
+    """Whether this process holds the lock on ``out``."""
+    return Path(out).resolve() in _held
+
+
 def release(out: Path):
     """Give up the lock on ``out`` (the end of the process does it too)."""
     handle = _held.pop(Path(out).resolve(), None)

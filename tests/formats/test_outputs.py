@@ -27,7 +27,8 @@ from harness.formats import outputs, ssp
 SHORT = ["--set", "experiment.stop=0.3", "--set", "experiment.transient=0.1"]
 # Where a test is about the folder, not the plots: shorter than one revolution of the driven
 # shaft (about 0.16 s), so the three plots over its angle are not drawn.
-BRIEF = ["--set", "experiment.stop=0.1", "--set", "experiment.transient=0"]
+BRIEF_OVERRIDES = ["experiment.stop=0.1", "experiment.transient=0"]
+BRIEF = [arg for override in BRIEF_OVERRIDES for arg in ("--set", override)]
 
 
 def _run(lever, *args):
@@ -231,3 +232,44 @@ def test_a_lever_run_of_an_archive_leaves_no_unpacked_copy(lever_process, export
                              env={**os.environ, "TMPDIR": str(scratch)})
     assert done.returncode == 0, done.stderr
     assert list(scratch.iterdir()) == []
+
+
+def _open_files_under(folder) -> list[str]:
+    """The files this process has open under ``folder``."""
+    opened = []
+    for fd in os.listdir(f"/proc/{os.getpid()}/fd"):
+        try:
+            opened.append(os.readlink(f"/proc/{os.getpid()}/fd/{fd}"))
+        except OSError:         # the listing's own descriptor, closed by now
+            pass
+    return [path for path in opened if path.startswith(str(folder))]
+
+
+def _claimable_by_another_process(folder) -> bool:
+    other = subprocess.run([sys.executable, "-c", "from harness.formats import outputs; "
+                            f"outputs.claim({str(folder)!r}); print('held')"], capture_output=True, text=True)
+    return other.returncode == 0 and other.stdout.strip() == "held"
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="counts open files through /proc")
+def test_a_python_caller_gets_each_folder_back_when_the_call_returns(tmp_path, fmu_dir):
+    """A notebook or a script makes run after run in one process: each call's lock on its
+    folder (and the open lock file) ends with the call, so a thousand runs do not exhaust
+    the process's files, and another process may write there afterwards.  A folder the
+    caller holds itself stays held."""
+    from harness import api
+
+    quiet = dict(notify=lambda *_: None)
+    for k in range(3):
+        api.run("kavz685", BRIEF_OVERRIDES, reference=False, plots=False, out=tmp_path / f"run{k}", **quiet)
+    api.stability_map("kavz685", stiffnesses=[1e4], dampings=[0.0], h_omegas=[0.2], masters=["jacobi"],
+                      min_steps=16, refine=False, jobs=1, out=tmp_path / "map")
+    assert _open_files_under(tmp_path) == []
+    assert not any(outputs.holds(tmp_path / name) for name in ("run0", "run1", "run2", "map"))
+    assert _claimable_by_another_process(tmp_path / "run2") and _claimable_by_another_process(tmp_path / "map")
+    mine = outputs.claim(tmp_path / "mine")
+    try:
+        api.run("kavz685", BRIEF_OVERRIDES, reference=False, plots=False, out=tmp_path / "mine", **quiet)
+        assert outputs.holds(tmp_path / "mine") and not _claimable_by_another_process(tmp_path / "mine")
+    finally:
+        outputs.release(mine)
