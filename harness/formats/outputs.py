@@ -1,10 +1,11 @@
 """A command's output folder, checked and locked before anything runs.
 
 ``claim(out)`` makes the folder (or finds it), proves it writable by writing into it, and
-takes an exclusive lock on ``out/.lever.lock`` (``fcntl.flock``) for the rest of the
-process: the kernel drops the lock when the process ends, however it ends, so a crash
-leaves no stale lock.  A second ``lever`` writing to the same folder is refused at once,
-with the first one's process id and command, instead of interleaving its rows.
+takes an exclusive lock on ``out/.lever.lock`` (``fcntl.flock``) until ``release`` (an API
+call gives it back when it returns) or the process ends: the kernel drops the lock when the
+process ends, however it ends, so a crash leaves no stale lock.  A second ``lever`` writing
+to the same folder is refused at once, with the first one's process id and command, instead
+of interleaving its rows.
 """
 from __future__ import annotations
 
