@@ -10,8 +10,11 @@ declare in their vendor annotation (docs/fmus.md, "Time derivatives").  A foreig
 """
 from __future__ import annotations
 
+import hashlib
+import threading
 import weakref
 import xml.etree.ElementTree as ET
+from collections import OrderedDict
 import zipfile
 from pathlib import Path
 
@@ -23,12 +26,32 @@ from lever.fmus.model_description import ANNOTATION_TOOL
 _RELATIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
+#: descriptions read, by the digest of their XML (the most recently used last): a run reads
+#: each FMU's description several times (the plan, the component, its FMI edition), and a
+#: sweep or a stability map makes hundreds of runs - the XML is read each time, parsed once
+_PARSED: OrderedDict[bytes, object] = OrderedDict()
+_PARSED_KEPT = 64
+_PARSED_LOCK = threading.Lock()
+
+
 def read_description(path: Path | str):
     """fmpy's model description of the FMU ``path`` (an ``.fmu``, an unpacked FMU's folder
     or its ``modelDescription.xml``), whose ``time_derivatives`` are those of the ``derivative``
-    attributes and of our annotation."""
+    attributes and of our annotation.  The same XML gives the same object (shared: read it,
+    never change it); an FMU rebuilt in place is read afresh."""
+    xml = _description_xml(Path(path))
+    key = hashlib.sha256(xml).digest()
+    with _PARSED_LOCK:
+        md = _PARSED.get(key)
+        if md is not None:
+            _PARSED.move_to_end(key)
+            return md
     md = read_model_description(str(path))
-    _RELATIONS[md] = {**_attributed(md), **annotated_time_derivatives(_description_xml(Path(path)))}
+    _RELATIONS[md] = {**_attributed(md), **annotated_time_derivatives(xml)}
+    with _PARSED_LOCK:
+        _PARSED[key] = md
+        while len(_PARSED) > _PARSED_KEPT:
+            _PARSED.popitem(last=False)
     return md
 
 

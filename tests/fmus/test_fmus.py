@@ -705,3 +705,28 @@ def test_outputs_read_in_initialisation_follow_the_parameters_set_there(componen
     assert c.get(["engine_torque", "a"]) == expected != before
     c.exit_initialization()
     assert c.get(["engine_torque", "a"]) == expected
+
+
+def test_a_description_is_parsed_once_per_content_and_read_afresh_when_the_fmu_changes(fmu_dir, tmp_path):
+    """The same model description read again (another run, a copy at another path) is the
+    object read first; an FMU rewritten in place with another description - same path, even
+    the same size - is read afresh, as its own file says."""
+    import shutil
+    import zipfile
+
+    original = Path(fmu_dir) / "LeverCoupling.fmu"
+    first = read_description(original)
+    copy = shutil.copy(original, tmp_path / "LeverCoupling.fmu")
+    assert read_description(copy) is first and read_description(original) is first
+    with zipfile.ZipFile(original) as z:
+        members = {name: z.read(name) for name in z.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    assert 'description="' in xml
+    at = xml.index('description="') + len('description="')
+    members["modelDescription.xml"] = (xml[:at] + "X" + xml[at + 1:]).encode()     # one character, same size
+    with zipfile.ZipFile(copy, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    changed = read_description(copy)
+    assert changed is not first and changed.description == "X" + first.description[1:]
+    assert time_derivatives(changed) == time_derivatives(first)
