@@ -9,7 +9,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from lever.physics.kinematics import MODES, TransferFunction, reported_amplitude
+from lever.physics.kinematics import MODES, TransferFunction, reported_amplitude, transfer_function
 from lever.physics.parameters import ParameterError
 
 DEG = math.pi / 180.0
@@ -386,3 +386,14 @@ def test_loading_the_physics_does_not_fit_the_reported_amplitudes():
             "k.TransferFunction('kinematic', 0.26, 0.03, 0.03); assert k.reported_fit.cache_info().currsize == 0; "
             "k.TransferFunction('scaled', 0.26, 0.03, 0.03); assert k.reported_fit.cache_info().currsize == 1")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("mode", ["kinematic", "scaled", "synchronous"])
+def test_a_transfer_function_is_made_once_for_the_same_values_and_is_the_one_made_fresh(mode):
+    values = (mode, math.radians(21.0), 0.04, 0.02)
+    kept = transfer_function(*values)
+    assert transfer_function(*values) is kept
+    fresh = TransferFunction(*values)
+    assert kept.coefficients == fresh.coefficients and kept.amplitude == fresh.amplitude
+    assert [kept.evaluate(0.1 * k) for k in range(64)] == [fresh.evaluate(0.1 * k) for k in range(64)]
+    assert transfer_function(mode, math.radians(21.5), 0.04, 0.02) is not kept

@@ -12,7 +12,7 @@ import math
 from .coupling import CouplingFamily, LeverCoupling, build_coupling
 from .elastic import TabulatedElasticLaw, elastic_law
 from .engine import engine_characteristic
-from .kinematics import GEOMETRIC_LIMIT, MODES, TransferFunction
+from .kinematics import GEOMETRIC_LIMIT, MODES, transfer_function
 from .friction import DIRECTIONS, ResistingLoad
 from .load import LOAD_KINDS, FourierLoad, Spectrum, TabulatedLoad, load_model
 from .parameters import Parameter, ParameterError, check_all
@@ -148,8 +148,8 @@ def coupling_family_of(p: dict, start: float) -> CouplingFamily:
     """``coupling_family_from`` for checked values (``check_coupling``)."""
 
     def transfer_at(alpha):
-        return TransferFunction(p["transfer_mode"], MISALIGNMENT.check(alpha), p["support_deformation"],
-                                p["hinge_deformation"])
+        return transfer_function(p["transfer_mode"], MISALIGNMENT.check(alpha), p["support_deformation"],
+                                 p["hinge_deformation"])
 
     return CouplingFamily(transfer_at, elastic_law(p["stiffness"], p["elastic_table"]), p["damping"], start)
 

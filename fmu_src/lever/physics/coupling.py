@@ -16,7 +16,7 @@ import math
 from typing import NamedTuple
 
 from .elastic import LinearElasticLaw, TabulatedElasticLaw, elastic_law
-from .kinematics import BlendedTransferFunction, TransferFunction
+from .kinematics import BlendedTransferFunction, TransferFunction, transfer_function
 from .parameters import ParameterError
 
 
@@ -178,7 +178,7 @@ class CouplingFamily:
 def build_coupling(transfer_mode: str, alpha: float, support_deformation: float, hinge_deformation: float,
                    c: float, b: float, elastic_table: str = "") -> LeverCoupling:
     """The one constructor the FMU, the reference solver and the tests share."""
-    transfer = TransferFunction(transfer_mode, alpha, support_deformation, hinge_deformation)
+    transfer = transfer_function(transfer_mode, alpha, support_deformation, hinge_deformation)
     return LeverCoupling(transfer, elastic_law(c, elastic_table), b)
 
 

@@ -239,6 +239,16 @@ class TransferFunction:
                 f"amplitude={self.amplitude:.4g}, harmonics={len(self._c)})")
 
 
+@functools.lru_cache(maxsize=256)
+def transfer_function(mode: str, alpha: float, support_deformation: float = 0.0,
+                      hinge_deformation: float = 0.0) -> TransferFunction:
+    """``TransferFunction(mode, alpha, ...)``, made once a process for the same values: a
+    run builds it in the reference and in the coupling FMU, a study builds it run after run,
+    and its Fourier series and samples cost more than the rest of a short run's set-up.  It
+    is read, never changed, so one object serves every caller."""
+    return TransferFunction(mode, alpha, support_deformation, hinge_deformation)
+
+
 class BlendedTransferFunction:
     """``U12`` and ``Phi`` between two transfer functions ``lower`` (at ``alpha_low``)
     and ``upper`` (at ``alpha_high``), blended linearly in alpha: what a coupling uses at
