@@ -36,6 +36,7 @@ call): one comparison per checked value and step.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -153,7 +154,7 @@ def bounds(plan: plans.Plan) -> list[Bound]:
     if "torque" in limits:
         torque, why = limits["torque"], "set in the scene's [limits]"
     else:
-        ratio = max(coupling.transfer.ratio(2.0 * math.pi * k / 1024) for k in range(1024))
+        ratio = _largest_ratio(coupling.transfer)
         energy = 0.5 * (engine.inertia + load.inertia) * speed * speed
         theta = _deflection_at_energy(coupling.law, energy) if math.isfinite(energy) else math.inf
         torque = max(1.0, ratio) * (float(coupling.law.torque(theta)) + coupling.damping * (1.0 + ratio) * speed)
@@ -253,3 +254,10 @@ class Guard:
                                  "value": float(value), "bound": bound.limit, "bound_rule": bound.why,
                                  "time": t, "master": self.master, "step": self.step,
                                  "step_index": step_index})
+
+
+@functools.lru_cache(maxsize=64)
+def _largest_ratio(transfer) -> float:
+    """The coupling's largest speed ratio U12, at 1024 angles a revolution (a transfer function
+    is made once a process for the same values: so is this)."""
+    return max(transfer.ratio(2.0 * math.pi * k / 1024) for k in range(1024))
