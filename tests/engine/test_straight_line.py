@@ -1,0 +1,162 @@
+"""Plans compiled to straight-line Python (``harness.engine.straight_line``) make the calls
+the interpreting loops make (``System.step_with``, ``System.interpret``), in their order,
+with the same arguments and counters, and fail the same way; a failing line shows in a
+traceback."""
+from __future__ import annotations
+
+import traceback
+
+import numpy as np
+import pytest
+
+from harness.description import scene
+from harness.engine import run
+from harness.engine.component import step_call
+from harness.engine.straight_line import straight_line
+from harness.engine.system import Copy, Send, StepCall, System, Visit
+
+
+class Stub:
+    """A component as a plan sees it: counters, a name, ``fail`` noted (and raised)."""
+
+    def __init__(self, name, log):
+        self.name, self.log = name, log
+        self.gets = self.sets = self.steps = 0
+        self.time = 0.0
+
+    def fail(self, call, status):
+        self.log.append(("fail", self.name, call, status))
+        raise RuntimeError(f"{self.name}: {call} -> {status}")
+
+
+def _plan(log, statuses):
+    """Two readers and one target, every raw call logged with its arguments; ``statuses``
+    maps a call (kind, component) to the status it returns (0 otherwise)."""
+    a, b, c = (Stub(n, log) for n in "abc")
+
+    def raw(kind, who):
+        def call(handle, first, second, third):
+            if kind == "step":
+                log.append((kind, who.name, handle, first, second, third))
+            else:
+                log.append((kind, who.name, handle, list(first), int(second), list(third)))
+                if kind == "get":        # a read fills its buffer: the outputs a's 1, 2, b's 10
+                    for k in range(len(third)):
+                        third[k] = {"a": 1.0 + k, "b": 10.0 + k}[who.name]
+            return statuses.get((kind, who.name), 0)
+        return call
+
+    outputs_a, outputs_b, inputs_c = [0.0, 0.0], [0.0], [0.0, 0.0, 0.0]
+    send = Send(c, raw("set", c), "hc", [7, 8, 9], 3, inputs_c)
+    visits = [Visit(a, raw("get", a), "ha", [1, 2], 2, outputs_a, (Copy(inputs_c, ((0, 1), (2, 0))),), ()),
+              Visit(b, raw("get", b), "hb", [3], 1, outputs_b, (Copy(inputs_c, ((1, 0),)),), (send,)),
+              Visit(None, None, None, None, 0, None, (), (send,))]
+    steps = (StepCall(a, raw("step", a), "ha"), StepCall(b, raw("step", b), "hb"))
+    return (a, b, c), steps, visits, inputs_c
+
+
+def _interpreted(steps, visits, t, h):
+    System.step_with(steps, t, h)
+    System.interpret(visits)
+
+
+@pytest.mark.parametrize("refused", [None, ("step", "b"), ("get", "a"), ("get", "b"), ("set", "c")])
+def test_the_generated_function_makes_the_interpreters_calls(refused):
+    outcomes = []
+    for make in (lambda steps, visits: lambda t, h: _interpreted(steps, visits, t, h),
+                 lambda steps, visits: straight_line("test", visits, steps)):
+        log = []
+        components, steps, visits, inputs = _plan(log, {refused: 3} if refused else {})
+        run_step = make(steps, visits)
+        try:
+            run_step(0.25, 1e-3)
+            raised = None
+        except RuntimeError as error:
+            raised = str(error)
+        outcomes.append((log, raised, list(inputs),
+                         [(c.gets, c.sets, c.steps, c.time) for c in components]))
+    assert outcomes[0] == outcomes[1]
+    log, raised, inputs, counters = outcomes[1]
+    if refused is None:
+        # the copies by hand: c's inputs are a's second output, b's, a's first
+        assert inputs == [2.0, 10.0, 1.0] and raised is None
+        assert [entry[:2] for entry in log] == [("step", "a"), ("step", "b"), ("get", "a"), ("get", "b"),
+                                               ("set", "c"), ("set", "c")]
+        assert log[4] == ("set", "c", "hc", [7, 8, 9], 3, [2.0, 10.0, 1.0])
+        assert counters == [(1, 0, 1, 0.25 + 1e-3), (1, 0, 1, 0.25 + 1e-3), (0, 2, 0, 0.0)]
+    else:
+        kind, who = refused
+        call = {"get": "fmi2GetReal", "set": "fmi2SetReal", "step": step_call(0.25, 1e-3)}[kind]
+        assert log[-1] == ("fail", who, call, 3) and raised == f"{who}: {call} -> 3"
+
+
+def test_a_failing_line_shows_in_the_traceback():
+    log = []
+    _, steps, visits, _ = _plan(log, {("get", "b"): 4})
+    run_step = straight_line("test", visits, steps)
+    with pytest.raises(RuntimeError) as caught:
+        run_step(0.0, 0.1)
+    shown = "".join(traceback.format_tb(caught.tb))
+    assert "component1.fail('fmi2GetReal', status)" in shown and "<harness test #" in shown
+    assert "# fmi2GetReal of b: 1 outputs" in run_step.source
+
+
+def test_a_run_with_the_generated_plans_is_the_run_with_the_interpreted_ones(monkeypatch):
+    """A whole jacobi-quadratic run: the same traces and FMI calls when every plan is walked
+    by the interpreting loops instead."""
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.02", "experiment.transient=0"])
+    generated = run.simulate(spec, master="jacobi-quadratic", step=1e-3)
+
+    def interpreting(self, plan, steps=()):
+        if not steps:
+            return lambda: System.interpret(plan)
+        return lambda t, h: _interpreted(steps, plan, t, h)
+
+    def calling_the_interpreter(source, plan):
+        # the masters' own generated lines kept, the plan in them walked
+        source.line(f"interpret({source.name(plan, 'plan')})")
+        source.bound["interpret"] = System.interpret
+
+    monkeypatch.setattr(System, "runner", interpreting)
+    monkeypatch.setattr("harness.engine.masters.explicit.add_visits", calling_the_interpreter)
+    interpreted = run.simulate(spec, master="jacobi-quadratic", step=1e-3)
+    assert generated.ok and interpreted.ok
+    timed = {"setup_time"}
+    assert {k: v for k, v in generated.counters.items() if k not in timed} == \
+        {k: v for k, v in interpreted.counters.items() if k not in timed}
+    assert generated.counters["calls_by_kind"]["coupling"]["get"] >= 20
+    for name, trace in generated.traces.items():
+        assert np.array_equal(trace, interpreted.traces[name]), name
+
+
+def test_the_guards_generated_check_is_its_loop():
+    """Every checked output of kavz685 in turn made non-finite or twice its bound: the
+    generated check and the loop raise the same ``Diverged``, and pass the same values."""
+    from harness.description import plan as plans
+    from harness.engine.guard import Diverged, Guard
+
+    system = System(plans.check(scene.load("kavz685")))
+    try:
+        system.initialize()
+        guard = Guard(system, "jacobi", 1e-3)
+        assert len(guard._checks) >= 6
+        guard.check(0.0, 0)
+        guard.interpret(0.0, 0)
+        seen = set()
+        for values, i, low, high, k in guard._checks:
+            kept = values[i]
+            for bad in (float("nan"), 2.0 * high if high < float("inf") else None):
+                if bad is None:
+                    continue
+                values[i] = bad
+                raised = []
+                for check in (guard.check, guard.interpret):
+                    with pytest.raises(Diverged) as caught:
+                        check(0.5, 7)
+                    raised.append((str(caught.value), repr(caught.value.diagnosis)))
+                assert raised[0] == raised[1]
+                seen.add(caught.value.diagnosis["variable"])
+            values[i] = kept
+        assert {"tau1", "tau2", "w"} <= seen
+    finally:
+        system.free()
