@@ -115,12 +115,13 @@ def add_visits(source: Source, visits) -> None:
             source.line(f"    {c}.fail('fmi2SetReal', status)")
 
 
-def straight_line(title: str, visits=(), steps=()) -> Callable:
-    """One function that makes the ``steps`` (``StepCall`` records: each component's
-    fmi2DoStep, as ``System.step_with``), then runs the ``visits`` (a compiled propagation,
-    as ``System.propagate_with``).  It takes ``(t, h)`` where there are steps, nothing
-    otherwise."""
+def straight_line(title: str, visits=(), steps=(), before=()) -> Callable:
+    """One function that runs the visits ``before``, makes the ``steps`` (``StepCall``
+    records: each component's fmi2DoStep, as ``System.step_with``), then runs the ``visits``
+    (each a compiled propagation, as ``System.interpret`` walks it).  It takes ``(t, h)``
+    where there are steps, nothing otherwise."""
     source = Source(title, "t, h" if steps else "")
+    add_visits(source, before)
     add_steps(source, steps)
     add_visits(source, visits)
     return source.function()

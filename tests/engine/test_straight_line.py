@@ -160,3 +160,63 @@ def test_the_guards_generated_check_is_its_loop():
         assert {"tau1", "tau2", "w"} <= seen
     finally:
         system.free()
+
+
+def _hold_by_loop(master, weights, pasts, h, predict, rest_only):
+    """The extrapolating masters' hold as a loop over the inputs and the points: each sum
+    from 0.0 over the points in their order."""
+    ends = [] if predict else None
+    for k, i, values, n, ramped, higher in (master._rest_inputs if rest_only else master._held_inputs):
+        mean = change = end = 0.0
+        for (w_mean, w_slope, w_end), inputs in zip(weights, pasts):
+            u = inputs[k][i]
+            mean += w_mean * u
+            change += w_slope * u
+            end += w_end * u
+        if ramped:
+            values[i] = mean - 0.5 * change
+            values[n + i] = change / h
+            for j in higher:
+                values[j] = 0.0
+        else:
+            values[i] = mean
+        if predict:
+            if i == 0:
+                ends.append([])
+            ends[-1].append(end)
+    return ends
+
+
+@pytest.mark.parametrize("ramp", [True, False])
+def test_the_generated_hold_is_the_loop_bit_for_bit(ramp):
+    """Random weights and torques through one to four points, predicted or not, all inputs or
+    those not sent ahead: the same writes and end values, bit for bit (the same scalar
+    operations in the same order)."""
+    import random
+
+    from harness.description import plan as plans
+    from harness.engine.masters import registry
+
+    rng = random.Random(11)
+    system = System(plans.check(scene.load("kavz685")))
+    try:
+        system.initialize()
+        master = registry.make("jacobi-quadratic", system, 1e-3, ramp=ramp)
+        assert bool(master._rest_inputs) is not ramp
+        for points in (1, 2, 3, 4):
+            for predict in (True, False):
+                for rest_only in ((False, True) if master._rest_inputs else (False,)):
+                    for _ in range(20):
+                        weights = [tuple(rng.uniform(-3.0, 3.0) for _ in range(3)) for _ in range(points)]
+                        pasts = [[[rng.uniform(-1e3, 1e3) for _ in range(held.n)] for held in master._held]
+                                 for _ in range(points)]
+                        h = rng.uniform(1e-5, 1e-2)
+                        got = master._holder(points, predict, rest_only)(weights, pasts, h)
+                        written = [list(held.values) for held in master._held]
+                        for held in master._held:
+                            held.values[:] = [0.0] * len(held.values)
+                        expected = _hold_by_loop(master, weights, pasts, h, predict, rest_only)
+                        assert got == expected
+                        assert written == [list(held.values) for held in master._held]
+    finally:
+        system.free()

@@ -258,6 +258,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._ahead_curved = any(each[5] for each in self._ahead_inputs)
         self.snapshot = snapshot_of(self._live)
         self._step_held = system.runner(self._held_plan, self._steps)
+        # the holds by number of points, prediction and part (``_hold``), made when first met
+        self._holders: dict[tuple, Callable] = {}
         # the end-of-step writes by the number of weights (``_send_ahead``), made when first met
         self._ahead_writers: dict[int, Callable] = {}
         # The derivative weights the last step used and the scaled nodes of their key:
@@ -287,39 +289,45 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         (``None`` unless ``predict``).  ``rest_only``: only the components whose inputs
         were not sent ahead."""
         weights = self._weights([p[0] for p in points], t, h)
-        ends = [] if predict else None
-        pasts = [p[1] for p in points]
-        unrolled = len(weights) == 3
-        if unrolled:
-            (m0, r0, e0), (m1, r1, e1), (m2, r2, e2) = weights
-            past0, past1, past2 = pasts
+        key = (len(weights), predict, rest_only)
+        holder = self._holders.get(key)
+        if holder is None:
+            holder = self._holders[key] = self._holder(*key)
+        return holder(weights, [p[1] for p in points], h)
+
+    def _holder(self, points: int, predict: bool, rest_only: bool) -> Callable:
+        """``_hold``'s writes and sends through ``points`` communication points as one
+        function (``harness.engine.straight_line``) of the weights, the points' values and
+        ``h``; it returns the polynomial's values at the step's end (by component) where
+        ``predict``, else None.  Per input each sum from 0.0 over the points in their order,
+        what a loop over them makes."""
+        source = Source(f"hold through {points} points", "weights, pasts, h")
+        source.line(", ".join(f"(m{j}, r{j}, e{j})" for j in range(points)) + ", = weights")
+        source.line(", ".join(f"past{j}" for j in range(points)) + ", = pasts")
+        ends = []
         for k, i, values, n, ramped, higher in (self._rest_inputs if rest_only else self._held_inputs):
-            # each sum from 0.0 over the points in their order; three points unrolled
-            if unrolled:
-                u0, u1, u2 = past0[k][i], past1[k][i], past2[k][i]
-                mean = 0.0 + m0 * u0 + m1 * u1 + m2 * u2
-                change = 0.0 + r0 * u0 + r1 * u1 + r2 * u2       # slope * h
-                end = 0.0 + e0 * u0 + e1 * u1 + e2 * u2
-            else:
-                mean = change = end = 0.0
-                for (w_mean, w_slope, w_end), inputs in zip(weights, pasts):
-                    u = inputs[k][i]
-                    mean += w_mean * u
-                    change += w_slope * u
-                    end += w_end * u
+            held = source.name(values, "held")
+            for j in range(points):
+                source.line(f"u{j} = past{j}[{k}][{i}]")
+            mean = "0.0" + "".join(f" + m{j} * u{j}" for j in range(points))
             if ramped:
-                values[i] = mean - 0.5 * change
-                values[n + i] = change / h
+                source.line(f"mean = {mean}")
+                source.line("change = 0.0" + "".join(f" + r{j} * u{j}" for j in range(points)) + "       # slope * h")
+                source.line(f"{held}[{i}] = mean - 0.5 * change")
+                source.line(f"{held}[{n + i}] = change / h")
                 for j in higher:
-                    values[j] = 0.0           # higher derivatives: the ramp is all
+                    source.line(f"{held}[{j}] = 0.0           # higher derivatives: the ramp is all")
             else:
-                values[i] = mean
+                source.line(f"{held}[{i}] = {mean}")
             if predict:
                 if i == 0:
                     ends.append([])
-                ends[-1].append(end)
-        self.system.propagate_with(self._sends_rest if rest_only else self._sends)
-        return ends
+                ends[-1].append(f"end{k}_{i}")
+                source.line(f"end{k}_{i} = 0.0" + "".join(f" + e{j} * u{j}" for j in range(points)))
+        add_visits(source, self._sends_rest if rest_only else self._sends)
+        source.line("return [" + ", ".join("[" + ", ".join(group) + "]" for group in ends) + "]" if predict
+                    else "return None")
+        return source.function()
 
     def _send_ahead(self, t_end):
         """Write each component's inputs at ``t_end`` (the step just made's end, where the
