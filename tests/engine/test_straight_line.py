@@ -220,3 +220,55 @@ def test_the_generated_hold_is_the_loop_bit_for_bit(ramp):
                         assert written == [list(held.values) for held in master._held]
     finally:
         system.free()
+
+
+def _send_ahead_by_loop(master, history, first, second, scale, squared):
+    """The extrapolating masters' end-of-step writes as a loop over the inputs and the past
+    points: each sum from 0.0 over the points in their order, then the value now."""
+    past = [p[1] for p in history]
+    for k, i, values, now, n, higher in master._ahead_inputs:
+        rate = curvature = 0.0
+        for w_first, w_second, inputs in zip(first, second, past):
+            u = inputs[k][i]
+            rate += w_first * u
+            curvature += w_second * u
+        u = now[i]
+        rate += first[-1] * u
+        curvature += second[-1] * u
+        values[i] = u
+        values[n + i] = rate / scale
+        if higher:
+            values[2 * n + i] = curvature / squared
+
+
+@pytest.mark.parametrize("name", ["jacobi-linear", "jacobi-quadratic"])
+def test_the_generated_send_ahead_is_the_loop_bit_for_bit(name):
+    import random
+
+    from harness.description import plan as plans
+    from harness.engine.masters import registry
+
+    rng = random.Random(5)
+    system = System(plans.check(scene.load("kavz685")))
+    try:
+        system.initialize()
+        master = registry.make(name, system, 1e-3)
+        assert master._ahead_inputs
+        for points in (1, 2, 3):
+            writer = master._ahead_writer(points)
+            for _ in range(20):
+                history = [(rng.uniform(0, 1), [[rng.uniform(-1e3, 1e3) for _ in range(held.n)]
+                                                for held in master._held]) for _ in range(points)]
+                for live in master._live:
+                    live[:] = [rng.uniform(-1e3, 1e3) for _ in range(len(live))]
+                first = [rng.uniform(-3, 3) for _ in range(points + 1)]
+                second = [rng.uniform(-3, 3) for _ in range(points + 1)]
+                scale = rng.uniform(1e-5, 1e-2)
+                writer(history, first, second, scale, scale * scale)
+                written = [list(held.values) for held in master._held]
+                for held in master._held:
+                    held.values[:] = [0.0] * len(held.values)
+                _send_ahead_by_loop(master, history, first, second, scale, scale * scale)
+                assert written == [list(held.values) for held in master._held]
+    finally:
+        system.free()
