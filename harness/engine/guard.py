@@ -240,8 +240,9 @@ class Guard:
         source = Source("guard", "t, step_index")
         for values, i, low, high, k in checks:
             value = f"{source.name(values, 'outputs')}[{i}]"
-            bounds = [source.name(low, "low"), source.name(high, "high")]
-            source.line(f"if not {bounds[0]} <= {value} <= {bounds[1]}:      # {self._bounds[k][0]}.{self._bounds[k][2]}")
+            low, high = source.name(low, "low"), source.name(high, "high")
+            component, _, variable, _ = self._bounds[k]
+            source.line(f"if not {low} <= {value} <= {high}:", f"{component}.{variable}")
             source.line(f"    fail({k}, {value}, t, step_index)")
         source.bound["fail"] = self._fail
         return source.function()

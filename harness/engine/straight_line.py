@@ -46,7 +46,11 @@ class Source:
         self.bound[name] = obj
         return name
 
-    def line(self, text: str):
+    def line(self, text: str, note: str | None = None):
+        """Add ``text`` to the body; ``note`` after it as a comment (a scene's names go here:
+        escaped, so that no name can end the comment and become code)."""
+        if note is not None:
+            text += "    # " + note.encode("unicode_escape").decode("ascii")
         self.lines.append("    " + text)
 
     def function(self) -> Callable:
@@ -75,8 +79,7 @@ def add_steps(source: Source, calls) -> None:
         c = source.name(call.component, "component")
         do_step = source.name(call.do_step, "do_step")
         handle = source.name(call.handle, "handle")
-        source.line(f"# fmi2DoStep of {call.component.name}")
-        source.line(f"{c}.steps += 1")
+        source.line(f"{c}.steps += 1", f"fmi2DoStep of {call.component.name}")
         source.line(f"status = {do_step}({handle}, t, h, 1)")
         source.line("if status > 1:")
         source.line(f"    {c}.fail(step_call(t, h), status)")
@@ -94,8 +97,7 @@ def add_visits(source: Source, visits) -> None:
             get_real = source.name(visit.get_real, "get_real")
             args = ", ".join([source.name(visit.handle, "handle"), source.name(visit.vrs, "vrs"),
                               source.name(visit.n, "count"), values])
-            source.line(f"# fmi2GetReal of {visit.component.name}: {len(visit.vrs)} outputs")
-            source.line(f"{c}.gets += 1")
+            source.line(f"{c}.gets += 1", f"fmi2GetReal of {visit.component.name}: {len(visit.vrs)} outputs")
             source.line(f"status = {get_real}({args})")
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2GetReal', status)")
@@ -108,8 +110,7 @@ def add_visits(source: Source, visits) -> None:
             set_real = source.name(send.set_real, "set_real")
             args = ", ".join([source.name(send.handle, "handle"), source.name(send.vrs, "vrs"),
                               source.name(send.n, "count"), source.name(send.values, "inputs")])
-            source.line(f"# fmi2SetReal of {send.component.name}: {len(send.vrs)} inputs")
-            source.line(f"{c}.sets += 1")
+            source.line(f"{c}.sets += 1", f"fmi2SetReal of {send.component.name}: {len(send.vrs)} inputs")
             source.line(f"status = {set_real}({args})")
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2SetReal', status)")

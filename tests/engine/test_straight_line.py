@@ -98,7 +98,18 @@ def test_a_failing_line_shows_in_the_traceback():
         run_step(0.0, 0.1)
     shown = "".join(traceback.format_tb(caught.tb))
     assert "component1.fail('fmi2GetReal', status)" in shown and "<harness test #" in shown
-    assert "# fmi2GetReal of b: 1 outputs" in run_step.source
+    assert "component1.gets += 1    # fmi2GetReal of b: 1 outputs" in run_step.source
+
+
+def test_a_name_cannot_end_its_comment():
+    """A component named with a line break stays inside its comment in the generated source."""
+    log = []
+    (_, _, c), steps, visits, _ = _plan(log, {})
+    c.name = "c\nraise SystemExit"
+    run_step = straight_line("test", visits, steps)
+    run_step(0.0, 0.1)
+    assert "# fmi2SetReal of c\\nraise SystemExit: 3 inputs" in run_step.source
+    assert not any(line.strip().startswith("raise") for line in run_step.source.splitlines())
 
 
 def test_a_run_with_the_generated_plans_is_the_run_with_the_interpreted_ones(monkeypatch):
