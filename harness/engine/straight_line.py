@@ -8,18 +8,19 @@ of one function, every call, handle, buffer and index bound once, and compiles i
 does what the interpreting loops do, in their order, call for call.
 
 The source is registered with ``linecache`` under the function's file name
-(``<harness ...>``), so a traceback or a debugger shows the line that failed; a function's
-``source`` attribute holds it too.
+(``<harness TITLE DIGEST>``), so a traceback or a debugger shows the line that failed; a
+function's ``source`` attribute holds it too.
 """
 from __future__ import annotations
 
-import itertools
+import hashlib
 import linecache
 from typing import Callable
 
 from harness.engine.component import step_call
 
-_serial = itertools.count(1)
+#: the function maker compiled from each distinct source
+_makers: dict[str, Callable] = {}
 
 
 class Source:
@@ -62,12 +63,16 @@ class Source:
                             f"    def {name}({self.arguments}):",
                             *("    " + line for line in body),
                             f"    return {name}", ""])
-        filename = f"<harness {self.title} #{next(_serial)}>"
-        # the source kept for tracebacks and debuggers (linecache's lazy entry: size, no mtime)
-        linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
-        namespace: dict = {}
-        exec(compile(source, filename, "exec"), namespace)      # noqa: S102 - our own plan's source
-        function = namespace["make"](**{key: self.bound[key] for key in bound})
+        make = _makers.get(source)
+        if make is None:
+            # one compilation and one ``linecache`` entry for each distinct source: a run of
+            # the same scene writes the same text (bounded however many runs a process makes)
+            filename = f"<harness {self.title} {hashlib.sha256(source.encode()).hexdigest()[:12]}>"
+            linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
+            namespace: dict = {}
+            exec(compile(source, filename, "exec"), namespace)      # noqa: S102 - our own plan's source
+            make = _makers[source] = namespace["make"]
+        function = make(**{key: self.bound[key] for key in bound})
         function.source = source
         return function
 
