@@ -121,13 +121,14 @@ def add_visits(source: Source, visits) -> None:
             source.line(f"    {c}.fail('fmi2SetReal', status)")
 
 
-def straight_line(title: str, visits=(), steps=(), before=()) -> Callable:
+def straight_line(title: str, visits=(), steps=None, before=()) -> Callable:
     """One function that runs the visits ``before``, makes the ``steps`` (``StepCall``
     records: each component's fmi2DoStep, as ``System.step_with``), then runs the ``visits``
     (each a compiled propagation, as ``System.interpret`` walks it).  It takes ``(t, h)``
-    where there are steps, nothing otherwise."""
-    source = Source(title, "t, h" if steps else "")
+    where ``steps`` are given (also none: a scene without feedthrough components has no
+    steps of them), nothing otherwise."""
+    source = Source(title, "" if steps is None else "t, h")
     add_visits(source, before)
-    add_steps(source, steps)
+    add_steps(source, steps or ())
     add_visits(source, visits)
     return source.function()

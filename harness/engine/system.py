@@ -441,12 +441,13 @@ class System:
         next step (saves two FMI calls a step on a driveline)."""
         return self._compile_plan(self.order, frozenset(held))
 
-    def runner(self, plan, steps=()) -> Callable:
+    def runner(self, plan, steps=None) -> Callable:
         """``plan`` (a compiled propagation: ``_full_plan``, a partial one, ``held_plan``,
         ``send_plan``, or several added) as one function of straight-line calls
         (``harness.engine.straight_line``), made on the first request and kept while the
         wiring stands (until ``expose``); a plan is not changed once made.  With ``steps``
-        (a ``step_plan``) the function takes ``(t, h)`` and makes those steps first."""
+        (a ``step_plan``, also an empty one) the function takes ``(t, h)`` and makes those
+        steps first."""
         return self._made((plan, steps), lambda: straight_line("plan", plan, steps))
 
     def _made(self, plans: tuple, make: Callable) -> Callable:

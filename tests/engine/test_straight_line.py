@@ -90,6 +90,16 @@ def test_the_generated_function_makes_the_interpreters_calls(refused):
         assert log[-1] == ("fail", who, call, 3) and raised == f"{who}: {call} -> 3"
 
 
+def test_no_steps_given_and_none_to_make_differ():
+    """A function of steps takes ``(t, h)`` also where there are none to make (a scene without
+    feedthrough components); a function of visits alone takes nothing."""
+    log = []
+    _, _, visits, _ = _plan(log, {})
+    straight_line("test", (), ())(0.0, 0.1)
+    straight_line("test", visits)()
+    assert [entry[:2] for entry in log] == [("get", "a"), ("get", "b"), ("set", "c"), ("set", "c")]
+
+
 def test_a_failing_line_shows_in_the_traceback():
     log = []
     _, steps, visits, _ = _plan(log, {("get", "b"): 4})
@@ -128,8 +138,8 @@ def test_a_run_with_the_generated_plans_is_the_run_with_the_interpreted_ones(mon
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.02", "experiment.transient=0"])
     generated = run.simulate(spec, master="jacobi-quadratic", step=1e-3)
 
-    def interpreting(self, plan, steps=()):
-        if not steps:
+    def interpreting(self, plan, steps=None):
+        if steps is None:
             return lambda: System.interpret(plan)
         return lambda t, h: _interpreted(steps, plan, t, h)
 
