@@ -258,10 +258,16 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._ahead_curved = any(each[5] for each in self._ahead_inputs)
         self.snapshot = snapshot_of(self._live)
         self._step_held = system.runner(self._held_plan, self._steps)
-        # the holds by number of points, prediction and part (``_hold``), made when first met
-        self._holders: dict[tuple, Callable] = {}
-        # the end-of-step writes by the number of weights (``_send_ahead``), made when first met
-        self._ahead_writers: dict[int, Callable] = {}
+        # The holds by number of points, prediction and part (``_hold``) and the end-of-step
+        # writes by number of weights (``_send_ahead``): made here for the counts a run meets
+        # (a history of at most ``degree`` points and the point now), so that no step pays
+        # for compiling one; any other made when first met.
+        self._holders: dict[tuple, Callable] = {
+            (points, predict, rest_only): self._holder(points, predict, rest_only)
+            for points in range(1, self.degree + 2) for predict in (True, False)
+            for rest_only in ((False, True) if self._rest else (False,))}
+        self._ahead_writers: dict[int, Callable] = {
+            points + 1: self._ahead_writer(points) for points in range(1, self.degree + 1)} if self.sends_ahead else {}
         # The derivative weights the last step used and the scaled nodes of their key:
         # a fixed step's next pattern is recognised without rounding (``_derivatives``).
         self._last_derivatives = None
