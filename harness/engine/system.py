@@ -500,12 +500,11 @@ class System:
         a step: the benchmark's FMU-call floor.  ``plan`` (default ``floor_plan()``) may
         carry raw calls wrapped, e.g. in timers."""
         if plan is None:
-            plan = self.floor_plan()
+            plan = self._made((), self.floor_plan)          # one default plan while the wiring stands
         made = self._runners.get((id(plan),))
-        if made is None:
-            self._made((plan,), lambda: straight_line("floor step", plan.propagation + plan.rereads, plan.steps))
-            made = self._runners[(id(plan),)]
-        made[1](t, h)
+        run = made[1] if made is not None else self._made(
+            (plan,), lambda: straight_line("floor step", plan.propagation + plan.rereads, plan.steps))
+        run(t, h)
 
     def refresh_dependent(self, send: bool = False):
         """Read again the outputs that depend on inputs written since they were read (see
