@@ -39,7 +39,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-
+from typing import Callable
 
 from lever.physics import component_parameters
 from lever.physics.elastic import LinearElasticLaw
@@ -49,6 +49,7 @@ from lever.physics.load import ConstantLoad, FourierLoad, RandomLoad, SpectrumLo
 from lever.physics.parameters import ParameterError, check_all
 
 from harness.description import plan as plans, scene_kinds
+from harness.engine.straight_line import Source
 
 #: default factor between the plausible speeds of a scene and its speed bound
 MARGIN = 10.0
@@ -232,8 +233,23 @@ class Guard:
             checks.append((system.buffers[component][1], i, -bound.limit, bound.limit, len(self._bounds)))
             self._bounds.append((component, scene.components[component].fmu, variable, bound))
         self._checks = tuple(checks)
+        self.check = self._compiled(self._checks)
 
-    def check(self, t: float, step_index: int):
+    def _compiled(self, checks) -> Callable[[float, int], None]:
+        """``check(t, step_index)``: every bound of ``checks`` tested in one function of
+        straight-line tests (``harness.engine.straight_line``), the loop ``interpret`` walks."""
+        source = Source("guard", "t, step_index")
+        for values, i, low, high, k in checks:
+            value = f"{source.name(values, 'outputs')}[{i}]"
+            low, high = source.name(low, "low"), source.name(high, "high")
+            component, _, variable, _ = self._bounds[k]
+            source.line(f"if not {low} <= {value} <= {high}:", f"{component}.{variable}")
+            source.line(f"    fail({k}, {value}, t, step_index)")
+        source.bound["fail"] = self._fail
+        return source.function()
+
+    def interpret(self, t: float, step_index: int):
+        """What ``check`` does, by walking the checks (the reference its code is tested against)."""
         for values, i, low, high, k in self._checks:
             if not low <= values[i] <= high:           # NaN fails both comparisons
                 self._fail(k, values[i], t, step_index)

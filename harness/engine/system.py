@@ -25,6 +25,7 @@ from harness.description.fmu_description import time_derivatives
 from harness.engine.component import Component, step_call
 from harness.engine.fmi3_component import open_component
 from harness.engine.interface import CoSimComponent
+from harness.engine.straight_line import straight_line
 from harness.paths import FMUS
 
 
@@ -348,7 +349,10 @@ class System:
         return plan
 
     def _compile(self):
+        # plans of the wiring replaced here: their functions go with them (see ``runner``)
+        self._runners = {}
         self._full_plan = self._compile_plan(self.order)
+        self._propagate_full = self.runner(self._full_plan)
         self._partial_plans = {}
         # Components without direct feedthrough whose exposed outputs still depend on their
         # inputs (a shaft's acceleration on its torque): propagation reads them before their
@@ -362,6 +366,8 @@ class System:
         self._dependent_sends = self.send_plan([Inputs(self.components[name], *self.inputs[name])
                                                 for name in dependent if name in self.inputs])
         self.has_dependent_outputs = bool(dependent)
+        self._refresh = self.runner(self.dependent_reads)
+        self._send_and_refresh = self.runner(self._dependent_sends + self.dependent_reads)
 
     def _read(self, name: str, first: int, count: int, copies=(), sends=()) -> Visit:
         """A ``Visit`` reading ``count`` outputs of ``name``'s buffer from ``first`` (views
@@ -435,8 +441,33 @@ class System:
         next step (saves two FMI calls a step on a driveline)."""
         return self._compile_plan(self.order, frozenset(held))
 
+    def runner(self, plan, steps=None) -> Callable:
+        """``plan`` (a compiled propagation: ``_full_plan``, a partial one, ``held_plan``,
+        ``send_plan``, or several added) as one function of straight-line calls
+        (``harness.engine.straight_line``), made on the first request and kept while the
+        wiring stands (until ``expose``); a plan is not changed once made.  With ``steps``
+        (a ``step_plan``, also an empty one) the function takes ``(t, h)`` and makes those
+        steps first."""
+        return self._made((plan, steps), lambda: straight_line("plan", plan, steps))
+
+    def _made(self, plans: tuple, make: Callable) -> Callable:
+        """The function ``make()`` gives for the objects ``plans``, made once: kept by their
+        ids with them (an id is not reused while its object lives)."""
+        key = tuple(map(id, plans))
+        made = self._runners.get(key)
+        if made is None:
+            made = self._runners[key] = (plans, make())
+        return made[1]
+
     def propagate_with(self, plan):
-        """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``)."""
+        """Run a compiled propagation plan (``_full_plan``, a partial one, or ``held_plan``):
+        its function (``runner``)."""
+        self.runner(plan)()
+
+    @staticmethod
+    def interpret(plan):
+        """Run a compiled propagation plan by walking its records: what its function
+        (``runner``) does, kept as the reference the generated code is tested against."""
         for visit in plan:
             values = visit.values
             get_real = visit.get_real
@@ -469,22 +500,27 @@ class System:
         a step: the benchmark's FMU-call floor.  ``plan`` (default ``floor_plan()``) may
         carry raw calls wrapped, e.g. in timers."""
         if plan is None:
-            plan = self.floor_plan()
-        self.step_with(plan.steps, t, h)
-        self.propagate_with(plan.propagation)
-        self.propagate_with(plan.rereads)
+            plan = self._made((), self.floor_plan)          # one default plan while the wiring stands
+        made = self._runners.get((id(plan),))
+        run = made[1] if made is not None else self._made(
+            (plan,), lambda: straight_line("floor step", plan.propagation + plan.rereads, plan.steps))
+        run(t, h)
 
     def refresh_dependent(self, send: bool = False):
         """Read again the outputs that depend on inputs written since they were read (see
         ``dependent_reads``), after sending those inputs from their buffers first when
         ``send`` (the last propagation was a held plan)."""
         if send:
-            self.propagate_with(self._dependent_sends)
-        self.propagate_with(self.dependent_reads)
+            self._send_and_refresh()
+        else:
+            self._refresh()
 
     def propagate(self, sources=None):
         """Read outputs and write them to connected inputs, in dependency order."""
-        self.propagate_with(self._full_plan if sources is None else self.partial_plan(sources))
+        if sources is None:
+            self._propagate_full()
+        else:
+            self.runner(self.partial_plan(sources))()
 
     def partial_plan(self, sources) -> list[Visit]:
         """The compiled propagation downstream of the components ``sources`` (what

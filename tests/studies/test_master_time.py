@@ -105,3 +105,27 @@ def test_a_model_exchange_master_is_not_timed_call_by_call():
     timed = master_time.measure(scene.load("kavz685"), "me-cvode", 1e-3)
     assert not timed.trusted and "Model Exchange" in timed.problems[0]
     assert timed.summary() == {"problems": timed.problems}
+
+
+@pytest.mark.parametrize("state_price_us, quoted", [(12.0, True), (60.0, False)])
+def test_prices_above_a_few_calls_measured_time_refuse_the_split_only_where_a_share_would_move(state_price_us,
+                                                                                              quoted):
+    """100 steps of 100 us: 20 us the master's, 80 us in the calls (11 step calls a step priced
+    at 3 us each). A start-up's 4 state calls measured at 10 us each and priced at 12 us: 8 us
+    too many in the whole run, 0.08 us a step, 0.08 % of a step - the split
+    stands with those calls all crossing (by hand: crossing (3300 + 40) us / 100 steps =
+    33.4 us a step, slave 80 - 33.4 = 46.6 us, master 20 us, of 100 us). Priced at 60 us:
+    200 us too many, 2 % of a step - refused, naming those calls."""
+    timed = {"problems": [], "steps": 100, "master_per_step_s": 20e-6, "in_calls_per_step_s": 80e-6,
+             "calls": {"load": {"step": 1100, "state": 4}},
+             "in_call_s": {"load": {"step": 7960e-6, "state": 40e-6}}}
+    twins = {"load": {"step": 3e-6, "state": state_price_us * 1e-6}}
+    split, problem = master_time.split(timed, twins, wall=1.0)
+    if quoted:
+        assert problem is None
+        assert split["crossing"] == pytest.approx(0.334) and split["slave"] == pytest.approx(0.466)
+        assert split["master"] == pytest.approx(0.2)
+    else:
+        assert split is None
+        assert problem == ("load's state calls priced at the do-nothing twins' (60.0 us a call) come to more than "
+                           "the time measured in them (10.0 us)")

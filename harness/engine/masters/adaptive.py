@@ -198,6 +198,8 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
         self._speeds = self._bond_speeds()
         self._read_speeds = _reader(self._speeds)
         self.bond_energy_residual = 0.0
+        # an attempt's steps and the propagation after them, one function (``System.runner``)
+        self._attempt_step = system.runner(system.propagation_plan, self._stateful_steps)
 
     def _bond_speeds(self):
         """For each coupled input (a torque on a shaft), the speed at the same port: the
@@ -223,8 +225,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
 
         def attempt(h, states):
             predicted = self._hold(t, h, points)
-            self._step_stateful(t, h)
-            self.system.propagate()
+            self._attempt_step(t, h)
             end = snapshot()
             # the largest torque so far and the largest miss, as max() finds them (the first
             # of equals kept, a NaN only where it comes first), without generator frames

@@ -88,6 +88,10 @@ class Master:
         self._steps = system.step_plan(system.components)
         self._stateful_steps = system.step_plan(system.stateful)
         self._feedthrough_steps = system.step_plan(self._feedthrough)
+        #: ``(t, h)``: fmi2DoStep of the stateful components, then of the feedthrough ones
+        #: (one straight-line function each: ``System.runner``)
+        self._step_stateful = system.runner((), self._stateful_steps)
+        self._step_feedthrough = system.runner((), self._feedthrough_steps)
         #: set by a step that left the coupled inputs in their buffers only (a held plan)
         self._inputs_unsent = False
 
@@ -139,9 +143,3 @@ class Master:
     def _free_states(self, states):
         for component, state in zip(self._stateful, states):
             component.free_state(state)
-
-    def _step_stateful(self, t, h):
-        self.system.step_with(self._stateful_steps, t, h)
-
-    def _step_feedthrough(self, t, h):
-        self.system.step_with(self._feedthrough_steps, t, h)

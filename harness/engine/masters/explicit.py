@@ -11,6 +11,7 @@ from typing import Any, Callable
 from harness.description.fmu_description import time_derivatives
 from harness.engine.masters.base import Master
 from harness.engine.component import Component
+from harness.engine.straight_line import Source, add_steps, add_visits
 from harness.engine.system import Inputs, System
 
 
@@ -34,10 +35,17 @@ class JacobiMaster(Master):
     order = 1
     description = "parallel steps, inputs held from the start of the step (zero-order hold)"
 
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        self._compile_step()
+
+    def _compile_step(self):
+        """The step and the propagation after it as one function (``System.runner``); made
+        again by a master that exposes outputs (the propagation reads them too)."""
+        self._step_and_propagate = self.system.runner(self.system.propagation_plan, self._steps)
+
     def _step_impl(self, t, h):
-        system = self.system
-        system.step_with(self._steps, t, h)
-        system.propagate()
+        self._step_and_propagate(t, h)
 
 
 class GaussSeidelMaster(Master):
@@ -49,13 +57,18 @@ class GaussSeidelMaster(Master):
     order = 1
     description = "sequential steps, each shaft sees the coupling on the latest states"
 
-    def _step_impl(self, t, h):
-        system = self.system
-        components = system.components
+    def __init__(self, system: System, step: float, **options):
+        super().__init__(system, step, **options)
+        # the whole step as one function (``harness.engine.straight_line``)
+        source = Source("gauss-seidel step", "t, h")
         for name in system.stateful:
-            components[name].do_step(t, h)
-            system.propagate([name])
-        self._step_feedthrough(t, h)
+            add_steps(source, system.step_plan([name]))
+            add_visits(source, system.partial_plan([name]))
+        add_steps(source, self._feedthrough_steps)
+        self._whole_step = source.function()
+
+    def _step_impl(self, t, h):
+        self._whole_step(t, h)
 
 
 def _lagrange_basis(nodes) -> list[list[float]]:
@@ -244,6 +257,17 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         self._rest_inputs = tuple(each for each in self._held_inputs if each[0] in self._rest)
         self._ahead_curved = any(each[5] for each in self._ahead_inputs)
         self.snapshot = snapshot_of(self._live)
+        self._step_held = system.runner(self._held_plan, self._steps)
+        # The holds by number of points, prediction and part (``_hold``) and the end-of-step
+        # writes by number of weights (``_send_ahead``): made here for the counts a run meets
+        # (a history of at most ``degree`` points and the point now), so that no step pays
+        # for compiling one; any other made when first met.
+        self._holders: dict[tuple, Callable] = {
+            (points, predict, rest_only): self._holder(points, predict, rest_only)
+            for points in range(1, self.degree + 2) for predict in (True, False)
+            for rest_only in ((False, True) if self._rest else (False,))}
+        self._ahead_writers: dict[int, Callable] = {
+            points + 1: self._ahead_writer(points) for points in range(1, self.degree + 1)} if self.sends_ahead else {}
         # The derivative weights the last step used and the scaled nodes of their key:
         # a fixed step's next pattern is recognised without rounding (``_derivatives``).
         self._last_derivatives = None
@@ -271,39 +295,45 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         (``None`` unless ``predict``).  ``rest_only``: only the components whose inputs
         were not sent ahead."""
         weights = self._weights([p[0] for p in points], t, h)
-        ends = [] if predict else None
-        pasts = [p[1] for p in points]
-        unrolled = len(weights) == 3
-        if unrolled:
-            (m0, r0, e0), (m1, r1, e1), (m2, r2, e2) = weights
-            past0, past1, past2 = pasts
+        key = (len(weights), predict, rest_only)
+        holder = self._holders.get(key)
+        if holder is None:
+            holder = self._holders[key] = self._holder(*key)
+        return holder(weights, [p[1] for p in points], h)
+
+    def _holder(self, points: int, predict: bool, rest_only: bool) -> Callable:
+        """``_hold``'s writes and sends through ``points`` communication points as one
+        function (``harness.engine.straight_line``) of the weights, the points' values and
+        ``h``; it returns the polynomial's values at the step's end (by component) where
+        ``predict``, else None.  Per input each sum from 0.0 over the points in their order,
+        what a loop over them makes."""
+        source = Source(f"hold through {points} points", "weights, pasts, h")
+        source.line(", ".join(f"(m{j}, r{j}, e{j})" for j in range(points)) + ", = weights")
+        source.line(", ".join(f"past{j}" for j in range(points)) + ", = pasts")
+        ends = []
         for k, i, values, n, ramped, higher in (self._rest_inputs if rest_only else self._held_inputs):
-            # each sum from 0.0 over the points in their order; three points unrolled
-            if unrolled:
-                u0, u1, u2 = past0[k][i], past1[k][i], past2[k][i]
-                mean = 0.0 + m0 * u0 + m1 * u1 + m2 * u2
-                change = 0.0 + r0 * u0 + r1 * u1 + r2 * u2       # slope * h
-                end = 0.0 + e0 * u0 + e1 * u1 + e2 * u2
-            else:
-                mean = change = end = 0.0
-                for (w_mean, w_slope, w_end), inputs in zip(weights, pasts):
-                    u = inputs[k][i]
-                    mean += w_mean * u
-                    change += w_slope * u
-                    end += w_end * u
+            held = source.name(values, "held")
+            for j in range(points):
+                source.line(f"u{j} = past{j}[{k}][{i}]")
+            mean = "0.0" + "".join(f" + m{j} * u{j}" for j in range(points))
             if ramped:
-                values[i] = mean - 0.5 * change
-                values[n + i] = change / h
+                source.line(f"mean = {mean}")
+                source.line("change = 0.0" + "".join(f" + r{j} * u{j}" for j in range(points)) + "       # slope * h")
+                source.line(f"{held}[{i}] = mean - 0.5 * change")
+                source.line(f"{held}[{n + i}] = change / h")
                 for j in higher:
-                    values[j] = 0.0           # higher derivatives: the ramp is all
+                    source.line(f"{held}[{j}] = 0.0           # higher derivatives: the ramp is all")
             else:
-                values[i] = mean
+                source.line(f"{held}[{i}] = {mean}")
             if predict:
                 if i == 0:
                     ends.append([])
-                ends[-1].append(end)
-        self.system.propagate_with(self._sends_rest if rest_only else self._sends)
-        return ends
+                ends[-1].append(f"end{k}_{i}")
+                source.line(f"end{k}_{i} = 0.0" + "".join(f" + e{j} * u{j}" for j in range(points)))
+        add_visits(source, self._sends_rest if rest_only else self._sends)
+        source.line("return [" + ", ".join("[" + ", ".join(group) + "]" for group in ends) + "]" if predict
+                    else "return None")
+        return source.function()
 
     def _send_ahead(self, t_end):
         """Write each component's inputs at ``t_end`` (the step just made's end, where the
@@ -312,44 +342,37 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         history = self.history
         scale = t_end - history[-1][0]
         first, second = self._derivatives(history, t_end, scale)
-        squared = scale * scale
-        if len(first) == 3:
-            # degree 2 unrolled: the same sums, in the same order, as the loop below
-            (f0, f1, f2), (s0, s1, s2) = first, second
-            (_, past0), (_, past1) = history
-            for k, i, values, now, n, higher in self._ahead_inputs:
-                u0, u1, u2 = past0[k][i], past1[k][i], now[i]
-                values[i] = u2
-                values[n + i] = (0.0 + f0 * u0 + f1 * u1 + f2 * u2) / scale
-                if higher:
-                    values[2 * n + i] = (0.0 + s0 * u0 + s1 * u1 + s2 * u2) / squared
-        elif len(first) == 2 and not self._ahead_curved:
-            # degree 1 (no second derivative) unrolled: the loop's sums in its order
-            f0, f1 = first
-            (_, past0), = history
-            for k, i, values, now, n, _ in self._ahead_inputs:
-                u1 = now[i]
-                values[i] = u1
-                values[n + i] = (0.0 + f0 * past0[k][i] + f1 * u1) / scale
-        else:
-            past = [p[1] for p in history]
-            for k, i, values, now, n, higher in self._ahead_inputs:
-                rate = curvature = 0.0
-                for w_first, w_second, inputs in zip(first, second, past):
-                    u = inputs[k][i]
-                    rate += w_first * u
-                    curvature += w_second * u
-                u = now[i]
-                rate += first[-1] * u
-                curvature += second[-1] * u
-                values[i] = u
-                values[n + i] = rate / scale
-                if higher:
-                    values[2 * n + i] = curvature / squared
-        self.system.propagate_with(self._sends_ahead)
+        writer = self._ahead_writers.get(len(first))
+        if writer is None:
+            writer = self._ahead_writers[len(first)] = self._ahead_writer(len(first) - 1)
+        writer(history, first, second, scale, scale * scale)
         self._ahead_after = history[-1]
         # what was not sent ahead is still only in the buffers
         self._inputs_unsent = bool(self._rest)
+
+    def _ahead_writer(self, points: int) -> Callable:
+        """``_send_ahead``'s writes and sends through ``points`` past communication points
+        and the inputs now, as one function (``harness.engine.straight_line``) of the history,
+        the weights, ``scale`` and its square.  Per input, each sum from 0.0 over the past
+        points in their order and then the value now: what a loop over them makes."""
+        source = Source(f"send ahead through {points + 1} points", "history, first, second, scale, squared")
+        if points:
+            source.line(", ".join(f"(_, past{j})" for j in range(points)) + ", = history")
+        source.line(", ".join(f"f{j}" for j in range(points + 1)) + ", = first")
+        if any(each[5] for each in self._ahead_inputs):
+            source.line(", ".join(f"s{j}" for j in range(points + 1)) + ", = second")
+        for k, i, values, now, n, higher in self._ahead_inputs:
+            held, live = source.name(values, "held"), source.name(now, "live")
+            source.line(f"u = {live}[{i}]")
+            source.line(f"{held}[{i}] = u")
+            source.line(f"{held}[{n + i}] = (0.0 + " + "".join(f"f{j} * past{j}[{k}][{i}] + " for j in range(points))
+                        + f"f{points} * u) / scale")
+            if higher:
+                source.line(f"{held}[{2 * n + i}] = (0.0 + "
+                            + "".join(f"s{j} * past{j}[{k}][{i}] + " for j in range(points))
+                            + f"s{points} * u) / squared")
+        add_visits(source, self._sends_ahead)
+        return source.function()
 
     def _derivatives(self, history, t_end, scale):
         """The derivative weights at ``t_end`` through the history's times and it, cached by
@@ -417,10 +440,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
             if not ahead or self._rest:
                 self._hold(t, h, [*history, (t, start)], predict=False, rest_only=ahead)
             self._ahead_after = None
-            system = self.system
-            system.step_with(self._steps, t, h)
             # The shafts' torques are written before the next step: only fill the buffers.
-            system.propagate_with(self._held_plan)
+            self._step_held(t, h)
             self._inputs_unsent = True
         history.append((t, start))
         if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not starting
@@ -500,37 +521,33 @@ class MidpointPredictionMaster(JacobiMaster):
                            for k, i in enumerate(share.positions)]
                 predicted.setdefault(share.component, []).append(source)
         self._taylor = tuple(taylor)
-        # by their number of terms: a shaft's angle (three) and speed (two) unrolled
-        self._taylor3 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
-                              if len(indices) == 3)
-        self._taylor2 = tuple((target, k, values, *indices) for target, k, values, indices in taylor
-                              if len(indices) == 2)
-        self._taylor_any = tuple(each for each in taylor if len(each[3]) not in (2, 3))
         # Each feedthrough target's predicted inputs sent in one call (its buffer's runs),
         # then the propagation from the feedthrough components: one plan, compiled once
         self._sends = system.send_plan([span for target, sources in predicted.items()
                                         for span in system.input_spans(target.name, sources)])
         self._from_feedthrough = system.partial_plan(self._feedthrough)
         self._predicted_plan = self._sends + self._from_feedthrough
+        self._predict = self._prediction()
+        self._compile_step()            # the propagation now reads the exposed derivatives too
 
-    def _predict(self, dt):
-        """Write the outputs predicted ``dt`` ahead to the feedthrough components' inputs
-        and propagate the coupling torques they give to the stateful components."""
-        # each Taylor sum as sum() makes it (from 0.0, lowest term first)
-        f1, f2 = dt, dt * dt / 2.0
-        for target_values, k, values, i0, i1, i2 in self._taylor3:
-            target_values[k] = 0.0 + values[i0] + f1 * values[i1] + f2 * values[i2]
-        for target_values, k, values, i0, i1 in self._taylor2:
-            target_values[k] = 0.0 + values[i0] + f1 * values[i1]
-        if self._taylor_any:
-            factors = (1.0, dt, dt * dt / 2.0, dt * dt * dt / 6.0)
-            for target_values, k, values, indices in self._taylor_any:
-                total = 0.0
-                for f, i in zip(factors, indices):
-                    total += f * values[i]
-                target_values[k] = total
-        self.system.propagate_with(self._predicted_plan)
+    def _prediction(self) -> Callable:
+        """``_predict(dt)``: write the outputs predicted ``dt`` ahead to the feedthrough
+        components' inputs and propagate the coupling torques they give to the stateful
+        components; one function (``harness.engine.straight_line``).  Each Taylor sum as
+        sum() makes it: from 0.0, lowest term first."""
+        source = Source("predict", "dt")
+        factors = ("1.0", "dt", "f2", "f3")
+        source.line("f2 = dt * dt / 2.0")
+        if any(len(indices) > 3 for *_, indices in self._taylor):
+            source.line("f3 = dt * dt * dt / 6.0")
+        for target_values, k, values, indices in self._taylor:
+            # a shaft's angle (phi, w, a) and speed (w, a): the value's factor 1.0 left out, as exact
+            terms = [f"{source.name(values, 'outputs')}[{i}]" if j == 0 else
+                     f"{factors[j]} * {source.name(values, 'outputs')}[{i}]" for j, i in enumerate(indices)]
+            source.line(f"{source.name(target_values, 'inputs')}[{k}] = 0.0 + " + " + ".join(terms))
+        add_visits(source, self._predicted_plan)
+        return source.function()
 
     def _step_impl(self, t, h):
         self._predict(0.5 * h)
-        super()._step_impl(t, h)
+        self._step_and_propagate(t, h)

@@ -7,6 +7,7 @@ import math
 from collections import deque
 
 from harness.engine.masters.base import Master, MasterFailure
+from harness.engine.straight_line import straight_line
 from harness.engine.system import System
 
 
@@ -129,6 +130,10 @@ class IterativeMaster(Master):
         # the held torques' buffers, and their writes compiled once
         self._live = tuple(inputs.values for inputs in self.coupled_inputs)
         self._sends = system.send_plan(self.coupled_inputs)
+        # an evaluation's calls, one function (``harness.engine.straight_line``): the held
+        # torques sent, the stateful components stepped, the torques at the end read
+        self._send_step_fill = straight_line("evaluate", self._held_plan, self._stateful_steps, before=self._sends)
+        self._send_held = system.runner(self._sends)
 
     def counters(self) -> dict:
         return {**super().counters(), "jacobians": self.n_jacobians}
@@ -148,16 +153,14 @@ class IterativeMaster(Master):
             for i in range(len(values)):
                 values[i] = u[k]
                 k += 1
-        self.system.propagate_with(self._sends)
-        self._step_stateful(t, h)
-        self.system.propagate_with(self._held_plan)     # the inputs' buffers now hold tau(t + h)
+        self._send_step_fill(t, h)          # the inputs' buffers now hold tau(t + h)
         end = self.current_inputs()
         return end if self.scheme == "implicit" else [0.5 * (a + b) for a, b in zip(start, end)]
 
     def _send_end_torques(self):
         """Leave the system consistent: the stateful components' inputs hold the torques
         at the end of the step (the evaluations left the held ones in place)."""
-        self.system.propagate_with(self._sends)
+        self._send_held()
 
     def _guess(self, t, h, start):
         if len(self.history) < 2:

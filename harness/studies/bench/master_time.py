@@ -315,10 +315,13 @@ def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple
     -> kind -> seconds a call), ``slave`` the rest of the time in the calls; and why not
     (``None`` and the reason): the figure is not to be quoted (``timed["problems"]``), a
     call kind made has no twin price, or the twins' prices come to more than the time
-    measured in those calls (the prices and the runs saw different machines)."""
+    measured in those calls (the prices and the runs saw different machines) by enough to
+    move a share by half a percentage point (the shares are given to the percent); by less
+    (a few state calls of a start-up, priced apart), those calls count as crossing alone."""
     if timed.get("problems"):
         return None, "; ".join(timed["problems"])
-    crossing = 0.0
+    crossing = excess = 0.0
+    worst = None
     for name, kinds in timed["calls"].items():
         for kind, count in kinds.items():
             if not count:
@@ -327,11 +330,17 @@ def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple
                 return None, f"{name}'s {kind} calls have no do-nothing price"
             priced, measured = count * twins[name][kind], timed["in_call_s"][name][kind]
             if priced > measured:
-                return None, (f"{name}'s {kind} calls priced at the do-nothing twins' ({1e6 * priced / count:.1f} us "
-                              f"a call) come to more than the time measured in them ({1e6 * measured / count:.1f} us)")
+                if worst is None or priced - measured > worst[0]:
+                    worst = (priced - measured,
+                             f"{name}'s {kind} calls priced at the do-nothing twins' ({1e6 * priced / count:.1f} us "
+                             f"a call) come to more than the time measured in them ({1e6 * measured / count:.1f} us)")
+                excess += priced - measured
+                priced = measured
             crossing += priced
     master, in_calls = timed["master_per_step_s"], timed["in_calls_per_step_s"]
     crossing = min(crossing / timed["steps"], in_calls)
     per_step = master + in_calls
+    if excess and excess / timed["steps"] >= 0.005 * per_step:
+        return None, worst[1]
     return {"crossing": wall * crossing / per_step, "slave": wall * (in_calls - crossing) / per_step,
             "master": wall * master / per_step}, None
