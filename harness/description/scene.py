@@ -126,7 +126,8 @@ class Scene:
         text = (f"Scene({self.name}: {len(self.components)} components ("
                 + ", ".join(f"{n} {fmu_name(c.fmu)}" for n, c in self.components.items())
                 + f"), {len(self.connections)} connections, t = {e.start:g} ... {e.stop:g} s, step {e.step:g} s, "
-                f"master {e.master}, {len(self.record)} signals recorded"
+                f"master {e.master}" + (f" (tolerance {e.tolerance:g})" if e.tolerance is not None else "")
+                + f", {len(self.record)} signals recorded"
                 + (f", --set {'; '.join(f'{k} = {v}' for k, v in self.overrides.items())}" if self.overrides else "")
                 + (f", from {self.path}" if self.path else "") + ")")
         return text if len(text) <= 2000 else text[:1995] + "...)"
