@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import dataclass
 from typing import Callable
 
@@ -230,7 +231,9 @@ class Guard:
             if name not in limited and not connected:
                 continue
             bound = limited.get(name) or Bound(name, math.inf, "", "finite")
-            checks.append((system.buffers[component][1], i, -bound.limit, bound.limit, len(self._bounds)))
+            # an unlimited bound tests finiteness: +-inf must fail it as NaN does
+            limit = bound.limit if math.isfinite(bound.limit) else sys.float_info.max
+            checks.append((system.buffers[component][1], i, -limit, limit, len(self._bounds)))
             self._bounds.append((component, scene.components[component].fmu, variable, bound))
         self._checks = tuple(checks)
         self.check = self._compiled(self._checks)
@@ -251,7 +254,7 @@ class Guard:
     def interpret(self, t: float, step_index: int):
         """What ``check`` does, by walking the checks (the reference its code is tested against)."""
         for values, i, low, high, k in self._checks:
-            if not low <= values[i] <= high:           # NaN fails both comparisons
+            if not low <= values[i] <= high:           # NaN fails both comparisons, +-inf the largest floats
                 self._fail(k, values[i], t, step_index)
 
     def _fail(self, k, value, t, step_index):

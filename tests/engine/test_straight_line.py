@@ -161,7 +161,7 @@ def test_a_run_with_the_generated_plans_is_the_run_with_the_interpreted_ones(mon
 
 
 def test_the_guards_generated_check_is_its_loop():
-    """Every checked output of kavz685 in turn made non-finite or twice its bound: the
+    """Every checked output of kavz685 in turn made NaN, +-inf or twice its bound: the
     generated check and the loop raise the same ``Diverged``, and pass the same values."""
     from harness.description import plan as plans
     from harness.engine.guard import Diverged, Guard
@@ -176,7 +176,8 @@ def test_the_guards_generated_check_is_its_loop():
         seen = set()
         for values, i, low, high, k in guard._checks:
             kept = values[i]
-            for bad in (float("nan"), 2.0 * high if high < float("inf") else None):
+            # +-inf fail a bound that only asks for a finite value too
+            for bad in (float("nan"), float("inf"), -float("inf"), 2.0 * high if high < 1e300 else None):
                 if bad is None:
                     continue
                 values[i] = bad
