@@ -258,6 +258,25 @@ def test_the_do_nothing_twin_has_the_fmus_variables_and_steps(tmp_path, fmu_dir)
                           start_values={"stiffness": 1000.0, "transfer_mode": "elastic", "phi1": 0.3},
                           output=["tau1", "phi1"])
     assert len(result) == 11 and (result["tau1"] == 0.0).all() and (result["phi1"] == 0.3).all()
+    # its state keeps nothing (pythonfmu's own reads every variable), so that a state call's
+    # price is the crossing's alone: serialised, the empty state; a round trip is accepted
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Slave
+
+    unzipped = extract(str(twin))
+    slave = FMU2Slave(guid=theirs.guid, unzipDirectory=unzipped, modelIdentifier=theirs.coSimulation.modelIdentifier)
+    slave.instantiate()
+    try:
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        state = slave.getFMUState()
+        assert bytes(slave.serializeFMUState(state)) == b"{}"
+        slave.setFMUState(state)
+        slave.freeFMUState(state)
+        slave.terminate()
+    finally:
+        slave.freeInstance()
 
 
 @pytest.mark.parametrize("measure", ["call_floor", "call_prices", "floors_side_by_side", "prices_side_by_side"])

@@ -8,7 +8,7 @@ read by our harness only, declares them all as ``derivative`` attributes) in its
 description, so that a ``System`` wires it exactly as the real one and every master makes the
 same calls (an extrapolating master sends a shaft's ramp only where ``tau_rate`` is declared
 the derivative of ``tau``); its ``do_step``
-returns at once and its getters and setters are pythonfmu's own.  What a call into it costs
+returns at once, its state is empty, and its getters and setters are pythonfmu's own.  What a call into it costs
 is the price of crossing from the host into pythonfmu's Python and back: the part of a
 master's time no slave can save.
 
@@ -61,6 +61,14 @@ class {cls}(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         return True
+
+    # a model that does nothing keeps nothing: its state calls cost the crossing alone
+    # (pythonfmu's own state reads every variable through its getter)
+    def _get_fmu_state(self):
+        return {{}}
+
+    def _set_fmu_state(self, state):
+        pass
 
     def to_xml(self, model_options=dict()):
         root = super().to_xml(model_options)
