@@ -2,12 +2,15 @@
 loaded with its overrides, the co-simulation masters."""
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
+from typing import Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.inputs import InputError
 from harness.description import scene as scene_files
+from harness.description import units
 
 
 def scenes() -> dict[str, str]:
@@ -100,7 +103,7 @@ def _seconds_or_none(text: str) -> float | None:
 
 def _number_or_none(text: str) -> float | None:
     value = scene_files.coerce(text)
-    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+    return float(value) if units.is_number(value) else None
 
 
 def _refuse_both(argument: str, value, key: str, raw: str | None, read, unit: str = " s"):
@@ -139,3 +142,25 @@ def check_masters(*names: str, argument: str = "master"):
     except masters.UnknownMaster as error:
         shown = repr(names[0]) if len(names) == 1 else repr(list(names))
         raise InputError(f"{_inputs.named(argument).given(shown)}: {error}") from None
+
+
+@contextlib.contextmanager
+def claimed_folder(out: Path, already: bool = False) -> Iterator[Path]:
+    """``out`` made, proven writable and locked for the body (InputError when it cannot be,
+    or another lever is writing there), then free again - unless this process held it
+    before, or ``already`` (the caller claimed it)."""
+    from harness.formats import outputs
+
+    if already:
+        yield Path(out)
+        return
+    held = outputs.holds(Path(out))
+    try:
+        out = outputs.claim(Path(out))
+    except outputs.OutputError as error:
+        raise InputError(str(error)) from None
+    try:
+        yield out
+    finally:
+        if not held:        # a caller's process goes on (a notebook): no lock or open file left behind
+            outputs.release(out)

@@ -2,6 +2,7 @@
 (``RunNote``, or ``notify``), the run, its reference and its summary."""
 from __future__ import annotations
 
+import contextlib as _contextlib
 import math as _math
 import warnings as _warnings
 from pathlib import Path
@@ -9,7 +10,7 @@ from typing import Callable
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_agreement, check_masters, checked_plan, load
+from harness.api.choices import check_agreement, check_masters, checked_plan, claimed_folder, load
 from harness.api.inputs import InputError
 from harness.api.results import UNTRUSTED, Run
 from harness.description import scene as scene_files
@@ -124,15 +125,9 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
                              f"({free / 2**30:.1f} GiB): use {_inputs.named('stream').on()} (writes traces.csv while "
                              f"running, keeps 1 row in k in memory), a larger {_inputs.named('step')} or a shorter "
                              "experiment.stop")
-    claimed_here = None
-    if out is not None and not claimed:
-        held = outputs.holds(Path(out))
-        try:
-            out = outputs.claim(Path(out))       # before the run: a bad or busy folder is said at once
-        except outputs.OutputError as error:
-            raise InputError(str(error)) from None
-        claimed_here = None if held else out
-    try:
+    with _contextlib.ExitStack() as folder:
+        if out is not None:       # before the run: a bad or busy folder is said at once
+            out = folder.enter_context(claimed_folder(out, already=claimed))
         if observer is None:        # a long run says how long, from its own pace, once it has one
             observer = PaceWatch(spec.experiment.stop, lambda message: say("note", message))
         try:
@@ -171,9 +166,6 @@ def run(scene: str | Path | scene_files.Scene = "kavz685", overrides=None, *, ma
         if latency:
             done.latency = step_latency.report(Path(out), timer, result)
         return done
-    finally:
-        if claimed_here is not None:     # a caller's process goes on: its folder is free again
-            outputs.release(claimed_here)
 
 
 def _made_reference(plan, run, why: str, say):

@@ -10,7 +10,7 @@ from typing import Callable, Iterable, Iterator
 
 from harness.api import inputs as _inputs
 from harness.api.building import build
-from harness.api.choices import check_masters, checked_plan, load
+from harness.api.choices import check_masters, checked_plan, claimed_folder, load
 from harness.api.inputs import InputError
 from harness.api.results import BenchResult, Returned, ReturnedTuple, StabilityMapResult
 from harness.description import scene as scene_files
@@ -53,7 +53,7 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
         raise InputError(str(error)) from None
     build()
     out = Path(out) if out is not None else benchmark.default_out(spec)
-    with _claimed(out, already=claimed) as out, _resumable(out):
+    with claimed_folder(out, already=claimed) as out, _resumable(out):
         result = benchmark.bench(spec, repeats, only=list(only), peers=peers, monolithic=monolithic,
                                  progress=progress or (lambda *_: None), out=out, resume=resume,
                                  fmi_editions=fmi_editions)
@@ -62,26 +62,6 @@ def bench(scene: str | Path | scene_files.Scene = "kavz685", *, repeats: int = 3
     return BenchResult(result)
 
 
-@_contextlib.contextmanager
-def _claimed(out: Path, already: bool = False) -> Iterator[Path]:
-    """``out`` made, proven writable and locked for the body (InputError when it cannot be,
-    or another lever is writing there), then free again - unless this process held it
-    before, or ``already`` (the caller claimed it)."""
-    from harness.formats import outputs
-
-    if already:
-        yield Path(out)
-        return
-    held = outputs.holds(Path(out))
-    try:
-        out = outputs.claim(Path(out))
-    except outputs.OutputError as error:
-        raise InputError(str(error)) from None
-    try:
-        yield out
-    finally:
-        if not held:        # a caller's process goes on (a notebook): no lock or open file left behind
-            outputs.release(out)
 
 
 def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnesses: Iterable[float] = (),
@@ -140,7 +120,7 @@ def stability_map(scene: str | Path | scene_files.Scene = "kavz685", *, stiffnes
     plan.masters = list(dict.fromkeys(masters)) or plan.masters
     plan.min_steps = min_steps
     plan.refine = refine
-    with _claimed(out or stabilitymap.default_out(spec)) as out:
+    with claimed_folder(out or stabilitymap.default_out(spec)) as out:
         with _resumable(out):
             result = stabilitymap.sweep(spec, plan, out, jobs=jobs, resume=resume, progress=progress)
         written = stability_report.write(out, result)
@@ -181,7 +161,7 @@ def sweep(axes: Iterable[str] = (), *, scene: str = "kavz685", overrides=None, s
     checked_plan(load(scene, extra))          # the parameters' types, units and ranges, before any case runs
     out = Path(out or RESULTS / "sweep")
     try:
-        with _claimed(out), _resumable(out):
+        with claimed_folder(out), _resumable(out):
             return Returned(sweeps.sweep(chosen, out, scene=scene, stop=stop, extra=extra, workers=workers,
                                          dask=dask, progress=progress, resume=resume))
     except scene_files.SceneError as error:
