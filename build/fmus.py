@@ -231,7 +231,7 @@ def _build_in(staging: Path, out_dir: Path, paths: dict[str, Path], digest: str,
             for name in [n for n in sys.modules if n == package or n.startswith(package + ".")
                          or n == script.stem]:
                 del sys.modules[name]
-        shim.wrap_fmu(paths[model], shim_so)
+        shim.wrap_fmu(paths[model], shim_so, channel=True)
         osp_description_path(paths[model]).write_text(osp_description)
         problems = check_fmu(paths[model])
         if problems:

@@ -85,8 +85,10 @@ def build_python() -> dict:
     return {"library": library, "home": sys.base_prefix, "paths": paths}
 
 
-def shim_config(guid: str, python: dict) -> str:
-    """The text of resources/lever_shim.cfg (lines key=value, read by the shim)."""
+def shim_config(guid: str, python: dict, channel: bool = False) -> str:
+    """The text of resources/lever_shim.cfg (lines key=value, read by the shim); ``channel``:
+    the model answers the shim's channel (``lever.fmus.me_channel``, every model of ours),
+    so a Co-Simulation instance gets the point block too."""
     for value in [guid, python["home"], *python["paths"], python["library"] or ""]:
         if "\n" in value or "\r" in value:
             raise ValueError(f"cannot write a line break into {CONFIG_NAME}: {value!r}")
@@ -95,6 +97,8 @@ def shim_config(guid: str, python: dict) -> str:
     if python["library"]:
         lines += [f"python_library={python['library']}", f"python_home={python['home']}"]
         lines += [f"python_path={p}" for p in python["paths"]]
+    if channel:
+        lines.append("channel=1")
     return "\n".join(lines) + "\n"
 
 
@@ -107,12 +111,12 @@ def _renamed(info: zipfile.ZipInfo, name: str) -> zipfile.ZipInfo:
     return new
 
 
-def wrap_fmu(fmu_path: Path, shim_so: Path) -> None:
+def wrap_fmu(fmu_path: Path, shim_so: Path, channel: bool = False) -> None:
     """Put the shim in front of the pythonfmu library of ``fmu_path``, in place.
 
     ``binaries/linux64/<modelIdentifier>.so`` becomes
     ``binaries/linux64/pythonfmu-export.so`` and the shim takes its name;
-    ``resources/lever_shim.cfg`` is added (see ``shim_config``).
+    ``resources/lever_shim.cfg`` is added (see ``shim_config``, which ``channel`` goes to).
     Every other member (other platforms included) is copied unchanged.  The
     new archive is written to a temporary file and atomically renamed over
     the original, so a failure never leaves a half-written FMU.
@@ -129,7 +133,7 @@ def wrap_fmu(fmu_path: Path, shim_so: Path) -> None:
             raise ValueError(f"{fmu_path} has no {target}")
         if inner in names:
             raise ValueError(f"{fmu_path} already contains {inner} (wrapped twice?)")
-        config = shim_config(guid, build_python())
+        config = shim_config(guid, build_python(), channel)
 
         fd, tmp_name = tempfile.mkstemp(prefix=fmu_path.name + ".", suffix=".tmp",
                                         dir=fmu_path.parent)

@@ -178,6 +178,7 @@ typedef struct {
     char home[PATH_MAX];               /* python_home */
     char paths[MAX_PYTHON_PATHS][PATH_MAX]; /* python_path: added with site.addsitedir */
     int nPaths;
+    int channel;                       /* channel=1: the model answers the channel (ours do) */
 } Config;
 
 static void config_line(Config *cfg, char *line)
@@ -200,6 +201,8 @@ static void config_line(Config *cfg, char *line)
         snprintf(cfg->home, sizeof cfg->home, "%s", value);
     } else if (strcmp(key, "python_path") == 0 && cfg->nPaths < MAX_PYTHON_PATHS) {
         snprintf(cfg->paths[cfg->nPaths++], PATH_MAX, "%s", value);
+    } else if (strcmp(key, "channel") == 0) {
+        cfg->channel = strcmp(value, "1") == 0;
     }
 }
 
@@ -903,10 +906,11 @@ typedef struct {
     int state;              /* ShimStateBit */
     fmi2Real time;          /* the current communication point (Model Exchange: fmi2SetTime's) */
     int me;                 /* instantiated as fmi2ModelExchange */
+    int channel;            /* the model answers the channel (the configuration's channel=1) */
     size_t nx, nz;          /* Model Exchange: continuous states, event indicators */
     int nzKnown;            /* nz was read (Model Exchange: at instantiation; else on first use) */
-    /* Model Exchange: the point block shared with the Python slave (POINT_* below), and the
-     * inputs it may hold: value reference and closed range of each, in the block's order. */
+    /* The point block shared with the Python slave (POINT_* below), and the inputs it may
+     * hold: value reference and closed range of each, in the block's order. */
     fmi2Real *point;
     size_t ninputs;
     fmi2ValueReference *inputVr;
@@ -920,12 +924,13 @@ typedef struct {
     int statesKnown;
 } Shim;
 
-/* The point block: fmi2SetTime, fmi2SetContinuousStates and, while the model runs,
- * fmi2SetReal of inputs the model applies without judgement (the model names them and
- * their closed ranges at instantiation) are checked here and written to a block of doubles
- * the Python slave reads (its address handed over with CONTROL_POINT); the model takes them
- * at its next fmi2GetReal or fmi2SetReal, the way every channel call reaches it, and a call
- * that reaches the model any other way is preceded by a sync (me_sync).  A value the check
+/* The point block: fmi2SetTime, fmi2SetContinuousStates and, while the model runs (Model
+ * Exchange's event and continuous-time modes, Co-Simulation's step complete), fmi2SetReal
+ * of inputs the model applies without judgement (the model names them and their closed
+ * ranges at instantiation) are checked here and written to a block of doubles the Python
+ * slave reads (its address handed over with CONTROL_POINT); the model takes them at its
+ * next fmi2GetReal, fmi2SetReal or fmi2DoStep, the way every channel call reaches it, and
+ * a call that reaches the model any other way is preceded by a sync (me_sync).  A value the check
  * refuses (out of range, NaN, not such an input) goes to the model, which says why.  An
  * integrator's right-hand side then calls into Python only to read: the time, the states
  * and the coupled inputs it sets cost no call there.
@@ -1273,6 +1278,25 @@ static int me_array(Shim *s, const char *function, const void *array, size_t n, 
 
 static fmi2Status point_connect(Shim *s);
 
+/* Gives a fresh Co-Simulation slave its point block: a host's fmi2SetReal of inputs in
+ * range then stays here until the model's next fmi2GetReal, fmi2SetReal or fmi2DoStep
+ * takes it (a master sets a shaft's torque, then reads or steps it), one call into Python
+ * fewer each.  The block's layout follows the model's states, as in Model Exchange. */
+static fmi2Status cs_connect(Shim *s)
+{
+    fmi2ValueReference size = SIZE_STATES;
+    fmi2Real n = 0.0;
+    fmi2Status status = channel_get(s, "fmi2Instantiate", CH_CONTROL, &size, 1, &n);
+    if (!succeeded(status)) {
+        return status;
+    }
+    if (!(n >= 0.0 && n < 1e6)) {
+        return shim_error(s, "fmi2Instantiate: the model reports %g states", n);
+    }
+    s->nx = (size_t)n;
+    return point_connect(s);
+}
+
 /* Tells a fresh Python slave that it runs as Model Exchange and reads its sizes. */
 static fmi2Status me_connect(Shim *s)
 {
@@ -1434,7 +1458,7 @@ static fmi2Status point_connect(Shim *s)
  * its range (then written, pending), 0 to send the call to the model. */
 static int point_keeps(Shim *s, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
-    if (!s->point || !s->ninputs || !(s->state & ME_RUNNING) || nvr == 0 || !value) {
+    if (!s->point || !s->ninputs || !(s->state & (s->me ? ME_RUNNING : ST_STEP_COMPLETE)) || nvr == 0 || !value) {
         return 0;
     }
     size_t slot[16];
@@ -1547,6 +1571,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         shim_error(s, "fmi2Instantiate: %s", err);
     } else {
         ok = 1;
+        s->channel = cfg.channel;
     }
     if (!ok) {
         pthread_mutex_unlock(&lock);
@@ -1600,6 +1625,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
             fmi2FreeInstance(s);
             return NULL;
         }
+    } else if (s->channel && !succeeded(cs_connect(s))) {
+        shim_error(s, "fmi2Instantiate: the model gives no point block for its inputs");
+        fmi2FreeInstance(s);
+        return NULL;
     }
     return s;
 }
@@ -1728,11 +1757,10 @@ fmi2Status fmi2Reset(fmi2Component c)
         free(s->point);
         s->point = NULL;
         s->statesKnown = 0;
-        if (s->me) {
-            /* a fresh Python slave: told again that it runs as Model Exchange */
-            fmi2Status connected = me_connect(s);
-            status = connected > status ? connected : status;
-        }
+        /* a fresh Python slave: told again that it runs as Model Exchange, or given its
+         * point block */
+        fmi2Status connected = s->me ? me_connect(s) : s->channel ? cs_connect(s) : fmi2OK;
+        status = connected > status ? connected : status;
     }
     return status;
 }
@@ -1848,6 +1876,7 @@ static ShimFMUstate *fmu_state_of(Shim *s, const char *function, fmi2FMUstate st
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     BEGIN(fmi2GetFMUstate, c);
+    SYNC(c); /* the state holds the inputs set since the model last took them */
     Shim *s = SHIM(c);
     if (!state) {
         return shim_error(s, "fmi2GetFMUstate: state is NULL");
@@ -1876,6 +1905,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     BEGIN(fmi2SetFMUstate, c);
+    SYNC(c); /* inputs set before are taken, then the restored state's replace them */
     Shim *s = SHIM(c);
     ShimFMUstate *w = fmu_state_of(s, "fmi2SetFMUstate", state);
     if (!w) {

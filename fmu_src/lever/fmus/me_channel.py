@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+from itertools import compress
 
 from .recompute import ALL, INPUTS_CHANGED
 
@@ -64,26 +65,27 @@ class NativeEntryChannel:
                       if self._vr_of.get(s.name) in self._state_outputs)
 
     def _take_point(self):
-        """The time and states the host set through the native entry since the model last
-        saw them (checked there: finite, the right number), if any: first thing in every
-        call that reaches the model through fmi2GetReal or fmi2SetReal."""
+        """The time, states and inputs the host set through the native entry since the
+        model last saw them (checked there: finite, in range, the right number), if any:
+        first thing in every call that reaches the model through fmi2GetReal, fmi2SetReal
+        or fmi2DoStep."""
         point = self._point
         if point is None or not point[0]:
             return
-        block = point.tolist()          # one copy of the block: cheaper than element by element
-        pending = int(block[0])
+        pending = int(point[0])
         point[0] = 0.0
-        if pending & POINT_TIME:
-            self._time = block[1]
-        if pending & POINT_STATES:
-            self._set_x(block[POINT_HEADER:POINT_HEADER + len(self._state_index)])
-        if pending & (POINT_TIME | POINT_STATES):
-            self._dirty = ALL
+        if pending != POINT_INPUTS:         # Model Exchange's time and states
+            if pending & POINT_TIME:
+                self._time = point[1]
+            if pending & POINT_STATES:
+                self._set_x(point[POINT_HEADER:POINT_HEADER + len(self._state_index)].tolist())
+            if pending & (POINT_TIME | POINT_STATES):
+                self._dirty = ALL
         if pending & POINT_INPUTS:
             first, flags, end = self._deferred_span
-            for name, value, flag in zip(self._deferred_names, block[first:flags], block[flags:end]):
-                if flag:
-                    setattr(self, name, value)
+            block = point[first:end].tolist()   # one copy: cheaper than element by element
+            for name, value in compress(zip(self._deferred_names, block), block[flags - first:]):
+                setattr(self, name, value)
             point[flags:end] = self._no_inputs_pending
             if not self._dirty:
                 self._dirty = INPUTS_CHANGED
