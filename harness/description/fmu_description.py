@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import time
 import weakref
 import xml.etree.ElementTree as ET
 from collections import OrderedDict
@@ -34,17 +35,35 @@ _PARSED_KEPT = 64
 _PARSED_LOCK = threading.Lock()
 
 
+#: the digest of the XML of each file read (by the file's path and identity: inode, size,
+#: times), so that a file read before is not opened again; only for a file last changed
+#: more than ``SETTLED`` seconds before it was read (as git trusts a racily clean index
+#: entry): a file changed again within the file system's timestamp granularity may keep
+#: its times
+_DIGEST_OF_FILE: OrderedDict[tuple, bytes] = OrderedDict()
+SETTLED = 2.0
+
+
 def read_description(path: Path | str):
     """fmpy's model description of the FMU ``path`` (an ``.fmu``, an unpacked FMU's folder
     or its ``modelDescription.xml``), whose ``time_derivatives`` are those of the ``derivative``
     attributes and of our annotation.  The same XML gives the same object (shared: read it,
     never change it); an FMU rebuilt in place is read afresh."""
-    xml = _description_xml(Path(path))
+    path = Path(path)
+    identity = _file_identity(path)
+    with _PARSED_LOCK:
+        key = _DIGEST_OF_FILE.get(identity) if identity is not None else None
+        md = _PARSED.get(key) if key is not None else None
+        if md is not None:
+            _PARSED.move_to_end(key)
+            return md
+    xml = _description_xml(path)
     key = hashlib.sha256(xml).digest()
     with _PARSED_LOCK:
         md = _PARSED.get(key)
         if md is not None:
             _PARSED.move_to_end(key)
+            _remember_file(identity, key)
             return md
     md = read_model_description(str(path))
     _RELATIONS[md] = {**_attributed(md), **annotated_time_derivatives(xml)}
@@ -52,7 +71,28 @@ def read_description(path: Path | str):
         _PARSED[key] = md
         while len(_PARSED) > _PARSED_KEPT:
             _PARSED.popitem(last=False)
+        _remember_file(identity, key)
     return md
+
+
+def _file_identity(path: Path) -> tuple | None:
+    """What tells the file holding ``path``'s description from any other or a changed one
+    (None: not known, or changed too recently to tell)."""
+    try:
+        target = path / "modelDescription.xml" if path.is_dir() else path
+        st = target.stat()
+    except OSError:
+        return None
+    if not time.time() - max(st.st_mtime, st.st_ctime) > SETTLED:
+        return None
+    return (str(target.absolute()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def _remember_file(identity: tuple | None, key: bytes):
+    if identity is not None:
+        _DIGEST_OF_FILE[identity] = key
+        while len(_DIGEST_OF_FILE) > 4 * _PARSED_KEPT:
+            _DIGEST_OF_FILE.popitem(last=False)
 
 
 def time_derivatives(md) -> dict[str, str]:

@@ -730,3 +730,30 @@ def test_a_description_is_parsed_once_per_content_and_read_afresh_when_the_fmu_c
     changed = read_description(copy)
     assert changed is not first and changed.description == "X" + first.description[1:]
     assert time_derivatives(changed) == time_derivatives(first)
+
+
+def test_a_settled_description_file_is_not_opened_again_and_a_changed_one_is(fmu_dir, tmp_path, monkeypatch):
+    """A file read before and unchanged since (its identity: inode, size, times) is not
+    opened again; one changed since is read afresh.  Files changed within the last
+    ``SETTLED`` seconds are always read (the test above); here every file counts as settled."""
+    import shutil
+    import zipfile
+    from harness.description import fmu_description
+
+    monkeypatch.setattr(fmu_description, "SETTLED", -1.0)
+    copy = Path(shutil.copy(Path(fmu_dir) / "LeverCoupling.fmu", tmp_path / "LeverCoupling.fmu"))
+    first = read_description(copy)
+    opened = []
+    real_zipfile = zipfile.ZipFile
+    monkeypatch.setattr(zipfile, "ZipFile", lambda *a, **k: opened.append(a) or real_zipfile(*a, **k))
+    assert read_description(copy) is first and opened == []
+    with real_zipfile(copy) as z:
+        members = {name: z.read(name) for name in z.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    at = xml.index('description="') + len('description="')
+    members["modelDescription.xml"] = (xml[:at] + "Changed: " + xml[at:]).encode()
+    with real_zipfile(copy, "w") as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    changed = read_description(copy)
+    assert opened and changed is not first and changed.description.startswith("Changed: ")
