@@ -273,8 +273,9 @@ class Component:
         """The FMU instance, its co-simulation interface (see ``harness.engine.me_component``
         for Model Exchange)."""
         fmu = FMU2SlaveOnce(guid=self.description.guid, unzipDirectory=self._unzipped,
-                        modelIdentifier=self.description.coSimulation.modelIdentifier,
-                        instanceName=self.instance_name)
+                            modelIdentifier=self.description.coSimulation.modelIdentifier,
+                            instanceName=self.instance_name)
+        fmu.__class__ = FMU2Slave     # loaded: fmpy's own class again (simulate_fmu tells the interface by it)
         fmu.instantiate(callbacks=_callbacks, loggingOn=logging_on)
         return fmu
 

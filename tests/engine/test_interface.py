@@ -38,3 +38,26 @@ def test_the_stability_stand_ins_satisfy_the_interface(fmu_dir):
 def test_the_interface_names_what_the_masters_and_the_system_call():
     assert {"raw", "fail", "read", "write", "do_step", "save_state", "restore_state", "free_state",
             "real_buffer", "variable", "vr", "description", "calls", "name", "time", "free"} <= set(MEMBERS)
+
+
+def test_a_component_loads_fmpys_own_prototypes_once(fmu_dir):
+    """The C functions' prototypes worked out once a process are fmpy's own, function by
+    function, and the loaded instance is fmpy's FMU2Slave (fmpy's simulate_fmu tells the
+    interface by the exact class)."""
+    from pathlib import Path
+    from fmpy.fmi2 import FMU2Slave
+
+    first, second = (Component(f"shaft{k}", Path(fmu_dir) / "EngineShaft.fmu") for k in range(2))
+    try:
+        own = FMU2Slave(guid=first.description.guid, unzipDirectory=first.unzipped_dir,
+                        modelIdentifier=first.description.coSimulation.modelIdentifier)
+        for component in (first, second):
+            assert type(component.fmu) is FMU2Slave
+            assert component.fmu._functions.keys() == own._functions.keys()
+            for name, function in own._functions.items():
+                mine = component.fmu._functions[name]
+                assert (mine.argnames, mine.argtypes, mine.restype) == \
+                    (function.argnames, function.argtypes, function.restype), name
+    finally:
+        first.free()
+        second.free()
