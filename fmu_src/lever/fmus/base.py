@@ -31,6 +31,17 @@ def _nan_values(self, vrs):
     return [math.nan] * len(vrs)
 
 
+def _reader_of(names: list[str]):
+    """A getter of the attributes ``names`` of a slave, as a tuple (attrgetter's own for two
+    or more; it gives one attribute alone, and nothing for none)."""
+    if len(names) > 1:
+        return operator.attrgetter(*names)
+    if names:
+        single = operator.attrgetter(names[0])
+        return lambda slave: (single(slave),)
+    return lambda slave: ()
+
+
 _LIVE = ("initialization", "stepping")
 
 
@@ -91,6 +102,7 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
         # that a good value costs one comparison; anything else takes _set_values's path,
         # which says what is wrong.
         self._real_names = {vr: v.name for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._readers = {}             # value references read -> getter (``_read_reals``)
         self._fast_inputs = {}
         for vr, p in self._settable.items():
             if p.kind == "real" and not p.fixed:
@@ -206,13 +218,26 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
             self._build_for_reading()
         if self._dirty and self._phase in _LIVE:
             self._refresh()
-        names = self._real_names
-        try:
-            return [float(getattr(self, names[vr])) for vr in vrs]
-        except KeyError:
-            unknown = next(vr for vr in vrs if vr not in names)
-            self._error(f"fmi2GetReal: value reference {unknown} is no Real variable of {type(self).__name__}")
-            return _nan_values(self, vrs)
+        return self._read_reals(vrs)
+
+    #: lists of value references a reader is kept for (a master reads the same few each step)
+    READERS_KEPT = 64
+
+    def _read_reals(self, vrs) -> list:
+        """The Real variables ``vrs`` as floats, read by a getter made once for each list of
+        value references a host reads; an unknown reference is an error (NaN values)."""
+        key = tuple(vrs)
+        read = self._readers.get(key)
+        if read is None:
+            names = self._real_names
+            if not all(vr in names for vr in key):
+                unknown = next(vr for vr in key if vr not in names)
+                self._error(f"fmi2GetReal: value reference {unknown} is no Real variable of {type(self).__name__}")
+                return _nan_values(self, vrs)
+            if len(self._readers) >= self.READERS_KEPT:
+                self._readers.clear()
+            read = self._readers[key] = _reader_of([names[vr] for vr in key])
+        return [*map(float, read(self))]
 
     @guarded()
     def set_real(self, vrs, values):

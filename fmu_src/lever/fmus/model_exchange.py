@@ -21,7 +21,7 @@ from typing import Callable, NamedTuple, Sequence
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
 
 from ..physics.parameters import ParameterError
-from .base import LeverSlave, _nan_values
+from .base import _LIVE, LeverSlave, _nan_values
 from .guard import guarded
 from .me_channel import CHANNEL, DERIVATIVES, INFO_FIELDS, KIND_SHIFT, NativeEntryChannel
 from .me_description import LIVE_EVENT_INDICATORS, ModelExchangeDescription
@@ -289,12 +289,15 @@ class ModelExchangeSlave(NativeEntryChannel, PartialDerivatives, ModelExchangeDe
         if vrs == self._derivative_refs and vrs:          # every right-hand side
             return self._derivatives()
         if point is not None and self._phase == "stepping" and self._state_outputs.issuperset(vrs):
-            return [float(getattr(self, self._real_names[vr])) for vr in vrs]
+            return self._read_reals(vrs)
         if vrs and max(vrs) >= self._special_from:
             if self._is_channel(vrs):
                 return self._channel_get(vrs)
             return self._get_with_locals(vrs)
-        return LeverSlave.get_real.__wrapped__(self, vrs)
+        # LeverSlave.get_real's, the model built above
+        if self._dirty and self._phase in _LIVE:
+            self._refresh()
+        return self._read_reals(vrs)
 
     @guarded(default=lambda self, vrs: [0] * len(vrs))
     def get_integer(self, vrs):
