@@ -757,3 +757,27 @@ def test_a_settled_description_file_is_not_opened_again_and_a_changed_one_is(fmu
             z.writestr(name, data)
     changed = read_description(copy)
     assert opened and changed is not first and changed.description.startswith("Changed: ")
+
+
+def test_a_read_of_an_unknown_value_reference_is_an_error_and_reads_go_on(components):
+    """fmi2GetReal of a value reference that is no Real variable is an error naming it
+    (alone or among known ones, read first or after the same list was read), and the
+    known ones read as before after it, alone, in pairs and in any order."""
+    import ctypes
+
+    c = start(components("EngineShaft"))
+    c.do_step(0.0, 1e-3)
+    phi, w = c.vr("phi"), c.vr("w")
+    get = c.fmu._functions["fmi2GetReal"]
+
+    def read(vrs):
+        out = (ctypes.c_double * len(vrs))()
+        status = get(c.fmu.component, (ctypes.c_uint * len(vrs))(*vrs), len(vrs), out)
+        return status, list(out)
+
+    assert read([w, phi]) == (0, [c.get(["w"])[0], c.get(["phi"])[0]])
+    for vrs in ([99999], [w, 99999], [99999, phi]):
+        status, _ = read(vrs)
+        assert status == FMI2_ERROR and any("value reference 99999" in m for m in c.messages), vrs
+        c.messages.clear()
+    assert read([w, phi])[1] == read([w])[1] + read([phi])[1] and read([phi, w])[1] == read([phi])[1] + read([w])[1]
