@@ -286,11 +286,16 @@ class ModelExchangeSlave(NativeEntryChannel, PartialDerivatives, ModelExchangeDe
         point = self._point
         if point is not None and point[0]:
             self._take_point()
-        if vrs == self._derivative_refs and vrs:          # every right-hand side
+        if vrs and max(vrs) < self._special_from:         # the model's variables: a host's reads
+            if not self._me:                              # Co-Simulation: LeverSlave.get_real's
+                if self._dirty and self._phase in _LIVE:
+                    LeverSlave._refresh(self)
+                return self._read_reals(vrs)
+            if point is not None and self._phase == "stepping" and self._state_outputs.issuperset(vrs):
+                return self._read_reals(vrs)
+        elif vrs == self._derivative_refs and vrs:        # every right-hand side
             return self._derivatives()
-        if point is not None and self._phase == "stepping" and self._state_outputs.issuperset(vrs):
-            return self._read_reals(vrs)
-        if vrs and max(vrs) >= self._special_from:
+        elif vrs:
             if self._is_channel(vrs):
                 return self._channel_get(vrs)
             return self._get_with_locals(vrs)
