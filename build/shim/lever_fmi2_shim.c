@@ -874,9 +874,9 @@ static const char *state_name(int state)
 #define CHANNEL_SHIFT 20
 #define CHANNEL_INDEX_MAX ((1u << CHANNEL_SHIFT) - 1u)
 enum { CH_CONTROL, CH_STATES, CH_DERIVATIVES, CH_INDICATORS, CH_NOMINALS, CH_SEEDS, CH_DIRECTIONAL,
-       CH_EVENT_INFO, CH_OUTPUT_RATES, CH_INPUT_TABLE, CH_STATE_OUTPUT_TABLE };
+       CH_EVENT_INFO, CH_OUTPUT_RATES, CH_INPUT_TABLE, CH_STATE_OUTPUT_TABLE, CH_OUTPUT_TABLE };
 enum { CONTROL_INTERFACE = 0, CONTROL_TIME = 1, CONTROL_COMMAND = 2, CONTROL_POINT = 3, CONTROL_SYNC = 4 };
-enum { SIZE_STATES = 0, SIZE_INDICATORS = 1, SIZE_DEFERRED_INPUTS = 2, SIZE_STATE_OUTPUTS = 3 };
+enum { SIZE_STATES = 0, SIZE_INDICATORS = 1, SIZE_DEFERRED_INPUTS = 2, SIZE_STATE_OUTPUTS = 3, SIZE_OUTPUTS = 4 };
 #define COMMAND_NEW_DISCRETE_STATES 2.0
 #define EVENT_INFO_FIELDS 6
 
@@ -922,6 +922,10 @@ typedef struct {
     fmi2ValueReference *stateOutputVr;
     size_t *stateOutputIndex;
     int statesKnown;
+    /* Co-Simulation: the outputs the model leaves in the block after a step (value
+     * references, in the block's order), answered from there until any other call */
+    size_t noutputs;
+    fmi2ValueReference *outputVr;
 } Shim;
 
 /* The point block: fmi2SetTime, fmi2SetContinuousStates and, while the model runs (Model
@@ -933,16 +937,20 @@ typedef struct {
  * a call that reaches the model any other way is preceded by a sync (me_sync).  A value the check
  * refuses (out of range, NaN, not such an input) goes to the model, which says why.  An
  * integrator's right-hand side then calls into Python only to read: the time, the states
- * and the coupled inputs it sets cost no call there.
+ * and the coupled inputs it sets cost no call there.  In Co-Simulation the model also
+ * leaves its outputs there at the end of each step: a read of those alone is answered
+ * from the block until the next call of any other kind (outputs_answer).
  * [0]: what is pending (POINT_TIME | POINT_STATES | POINT_INPUTS), [1]: the time,
- * [2 .. 2+max(nx,1)): the states, then the inputs' values, then their pending flags. */
+ * [2 .. 2+max(nx,1)): the states, then the inputs' values, then their pending flags, then
+ * whether the outputs are the model's (1.0) and the outputs. */
 #define POINT_TIME 1
 #define POINT_STATES 2
 #define POINT_INPUTS 4
 #define POINT_HEADER 2
 /* where the inputs' values begin, and the block's size */
 #define POINT_INPUTS_AT(s) (POINT_HEADER + ((s)->nx ? (s)->nx : 1))
-#define POINT_SIZE(s) (POINT_INPUTS_AT(s) + 2 * (s)->ninputs)
+#define POINT_OUTPUTS_AT(s) (POINT_INPUTS_AT(s) + 2 * (s)->ninputs)
+#define POINT_SIZE(s) (POINT_OUTPUTS_AT(s) + 1 + (s)->noutputs)
 /* what the host set and the model has not taken yet */
 #define POINT_PENDING(s, what) ((s)->point[0] = (fmi2Real)((int)(s)->point[0] | (what)))
 
@@ -1035,6 +1043,7 @@ static void free_shim(Shim *s)
     free(s->inputRange);
     free(s->stateOutputVr);
     free(s->stateOutputIndex);
+    free(s->outputVr);
     free_categories(s);
     free(s->instanceName);
     free(s);
@@ -1153,6 +1162,9 @@ static int shim_begin(Shim *s, const char *function, int allowed)
     if (!(s->state & allowed)) {
         shim_refuse_state(s, function, allowed);
         return 0;
+    }
+    if (s->noutputs && s->point && strcmp(function, "fmi2GetReal") != 0) {
+        s->point[POINT_OUTPUTS_AT(s)] = 0.0; /* any call but a read may change the outputs */
     }
     thread_state_ready();
     return 1;
@@ -1406,6 +1418,52 @@ static fmi2Status read_state_outputs(Shim *s)
     return status;
 }
 
+/* The outputs the model leaves in the point block after a Co-Simulation step, read once
+ * per instance (in Model Exchange the block keeps their place, unused). */
+static fmi2Status read_block_outputs(Shim *s)
+{
+    fmi2Real *table;
+    size_t n;
+    fmi2Status status = read_table(s, SIZE_OUTPUTS, CH_OUTPUT_TABLE, 1, 1e4, "outputs", &table, &n);
+    free(s->outputVr);
+    s->noutputs = 0;
+    s->outputVr = malloc((n + 1) * sizeof *s->outputVr);
+    if (succeeded(status) && !s->outputVr) {
+        status = shim_error(s, "fmi2Instantiate: out of memory");
+    }
+    if (succeeded(status)) {
+        for (size_t i = 0; i < n; i++) {
+            s->outputVr[i] = (fmi2ValueReference)table[i];
+        }
+        s->noutputs = n;
+    }
+    free(table);
+    return status;
+}
+
+/* fmi2GetReal answered from the outputs the model left in the point block at the end of
+ * the step (Co-Simulation): 1 if they are still the model's and every value reference is
+ * one of them, 0 to ask the model. */
+static int outputs_answer(Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    if (s->me || !s->point || !s->noutputs || s->state != ST_STEP_COMPLETE || nvr == 0 || !value) {
+        return 0;
+    }
+    const fmi2Real *block = s->point + POINT_OUTPUTS_AT(s);
+    if (block[0] != 1.0) {
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; i++) { /* a miss: the model's read writes every value */
+        size_t k = 0;
+        while (k < s->noutputs && s->outputVr[k] != vr[i]) k++;
+        if (k == s->noutputs) {
+            return 0;
+        }
+        value[i] = block[1 + k];
+    }
+    return 1;
+}
+
 /* fmi2GetReal answered from the point block: 1 if every value reference is an output that
  * is a state and the block's states are the model's (statesKnown), 0 to ask the model. */
 static int point_answers(Shim *s, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
@@ -1433,6 +1491,9 @@ static fmi2Status point_connect(Shim *s)
     fmi2Status status = read_deferred_inputs(s);
     if (succeeded(status)) {
         status = read_state_outputs(s);
+    }
+    if (succeeded(status)) {
+        status = read_block_outputs(s);
     }
     if (!succeeded(status)) {
         return status;
@@ -1770,6 +1831,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     BEGIN(fmi2GetReal, c);
     if (!host_references(SHIM(c), "fmi2GetReal", vr, nvr)) return fmi2Error;
     if (point_answers(SHIM(c), vr, nvr, value)) return fmi2OK;
+    if (outputs_answer(SHIM(c), vr, nvr, value)) return fmi2OK;
     return shim_end(SHIM(c), "fmi2GetReal", g_api->fmi2GetReal(SHIM(c)->inner, vr, nvr, value));
 }
 

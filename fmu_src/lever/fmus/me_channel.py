@@ -12,23 +12,25 @@ from __future__ import annotations
 
 import ctypes
 import math
+from array import array
 from itertools import compress
 
-from .recompute import ALL, INPUTS_CHANGED
+from .recompute import ALL, CLEAN, INPUTS_CHANGED
 
 CHANNEL = 0x40000000
 KIND_SHIFT = 20
 INDEX_MASK = (1 << KIND_SHIFT) - 1
 # kinds of channel references
 (CONTROL, STATES, DERIVATIVES, INDICATORS, NOMINALS, SEEDS, DIRECTIONAL, EVENT_INFO, OUTPUT_RATES, INPUT_TABLE,
- STATE_OUTPUT_TABLE) = range(11)
+ STATE_OUTPUT_TABLE, OUTPUT_TABLE) = range(12)
 # CONTROL set: the interface (1: Model Exchange), the time, a command, the address of the
 # native entry's point block (0: none), a sync (nothing but the point block taken); get: the sizes
 SET_INTERFACE, SET_TIME, SET_COMMAND, SET_POINT, SYNC = 0, 1, 2, 3, 4
 # the point block: what is pending (bits), the time, the states, then the deferred inputs'
-# values and their pending flags (build/shim: POINT_*)
+# values and their pending flags, then whether the outputs there are the model's and the
+# outputs, left at the end of a Co-Simulation step (build/shim: POINT_*)
 POINT_TIME, POINT_STATES, POINT_INPUTS, POINT_HEADER = 1, 2, 4, 2
-GET_STATES, GET_INDICATORS, GET_DEFERRED_INPUTS, GET_STATE_OUTPUTS = 0, 1, 2, 3
+GET_STATES, GET_INDICATORS, GET_DEFERRED_INPUTS, GET_STATE_OUTPUTS, GET_OUTPUTS = 0, 1, 2, 3, 4
 NEW_DISCRETE_STATES = 2.0
 # EVENT_INFO: what fmi2NewDiscreteStates reports
 INFO_FIELDS = ("newDiscreteStatesNeeded", "terminateSimulation", "nominalsOfContinuousStatesChanged",
@@ -63,6 +65,27 @@ class NativeEntryChannel:
         Continuous-Time Mode from the states the host set, without a call into Python."""
         return sorted((self._vr_of[s.name], k) for k, s in enumerate(self.ME_STATES)
                       if self._vr_of.get(s.name) in self._state_outputs)
+
+    def _block_outputs(self) -> tuple:
+        """The outputs a Co-Simulation step leaves in the point block (``_publish_outputs``),
+        in its order: every output (read together by ``_outputs_of``) of a model with states;
+        none of a model without, whose outputs follow the inputs a host sets before it reads."""
+        return tuple(o.name for o in self.OUTPUTS) if self.ME_STATES else ()
+
+    def _publish_outputs(self):
+        """At the end of a Co-Simulation step: the outputs computed now and left in the point
+        block, where the native entry answers a read of them until the next call of another
+        kind.  Outputs that are not all finite are left to the next read, which says so."""
+        self._compute_outputs()
+        values = self._outputs_of(self)
+        if len(self.OUTPUTS) == 1:
+            values = (values,)
+        total = sum(values)
+        if total - total == 0.0:
+            self._dirty = CLEAN
+            at = self._outputs_at
+            self._point[at + 1:at + 1 + len(values)] = array("d", values)
+            self._point[at] = 1.0
 
     def _take_point(self):
         """The time, states and inputs the host set through the native entry since the
@@ -114,11 +137,13 @@ class NativeEntryChannel:
             deferred = self._deferred_inputs()
             first = POINT_HEADER + max(len(self.ME_STATES), 1)
             m = len(deferred)
+            size = first + 2 * m + 1 + len(self._block_outputs())
             # a memoryview of the block: its items and slices are read and written in C
-            self._point = (memoryview((ctypes.c_double * (first + 2 * m)).from_address(address)).cast("B").cast("d")
+            self._point = (memoryview((ctypes.c_double * size).from_address(address)).cast("B").cast("d")
                            if address else None)
             self._deferred_names = tuple(name for _, (name, _, _) in deferred)
             self._deferred_span = (first, first + m, first + 2 * m)
+            self._outputs_at = first + 2 * m if self._point is not None and self._block_outputs() else None
             self._no_inputs_pending = memoryview(bytes(8 * m)).cast("d")
         elif kind == CONTROL and index == [SET_COMMAND] and values[0] == NEW_DISCRETE_STATES:
             self._new_discrete_states()
@@ -141,10 +166,14 @@ class NativeEntryChannel:
         if kind == CONTROL:
             sizes = {GET_STATES: float(len(self.ME_STATES)), GET_INDICATORS: float(self.ME_EVENT_INDICATORS),
                      GET_DEFERRED_INPUTS: float(len(self._deferred_inputs())),
-                     GET_STATE_OUTPUTS: float(len(self._state_output_table()))}
+                     GET_STATE_OUTPUTS: float(len(self._state_output_table())),
+                     GET_OUTPUTS: float(len(self._block_outputs()))}
             return [sizes[i] for i in index]
         if kind == STATE_OUTPUT_TABLE:
             table = [float(value) for pair in self._state_output_table() for value in pair]
+            return [table[i] for i in index]
+        if kind == OUTPUT_TABLE:
+            table = [float(self._vr_of[name]) for name in self._block_outputs()]
             return [table[i] for i in index]
         if kind == INPUT_TABLE:
             table = [value for vr, (_, low, high) in self._deferred_inputs() for value in (float(vr), low, high)]

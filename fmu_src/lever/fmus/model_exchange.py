@@ -95,6 +95,7 @@ class ModelExchangeSlave(NativeEntryChannel, PartialDerivatives, ModelExchangeDe
     _keys_of = None           # (model, known keys, unknown keys) of directional derivatives' references
     _partials_at = None       # (model, t, x, u, partials) of the last directional derivative
     _deferred_names = ()      # the inputs it may hold, in its order
+    _outputs_at = None        # where the outputs a step leaves there begin (None: nowhere)
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -320,7 +321,13 @@ class ModelExchangeSlave(NativeEntryChannel, PartialDerivatives, ModelExchangeDe
         point = self._point
         if point is not None and point[0]:
             self._take_point()
-        return LeverSlave.do_step.__wrapped__(self, current_time, step_size)
+        stepped = LeverSlave.do_step.__wrapped__(self, current_time, step_size)
+        if stepped and self._outputs_at is not None and not self._me:
+            try:
+                self._publish_outputs()
+            except Exception:  # noqa: BLE001 - the next read computes them again and says what failed
+                self._dirty = ALL
+        return stepped
 
     @guarded()
     def set_real(self, vrs, values):
