@@ -359,3 +359,37 @@ def replayed(recording: Recording) -> float:
         return seconds
     finally:
         replay.free()
+
+
+class OwnCallsFloor:
+    """The floor of a master's case in the benchmark: its run recorded once (runs are
+    deterministic: every run of the case makes these calls), then ``__call__`` before each
+    run gives the seconds its calls take replayed - the whole run's (a span's replay scaled
+    by the steps, see the module) - or None once a replay failed or differed from the run,
+    ``problem`` saying why."""
+
+    def __init__(self, scene, master: str, step: float, options: dict | None = None, fmu_dir: Path = FMUS,
+                 limit: int = MAX_CALLS):
+        self.recording = record(scene, master, step, options, fmu_dir, limit)
+        self.problem = self.recording.failure
+
+    def __call__(self) -> float | None:
+        if self.problem:
+            return None
+        try:
+            seconds = replayed(self.recording)
+        except ReplayDiverged as error:
+            self.problem = f"the replay of the run's calls is not the run's: {error}"
+            self.recording.calls.clear()
+            return None
+        r = self.recording
+        return seconds * r.steps / r.span_steps
+
+    def summary(self) -> dict:
+        """What the case keeps: the calls replayed, the steps they span of the run's, the
+        state calls among them, and why the floor is not measured (None: it is)."""
+        r = self.recording
+        stepping = r.calls_by_kind
+        return {"calls": sum(sum(kinds.values()) for kinds in stepping.values()),
+                "state_calls": sum(kinds["state"] for kinds in stepping.values()),
+                "steps": r.steps, "span_steps": r.span_steps, "problem": self.problem}
