@@ -59,7 +59,7 @@ class ReplayDiverged(RuntimeError):
 @dataclass
 class Recording:
     """A run's FMI calls (``record``): ``calls`` in order, each ``(component index, kind,
-    arguments...)``; ``plan`` the checked scene (its FMUs), ``record`` the outputs the run
+    arguments...)``, value references by their number in ``value_references``; ``plan`` the checked scene (its FMUs), ``record`` the outputs the run
     recorded; ``components`` the scene's component names (in the order the
     indices count); ``start`` the index of the stepping loop's first call (those before
     are the master's set-up); ``steps`` the run's steps and ``span_steps`` the steps
@@ -70,6 +70,7 @@ class Recording:
     record: list
     components: list
     calls: list = field(default_factory=list)
+    value_references: list = field(default_factory=list)
     start: int = 0
     steps: int = 0
     span_steps: int = 0
@@ -95,14 +96,17 @@ class _Recorder:
         self.limit = limit
         self.on = [True]
         self.handles, self.readers = {}, {}
-        self.vrs: dict[bytes, object] = {}
+        self.vrs: dict[bytes, int] = {}
 
-    def _vrs(self, vrs, n: int):
-        """One ctypes array for each distinct set of value references."""
+    def _vrs(self, vrs, n: int) -> int:
+        """The number of a set of value references in ``Recording.value_references`` (one
+        ctypes array each; a call keeps the number, so that the recorded calls hold plain
+        values only, which the garbage collector stops visiting)."""
         key = ctypes.string_at(vrs, n * ctypes.sizeof(ctypes.c_uint))
         kept = self.vrs.get(key)
         if kept is None:
-            kept = self.vrs[key] = (ctypes.c_uint * n).from_buffer_copy(key)
+            kept = self.vrs[key] = len(self.recording.value_references)
+            self.recording.value_references.append((ctypes.c_uint * n).from_buffer_copy(key))
         return kept
 
     def wrap(self, component: str, kind: str, function):
@@ -262,17 +266,18 @@ class Replay:
         """``(function, a, b, c, d)`` of each call, its arguments as ctypes objects made now."""
         out = []
         raws = [c.raw for c in self.components]
+        value_references = self.recording.value_references
         for call in calls:
             k, code = call[0], call[1]
             raw, component = raws[k], self.components[k]
             if code == GET:
-                vrs = call[2]
-                buffer = self.scratch.get((k, id(vrs)))
+                vrs = value_references[call[2]]
+                buffer = self.scratch.get((k, call[2]))
                 if buffer is None:
-                    buffer = self.scratch[(k, id(vrs))] = (ctypes.c_double * len(vrs))()
+                    buffer = self.scratch[(k, call[2])] = (ctypes.c_double * len(vrs))()
                 out.append((raw.get_real, raw.handle, vrs, raw.count(len(vrs)), buffer))
             elif code == SET:
-                vrs = call[2]
+                vrs = value_references[call[2]]
                 out.append((raw.set_real, raw.handle, vrs, raw.count(len(vrs)),
                             (ctypes.c_double * len(vrs)).from_buffer_copy(call[3])))
             elif code == STEP:
