@@ -89,6 +89,7 @@ SLOW = (
     "judges/test_stiff_switch.py",
     "judges/test_fmu_reference_own_error.py",
     "studies/test_cvode_host_grid.py",
+    "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
     "description/test_plan_start_and_record.py",
     "formats/test_ssp_export_twice.py",
     "description/test_physics_checked_once.py::test_a_run_checks_each_components_parameters_once",

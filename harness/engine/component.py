@@ -387,6 +387,13 @@ class Component:
         self._set_state = wrap("set_state", self._set_state)
         self._free_state = wrap("free_state", self._free_state)
 
+    @property
+    def raw_state_calls(self) -> tuple:
+        """fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate (FMI 3.0's in a ``Component3``)
+        as the raw calls ``save_state``, ``restore_state`` and ``free_state`` make, without
+        their counts and checks: for a caller that replays recorded calls."""
+        return self._get_state, self._set_state, self._free_state
+
     # -- state (for masters that roll back) --------------------------------------------------
     # Raw calls like the hot path: an iterating master saves, restores and frees a state
     # on every communication step.

@@ -285,17 +285,17 @@ class Replay:
             elif code == GET_STATE:
                 slot = self.slots[call[2]] = ctypes.c_void_p()
                 self.held.append((component, slot))
-                out.append((_two, component._get_state, raw.handle, ctypes.byref(slot), None))
+                out.append((_two, component.raw_state_calls[0], raw.handle, ctypes.byref(slot), None))
             else:
                 slot = self.slots.get(call[2])
                 if slot is None:
                     raise ReplayDiverged(f"{component.name}: a state call names a state the run never saved")
                 if code == SET_STATE:
-                    out.append((_two, component._set_state, raw.handle, slot, None))
+                    out.append((_two, component.raw_state_calls[1], raw.handle, slot, None))
                 else:
                     del self.slots[call[2]]
                     self.held = [(c, s) for c, s in self.held if s is not slot]
-                    out.append((_two, component._free_state, raw.handle, ctypes.byref(slot), None))
+                    out.append((_two, component.raw_state_calls[2], raw.handle, ctypes.byref(slot), None))
         return out
 
     @staticmethod
