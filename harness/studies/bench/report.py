@@ -162,7 +162,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
              machine_text(result.get("machine") or c.get("machine")), ""]
     if result.get("eigenfrequency_rad_s"):
         lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
-    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above own calls [min-max] | "
+    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above own calls [least to most] | "
               "above call floor | torque RMS | torque max | speed RMS | torque RMS after transient | "
               "energy residual | note |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -178,7 +178,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
                                      r.get("own_calls_note") or "") if x)
         own = _pct(r["overhead_above_own_calls"])
         if own and r["repeats"] > 1:
-            own += f" [{_pct(r['overhead_above_own_calls_min'])}-{_pct(r['overhead_above_own_calls_max'])}]"
+            own += f" [{_pct(r['overhead_above_own_calls_min'])} to {_pct(r['overhead_above_own_calls_max'])}]"
         runs = f"{r['repeats']}" + (f" of {r['asked']}" if r.get("asked") and r["asked"] != r["repeats"] else "")
         steps = f"{r['steps']}" + (f" ({r['rhs']} RHS)" if r.get("rhs") is not None and r["kind"] == "master" else "")
         lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {steps} | "
@@ -259,8 +259,8 @@ def markdown(result: dict, rows: list[dict]) -> str:
                 lines[-1] += " The bound without a master is not shown: its split is unreliable."
     if c.get("overhead_above_own_calls"):
         lines += ["", "Harness overhead above the floor of each run's own FMI calls (" + OWN_CALLS_WORDS
-                  + "; median over the master's steps [least-most over all its runs]): "
-                  + ", ".join(f"{n} {_pct(v['median'])} [{_pct(v['min'])}-{_pct(v['max'])}]"
+                  + "; median over the master's steps [least to most over all its runs]): "
+                  + ", ".join(f"{n} {_pct(v['median'])} [{_pct(v['min'])} to {_pct(v['max'])}]"
                               for n, v in c["overhead_above_own_calls"].items()) + "."]
     if c.get("overhead_above_call_floor"):
         lines += ["", "Above the one-step FMU-call floor instead (" + CALL_FLOOR_WORDS + "; median over steps): "
@@ -325,7 +325,7 @@ def summary_lines(result: dict) -> list[str]:
                 + (f" ({1e6 * case.timed['master_per_step_s']:.1f} us a step)" if case.timed else ""))
     if claims.get("overhead_above_own_calls"):
         lines.append("  above the floor of its own FMI calls (the run's calls replayed alone): " + ", ".join(
-            f"{n} {100 * v['median']:.0f} % [{100 * v['min']:.0f}-{100 * v['max']:.0f} %]"
+            f"{n} {100 * v['median']:.0f} % [{100 * v['min']:.0f} to {100 * v['max']:.0f} %]"
             for n, v in claims["overhead_above_own_calls"].items()))
     if claims.get("overhead_above_call_floor"):
         lines.append("  above the one-step FMU-call floor (zero-order-hold calls): " + ", ".join(
