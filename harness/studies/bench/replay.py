@@ -241,7 +241,7 @@ class Replay:
             self.components = [self.system.components[name] for name in recording.components]
             self._follow_initialization()
             self.slots: dict[int, ctypes.c_void_p] = {}
-            self.held: list[ctypes.c_void_p] = []
+            self.held: list[tuple] = []          # (component, state) saved and not yet freed
             self.scratch: dict[tuple[int, int], object] = {}
             set_up = self._compiled(recording.calls[self.initialized:recording.start])
             self.loop = self._compiled(recording.calls[recording.start:])
@@ -330,8 +330,9 @@ class Replay:
             if now.get(name) != (vrs, values):
                 got = (ctypes.c_double * len(vrs)).from_buffer_copy(now[name][1])
                 want = (ctypes.c_double * len(vrs)).from_buffer_copy(values)
-                first = next(k for k in range(len(vrs)) if got[k] != want[k] or
-                             bytes(ctypes.c_double(got[k])) != bytes(ctypes.c_double(want[k])))
+                size = ctypes.sizeof(ctypes.c_double)
+                first = next(k for k in range(len(vrs))       # the bits, a NaN's too
+                             if now[name][1][k * size:(k + 1) * size] != values[k * size:(k + 1) * size])
                 variable = next(v.name for v in self.components[self.recording.components.index(name)]
                                 .description.modelVariables if v.valueReference == vrs[first]
                                 and v.type in REAL_TYPES)
