@@ -39,9 +39,13 @@ def _replay_loop_calls(recording) -> dict:
     return counted
 
 
-@pytest.mark.parametrize("master", ["jacobi", "jacobi-quadratic", "jacobi-midpoint", "adaptive"])
-def test_the_replay_leaves_the_fmus_where_the_run_left_them_bit_for_bit(fmu_dir, master):
-    spec = _scene()
+@pytest.mark.parametrize("name, master", [("kavz685", "jacobi"), ("kavz685", "jacobi-quadratic"),
+                                          ("kavz685", "jacobi-midpoint"), ("kavz685", "adaptive"),
+                                          # four FMUs, one a source; a single FMU
+                                          ("kavz685_misalignment_ramp", "jacobi-linear"),
+                                          ("freewheel_rectifier", "jacobi")])
+def test_the_replay_leaves_the_fmus_where_the_run_left_them_bit_for_bit(fmu_dir, name, master):
+    spec = scene.load(name).with_overrides(SHORT)
     recording = replay.record(spec, master, 1e-3, fmu_dir=fmu_dir)
     assert recording.failure is None and recording.whole
     # a plain run of the master (no wrapper) as the independent account: its stepping calls
