@@ -225,10 +225,11 @@ def claims(scene: scenes.Scene, cases: list[Case], p: dict, hollow_per_step: flo
             out["baseline_step"] = b
             out["ratios"]["baseline_step_over_hollow_floor"] = r
     # Harness overhead of the fixed-step masters: each run over the replay of its own calls
-    # timed just before it (the figure), and over the one-step FMU-call floor (as before).
+    # timed just before it (the figure), and over the one-step FMU-call floor; the cases
+    # whose run time is no result (``case_problems``) left out, as the table leaves them.
     overhead, own = {}, {}
     for case in cases:
-        if case.kind == "master" and case.stable and case.tolerance is None:
+        if case.kind == "master" and case.stable and case.tolerance is None and not case_problems(case):
             if case.floor_time and (o := overhead_above_floor(case)) is not None:
                 overhead.setdefault(case.engine, []).append(o)
             if (r := overhead_above_own_calls(case)) is not None:

@@ -259,11 +259,13 @@ def markdown(result: dict, rows: list[dict]) -> str:
                 lines[-1] += " The bound without a master is not shown: its split is unreliable."
     if c.get("overhead_above_own_calls"):
         lines += ["", "Harness overhead above the floor of each run's own FMI calls (" + OWN_CALLS_WORDS
-                  + "; median over the master's steps [least to most over all its runs]): "
+                  + "; median over the master's steps whose run time is a result [least to most over "
+                  "their runs]): "
                   + ", ".join(f"{n} {_pct(v['median'])} [{_pct(v['min'])} to {_pct(v['max'])}]"
                               for n, v in c["overhead_above_own_calls"].items()) + "."]
     if c.get("overhead_above_call_floor"):
-        lines += ["", "Above the one-step FMU-call floor instead (" + CALL_FLOOR_WORDS + "; median over steps): "
+        lines += ["", "Above the one-step FMU-call floor instead (" + CALL_FLOOR_WORDS + "; median over the same "
+                  "steps): "
                   + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_call_floor"].items()) + "."]
     if c.get("largest_stable_baseline_step"):
         s = c["largest_stable_baseline_step"]
