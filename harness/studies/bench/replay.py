@@ -59,9 +59,9 @@ class ReplayDiverged(RuntimeError):
 @dataclass
 class Recording:
     """A run's FMI calls (``record``): ``calls`` in order, each ``(component index, kind,
-    arguments...)``, value references by their number in ``value_references``; ``plan`` the checked scene (its FMUs), ``record`` the outputs the run
-    recorded; ``components`` the scene's component names (in the order the
-    indices count); ``start`` the index of the stepping loop's first call (those before
+    arguments...)``, value references by their number in ``value_references``; ``plan``
+    the checked scene (its FMUs), ``record`` the outputs the run recorded; ``components``
+    the scene's component names (in the order the indices count); ``start`` the index of the stepping loop's first call (those before
     are the master's set-up); ``steps`` the run's steps and ``span_steps`` the steps
     recorded (fewer where the run passed ``MAX_CALLS``); ``final`` every real variable of
     each component where the recording ends (component -> (value references, values)),

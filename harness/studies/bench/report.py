@@ -36,9 +36,9 @@ CALL_FLOOR_WORDS = ("each run over one communication step of zero-order-hold cal
                     "makes more calls shows the FMUs' extra work there too")
 
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
-           "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks", "own_calls_floor_s", "overhead_above_own_calls",
-           "overhead_above_own_calls_min", "overhead_above_own_calls_max", "own_calls_note", "floor_s",
-           "overhead_above_call_floor",
+           "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks",
+           "own_calls_floor_s", "overhead_above_own_calls", "overhead_above_own_calls_min",
+           "overhead_above_own_calls_max", "own_calls_note", "floor_s", "overhead_above_call_floor",
            "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
            "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "master_per_step_s", "split_unreliable", "failure"]
 

@@ -131,9 +131,8 @@ def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_ste
     masters = list(dict.fromkeys(name for name, _, _ in runs))
     timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
     cost = {name: step_cost(lambda count, name=name: timed(name, count)) for name in masters}
-    # a fixed-step master's case records its calls in one run more and replays them
-    # before each run (about a run's time, less the master's)
-    # (``planned_runs`` lists them first)
+    # a fixed-step master's case (``planned_runs`` lists them first) records its calls in
+    # one run more and replays them before each run (about a run's time, less the master's)
     fixed = sum(len(hs) for hs in p["steps"].values())
     total = 0.0
     for k, run in enumerate(runs):
@@ -178,8 +177,9 @@ TIMED_RUNS = 3
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
     """A master's case: its runs, each after the FMU-call floor at its step (the scene's
     for an adaptive master) and, for a fixed-step co-simulation master, after the replay of
-    its own calls (``replay.OwnCallsFloor``: recorded in one more run), and with ``twins`` (the do-nothing FMUs) the prices of a call
-    into ours and into the twins just before and just after the runs, for its time split."""
+    its own calls (``replay.OwnCallsFloor``: recorded in one more run), and with ``twins``
+    (the do-nothing FMUs) the prices of a call into ours and into the twins just before and
+    just after the runs, for its time split."""
     options, method = master_options(scene, name, tolerance)
     at = step if tolerance is None else scene.experiment.step
     prices = {"ours": [], "hollow": []}
