@@ -137,3 +137,26 @@ def test_a_run_is_not_faster_than_the_replay_of_its_own_calls(fmu_dir):
         seconds = replay.replayed(recording)
         ratios.append(simulate(spec, "jacobi-quadratic", 1e-3, fmu_dir).wall_time / seconds)
     assert stats.median(ratios) > 0.95, ratios
+
+
+def test_runs_faster_than_their_own_replay_are_no_result():
+    """The overhead is each run over the replay timed just before it; a run below its replay
+    (which makes the same calls and nothing else) says the machine changed between the two."""
+    from harness.studies import bench
+    from harness.studies.bench.schedule import Case
+
+    case = Case("jacobi-quadratic", "master", 5e-3, wall_times=[1.2, 1.1, 1.5], steps=2000, asked=3,
+                own_calls_times=[1.0, 1.0, 1.0], load=[1.0, 1.0], errors={"tau_rms": 1e-3})
+    found = bench.overhead_above_own_calls(case)
+    assert found == {"median": pytest.approx(0.2), "min": pytest.approx(0.1), "max": pytest.approx(0.5), "n": 3}
+    assert bench.case_problems(case) == []
+    row = bench.table_row(case)
+    assert row["overhead_above_own_calls"] == pytest.approx(0.2) and row["own_calls_floor_s"] == 1.0
+    case.own_calls_times = [1.3, 1.2, 1.2]              # ratios 0.92, 0.92, 1.25
+    assert bench.case_problems(case) == ["the runs took 8 % less than the replay of their own calls timed just "
+                                         "before each (the same calls and nothing else)"]
+    row = bench.table_row(case)
+    assert row["overhead_above_own_calls"] is None and "the replay of their own calls" in row["unreliable"]
+    # a run without a replay for every run has no figure
+    case.own_calls_times = [1.0, 1.0]
+    assert bench.overhead_above_own_calls(case) is None and bench.case_problems(case) == []

@@ -297,10 +297,16 @@ def overhead_above_own_calls(case: Case) -> dict | None:
 
 def case_problems(case: Case) -> list[str]:
     """What makes a case's run time no result: fewer runs than asked (a failed case made
-    its one run), a call floor above the step it bounds."""
+    its one run), a call floor above the step it bounds, runs faster than the replay of
+    their own calls (which makes the same calls and nothing else: the machine changed
+    between the two)."""
     problems = []
     if not case.failure and case.asked:
         problems.append(trust.runs_problem(len(case.wall_times), case.asked, max(case.wall_times, default=None)))
     if case.kind == "master" and case.floor_times and case.steps and case.wall_times:
         problems.append(trust.floor_problem(stats.median(case.floor_times), case.wall / case.steps))
+    own = overhead_above_own_calls(case)
+    if own is not None and own["median"] < 0.0:
+        problems.append(f"the runs took {-100 * own['median']:.0f} % less than the replay of their own calls "
+                        "timed just before each (the same calls and nothing else)")
     return [p for p in problems if p]
