@@ -89,6 +89,7 @@ SLOW = (
     "judges/test_stiff_switch.py",
     "judges/test_fmu_reference_own_error.py",
     "studies/test_cvode_host_grid.py",
+    "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
     "description/test_plan_start_and_record.py",
     "formats/test_ssp_export_twice.py",
     "description/test_physics_checked_once.py::test_a_run_checks_each_components_parameters_once",
@@ -354,6 +355,8 @@ SERIAL = (
     "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
     # a step of 6 s alone is flagged past 15 s: two children of its own fill both cores
     "fmus/test_step_watchdog.py",
+    # a run's time over its replay's, each moved by a neighbour's load
+    "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
 )
 
 #: Work that several tests share through a fixture of their module (``file::fixture``) or of

@@ -160,6 +160,11 @@ def unconverted(function):
     return ctypes.CFUNCTYPE(function.restype)(ctypes.cast(function, ctypes.c_void_p).value)
 
 
+#: the kinds ``Component.wrap_calls`` gives the state calls: fmi2GetFMUstate,
+#: fmi2SetFMUstate and fmi2FreeFMUstate (counted together as ``state``)
+STATE_CALLS = ("get_state", "set_state", "free_state")
+
+
 def step_call(t: float, h: float) -> str:
     """How a refused fmi2DoStep is named in its error: the step's time and size."""
     return f"fmi2DoStep(t = {t:.9g}, h = {h:.3g})"
@@ -393,14 +398,22 @@ class Component:
 
     def wrap_calls(self, wrap: Callable):
         """Replace the hot path's C functions and the state calls by ``wrap(kind, function)``
-        (kind: get, set, step, state), e.g. to time every call; before any plan holds them
+        (kind: get, set, step, and ``STATE_CALLS``, the three calls the ``state`` count holds),
+        e.g. to time every call or record it; before any plan holds them
         (``System(wrap_calls=...)``)."""
         raw = self.raw
         self.raw = raw._replace(get_real=wrap("get", raw.get_real), set_real=wrap("set", raw.set_real),
                                 do_step=wrap("step", raw.do_step))
-        self._get_state = wrap("state", self._get_state)
-        self._set_state = wrap("state", self._set_state)
-        self._free_state = wrap("state", self._free_state)
+        self._get_state = wrap("get_state", self._get_state)
+        self._set_state = wrap("set_state", self._set_state)
+        self._free_state = wrap("free_state", self._free_state)
+
+    @property
+    def raw_state_calls(self) -> tuple:
+        """fmi2GetFMUstate, fmi2SetFMUstate and fmi2FreeFMUstate (FMI 3.0's in a ``Component3``)
+        as the raw calls ``save_state``, ``restore_state`` and ``free_state`` make, without
+        their counts and checks: for a caller that replays recorded calls."""
+        return self._get_state, self._set_state, self._free_state
 
     # -- state (for masters that roll back) --------------------------------------------------
     # Raw calls like the hot path: an iterating master saves, restores and frees a state

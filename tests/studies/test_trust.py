@@ -70,7 +70,7 @@ def test_a_floor_above_the_step_it_bounds_is_flagged_and_no_overhead_is_shown():
                 load=[2.9, 3.1], errors={"tau_rms": 1e-2})
     case.floor_time = 97.5e-6 * case.steps
     row = bench.table_row(case)
-    assert "call floor" in row["unreliable"] and row["overhead_above_floor"] is None
+    assert "call floor" in row["unreliable"] and row["overhead_above_call_floor"] is None
     assert "machine too noisy" in row["unreliable"]
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from harness.engine import masters as master_family
+from harness.engine.component import STATE_CALLS
 from harness.engine.run import simulate
 from harness.engine.system import CO_SIMULATION
 from harness.paths import FMUS
@@ -45,6 +46,8 @@ MAX_DROPPED = 0.2
 OUTLIER = 4.0
 #: how many arguments each kind of call takes (the wrapper matches it: no ``*args``)
 ARITY = {"get": 4, "set": 4, "step": 4, "state": 2}
+#: the kind each wrapped call is counted as (``Component.wrap_calls`` names the three state calls)
+COUNTED_AS = {"get": "get", "set": "set", "step": "step", **dict.fromkeys(STATE_CALLS, "state")}
 
 
 class CallTimer:
@@ -63,6 +66,7 @@ class CallTimer:
         self.window = None
 
     def wrap(self, component: str, kind: str, function):
+        kind = COUNTED_AS[kind]
         account = self.spent.setdefault(component, {}).setdefault(kind, [0.0])
         count = self.made.setdefault(component, {}).setdefault(kind, [0])
         return _timed(function, self.timer, account, count, self.total, self.calls, ARITY[kind])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import statistics as stats
 from dataclasses import asdict
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from harness.description import scene as scenes
 from harness.paths import RESULTS
 from harness.studies import trust
 from harness.studies.bench import editions
-from harness.studies.bench.headlines import case_noise, case_problems, overhead_above_floor
+from harness.studies.bench.headlines import case_noise, case_problems, overhead_above_floor, overhead_above_own_calls
 from harness.studies.bench.schedule import Case
 
 
@@ -26,10 +27,34 @@ def progress_line(case: Case) -> str:
             f"  ({case.steps} steps)")
 
 
+#: what the two floors a master's run is measured against are, in the report's words
+OWN_CALLS_WORDS = ("each run over a replay, timed just before it, of the very FMI calls that run made, with the "
+                   "same arguments, on fresh instances of the FMUs and with nothing else: the FMUs' own cost of "
+                   "that run, an extrapolating master's extra work in the shafts and extra calls included")
+CALL_FLOOR_WORDS = ("each run over one communication step of zero-order-hold calls - each FMU stepped once, one "
+                    "propagation - timed just before it, times the run's steps: a master that sends more or "
+                    "makes more calls shows the FMUs' extra work there too")
+
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
-           "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks", "floor_s", "overhead_above_floor",
+           "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks",
+           "own_calls_floor_s", "overhead_above_own_calls", "overhead_above_own_calls_min",
+           "overhead_above_own_calls_max", "own_calls_note", "floor_s", "overhead_above_call_floor",
            "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
            "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "master_per_step_s", "split_unreliable", "failure"]
+
+
+def own_calls_note(case: Case) -> str | None:
+    """What the floor of a case's own calls is not, in words: not measured and why, or the
+    replay of a span of the run scaled to the whole (None: the whole run, replayed)."""
+    o = case.own_calls
+    if not o:
+        return None
+    if o.get("problem"):
+        return f"own calls not replayed: {o['problem']}"
+    if o["span_steps"] < o["steps"]:
+        return (f"own calls replayed for the first {o['span_steps']} of {o['steps']} steps (the recording's "
+                "bound), scaled to the run's steps")
+    return None
 
 
 def table_row(case: Case) -> dict:
@@ -38,6 +63,7 @@ def table_row(case: Case) -> dict:
     (``split_case``) is left out, the reason in ``split_unreliable``."""
     problems = case_problems(case)
     overhead = overhead_above_floor(case) if case.floor_time and case.stable and not problems else None
+    own = overhead_above_own_calls(case) if case.stable and not problems else None
     spread = trust.spread(case.wall_times)
     loads = [x for x in case.load if x is not None]
     split = None if case.split_unreliable or problems else case.split      # a split of no result is none
@@ -46,8 +72,11 @@ def table_row(case: Case) -> dict:
             "repeats": len(case.wall_times), "asked": case.asked or None,
             "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
             "unreliable": ("; ".join(problems) + f": {case_noise(case, problems)}") if problems else None,
-            "steps": case.steps, "rhs": case.rhs, "method": case.method, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "floor_s": case.floor_time,
-            "overhead_above_floor": overhead, **{k: case.errors.get(k) for k in
+            "steps": case.steps, "rhs": case.rhs, "method": case.method, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "own_calls_floor_s": stats.median(case.own_calls_times) if case.own_calls_times else None,
+            **{f"overhead_above_own_calls{suffix}": own[key] if own else None
+               for suffix, key in (("", "median"), ("_min", "min"), ("_max", "max"))},
+            "own_calls_note": own_calls_note(case),
+            "floor_s": case.floor_time, "overhead_above_call_floor": overhead, **{k: case.errors.get(k) for k in
                                                  ("tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient",
                                                   "w_rms_after_transient")},
             "energy_residual": case.energy_residual,
@@ -133,9 +162,10 @@ def markdown(result: dict, rows: list[dict]) -> str:
              machine_text(result.get("machine") or c.get("machine")), ""]
     if result.get("eigenfrequency_rad_s"):
         lines += [f"Coupling eigenfrequency omega_n = {result['eigenfrequency_rad_s']:.1f} rad/s.", ""]
-    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above floor | torque RMS | torque max | "
-              "speed RMS | torque RMS after transient | energy residual | note |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["| engine | step / tol | run time [min-max] | runs | steps | above own calls [least to most] | "
+              "above call floor | torque RMS | torque max | speed RMS | torque RMS after transient | "
+              "energy residual | note |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         setting = f"tol {r['tolerance']:g}" if r["tolerance"] is not None else f"h {r['step']:g} s"
         if r.get("unreliable"):
@@ -144,11 +174,15 @@ def markdown(result: dict, rows: list[dict]) -> str:
             wall = f"{r['wall_median_s']:.3f} s [{r['wall_min_s']:.3f}-{r['wall_max_s']:.3f}]"
         else:
             wall = f"{r['wall_median_s']:.3f} s"
-        note = "; ".join(x for x in ((r["failure"] or "")[:90], r.get("unreliable") or "") if x)
+        note = "; ".join(x for x in ((r["failure"] or "")[:90], r.get("unreliable") or "",
+                                     r.get("own_calls_note") or "") if x)
+        own = _pct(r["overhead_above_own_calls"])
+        if own and r["repeats"] > 1:
+            own += f" [{_pct(r['overhead_above_own_calls_min'])} to {_pct(r['overhead_above_own_calls_max'])}]"
         runs = f"{r['repeats']}" + (f" of {r['asked']}" if r.get("asked") and r["asked"] != r["repeats"] else "")
         steps = f"{r['steps']}" + (f" ({r['rhs']} RHS)" if r.get("rhs") is not None and r["kind"] == "master" else "")
         lines.append(f"| {r['engine']} | {setting} | {wall} | {runs} | {steps} | "
-                     f"{_pct(r['overhead_above_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
+                     f"{own} | {_pct(r['overhead_above_call_floor'])} | {_pct(r['tau_rms'])} | {_pct(r['tau_max'])} | "
                      f"{_pct(r['w_rms'])} | {_pct(r['tau_rms_after_transient'])} | "
                      f"{'' if r['energy_residual'] is None else format(r['energy_residual'], '.2e')} | {note} |")
     lines += ["", f"## At an RMS torque error of {_pct(c['target_error'])}", "",
@@ -223,11 +257,16 @@ def markdown(result: dict, rows: list[dict]) -> str:
                               f"would take {b['bound_without_master']:.2f}x the floor.")
             elif b.get("bound_unreliable"):
                 lines[-1] += " The bound without a master is not shown: its split is unreliable."
-    if c.get("overhead_above_floor"):
-        lines += ["", "Harness overhead above the FMU-call floor (each run over the floor timed just before it, "
-                  "at the case's step; median over steps; masters that make more FMI calls per step than the "
-                  "floor's one step and one propagation show those calls here too): "
-                  + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_floor"].items()) + "."]
+    if c.get("overhead_above_own_calls"):
+        lines += ["", "Harness overhead above the floor of each run's own FMI calls (" + OWN_CALLS_WORDS
+                  + "; median over the master's steps whose run time is a result [least to most over "
+                  "their runs]): "
+                  + ", ".join(f"{n} {_pct(v['median'])} [{_pct(v['min'])} to {_pct(v['max'])}]"
+                              for n, v in c["overhead_above_own_calls"].items()) + "."]
+    if c.get("overhead_above_call_floor"):
+        lines += ["", "Above the one-step FMU-call floor instead (" + CALL_FLOOR_WORDS + "; median over the same "
+                  "steps): "
+                  + ", ".join(f"{n} {_pct(v)}" for n, v in c["overhead_above_call_floor"].items()) + "."]
     if c.get("largest_stable_baseline_step"):
         s = c["largest_stable_baseline_step"]
         side = s.get("wall_spread_side_by_side")
@@ -286,9 +325,13 @@ def summary_lines(result: dict) -> list[str]:
             lines.append(f"  {case.label:34s} " + ", ".join(
                 f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master"))
                 + (f" ({1e6 * case.timed['master_per_step_s']:.1f} us a step)" if case.timed else ""))
-    if claims.get("overhead_above_floor"):
-        lines.append("  above the FMU-call floor: " + ", ".join(
-            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_floor"].items()))
+    if claims.get("overhead_above_own_calls"):
+        lines.append("  above the floor of its own FMI calls (the run's calls replayed alone): " + ", ".join(
+            f"{n} {100 * v['median']:.0f} % [{100 * v['min']:.0f} to {100 * v['max']:.0f} %]"
+            for n, v in claims["overhead_above_own_calls"].items()))
+    if claims.get("overhead_above_call_floor"):
+        lines.append("  above the one-step FMU-call floor (zero-order-hold calls): " + ", ".join(
+            f"{n} {100 * v:.0f} %" for n, v in claims["overhead_above_call_floor"].items()))
     lines += editions.summary_lines(result.get("fmi_editions"))
     lines.append("  " + machine_text(result.get("machine")))
     return lines

@@ -46,6 +46,12 @@ class Case:
     asked: int = 0
     #: the FMU-call floor [s a step] timed just before each run (masters): one per run
     floor_times: list = field(default_factory=list)
+    #: the floor of the run's own FMI calls [s a run]: the calls the master made, recorded
+    #: once and replayed on fresh FMUs just before each run (``replay``): one per run
+    own_calls_times: list = field(default_factory=list)
+    #: what was replayed (``replay.OwnCallsFloor.summary``): calls, state calls, steps of
+    #: the run's recorded, and why the floor is not measured (``problem``)
+    own_calls: dict | None = None
     #: the machine's one-minute load average before and after the case's runs
     load: list = field(default_factory=list)
     #: the master's own time measured directly (``master_time.measure(...).summary()``),

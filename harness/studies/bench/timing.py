@@ -19,7 +19,7 @@ from harness.engine.system import CO_SIMULATION
 from harness.judges import metrics
 from harness.judges import fmu_reference, monolithic, stability
 from harness.studies import trust
-from harness.studies.bench import floors, master_time
+from harness.studies.bench import floors, master_time, replay
 from harness.studies.bench.schedule import Case
 
 
@@ -43,16 +43,21 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
         case.energy_residual = metrics.energy_balance(scene, times, traces)["residual_relative"]
 
 
-def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None) -> Case:
+def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None, own_calls=None) -> Case:
     """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
     judge the first run (runs are deterministic), stop at a failure or a long run.
-    ``floor()`` (seconds a step of the FMU calls alone) is timed just before each run, so
-    that a run and the floor it is divided by saw the same machine."""
+    ``floor()`` (seconds a step of the FMU calls alone) and ``own_calls()`` (seconds of the
+    run's own calls replayed, None where not measured) are timed just before each run, so
+    that a run and the floors it is divided by saw the same machine."""
     case.asked = repeats
     case.load.append(trust.load_average())
     for attempt in range(repeats):
         if floor is not None:
             case.floor_times.append(floor())
+        if own_calls is not None:
+            seconds = own_calls()
+            if seconds is not None:
+                case.own_calls_times.append(seconds)
         result: RunResult = run_once()
         interrupt.check()          # Ctrl-C during a peer's run: the case is not measured
         case.wall_times.append(result.wall_time)
@@ -103,7 +108,8 @@ def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_ste
     """How long the masters' and peers' runs of plan ``p`` will take, about: each master's
     set-up and cost of a communication step timed now (``cases.step_cost``, at the scene's
     step), times each case's steps and repeats (one run where it would pass the plan's
-    ``repeats_limit_s``), with the floor timed before each run.  None where the runs would
+    ``repeats_limit_s``), with the floor timed before each run (and a fixed-step master's
+    recording and replays of its own calls).  None where the runs would
     take less than a minute even at ``COSTLIEST_STEP_IN_FLOORS`` times the FMU-call floor
     (nothing is timed then).  The monolithic solutions and the side-by-side rounds come on
     top, and an adaptive master's steps are its own: an estimate, not a promise."""
@@ -125,13 +131,19 @@ def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_ste
     masters = list(dict.fromkeys(name for name, _, _ in runs))
     timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
     cost = {name: step_cost(lambda count, name=name: timed(name, count)) for name in masters}
+    # a fixed-step master's case (``planned_runs`` lists them first) records its calls in
+    # one run more and replays them before each run (about a run's time, less the master's)
+    fixed = sum(len(hs) for hs in p["steps"].values())
     total = 0.0
-    for run in runs:
+    for k, run in enumerate(runs):
         name, _, runs_asked = run
         setup, per_step = cost[name]
         one = setup + per_step * steps[run]
-        total += (one + FLOOR_STEPS * floor_per_step) * (1 if one > p["repeats_limit_s"] else runs_asked) \
-            + 4 * PRICE_STEPS * floor_per_step       # the call prices before and after a case, ours and the twins'
+        replayed = k < fixed
+        total += (one * (2 if replayed else 1) + FLOOR_STEPS * floor_per_step) \
+            * (1 if one > p["repeats_limit_s"] else runs_asked) \
+            + 4 * PRICE_STEPS * floor_per_step \
+            + (one if replayed else 0.0)            # the call prices before and after a case; the recording
     return total
 
 
@@ -164,8 +176,10 @@ TIMED_RUNS = 3
 
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
     """A master's case: its runs, each after the FMU-call floor at its step (the scene's
-    for an adaptive master), and with ``twins`` (the do-nothing FMUs) the prices of a call
-    into ours and into the twins just before and just after the runs, for its time split."""
+    for an adaptive master) and, for a fixed-step co-simulation master, after the replay of
+    its own calls (``replay.OwnCallsFloor``: recorded in one more run), and with ``twins``
+    (the do-nothing FMUs) the prices of a call into ours and into the twins just before and
+    just after the runs, for its time split."""
     options, method = master_options(scene, name, tolerance)
     at = step if tolerance is None else scene.experiment.step
     prices = {"ours": [], "hollow": []}
@@ -176,9 +190,16 @@ def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: P
             prices["hollow"].append(floors.call_prices(scene, twins, n_steps=PRICE_STEPS, step=at))
 
     price()
+    # a fixed-step co-simulation master's own calls, recorded in a run of their own
+    own_calls = (replay.OwnCallsFloor(scene, name, step, options, fmu_dir) if tolerance is None and
+                 master_family.master_class(name).interface == CO_SIMULATION else None)
     case = _measure(Case(name, "master", step, tolerance), scene,
                     lambda: simulate(scene, name, step, fmu_dir, options=options), repeats, limit_s,
-                    floor=lambda: floors.call_floor(scene, n_steps=FLOOR_STEPS, fmu_dir=fmu_dir, step=at))
+                    floor=lambda: floors.call_floor(scene, n_steps=FLOOR_STEPS, fmu_dir=fmu_dir, step=at),
+                    own_calls=own_calls)
+    if own_calls is not None:
+        case.own_calls = own_calls.summary()
+        del own_calls       # the recording's memory back before the next case
     price()
     if twins is not None:
         case.prices = prices
