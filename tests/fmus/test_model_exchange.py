@@ -562,6 +562,16 @@ def read_back(fmu, md, vr, kind):
     return fmu.getDirectionalDerivative([u.variable.valueReference for u in md.outputs], known, [1.0])
 
 
+def a_refused_set_keeps_what_was_set(fmu, vr, inputs):
+    """A refused set (a NaN input) is refused at once: what was set before it stays set,
+    the refused input keeps its value."""
+    before = fmu.getReal([vr[n] for n in inputs])
+    fmu.setReal([vr[inputs[-1]]], [before[-1] + 0.125])
+    refused(fmu.setReal, [vr[inputs[0]]], [float("nan")])
+    after = fmu.getReal([vr[n] for n in inputs])
+    assert after[-1] == before[-1] + 0.125 and after[0] == before[0]
+
+
 @pytest.mark.parametrize("name", sorted(POINTS))
 def test_the_model_computes_with_what_the_host_set_in_any_order(unpacked, name):
     """fmi2SetTime, fmi2SetContinuousStates and fmi2SetReal of inputs in range are kept in
@@ -611,12 +621,7 @@ def test_the_model_computes_with_what_the_host_set_in_any_order(unpacked, name):
             rng.shuffle(kinds)
             for kind in kinds:
                 assert read_back(lazy, md, vr, kind) == read_back(eager, md, vr, kind), (trial, kind, sets)
-        # a refused set: what was set before it stays set, the refused input keeps its value
-        before = lazy.getReal([vr[n] for n in inputs])
-        lazy.setReal([vr[inputs[-1]]], [before[-1] + 0.125])
-        refused(lazy.setReal, [vr[inputs[0]]], [float("nan")])
-        after = lazy.getReal([vr[n] for n in inputs])
-        assert after[-1] == before[-1] + 0.125 and after[0] == before[0]
+        a_refused_set_keeps_what_was_set(lazy, vr, inputs)
     finally:
         free(lazy)
         free(eager)
@@ -673,11 +678,7 @@ def test_a_co_simulation_step_takes_what_the_host_set_in_any_order(unpacked, nam
             rng.shuffle(order)
             for refs, expected in order:
                 assert lazy.getReal(refs) == expected, (trial, what, chosen)
-        before = lazy.getReal([vr[n] for n in inputs])
-        lazy.setReal([vr[inputs[-1]]], [before[-1] + 0.125])
-        refused(lazy.setReal, [vr[inputs[0]]], [float("nan")])
-        after = lazy.getReal([vr[n] for n in inputs])
-        assert after[-1] == before[-1] + 0.125 and after[0] == before[0]
+        a_refused_set_keeps_what_was_set(lazy, vr, inputs)
     finally:
         if saved is not None:
             for fmu, state in zip((lazy, eager), saved[0]):
