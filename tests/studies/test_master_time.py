@@ -6,7 +6,7 @@ import pytest
 
 from harness.description import scene
 from harness.engine.masters.explicit import JacobiMaster
-from harness.studies.bench import master_time
+from harness.studies.bench import floors, master_time
 
 
 class Ticks:
@@ -129,3 +129,23 @@ def test_prices_above_a_few_calls_measured_time_refuse_the_split_only_where_a_sh
         assert split is None
         assert problem == ("load's state calls priced at the do-nothing twins' (60.0 us a call) come to more than "
                            "the time measured in them (10.0 us)")
+
+
+def test_reads_and_sets_the_entry_answers_itself_are_crossing_alone():
+    """Our FMUs' entry keeps a set and answers a read of a step's outputs without entering
+    the model: such calls measured below the do-nothing twins' price (here 1 us against 4 us
+    a call) are all crossing, and the split stands (by hand: crossing (100 + 50 + 600) us /
+    100 steps = 7.5 us a step, slave 40 - 7.5 = 32.5 us, master 10 us of 50 us); a step call
+    measured so still refuses it."""
+    timed = {"problems": [], "steps": 100, "master_per_step_s": 10e-6, "in_calls_per_step_s": 40e-6,
+             "calls": {"load": {"set": 100, "get": 50, "step": 100}},
+             "in_call_s": {"load": {"set": 100e-6, "get": 50e-6, "step": 3850e-6}}}
+    twins = {"load": {"set": 4e-6, "get": 4e-6, "step": 6e-6}}
+    split, problem = master_time.split(timed, twins, wall=1.0)
+    assert problem is None
+    assert split == pytest.approx({"crossing": 0.15, "slave": 0.65, "master": 0.2})
+    slow_steps = {**timed, "in_call_s": {"load": {"set": 100e-6, "get": 50e-6, "step": 100e-6}}}
+    assert master_time.split(slow_steps, twins, wall=1.0)[0] is None
+    # the split from prices alone counts such a call's price as crossing, never a negative slave
+    assert floors.time_split(1.0, {"load": {"set": 100}}, {"load": {"set": 1e-6}}, {"load": {"set": 4e-6}}) == \
+        pytest.approx({"crossing": 100e-6, "slave": 0.0, "master": 1.0 - 100e-6})
