@@ -34,6 +34,14 @@ docs: $(STAMP)
 JOBS     ?= auto
 PARALLEL := -n $(JOBS) --dist loadgroup
 
+# Python keeps its compiled bytecode, in PYCACHE outside the sources, also where the
+# environment says not to write it beside them (PYTHONDONTWRITEBYTECODE): without it every
+# pytest process and every `lever` a test starts compiled the project anew, and pytest
+# rewrote every test module's asserts - two thirds of each collection's CPU time.
+PYCACHE ?= $(abspath $(VENV))/pycache
+export PYTHONPYCACHEPREFIX := $(PYCACHE)
+export PYTHONDONTWRITEBYTECODE :=
+
 # After its prerequisite test-dispatch (below), the oracles first - expected values that do
 # not come from the code under test, so a wrong model fails within minutes - then the rest.
 # The FMUs are built before the workers start, so that none of them waits for the build.
