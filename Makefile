@@ -34,6 +34,13 @@ docs: $(STAMP)
 JOBS     ?= auto
 PARALLEL := -n $(JOBS) --dist loadgroup
 
+# Python keeps its compiled bytecode (__pycache__, ignored by git) also where the environment
+# says not to write it (PYTHONDONTWRITEBYTECODE): without it every pytest process and every
+# `lever` a test starts compiled the project anew, and pytest rewrote every test module's
+# asserts - two thirds of each collection's CPU time.  Not PYTHONPYCACHEPREFIX: the
+# bytecode of each FMU's unpacked copy would stay there after the copy is removed.
+export PYTHONDONTWRITEBYTECODE :=
+
 # After its prerequisite test-dispatch (below), the oracles first - expected values that do
 # not come from the code under test, so a wrong model fails within minutes - then the rest.
 # The FMUs are built before the workers start, so that none of them waits for the build.

@@ -5,7 +5,9 @@ strictly (``check_shape``: a boolean or a string where a number belongs is refus
 resolved to its file.  ``harness.description.scene`` builds the ``Scene`` from it."""
 from __future__ import annotations
 
+import copy
 import difflib
+import functools
 import tomllib
 from pathlib import Path
 
@@ -56,12 +58,24 @@ OWN = ("name", "description", "extends")
 MERGED = ("experiment", "limits", "validation")
 
 
+@functools.lru_cache(maxsize=256)
+def _parsed(text: str) -> dict:
+    return tomllib.loads(text)
+
+
+def parse_toml(text: str) -> dict:
+    """``text`` read as TOML, a table of the caller's own: a scene file is read many times
+    over (every scene's features when a command lists the references, a base once for each
+    variant), and parsing took most of a ``lever validate`` that refuses its input."""
+    return copy.deepcopy(_parsed(text))
+
+
 def read_data(path: Path, extending: tuple[Path, ...] = ()) -> dict:
     """The TOML table of the scene file ``path``, with what it inherits when it names a
     base scene (``extends = "kavz685"``: a scene beside it or in resources/scenes, or a
     .toml path relative to it) and states only what differs."""
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = parse_toml(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path}: not a valid TOML file: {error}") from None
     except UnicodeDecodeError as error:

@@ -27,6 +27,24 @@ def pyplot():
     return plt
 
 
+def save_png(fig, path, dpi: int = 110) -> None:
+    """``fig`` written to ``path`` as a PNG at ``dpi``, pixel for pixel what
+    ``fig.savefig(path, dpi=dpi)`` writes, drawn once: savefig draws a figure with a layout
+    engine twice (a pass that places the axes and renders nothing, then the picture), a
+    fifth of the time of a run's plots; here the layout is placed and the picture drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    if not isinstance(fig.canvas, FigureCanvasAgg):     # a figure of another backend: its own way
+        fig.savefig(path, dpi=dpi)
+        return
+    fig.set_dpi(dpi)
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        engine.execute(fig)
+        fig.set_layout_engine("none")       # placed: the draw keeps the axes where they are
+    fig.canvas.print_png(path)
+
+
 def legend_outside(ax, fontsize: float = 8, **options) -> None:
     """The axes' legend to the right of the axes, where it covers no data (nothing when
     nothing is labelled).  The figure must leave room: ``constrained`` layout does."""
@@ -257,5 +275,5 @@ def time_view(t, series: list[tuple[str, np.ndarray]], ylabel: str, unit: str, t
     return fig
 
 
-__all__ = ["PAIR_COLOURS", "pyplot", "legend_outside", "legend_above", "row_legend", "zoom", "mark_transient", "log_ticks", "turns",
+__all__ = ["PAIR_COLOURS", "pyplot", "save_png", "legend_outside", "legend_above", "row_legend", "zoom", "mark_transient", "log_ticks", "turns",
            "envelope", "trace", "detail_span", "impulse_limits", "time_view"]

@@ -108,7 +108,7 @@ def read_csv(path: Path) -> Traces:
     try:
         # utf-8-sig: a byte-order mark (as spreadsheets write one) is not part of the first name
         with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = [row for row in csv.reader(f) if row and any(cell.strip() for cell in row)]
+            rows = [row for row in csv.reader(f) if "".join(row).strip()]     # blank rows left out
     except OSError as error:
         raise TraceFileError(f"{path}: {error.strerror}") from None
     except UnicodeDecodeError as error:

@@ -15,6 +15,7 @@ from harness.description import scene as scenes
 from harness.engine.run import RunResult
 from harness.paths import FMUS
 from harness.engine import interrupt, masters
+from harness.formats import plotting
 from harness.engine.traces import replaced as write_whole
 from harness.engine.traces import write as write_traces     # one writer: a streamed and a plain run write the same file
 
@@ -64,7 +65,7 @@ def save_figure(fig, path: Path, dpi: int = 110):
             _not_drawn.append(path.name)
             return
         with write_whole(path) as temporary:
-            fig.savefig(temporary, dpi=dpi)
+            plotting.save_png(fig, temporary, dpi)
     finally:
         plt.close(fig)
 

@@ -100,7 +100,7 @@ def plot_verdict_signal(out: Path, reference: ReferenceTraces, result: Result, s
                       fontsize=9)
     axes[1].set_title(zoom_title, fontsize=9)
     path = out / f"{signal.name}.png"
-    fig.savefig(path, dpi=110)
+    plotting.save_png(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -165,6 +165,6 @@ def plot_signal(out: Path, reference: ReferenceTraces, result: Result, finding, 
     plotting.legend_outside(axes[0])
     axes[0].set_title(f"{reference.name}: {finding.name} - {finding.problem}", fontsize=9)
     path = out / f"{finding.name}.png"
-    fig.savefig(path, dpi=110)
+    plotting.save_png(fig, path, dpi=110)
     plt.close(fig)
     return path

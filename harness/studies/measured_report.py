@@ -131,7 +131,7 @@ def plot_grade(out: Path, drive: Table, driven: Table, prediction: Prediction, p
                  f"{100 * numbers['rms_model']:.1f} %, naive {100 * numbers['rms_naive']:.1f} %")
     ax.grid(alpha=0.3)
     plotting.legend_outside(ax)
-    fig.savefig(path, dpi=110)
+    plotting.save_png(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -349,7 +349,7 @@ def _plot(path: Path, result: StabilityMap) -> Path:
     fig.legend(handles=handles, loc="outside lower center", ncol=len(handles) if ncols > 1 else 2, fontsize=8,
                frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes; lines: linear analysis)", fontsize=11)
-    fig.savefig(path, dpi=110)
+    plotting.save_png(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -385,6 +385,6 @@ def _plot_observed(path: Path, result: StabilityMap) -> Path:
     fig.legend(handles=handles, loc="outside lower center", ncol=max(1, len(handles)), fontsize=8, frameon=False)
     fig.suptitle(f"Stability map: {result.scene.name} (observed classes only; edges not predicted)\n"
                  + textwrap.fill(result.no_prediction, 110), fontsize=9)
-    fig.savefig(path, dpi=110)
+    plotting.save_png(fig, path, dpi=110)
     plt.close(fig)
     return path

@@ -241,7 +241,7 @@ def _plot(path: Path, axis: Axis, rows: list[dict], reported: dict):
         ax.set_xlabel(axis.quantity)
     fig.suptitle(f"{axis.name} (Fig. {axis.figure}): {axis.note}" + ("" if not comparisons else
                  "\nthe monograph's points (x) on the model's axes"), fontsize=9)
-    fig.savefig(path, dpi=100)
+    plotting.save_png(fig, path, dpi=100)
     plt.close(fig)
 
 

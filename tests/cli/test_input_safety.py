@@ -182,7 +182,7 @@ def _open_scene(tmp_path, strict=False) -> Path:
 
 
 def test_an_unconnected_input_is_named_in_the_output_and_the_report(lever, fmu_dir, tmp_path):
-    result = lever("run", _open_scene(tmp_path), "--out", tmp_path / "o", "--no-progress")
+    result = lever("run", _open_scene(tmp_path), "--out", tmp_path / "o", "--no-progress", "--no-plots")
     assert result.exit_code == 0, result.output
     assert "load.tau is connected to nothing" in result.output
     import json

@@ -98,3 +98,22 @@ def test_variants_chain_and_a_circle_or_a_missing_base_is_a_scene_error(tmp_path
         scenes.load(_write(tmp_path, "orphan", 'extends = "nowhere"\n'))
     with pytest.raises(scenes.SceneError, match="expected the name"):
         scenes.load(_write(tmp_path, "odd", "extends = 3\n"))
+
+
+def test_a_scene_file_read_again_is_read_as_it_is_now_into_a_table_of_its_own(tmp_path):
+    """Parsed scene files are kept (a command reads every scene's features): a file edited
+    between two reads is read as it is now, and a caller that changes the table it got
+    changes no later read."""
+    from harness.description import scene_file
+
+    path = tmp_path / "s.toml"
+    path.write_text('extends = "kavz685"\n[experiment]\nstop = 0.5\n')
+    first = scene_file.read_data(path)
+    first["experiment"]["stop"] = 99.0
+    first["components"]["coupling"]["parameters"]["stiffness"] = -1.0
+    again = scene_file.read_data(path)
+    assert again["experiment"]["stop"] == 0.5
+    assert again["components"]["coupling"]["parameters"]["stiffness"] == \
+        scene_file.read_data(scene_file.SCENES / "kavz685.toml")["components"]["coupling"]["parameters"]["stiffness"] > 0
+    path.write_text('extends = "kavz685"\n[experiment]\nstop = 0.25\n')
+    assert scene_file.read_data(path)["experiment"]["stop"] == 0.25

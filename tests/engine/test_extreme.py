@@ -130,7 +130,7 @@ def test_an_fmu_refusal_gives_the_same_diagnosis():
 def test_lever_run_exits_nonzero_with_the_diagnosis_and_the_traces(lever, tmp_path):
     out = tmp_path / "diverged"
     done = lever("run", "kavz685_stiff_1e6", "--master", "jacobi", "--step", "1e-4",
-                 "--set", "experiment.stop=0.1", "--set", "experiment.transient=0", "--out", out)
+                 "--set", "experiment.stop=0.1", "--set", "experiment.transient=0", "--no-plots", "--out", out)
     assert done.exit_code == 1, done.stderr
     assert "diverged:" in done.stderr and ("FMU EngineShaft" in done.stderr or "FMU LoadShaft" in done.stderr)
     assert "master jacobi, step 0.0001 s" in done.stderr and "Traceback" not in done.stderr

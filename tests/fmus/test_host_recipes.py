@@ -71,7 +71,7 @@ def _quoted_blocks() -> dict[str, str]:
 
 def test_the_docs_quote_every_recipe_as_it_is():
     blocks = _quoted_blocks()
-    files = {f"examples/hosts/{p.name}" for p in HOSTS.iterdir() if p.name != "run_recipes.py"}
+    files = {f"examples/hosts/{p.name}" for p in HOSTS.iterdir() if p.is_file() and p.name != "run_recipes.py"}
     assert files == {f"examples/hosts/{r.file}" for r in recipes.RECIPES}, "a recipe the runner does not run"
     assert set(blocks) == files
     for name, body in blocks.items():

@@ -110,7 +110,7 @@ def test_a_second_writer_is_refused_and_the_lock_dies_with_its_holder(lever, tmp
     finally:
         holder.kill()                     # a crash: the kernel drops the lock
         holder.wait()
-    again = lever("run", "kavz685", *BRIEF, "--no-reference", "--out", out)
+    again = lever("run", "kavz685", *BRIEF, "--no-reference", "--no-plots", "--out", out)
     assert again.exit_code == 0, again.output
     assert (out / "traces.csv").exists()
 

@@ -200,8 +200,7 @@ def test_the_sweep_says_how_far_and_which_way_the_model_is_from_the_monograph():
 
 def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_the_gap(tmp_path, monkeypatch):
     drawn = {}
-    plt = plotting.pyplot()
-    monkeypatch.setattr(plt.Figure, "savefig", lambda fig, path, **options: drawn.setdefault("fig", fig))
+    monkeypatch.setattr(plotting, "save_png", lambda fig, path, **options: drawn.setdefault("fig", fig))
     axis = sweeps.select(["misalignment"])[0]
     sweep_report._plot(tmp_path / "s.png", axis, _sweep_rows(), REPORTED_318)
     fig = drawn["fig"]
@@ -219,7 +218,7 @@ def test_the_sweeps_plot_puts_the_monographs_points_on_the_models_axes_and_says_
     for ax in (fig.axes[3], torque_dA):                             # plain numbers, not $10^{1}$
         shown = [label.get_text() for label in ax.get_yticklabels() if label.get_text()]
         assert shown and not any("$" in text for text in shown), shown
-    plt.close(fig)
+    plotting.pyplot().close(fig)
 
 
 def test_a_run_of_three_samples_gets_a_detail_of_two_without_a_warning():
