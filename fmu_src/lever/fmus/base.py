@@ -107,7 +107,7 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
         for vr, p in self._settable.items():
             if p.kind == "real" and not p.fixed:
                 self._fast_inputs[vr] = (p.name, *closed_bounds(p))
-        self._outputs_of = operator.attrgetter(*(o.name for o in self.OUTPUTS)) if self.OUTPUTS else None
+        self._outputs_of = _reader_of([o.name for o in self.OUTPUTS]) if self.OUTPUTS else None   # a tuple
         self._take_configured_start_values()
 
     def _take_configured_start_values(self):
@@ -318,7 +318,7 @@ class LeverSlave(ValueChecks, StateSaving, ModelDescription, Fmi2Slave):
             # overflows, which the test below sorts out).
             if self._outputs_of is None:
                 return
-            total = sum(self._outputs_of(self)) if len(self.OUTPUTS) > 1 else self._outputs_of(self)
+            total = sum(self._outputs_of(self))
             if total - total == 0.0:
                 return
             bad = [o.name for o in self.OUTPUTS if not math.isfinite(getattr(self, o.name))]

@@ -78,8 +78,6 @@ class NativeEntryChannel:
         kind.  Outputs that are not all finite are left to the next read, which says so."""
         self._compute_outputs()
         values = self._outputs_of(self)
-        if len(self.OUTPUTS) == 1:
-            values = (values,)
         total = sum(values)
         if total - total == 0.0:
             self._dirty = CLEAN

@@ -39,6 +39,8 @@ from harness.engine.component import STATE_CALLS
 from harness.engine.run import simulate
 from harness.engine.system import System
 from harness.paths import FMUS
+from harness.studies.bench.floors import CALL_KINDS
+from harness.studies.bench.master_time import COUNTED_AS
 
 #: calls recorded at most (about 160 bytes a call kept, more while replayed): a run longer
 #: than this is recorded and replayed for a span of its first whole steps
@@ -48,8 +50,7 @@ MAX_CALLS = 500_000
 REAL_TYPES = ("Real", "Float64")
 
 GET, SET, STEP, GET_STATE, SET_STATE, FREE_STATE = range(6)
-_KINDS = {"get": GET, "set": SET, "step": STEP, "get_state": GET_STATE, "set_state": SET_STATE,
-          "free_state": FREE_STATE}
+_KINDS = {"get": GET, "set": SET, "step": STEP, **dict(zip(STATE_CALLS, (GET_STATE, SET_STATE, FREE_STATE)))}
 
 
 class ReplayDiverged(RuntimeError):
@@ -212,11 +213,10 @@ def record(scene, master: str, step: float, options: dict | None = None, fmu_dir
         recording.failure = f"{master} failed in the recorded run: {run.failure}"
         recording.calls.clear()
         return recording
-    counted = {name: {kind: 0 for kind in ("get", "set", "step", "state")} for name in names}
-    kind_names = {GET: "get", SET: "set", STEP: "step", GET_STATE: "state", SET_STATE: "state",
-                  FREE_STATE: "state"}
+    counted = {name: dict.fromkeys(CALL_KINDS, 0) for name in names}
+    counted_as = {code: COUNTED_AS[kind] for kind, code in _KINDS.items()}
     for call in recording.calls[recording.start:]:
-        counted[names[call[0]]][kind_names[call[1]]] += 1
+        counted[names[call[0]]][counted_as[call[1]]] += 1
     recording.calls_by_kind = counted
     return recording
 
