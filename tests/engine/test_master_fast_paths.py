@@ -9,9 +9,13 @@ import random
 import numpy as np
 import pytest
 
+from harness.description import plan as plans
 from harness.description import scene
 from harness.engine import run
 from harness.engine.masters import explicit
+from harness.engine.system import System
+
+MASTERS = {cls.name: cls for cls in (explicit.LinearExtrapolationMaster, explicit.QuadraticExtrapolationMaster)}
 
 
 def _nodes(rng, n):
@@ -55,22 +59,56 @@ def test_a_node_within_1e_10_of_a_key_rounds_to_that_key():
 @pytest.mark.parametrize("name", ["jacobi-linear", "jacobi-quadratic"])
 def test_a_fixed_step_reuses_the_weights_the_rounded_key_finds(name, monkeypatch):
     """Every step's derivative weights are the ones the cache holds under the step's
-    rounded pattern: the shortcut never hands on another pattern's."""
+    rounded pattern: the shortcut (in ``_derivatives`` and in the steady step's function)
+    never hands on another pattern's.  The weights a step sent ahead with are the last
+    ones (``_last_derivatives``), whichever path found them."""
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.05", "experiment.transient=0"])
     checked = []
-    original = explicit.ExtrapolatingJacobiMaster._derivatives
+    original = explicit.ExtrapolatingJacobiMaster._step_impl
 
-    def checking(self, history, t_end, scale):
-        weights = original(self, history, t_end, scale)
+    def checking(self, t, h):
+        original(self, t, h)
+        history, t_end = self.history, t + h
+        if len(history) < self.degree:                      # a start-up step sends nothing ahead
+            return
+        scale = t_end - history[-1][0]
         times = [p[0] for p in history] + [t_end]
         key = ("d",) + tuple(round((x - t_end) / scale, 9) for x in times)
-        assert self._weights_cache[key] is weights
+        assert self._weights_cache[key] is self._last_derivatives[1]
         checked.append(t_end)
-        return weights
 
-    monkeypatch.setattr(explicit.ExtrapolatingJacobiMaster, "_derivatives", checking)
+    monkeypatch.setattr(explicit.ExtrapolatingJacobiMaster, "_step_impl", checking)
     result = run.simulate(spec, master=name, step=1e-3)
-    assert result.ok and len(checked) >= 45
+    assert result.ok and len(checked) >= 48
+
+
+@pytest.mark.parametrize("name", ["jacobi-linear", "jacobi-quadratic"])
+def test_the_steady_step_is_the_general_step_call_for_call(name, monkeypatch):
+    """The steady step's one function against the step made part by part (``_general_step``
+    and ``Master.step``'s reads): the same traces bit for bit and the same FMI calls, on a
+    run that varies its step (so the weights change and the steady step hands over)."""
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.03", "experiment.transient=0"])
+
+    def run_with(steady: bool):
+        monkeypatch.setattr(explicit.ExtrapolatingJacobiMaster, "steady_steps", steady)
+        plan = plans.check(spec)
+        system = System(plan, record=list(plan.recorded))
+        system.initialize()
+        try:
+            driver = MASTERS[name](system, 1e-3)
+            assert (driver._whole_step != driver._general_step) is steady
+            rows = []
+            for h in [1e-3] * 8 + [5e-4] * 6 + [1e-3] * 5 + [2e-3] * 4:
+                driver.step(h)
+                rows.append(np.ctypeslib.as_array(system.output_block).copy())
+            return rows, system.calls_by_kind()
+        finally:
+            system.free()
+
+    steady_rows, steady_calls = run_with(True)
+    general_rows, general_calls = run_with(False)
+    assert np.array_equal(np.array(steady_rows), np.array(general_rows))
+    assert steady_calls == general_calls
 
 
 def test_midpoint_prediction_is_the_taylor_sum_to_rounding():

@@ -189,6 +189,7 @@ class AdaptiveMaster(StepControl, ExtrapolatingJacobiMaster):
     description = "ramped quadratic extrapolation with error-controlled steps (predictor-corrector, PI)"
     options = {"tolerance": 1e-3, "min_step": 1e-8, "max_step": None, "ramp": True}
 
+    steady_steps = False        # every step is its own (``_step_impl``), none compiled whole
     MEAN_FRACTION = (0.5, 5.0 / 12.0, 3.0 / 8.0)   # by degree: mean error / end-point error
     ESTIMATE_ORDER = 3
 

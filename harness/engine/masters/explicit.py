@@ -34,15 +34,18 @@ class JacobiMaster(Master):
     name = "jacobi"
     order = 1
     description = "parallel steps, inputs held from the start of the step (zero-order hold)"
+    reads_recorded = True       # the step's function reads them last (``_compile_step``)
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
         self._compile_step()
 
     def _compile_step(self):
-        """The step and the propagation after it as one function (``System.runner``); made
-        again by a master that exposes outputs (the propagation reads them too)."""
-        self._step_and_propagate = self.system.runner(self.system.propagation_plan, self._steps)
+        """The step, the propagation after it and the reads of the recorded outputs that
+        depend on the inputs it wrote, as one function (``System.runner``); made again by a
+        master that exposes outputs (the propagation reads them too)."""
+        system = self.system
+        self._step_and_propagate = system.runner(system.propagation_plan + system.dependent_reads, self._steps)
 
     def _step_impl(self, t, h):
         self._step_and_propagate(t, h)
@@ -56,6 +59,7 @@ class GaussSeidelMaster(Master):
     name = "gauss-seidel"
     order = 1
     description = "sequential steps, each shaft sees the coupling on the latest states"
+    reads_recorded = True       # the whole step's function reads them last
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
@@ -65,6 +69,7 @@ class GaussSeidelMaster(Master):
             add_steps(source, system.step_plan([name]))
             add_visits(source, system.partial_plan([name]))
         add_steps(source, self._feedthrough_steps)
+        add_visits(source, system.dependent_reads)
         self._whole_step = source.function()
 
     def _step_impl(self, t, h):
@@ -207,6 +212,10 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
 
     degree = 1
     options = {"ramp": True}
+    reads_recorded = False      # but the steady step's function does (``_steady_step``)
+    #: a step after the start-up is one compiled function where it can be (``_steady_step``);
+    #: a subclass with a ``_step_impl`` of its own says False
+    steady_steps = True
 
     def __init__(self, system: System, step: float, **options):
         super().__init__(system, step, **options)
@@ -271,6 +280,13 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         # The derivative weights the last step used and the scaled nodes of their key:
         # a fixed step's next pattern is recognised without rounding (``_derivatives``).
         self._last_derivatives = None
+        # Where every component takes the polynomial whole, a step after the start-up is one
+        # function (``_steady_step``) that also reads the recorded outputs itself.
+        if self.steady_steps and self.sends_ahead and not self._rest:
+            self.reads_recorded = True
+            self._whole_step = self._steady_step()
+        else:
+            self._whole_step = self._general_step
 
     def _derivative_inputs(self, inputs) -> list[list]:
         """For each ``Inputs`` of ``inputs``: the value references of their declared time
@@ -359,8 +375,14 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         if points:
             source.line(", ".join(f"(_, past{j})" for j in range(points)) + ", = history")
         source.line(", ".join(f"f{j}" for j in range(points + 1)) + ", = first")
-        if any(each[5] for each in self._ahead_inputs):
+        if self._ahead_curved:
             source.line(", ".join(f"s{j}" for j in range(points + 1)) + ", = second")
+        self._add_ahead_writes(source, points)
+        return source.function()
+
+    def _add_ahead_writes(self, source: Source, points: int):
+        """The lines of ``_ahead_writer``'s writes and sends, in ``source`` (past values
+        ``past0`` ..., weights ``f0`` ... and ``s0`` ..., ``scale`` and ``squared`` bound)."""
         for k, i, values, now, n, higher in self._ahead_inputs:
             held, live = source.name(values, "held"), source.name(now, "live")
             source.line(f"u = {live}[{i}]")
@@ -372,7 +394,6 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
                             + "".join(f"s{j} * past{j}[{k}][{i}] + " for j in range(points))
                             + f"s{points} * u) / squared")
         add_visits(source, self._sends_ahead)
-        return source.function()
 
     def _derivatives(self, history, t_end, scale):
         """The derivative weights at ``t_end`` through the history's times and it, cached by
@@ -426,6 +447,66 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         return weights
 
     def _step_impl(self, t, h):
+        self._whole_step(t, h)
+
+    def _steady_step(self) -> Callable:
+        """``_general_step`` and the reads of the recorded outputs after it as one function
+        (``harness.engine.straight_line``) of ``(t, h)``, for a master whose components all take
+        the polynomial whole.  A step after the start-up - the history full, its newest point
+        the one the inputs were sent ahead after, the last derivative weights matching the
+        times - is made here, call for call and operation for operation as ``_general_step``,
+        ``_send_ahead`` and ``_derivatives`` make it; any other goes to ``_general_step``."""
+        points = self.degree
+        source = Source(f"steady step through {points + 1} points", "t, h")
+        master = source.name(self, "master")
+        general = source.name(self._general_step, "general")
+        source.line(f"history = {master}.history")
+        source.line(f"after = {master}._ahead_after")
+        source.line(f"if after is None or len(history) != {points} or history[-1] is not after:")
+        source.line(f"    return {general}(t, h)")
+        # the snapshot (``snapshot_of``): each input buffer's values as a list
+        source.line("start = [" + ", ".join(
+            "[" + ", ".join(f"{source.name(values, 'live')}[{i}]" for i in range(len(values))) + "]"
+            for values in self._live) + "]")
+        source.line(f"{master}._ahead_after = None")
+        add_steps(source, self._steps)
+        add_visits(source, self._held_plan)
+        source.line("history.append((t, start))")
+        # ``_send_ahead`` at the step's end, ``_derivatives``' test of the last weights unrolled
+        source.line("t_end = t + h")
+        source.line("scale = t_end - history[-1][0]")
+        source.line(", ".join(f"(t{j}, past{j})" for j in range(points)) + ", = history")
+        source.line(f"last = {master}._last_derivatives")
+        source.line("weights = None")
+        source.line("if last is not None:")
+        source.line("    nodes = last[0]")
+        source.line(f"    if len(nodes) == {points}:")
+        source.line("        " + ", ".join(f"n{j}" for j in range(points)) + ", = nodes")
+        source.line("        if " + " and ".join(f"abs((t{j} - t_end) / scale - n{j}) < 1e-10"
+                                                 for j in range(points)) + ":")
+        source.line("            weights = last[1]")
+        source.line("if weights is None:")
+        source.line(f"    weights = {master}._derivatives(history, t_end, scale)")
+        source.line(", ".join(f"f{j}" for j in range(points + 1)) + ", = weights[0]")
+        if self._ahead_curved:
+            source.line(", ".join(f"s{j}" for j in range(points + 1)) + ", = weights[1]")
+            source.line("squared = scale * scale")
+        self._add_ahead_writes(source, points)
+        source.line(f"{master}._ahead_after = history[-1]")
+        add_visits(source, self.system.dependent_reads)
+        source.line(f"{master}._inputs_unsent = False")
+        return source.function()
+
+    def _general_step(self, t, h):
+        """A step of this family, whatever the history (a start-up, inputs not sent ahead, a
+        restored state); with ``reads_recorded`` it reads the recorded outputs after it too,
+        as ``Master.step`` does otherwise."""
+        self._general_step_impl(t, h)
+        if self.reads_recorded and self.system.has_dependent_outputs:
+            self.system.refresh_dependent(send=self._inputs_unsent)
+            self._inputs_unsent = False
+
+    def _general_step_impl(self, t, h):
         start = self.snapshot()
         history = self.history
         # While the history is too short for the full degree and the stateful components
