@@ -16,7 +16,6 @@ from harness.description.plan import recorded_names
 from harness.engine.component import FmuCallError
 from harness.engine.system import FloorPlan, System
 from harness.paths import FMUS
-from harness.studies.bench.master_time import ANSWERED_AT_ENTRY
 
 
 def _initial_states(system: System) -> list | None:
@@ -284,11 +283,8 @@ def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, di
                 continue
             if kind not in ours.get(name, {}) or kind not in twins.get(name, {}):
                 return None
-            # a read or a set our FMU's entry answers itself costs less than entering the
-            # twin's model: all of it crossing
-            price = min(twins[name][kind], ours[name][kind]) if kind in ANSWERED_AT_ENTRY else twins[name][kind]
-            crossing += count * price
-            slave += count * (ours[name][kind] - price)
+            crossing += count * twins[name][kind]
+            slave += count * (ours[name][kind] - twins[name][kind])
     return {"crossing": crossing, "slave": slave, "master": wall - crossing - slave}
 
 
