@@ -263,15 +263,21 @@ def step_parts(marks: list[tuple[float, float, int]], calibration: dict, state_c
     return masters, in_calls, corrections
 
 
-def kept_steps(masters: list, in_calls: list) -> list[int]:
-    """The steps not interrupted: those whose whole time is within ``OUTLIER`` times the
-    median step's (another process's turn on the processor, a page fault or a collection
-    of the garbage lands in a few steps and makes them many times as long)."""
-    totals = [m + c for m, c in zip(masters, in_calls)]
+def uninterrupted(totals: list) -> list[int]:
+    """The steps not interrupted, of steps that took ``totals`` seconds: those within
+    ``OUTLIER`` times the median step's (another process's turn on the processor, a page
+    fault or a collection of the garbage lands in a few steps and makes them many times as
+    long)."""
     if not totals:
         return []
     limit = OUTLIER * stats.median(totals)
     return [k for k, total in enumerate(totals) if total <= limit]
+
+
+def kept_steps(masters: list, in_calls: list) -> list[int]:
+    """The steps not interrupted (``uninterrupted``), each step's whole time its master's
+    and its calls' time."""
+    return uninterrupted([m + c for m, c in zip(masters, in_calls)])
 
 
 def measure(scene, master: str, step: float, options: dict | None = None, fmu_dir: Path = FMUS,
