@@ -31,7 +31,6 @@ its ``do-nothing-twins`` part) and reused.
 from __future__ import annotations
 
 import ast
-import configparser
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -264,9 +263,11 @@ def entry_of(fmu: Path) -> Entry | None:
         library = f"{PLATFORM_DIR}/{model}.so"
         if library not in names:
             raise ValueError(f"{Path(fmu).name} has our native entry's configuration but no {library}")
-        config = configparser.ConfigParser(interpolation=None)
-        config.read_string("[entry]\n" + archive.read(ENTRY_CONFIG).decode())
-        channel = config["entry"].get("channel", "0").strip() == "1"
+        # lines key=value read as the entry reads them (config_line: a key may repeat, the last
+        # one holds)
+        settings = dict(line.split("=", 1) for line in archive.read(ENTRY_CONFIG).decode().splitlines()
+                        if "=" in line and not line.startswith("#"))
+        channel = settings.get("channel") == "1"
         code = {n: archive.read(n) for n in sorted(names) if n.startswith("resources/") and n.endswith(".py")}
         return Entry(archive.read(library), channel, code if channel else {})
 
