@@ -366,6 +366,9 @@ def build_twin(fmu: Path, dest: Path) -> Path:
     key = twin_key(fmu)
     entry = entry_of(fmu)
     found = survey(fmu) if entry is not None and entry.channel else None
+    if entry is not None and entry.channel and found is None:
+        raise ValueError(f"{Path(fmu).name}: its native entry speaks the model's channel (channel=1 in "
+                         f"{ENTRY_CONFIG}) but its model has no {CHANNEL_CLASS}: it cannot be instantiated")
     cls = f"DoNothing{model}"
     with tempfile.TemporaryDirectory(prefix="lever-do-nothing-twin-") as stage:
         # a module and a package name of its own: twins loaded into one process share no module
