@@ -329,6 +329,7 @@ SLOW = (
     "project/test_install.py",
     "project/test_layers.py::test_no_import_circle_among_harness_modules",
     "project/test_layers.py::test_no_private_name_is_used_outside_its_module",
+    "studies/test_do_nothing_twins.py",
     "studies/test_bench.py::test_bench_records_failed_cases_goes_on_and_resumes",
     "studies/test_bench.py::test_the_fmi_editions_are_measured_in_turn_round_by_round",
     "studies/test_bench.py::test_small_bench_writes_its_table_plot_and_claims",

@@ -125,15 +125,14 @@ def test_the_made_reference_the_twins_and_the_case_logs_are_keyed_on_the_code(ow
     made = fmu_reference.reference(plan, times, source="model-exchange")
     assert not made.info.get("cached")
     assert fmu_reference.reference(plan, times, source="model-exchange").info.get("cached")
-    description = scenes.load("kavz685").components["coupling"].fmu
-    from harness.description.fmu_description import read_description
-    twin_key = do_nothing_twins.twin_key(read_description(fmu_dir / f"{description}.fmu"))
+    coupling = fmu_dir / f"{scenes.load('kavz685').components['coupling'].fmu}.fmu"
+    twin_key = do_nothing_twins.twin_key(coupling)
     log = CaseLog(tmp_path / "study", {"study": "t"})
     log.record("a", {"status": "ok"})
 
     monkeypatch.setattr(cache, "code_digest", lambda: "another-code")
     assert not fmu_reference.reference(plan, times, source="model-exchange").info.get("cached")
-    assert do_nothing_twins.twin_key(read_description(fmu_dir / f"{description}.fmu")) != twin_key
+    assert do_nothing_twins.twin_key(coupling) != twin_key
     again = CaseLog(tmp_path / "study", {"study": "t"})
     assert len(again) == 0 and again.set_aside is not None
 

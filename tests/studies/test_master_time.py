@@ -131,21 +131,24 @@ def test_prices_above_a_few_calls_measured_time_refuse_the_split_only_where_a_sh
                            "the time measured in them (10.0 us)")
 
 
-def test_reads_and_sets_the_entry_answers_itself_are_crossing_alone():
-    """Our FMUs' entry keeps a set and answers a read of a step's outputs without entering
-    the model: such calls measured below the do-nothing twins' price (here 1 us against 4 us
-    a call) are all crossing, and the split stands (by hand: crossing (100 + 50 + 600) us /
-    100 steps = 7.5 us a step, slave 40 - 7.5 = 32.5 us, master 10 us of 50 us); a step call
-    measured so still refuses it."""
+def test_reads_and_sets_priced_above_their_measured_time_refuse_the_split_as_any_kind():
+    """The do-nothing twins cross by our FMUs' own path (a set kept and a read answered in
+    their native entry, as ours are), so a read or a set has no exception: 100 steps, 50 us a
+    step (10 us the master's, 40 us in the calls), reads measured at 1 us a call and priced
+    at 4 us: 50 reads x 3 us = 150 us too many, 1.5 us a step, 3 % of a step - refused,
+    naming those calls; priced at 1 us the split stands (by hand: crossing (100 + 50 + 600) us
+    / 100 steps = 7.5 us a step, slave 40 - 7.5 = 32.5 us, master 10 us, of 50 us)."""
     timed = {"problems": [], "steps": 100, "master_per_step_s": 10e-6, "in_calls_per_step_s": 40e-6,
              "calls": {"load": {"set": 100, "get": 50, "step": 100}},
              "in_call_s": {"load": {"set": 100e-6, "get": 50e-6, "step": 3850e-6}}}
-    twins = {"load": {"set": 4e-6, "get": 4e-6, "step": 6e-6}}
-    split, problem = master_time.split(timed, twins, wall=1.0)
+    split, problem = master_time.split(timed, {"load": {"set": 1e-6, "get": 4e-6, "step": 6e-6}}, wall=1.0)
+    assert split is None
+    assert problem == ("load's get calls priced at the do-nothing twins' (4.0 us a call) come to more than the "
+                       "time measured in them (1.0 us)")
+    split, problem = master_time.split(timed, {"load": {"set": 1e-6, "get": 1e-6, "step": 6e-6}}, wall=1.0)
     assert problem is None
     assert split == pytest.approx({"crossing": 0.15, "slave": 0.65, "master": 0.2})
-    slow_steps = {**timed, "in_call_s": {"load": {"set": 100e-6, "get": 50e-6, "step": 100e-6}}}
-    assert master_time.split(slow_steps, twins, wall=1.0)[0] is None
-    # the split from prices alone counts such a call's price as crossing, never a negative slave
-    assert floors.time_split(1.0, {"load": {"set": 100}}, {"load": {"set": 1e-6}}, {"load": {"set": 4e-6}}) == \
-        pytest.approx({"crossing": 100e-6, "slave": 0.0, "master": 1.0 - 100e-6})
+    # the split from prices alone: the twins' prices times the calls, ours less theirs the slave's
+    assert floors.time_split(1.0, {"load": {"set": 100, "get": 10}}, {"load": {"set": 2e-6, "get": 5e-6}},
+                             {"load": {"set": 1.5e-6, "get": 4e-6}}) == \
+        pytest.approx({"crossing": 190e-6, "slave": 60e-6, "master": 1.0 - 250e-6})

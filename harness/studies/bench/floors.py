@@ -16,7 +16,7 @@ from harness.description.plan import recorded_names
 from harness.engine.component import FmuCallError
 from harness.engine.system import FloorPlan, System
 from harness.paths import FMUS
-from harness.studies.bench.master_time import ANSWERED_AT_ENTRY
+from harness.studies.bench.master_time import uninterrupted
 
 
 def _initial_states(system: System) -> list | None:
@@ -218,13 +218,17 @@ class _PriceLoop(_StepLoop):
         self.plan = FloorPlan(tuple(replace(call, do_step=timed(call.do_step, spent[call.component.name], "step"))
                                     for call in plan.steps),
                               [timed_visit(v) for v in plan.propagation], [timed_visit(v) for v in plan.rereads])
-        self.made = {name: dict.fromkeys(spent[name], 0) for name in spent}
+        # each completed step's seconds and calls by component and kind: a step interrupted by
+        # another process is set aside (``master_time.uninterrupted``), as in the timed runs -
+        # one interruption of milliseconds in a thousand calls of a microsecond each would
+        # price every one of them several microseconds too high
+        self.steps: list[tuple[dict, dict]] = []
         self.state_spent = {name: 0.0 for name in system.stateful
                             if system.components[name].description.coSimulation.canGetAndSetFMUstate}
 
     def advance(self, count: int):
         """``count`` more completed steps, their calls priced."""
-        system, spent, made, counted = self.system, self.spent, self.made, self.system.calls_by_kind
+        system, spent, steps, counted = self.system, self.spent, self.steps, self.system.calls_by_kind
         goal = self.done + count
         while self.done < goal:
             before = counted()
@@ -239,16 +243,26 @@ class _PriceLoop(_StepLoop):
                 self.t = self.start
                 continue
             after = counted()
-            for name in made:
-                for kind in made[name]:
-                    made[name][kind] += after[name][kind] - before[name][kind]
+            steps.append(({name: {kind: spent[name][kind] - kept[name][kind] for kind in spent[name]} for name in spent},
+                           {name: {kind: after[name][kind] - before[name][kind] for kind in spent[name]}
+                            for name in spent}))
             self.done += 1
             self.t += self.h
 
     def prices(self, own: float) -> dict[str, dict[str, float]]:
-        """Seconds per call of each component and kind so far, less the timer's ``own``."""
-        return {name: {kind: max(0.0, self.spent[name][kind] / self.made[name][kind] - own)
-                       for kind in self.spent[name] if self.made[name][kind]} for name in self.spent}
+        """Seconds per call of each component and kind in the steps so far that were not
+        interrupted (``master_time.uninterrupted``), less the timer's ``own``."""
+        kept = [self.steps[k] for k in uninterrupted([sum(sum(kinds.values()) for kinds in spent.values())
+                                                      for spent, _ in self.steps])]
+        prices = {}
+        for name, kinds in self.spent.items():
+            prices[name] = {}
+            for kind in kinds:
+                made = sum(step_made[name][kind] for _, step_made in kept)
+                if made:
+                    spent = sum(step_spent[name][kind] for step_spent, _ in kept)
+                    prices[name][kind] = max(0.0, spent / made - own)
+        return prices
 
     def time_states(self, count: int):
         """``count`` rounds of getting, setting and freeing a state of each component that
@@ -270,9 +284,10 @@ def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, di
     kind -> count) and the prices of a call (component -> kind -> seconds) into our FMUs
     (``ours``) and into their do-nothing twins (``twins``):
 
-    * ``crossing``: the twins' prices times the calls - what any pythonfmu FMU costs;
+    * ``crossing``: the twins' prices times the calls - what the calls cost on the FMUs' own
+      path (our native entry, its channel's bookkeeping, pythonfmu) with nothing behind it;
     * ``slave``: our prices minus the twins' times the calls - our FMUs' own work behind
-      the calls (the native entry's checks, the FMI glue, the model's physics);
+      the calls (the FMI glue, the model's physics);
     * ``master``: the rest - the master's arithmetic, its Python, the recording.
 
     None when a call kind was made that has no price (e.g. states of an FMU that cannot
@@ -284,11 +299,8 @@ def time_split(wall: float, calls: dict[str, dict[str, int]], ours: dict[str, di
                 continue
             if kind not in ours.get(name, {}) or kind not in twins.get(name, {}):
                 return None
-            # a read or a set our FMU's entry answers itself costs less than entering the
-            # twin's model: all of it crossing
-            price = min(twins[name][kind], ours[name][kind]) if kind in ANSWERED_AT_ENTRY else twins[name][kind]
-            crossing += count * price
-            slave += count * (ours[name][kind] - price)
+            crossing += count * twins[name][kind]
+            slave += count * (ours[name][kind] - twins[name][kind])
     return {"crossing": crossing, "slave": slave, "master": wall - crossing - slave}
 
 

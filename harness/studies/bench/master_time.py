@@ -263,15 +263,21 @@ def step_parts(marks: list[tuple[float, float, int]], calibration: dict, state_c
     return masters, in_calls, corrections
 
 
-def kept_steps(masters: list, in_calls: list) -> list[int]:
-    """The steps not interrupted: those whose whole time is within ``OUTLIER`` times the
-    median step's (another process's turn on the processor, a page fault or a collection
-    of the garbage lands in a few steps and makes them many times as long)."""
-    totals = [m + c for m, c in zip(masters, in_calls)]
+def uninterrupted(totals: list) -> list[int]:
+    """The steps not interrupted, of steps that took ``totals`` seconds: those within
+    ``OUTLIER`` times the median step's (another process's turn on the processor, a page
+    fault or a collection of the garbage lands in a few steps and makes them many times as
+    long)."""
     if not totals:
         return []
     limit = OUTLIER * stats.median(totals)
     return [k for k, total in enumerate(totals) if total <= limit]
+
+
+def kept_steps(masters: list, in_calls: list) -> list[int]:
+    """The steps not interrupted (``uninterrupted``), each step's whole time its master's
+    and its calls' time."""
+    return uninterrupted([m + c for m, c in zip(masters, in_calls)])
 
 
 def measure(scene, master: str, step: float, options: dict | None = None, fmu_dir: Path = FMUS,
@@ -313,12 +319,6 @@ def measure(scene, master: str, step: float, options: dict | None = None, fmu_di
     return result
 
 
-#: kinds of call an FMU's native entry may answer without entering the model (a set kept
-#: until the model's next call, a read of the outputs a step left): ours does, from its point
-#: block, and then the call costs less than the do-nothing twins' entry into Python
-ANSWERED_AT_ENTRY = ("get", "set")
-
-
 def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple[dict | None, str | None]:
     """A run of ``wall`` seconds split by ``timed`` (``MasterTime.summary()``): ``master``
     its measured share, ``crossing`` the calls priced at the do-nothing twins' (component
@@ -328,9 +328,8 @@ def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple
     measured in those calls (the prices and the runs saw different machines) by enough to
     move a share by half a percentage point (the shares are given to the percent); by less
     (a few state calls of a start-up, priced apart), those calls count as crossing alone.
-    Reads and sets measured below the twins' price (``ANSWERED_AT_ENTRY``: the FMU's entry
-    answered them, never entering the model) count as crossing alone, whatever the
-    difference."""
+    Every kind is judged alike: the twins cross by the FMUs' own path (``do_nothing_twins``:
+    behind the same native entry, a set kept and a read answered there as ours are)."""
     if timed.get("problems"):
         return None, "; ".join(timed["problems"])
     crossing = excess = 0.0
@@ -342,9 +341,7 @@ def split(timed: dict, twins: dict[str, dict[str, float]], wall: float) -> tuple
             if kind not in twins.get(name, {}):
                 return None, f"{name}'s {kind} calls have no do-nothing price"
             priced, measured = count * twins[name][kind], timed["in_call_s"][name][kind]
-            if priced > measured and kind in ANSWERED_AT_ENTRY:
-                priced = measured
-            elif priced > measured:
+            if priced > measured:
                 if worst is None or priced - measured > worst[0]:
                     worst = (priced - measured,
                              f"{name}'s {kind} calls priced at the do-nothing twins' ({1e6 * priced / count:.1f} us "

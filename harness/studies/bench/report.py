@@ -219,9 +219,10 @@ def markdown(result: dict, rows: list[dict]) -> str:
                   "processes set aside; the least of the runs): *master* the time outside the calls (the "
                   "master's arithmetic and Python, recording, the divergence guard), its microseconds a step "
                   "beside it; the time in the calls split into *crossing*, the calls priced at the do-nothing "
-                  "twins of the FMUs (pythonfmu, an empty do_step; each price timed call by call in the floor's "
-                  "loop at the case's step - the scene's for adaptive masters - just before and just after the "
-                  "case's runs), and *slave*, the rest (our FMUs' work: the native entry, the FMI glue and the "
+                  "twins of the FMUs (their variables behind the FMU's own native entry, an empty do_step: "
+                  "a set or a read our entry answers costs a twin what it costs ours; each price timed call by "
+                  "call in the floor's loop at the case's step - the scene's for adaptive masters - just before "
+                  "and just after the case's runs), and *slave*, the rest (our FMUs' work: the FMI glue and the "
                   "physics).  A figure that cannot be quoted (timed runs that disagree by more than a quarter, "
                   "a fifth of the steps interrupted, a correction as large as the master's time) is not shown, "
                   "the reason beside it.", "",

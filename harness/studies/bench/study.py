@@ -85,8 +85,8 @@ def _bench(scene, repeats, fmu_dir, only, peers, monolithic, progress, out, resu
     if estimate is not None and estimate > 60:
         say(f"{len(timing.planned_runs(scene, p, repeats))} cases of masters and peers; "
             f"{duration_text(estimate, NARROW)}")
-    # The same calls into do-nothing twins of the FMUs (pythonfmu, an empty do_step): what
-    # any pythonfmu FMU costs, and the other half of each master's time split.
+    # The same calls into do-nothing twins of the FMUs (an empty do_step behind the FMU's own
+    # entry): what the crossing costs, and the other half of each master's time split.
     try:
         twins = do_nothing_twins.twins(scene, fmu_dir)
     except Exception as error:  # noqa: BLE001 - the benchmark goes on without the split
