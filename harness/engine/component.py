@@ -27,7 +27,7 @@ from fmpy.logging import addLoggerProxy
 
 from harness.description import typed_values
 from harness.description.fmu_description import read_description
-from harness.engine.interface import RawCalls
+from harness.engine.interface import CallCounts, RawCalls
 
 _STATUS = ("ok", "warning", "discard", "error", "fatal", "pending")
 
@@ -233,7 +233,7 @@ class FMU2SlaveOnce(FMU2Slave):
             self._functions[name] = function
 
 
-class Component:
+class Component(CallCounts):
     """An instantiated FMU: named variables, parameters applied, fast value access."""
 
     def __init__(self, name: str, fmu_path: Path | str, logging_on: bool = False):
@@ -269,7 +269,7 @@ class Component:
         self._unzipped = unzipped(self.fmu_path)
         self.messages: deque[str] = deque(maxlen=50)
         # FMI calls made on the hot path, by kind (the benchmark prices each kind)
-        self.gets = self.sets = self.steps = self.state_calls = 0
+        self._start_counts()
         self.time = 0.0
         # A process-unique instance name routes this instance's log messages here.
         self.instance_name = f"{name}#{next(_instances)}"
@@ -291,11 +291,6 @@ class Component:
     def unzipped_dir(self) -> str:
         """The folder this process extracted the FMU to (shared by its instances)."""
         return self._unzipped
-
-    @property
-    def calls(self) -> int:
-        """FMI calls made on the hot path: read, write, do_step and the state calls."""
-        return self.gets + self.sets + self.steps + self.state_calls
 
     # -- helpers ---------------------------------------------------------------------------
     def variable(self, name: str):
@@ -373,19 +368,19 @@ class Component:
         return vrs, (ctypes.c_double * len(names))()
 
     def read(self, vrs, values):
-        self.gets += 1
+        self.count("get")
         status = self.raw.get_real(self.raw.handle, vrs, _count(len(vrs)), values)
         if status > 1:
             self.fail("fmi2GetReal", status)
 
     def write(self, vrs, values):
-        self.sets += 1
+        self.count("set")
         status = self.raw.set_real(self.raw.handle, vrs, _count(len(vrs)), values)
         if status > 1:
             self.fail("fmi2SetReal", status)
 
     def do_step(self, t: float, h: float):
-        self.steps += 1
+        self.count("step")
         status = self.raw.do_step(self.raw.handle, t, h, 1)
         if status > 1:
             self.fail(step_call(t, h), status)

@@ -39,6 +39,42 @@ class RawModelExchangeCalls(NamedTuple):
     nx: Any
 
 
+class CallCounts:
+    """A component's FMI calls on the hot path by kind (get, set, step): those made one by
+    one (its own methods, the system's interpreting loops: ``count``) and those of the
+    compiled functions that hold it (``harness.engine.straight_line``), which count their
+    runs once each instead of every call (``tallies``: ``(tally, {kind: calls a run})``)."""
+
+    def _start_counts(self):
+        self.counted = {"get": 0, "set": 0, "step": 0}
+        self.tallies: list[tuple[Any, dict[str, int]]] = []
+        self.state_calls = 0
+
+    def count(self, kind: str):
+        """One call of ``kind`` made."""
+        self.counted[kind] += 1
+
+    def _calls_of(self, kind: str) -> int:
+        return self.counted[kind] + sum(tally.runs * made.get(kind, 0) for tally, made in self.tallies)
+
+    @property
+    def gets(self) -> int:
+        return self._calls_of("get")
+
+    @property
+    def sets(self) -> int:
+        return self._calls_of("set")
+
+    @property
+    def steps(self) -> int:
+        return self._calls_of("step")
+
+    @property
+    def calls(self) -> int:
+        """FMI calls made on the hot path: read, write, do_step and the state calls."""
+        return self.gets + self.sets + self.steps + self.state_calls
+
+
 @runtime_checkable
 class CoSimComponent(Protocol):
     name: str
@@ -48,8 +84,11 @@ class CoSimComponent(Protocol):
     sets: int               # fmi2SetReal calls
     steps: int              # fmi2DoStep calls
     state_calls: int        # fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate calls
+    tallies: list           # the compiled functions' counts (``CallCounts``)
     time: float
     raw: RawCalls
+
+    def count(self, kind: str) -> None: ...
 
     def variable(self, name: str) -> Any: ...
 

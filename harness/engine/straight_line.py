@@ -10,9 +10,16 @@ does what the interpreting loops do, in their order, call for call.
 The source is registered with ``linecache`` under the function's file name
 (``<harness TITLE DIGEST>``), so a traceback or a debugger shows the line that failed; a
 function's ``source`` attribute holds it too.
+
+A function counts its FMI calls once a run, not call by call (``CallTally``): after its
+last call it adds one run, and its components add its runs times its calls of each kind to
+their counts (``harness.engine.interface.CallCounts``).  Its calls sit in one ``try``
+block; a run that stops there (a call's failing status, any exception) counts the calls
+made before the line it stopped on and the one on it.
 """
 from __future__ import annotations
 
+import bisect
 import hashlib
 import linecache
 from typing import Callable
@@ -21,6 +28,29 @@ from harness.engine.component import step_call
 
 #: the function maker compiled from each distinct source
 _makers: dict[str, Callable] = {}
+
+
+class CallTally:
+    """The FMI calls of one compiled function: ``calls`` (``(component, kind)`` in the order
+    made, ``lines`` their line numbers in its source) and ``runs`` (whole runs: every call
+    made)."""
+    __slots__ = ("runs", "calls", "lines")
+
+    def __init__(self, calls, lines):
+        self.runs = 0
+        self.calls, self.lines = tuple(calls), tuple(lines)
+        for component in dict.fromkeys(component for component, _ in self.calls):
+            made: dict[str, int] = {}
+            for each, kind in self.calls:
+                if each is component:
+                    made[kind] = made.get(kind, 0) + 1
+            component.tallies.append((self, made))
+
+    def stopped(self, traceback):
+        """Count the calls of a run that stopped at ``traceback``'s line of the function: those
+        on the lines up to it."""
+        for component, kind in self.calls[:bisect.bisect_right(self.lines, traceback.tb_lineno)]:
+            component.count(kind)
 
 
 class Source:
@@ -35,6 +65,11 @@ class Source:
         self.bound: dict[str, object] = {}
         self._names: dict[int, str] = {}
         self._counts: dict[str, int] = {}
+        # the FMI calls (``call``): (component, kind) and the index of each one's line;
+        # the index after the last one's checks
+        self._calls: list[tuple[object, str]] = []
+        self._call_lines: list[int] = []
+        self._after_calls = 0
 
     def name(self, obj, kind: str) -> str:
         """The name ``obj`` goes by in the body (``kind`` and a number)."""
@@ -54,10 +89,43 @@ class Source:
             text += "    # " + note.encode("unicode_escape").decode("ascii")
         self.lines.append("    " + text)
 
+    def call(self, component, kind: str, text: str, note: str):
+        """Add the line ``text`` of an FMI call of ``kind`` to ``component`` (counted by the
+        function's ``CallTally``; ``note`` its comment)."""
+        self._calls.append((component, kind))
+        self._call_lines.append(len(self.lines))
+        self.line(text, note)
+
+    def calls_checked(self):
+        """The last call's checks are in the body: the calls' ``try`` block may end here."""
+        self._after_calls = len(self.lines)
+
+    def _counted_body(self) -> tuple[list[str], list[int]]:
+        """The body with its calls in a ``try`` block that counts a stopped run, and the run
+        counted after it; and the calls' line numbers in the source."""
+        lines = self.lines
+        if not self._calls:
+            return lines or ["    pass"], []
+        first, end = self._call_lines[0], self._after_calls
+        inside = lines[first:end]
+        if not all(line.startswith("    ") and not line.startswith("     ") for line in (lines[first], *lines[end:end + 1])) \
+                or any(line.strip().startswith("return") for line in inside):
+            raise ValueError(f"{self.title}: the calls must make one block of the body's top level")
+        body = [*lines[:first], "    try:", *("    " + line for line in inside),
+                "    except BaseException as error:",
+                "        tally.stopped(error.__traceback__)",
+                "        raise",
+                "    tally.runs += 1", *lines[end:]]
+        # "def make", "def <name>", then the body; a call inside the try block one line later
+        return body, [index + 3 + (index >= first) for index in self._call_lines]
+
     def function(self) -> Callable:
         """Compile the body into a function of ``arguments``, the bound objects closed over."""
         name = "".join(c if c.isalnum() else "_" for c in self.title)
-        body = self.lines or ["    pass"]
+        body, call_lines = self._counted_body()
+        tally = CallTally(self._calls, call_lines) if self._calls else None
+        if tally is not None:
+            self.bound["tally"] = tally
         bound = sorted(self.bound)
         source = "\n".join([f"def make({', '.join(bound)}):",
                             f"    def {name}({self.arguments}):",
@@ -74,6 +142,7 @@ class Source:
             make = _makers[source] = namespace["make"]
         function = make(**{key: self.bound[key] for key in bound})
         function.source = source
+        function.tally = tally
         return function
 
 
@@ -84,11 +153,12 @@ def add_steps(source: Source, calls) -> None:
         c = source.name(call.component, "component")
         do_step = source.name(call.do_step, "do_step")
         handle = source.name(call.handle, "handle")
-        source.line(f"{c}.steps += 1", f"fmi2DoStep of {call.component.name}")
-        source.line(f"status = {do_step}({handle}, t, h, 1)")
+        source.call(call.component, "step", f"status = {do_step}({handle}, t, h, 1)",
+                    f"fmi2DoStep of {call.component.name}")
         source.line("if status > 1:")
         source.line(f"    {c}.fail(step_call(t, h), status)")
         source.line(f"{c}.time = t + h")
+        source.calls_checked()
     if calls:
         source.bound["step_call"] = step_call
 
@@ -102,10 +172,11 @@ def add_visits(source: Source, visits) -> None:
             get_real = source.name(visit.get_real, "get_real")
             args = ", ".join([source.name(visit.handle, "handle"), source.name(visit.vrs, "vrs"),
                               source.name(visit.n, "count"), values])
-            source.line(f"{c}.gets += 1", f"fmi2GetReal of {visit.component.name}: {len(visit.vrs)} outputs")
-            source.line(f"status = {get_real}({args})")
+            source.call(visit.component, "get", f"status = {get_real}({args})",
+                        f"fmi2GetReal of {visit.component.name}: {len(visit.vrs)} outputs")
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2GetReal', status)")
+            source.calls_checked()
         for copy in visit.copies:
             target = source.name(copy.values, "inputs")
             for k, i in copy.pairs:
@@ -115,10 +186,11 @@ def add_visits(source: Source, visits) -> None:
             set_real = source.name(send.set_real, "set_real")
             args = ", ".join([source.name(send.handle, "handle"), source.name(send.vrs, "vrs"),
                               source.name(send.n, "count"), source.name(send.values, "inputs")])
-            source.line(f"{c}.sets += 1", f"fmi2SetReal of {send.component.name}: {len(send.vrs)} inputs")
-            source.line(f"status = {set_real}({args})")
+            source.call(send.component, "set", f"status = {set_real}({args})",
+                        f"fmi2SetReal of {send.component.name}: {len(send.vrs)} inputs")
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2SetReal', status)")
+            source.calls_checked()
 
 
 def straight_line(title: str, visits=(), steps=None, before=()) -> Callable:

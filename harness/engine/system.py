@@ -424,7 +424,7 @@ class System:
         ``Component.do_step`` does, without its per-call lookups."""
         for call in plan:
             component = call.component
-            component.steps += 1
+            component.count("step")
             status = call.do_step(call.handle, t, h, 1)
             if status > 1:
                 component.fail(step_call(t, h), status)
@@ -473,7 +473,7 @@ class System:
             get_real = visit.get_real
             if get_real is not None:
                 component = visit.component
-                component.gets += 1
+                component.count("get")
                 status = get_real(visit.handle, visit.vrs, visit.n, values)
                 if status > 1:
                     component.fail("fmi2GetReal", status)
@@ -483,7 +483,7 @@ class System:
                     target_values[k] = values[i]
             for send in visit.sends:
                 target = send.component
-                target.sets += 1
+                target.count("set")
                 status = send.set_real(send.handle, send.vrs, send.n, send.values)
                 if status > 1:
                     target.fail("fmi2SetReal", status)

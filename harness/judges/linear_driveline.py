@@ -25,7 +25,7 @@ from lever.physics.shaft import LaggedShaft, Shaft
 
 from harness.description import scene as scenes
 from harness.description.fmu_description import read_description, time_derivatives
-from harness.engine.interface import RawCalls
+from harness.engine.interface import CallCounts, RawCalls
 from harness.engine.system import System, feedthrough_components
 from harness.paths import FMUS
 
@@ -67,7 +67,7 @@ def _descriptions(fmu_dir: Path, wiring: Wiring) -> dict:
             "load": _read(Path(wiring.load.fmu) if wiring.load.fmu else Path(fmu_dir) / "LoadShaft.fmu")}
 
 
-class _LinearComponent:
+class _LinearComponent(CallCounts):
     """One component of the stand-in: the FMU's model description, values by value
     reference, and the interface the masters and ``System`` use
     (``harness.engine.interface.CoSimComponent``, its raw calls included)."""
@@ -78,13 +78,9 @@ class _LinearComponent:
         self.variables = {v.name: v for v in description.modelVariables}
         self.values = {v.valueReference: 0.0 for v in description.modelVariables if v.type == "Real"}
         self._vr = {v.name: v.valueReference for v in description.modelVariables}
-        self.gets = self.sets = self.steps = self.state_calls = 0
+        self._start_counts()
         self.time = 0.0
         self.raw = RawCalls(None, self._get, self._set, self._raw_step)
-
-    @property
-    def calls(self) -> int:
-        return self.gets + self.sets + self.steps + self.state_calls
 
     def variable(self, name):
         return self.variables[name]
@@ -117,15 +113,15 @@ class _LinearComponent:
         return 0
 
     def read(self, vrs, values):
-        self.gets += 1
+        self.count("get")
         self._get(None, vrs, len(vrs), values)
 
     def write(self, vrs, values):
-        self.sets += 1
+        self.count("set")
         self._set(None, vrs, len(vrs), values)
 
     def do_step(self, t, h):
-        self.steps += 1
+        self.count("step")
         self._advance(t, h)
         self.time = t + h
 
