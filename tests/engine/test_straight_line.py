@@ -305,3 +305,25 @@ def test_the_generated_send_ahead_is_the_loop_bit_for_bit(name):
                 assert written == [list(held.values) for held in master._held]
     finally:
         system.free()
+
+
+def test_calls_are_counted_once_a_run_and_a_stopped_run_counts_what_it_made():
+    """A function counts its runs, its components add its calls of each kind a run; a run
+    stopped by an exception inside a call (not a status) counts the calls up to and with it."""
+    log = []
+    (a, b, c), steps, visits, _ = _plan(log, {})
+    run_step = straight_line("test", visits, steps)
+    for k in range(3):
+        run_step(0.1 * k, 0.1)
+    assert [(x.gets, x.sets, x.steps) for x in (a, b, c)] == [(3, 0, 3), (3, 0, 3), (0, 6, 0)]
+    assert run_step.tally.runs == 3 and a.calls == 6
+
+    def raising(handle, vrs, n, values):
+        raise KeyboardInterrupt
+    broken = [visits[0], Visit(b, raising, "hb", [3], 1, [0.0], (), visits[1].sends), visits[2]]
+    stopped = straight_line("test", broken, steps)
+    with pytest.raises(KeyboardInterrupt):
+        stopped(0.5, 0.1)
+    # made: a's and b's steps, a's read, b's read (it raised): not c's two sets
+    assert [(x.gets, x.sets, x.steps) for x in (a, b, c)] == [(4, 0, 4), (4, 0, 4), (0, 6, 0)]
+    assert stopped.tally.runs == 0
