@@ -59,12 +59,13 @@ test-fast: $(STAMP)
 
 # The numerics-sensitive tests again with numpy's SIMD dispatch limited to each lower level
 # this CPU has, so that a test that holds at one dispatch level only fails here too
-# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.  The workers
-# inherit the limit (NPY_DISABLE_CPU_FEATURES) from the pytest that starts them.
+# (docs/testing.md); a prerequisite of `test`, kept apart from its recipe.  One pytest per
+# level, no workers: its 119 tests take a few seconds, less than two workers' start-up and
+# collection (15 s CPU against 17-25 s, and sooner beside other work).
 .PHONY: test-dispatch
 test: test-dispatch
 test-dispatch: $(STAMP)
-	$(BIN)/python tests/numpy_dispatch.py $(PARALLEL)
+	$(BIN)/python tests/numpy_dispatch.py
 
 # The host recipes (examples/hosts/) in the hosts the environment names - PYFMI_PYTHON,
 # OMSIMULATOR, OMSIMULATOR_PYTHONPATH (docs/hosts.md) -, each result judged by `lever validate`

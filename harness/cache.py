@@ -1,6 +1,7 @@
 """The harness's cache: what it computes once and reuses - the monolithic references and
 the references made from a scene's FMUs (``references/``), the benchmark's do-nothing twins
-of the FMUs (``do-nothing-twins/``).
+of the FMUs (``do-nothing-twins/``), the factors of the units values are given in
+(``unit-factors/``, ``harness.description.units``).
 
 Where: the folder ``LEVER_CACHE_DIR`` names, else the per-user cache folder of this
 version (``platformdirs.user_cache_dir``: ``~/.cache/lever-cosim/<version>`` on Linux,
@@ -30,7 +31,8 @@ from harness import paths
 ENVIRONMENT = "LEVER_CACHE_DIR"
 #: the cache's parts: folder -> what it holds
 PARTS = {"references": "monolithic references and references made from a scene's FMUs",
-         "do-nothing-twins": "the benchmark's do-nothing twins of the FMUs"}
+         "do-nothing-twins": "the benchmark's do-nothing twins of the FMUs",
+         "unit-factors": "the factors of the units values were given in, as pint works them out"}
 
 
 def folder() -> Path:

@@ -354,8 +354,6 @@ SERIAL = (
     "engine/test_interrupts.py::test_run_interrupted_keeps_the_computed_part",
     "engine/test_interrupts.py::test_stability_interrupted_stops_its_workers_and_resumes",
     "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
-    # a step of 6 s alone is flagged past 15 s: two children of its own fill both cores
-    "fmus/test_step_watchdog.py",
     # a run's time over its replay's, each moved by a neighbour's load
     "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
 )

@@ -90,7 +90,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
              result=None, tolerance: str = "lever",
              window: tuple[float | str | None, float | str | None] | str | None = None,
              out: Path | str | None = None, rtol=None, signals=None, reference=None,
-             notify: Callable[[str, str], None] | None = None) -> Validation:
+             notify: Callable[[str, str], None] | None = None, plots: bool = True) -> Validation:
     """Judge NAME against its committed reference traces (or ``reference``), as ``lever validate NAME``: run
     the FMU stand-alone or the scene (with ``overrides``, ``master``, ``step``), or judge
     ``result`` instead: a ``Run`` (what ``api.run`` returned), a numpy structured array
@@ -103,7 +103,7 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     (the band's figures).  ``window``: judge only ``(start, stop)`` of the reference's span
     (e.g. a shorter run; seconds or with a time unit, ``("0 s", "500 ms")``, or
     ``"START:STOP"``); ``out``: write validation.json, the result and a plot per failing
-    signal there.  ``result`` may also be a lever results folder (its traces.csv; judged
+    signal there (``plots`` false: without the plots).  ``result`` may also be a lever results folder (its traces.csv; judged
     against its reference.csv, the reference made for that run's parameters, unless
     ``reference`` is given).  ``reference``: judge against these traces instead of the
     committed ones - a CSV (a time column and named columns), a lever results folder (its
@@ -240,7 +240,8 @@ def validate(name: str, *, overrides=None, master: str | None = None, step: floa
     if out is not None:
         from harness.formats import validation_files
 
-        validation_files.write_validation(out, findings, bands, judged, ref, write_result=result is None)
+        validation_files.write_validation(out, findings, bands, judged, ref, write_result=result is None,
+                                          plots=plots)
     return Validation(label, findings, bands, judged, ref, Path(out) if out is not None else None)
 
 
@@ -301,7 +302,7 @@ def reference_names(names: Iterable[str] = ()) -> list[str]:
 def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | None = None, step: float | None = None,
                   result: Path | str | None = None, tolerance: str = "lever", window: str | None = None,
                   out: Path | str | None = None, rtol=None, signals=None, reference=None,
-                  notify: Callable[[str, str], None] | None = None) -> Iterator[Validation]:
+                  notify: Callable[[str, str], None] | None = None, plots: bool = True) -> Iterator[Validation]:
     """``lever validate NAMES``: ``validate`` for each name (none: every reference), in
     ``out`` (one name) or ``out/<name>`` (default results/validate/<name>); input checked
     and the FMUs built before the first."""
@@ -329,7 +330,7 @@ def validate_each(names: Iterable[str] = (), *, overrides=None, master: str | No
         target = out if (out and len(chosen) == 1) else Path(out or RESULTS / "validate") / folder
         yield validate(name, overrides=_inputs.assignments(overrides), master=master, step=step, result=result,
                        tolerance=tolerance, window=span, out=target, rtol=rtol, signals=signals, reference=reference,
-                       notify=notify)
+                       notify=notify, plots=plots)
 
 
 def _scene_of_run(result) -> str:

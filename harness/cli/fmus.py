@@ -80,7 +80,8 @@ def _size(count: int) -> str:
 @click.option("--clear-stale", is_flag=True, help="Remove only what other code or versions left (never read again).")
 def cache(clear, clear_stale):
     """Where the harness keeps what it computes once - the references runs are measured
-    against, the benchmark's do-nothing twins - and how much it holds: LEVER_CACHE_DIR, else
+    against, the benchmark's do-nothing twins, the factors of the units values are given
+    in - and how much it holds: LEVER_CACHE_DIR, else
     the user's cache folder of this version (~/.cache/lever-cosim/<version> on Linux).  An
     entry is kept for the code and versions that made it: after an upgrade or a change to
     the code the old entries are stale, never read again, and --clear-stale frees their space."""

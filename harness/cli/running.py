@@ -218,14 +218,16 @@ def reference(names, update, until):
                    "part; an empty side is the reference's own start or stop); the verdict says the span judged.")
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="Output folder (default results/validate/<NAME>).")
+@click.option("--no-plots", is_flag=True, help="Write validation.json and the result without a plot of each failing "
+              "signal (for scripts and batches).")
 def validate(names, assignments, master, step, result_csv, reference_path, verbose, tolerance, rtol, signals, window,
-             measured, out):
+             measured, out, no_plots):
     """Run each NAME (an FMU stand-alone, driven by its _in.csv under fmpy's simulate_fmu;
     or a scene, with its master), or take --result, and judge each signal the result has
     against its committed reference trace: over the window after the start-up transient,
     its mean, ripple amplitude, leading rotation orders and a tube, each against a relative
     tolerance (--rtol); beside each verdict the smallest change it catches, and one line on
-    what it cannot see; a plot per failing signal.  NAMES default: every reference.
+    what it cannot see; a plot per failing signal (--no-plots: none).  NAMES default: every reference.
     A NAME may be an FMU file (FMI 2.0 or 3.0, e.g. build/fmus3/EngineShaft.fmu): run
     stand-alone as its model's name is, judged by that model's reference (results in
     results/validate/<Model>-fmi<version>).
@@ -235,6 +237,9 @@ def validate(names, assignments, master, step, result_csv, reference_path, verbo
     too few samples for the window, a reference without a time column or without any of the
     result's signals)."""
     if measured:
+        if no_plots:
+            raise click.UsageError("--no-plots: the model-vs-measurement check (--measured) always draws its plots "
+                                   "(measured_<grade>.png)")
         print_measured([Path(n) for n in names], out or RESULTS / "validate" / "measured")
         return
     all_passed = True
@@ -244,7 +249,8 @@ def validate(names, assignments, master, step, result_csv, reference_path, verbo
                                              result=result_csv, tolerance=tolerance, window=window, out=out,
                                              rtol=list(rtol), reference=reference_path,
                                              signals=[x.strip() for x in signals.split(",") if x.strip()]
-                                             if signals else None, notify=_said_before_the_summary):
+                                             if signals else None, notify=_said_before_the_summary,
+                                             plots=not no_plots):
                 if verdict.findings.KIND == "lever":
                     _print_verdict(verdict.name, verdict.findings, verdict.result, verdict.out, verbose)
                 else:

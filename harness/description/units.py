@@ -83,8 +83,10 @@ def declared_unit(variable) -> str | None:
 
 
 def same_dimension(a: str | None, b: str | None) -> bool:
-    """Whether units ``a`` and ``b`` measure the same kind of quantity (None: dimensionless)."""
-    return parse_unit(a or "").dimensionality == parse_unit(b or "").dimensionality
+    """Whether units ``a`` and ``b`` measure the same kind of quantity (None: dimensionless);
+    kept in the cache as a factor is (``factor``)."""
+    return _kept(f"same dimension {a or ''}\0{b or ''}",
+                 lambda: parse_unit(a or "").dimensionality == parse_unit(b or "").dimensionality)
 
 
 #: the SI unit of each base dimension (pint's own root of [mass] is the gram)
@@ -119,7 +121,79 @@ def split(text: str) -> tuple[float, str] | None:
 
 def factor(unit: str, target: str | None) -> float:
     """What a value in ``unit`` is multiplied by to be in ``target`` (None: the SI base
-    units, kg m s rad); ``UnitProblem`` when the dimensions differ or a unit is unknown."""
+    units, kg m s rad); ``UnitProblem`` when the dimensions differ or a unit is unknown.
+    A factor once worked out is kept in the cache (``FACTORS``): pint's import and its
+    registry are a second of every process that converts a value ("15 deg" in a scene)."""
+    return _kept(f"factor {unit}\0{target}", lambda: _factor_by_pint(unit, target))
+
+
+#: the part of the cache (``harness.cache.PARTS``) the factors (and which units share a
+#: dimension) are kept in: one file for the pint release that worked them out (its registry,
+#: with the change this module makes, is code the cache's digest covers)
+FACTORS = "unit-factors"
+
+
+def _kept(key: str, work):
+    """What ``work()`` answers for ``key``: from the cache, else worked out and kept (an
+    exception it raises - a refusal - is not kept)."""
+    known = _known_factors()
+    if key not in known:
+        known[key] = work()
+        _keep_factors(known)
+    return known[key]
+
+
+def _factors_file() -> Path:
+    from harness import cache
+
+    return cache.entries(FACTORS) / f"pint-{_pint_version()}.json"
+
+
+@functools.lru_cache(maxsize=1)
+def _pint_version() -> str:
+    from importlib.metadata import version
+
+    return version("pint")
+
+
+#: the factors read from each cache file this process used (a process that changes
+#: ``LEVER_CACHE_DIR`` reads and writes the new folder's)
+_read: dict[Path, dict[str, float | bool]] = {}
+
+
+def _known_factors() -> dict[str, float | bool]:
+    """What the cache keeps, read once a process (nothing when it holds no readable file)."""
+    import json
+
+    path = _factors_file()
+    if path not in _read:
+        try:
+            kept = json.loads(path.read_text())
+        except (OSError, ValueError):
+            kept = {}
+        _read[path] = {k: v for k, v in kept.items() if isinstance(v, (float, bool))} if isinstance(kept, dict) else {}
+    return _read[path]
+
+
+def _keep_factors(known: dict[str, float | bool]) -> None:
+    """``known`` written to the cache whole (a temporary file renamed over the old one: a
+    process reading it at the same time sees the old or the new file); a cache that cannot
+    be written only means pint works it out again."""
+    import json
+    import os
+    import tempfile
+
+    path = _factors_file()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile("w", dir=path.parent, prefix=".factors-", delete=False) as scratch:
+            json.dump(known, scratch)
+        os.replace(scratch.name, path)
+    except OSError:
+        pass
+
+
+def _factor_by_pint(unit: str, target: str | None) -> float:
     import pint
 
     source = parse_unit(unit)

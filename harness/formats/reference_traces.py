@@ -32,7 +32,11 @@ The traces are regenerated only on purpose (``lever reference --update``);
 from __future__ import annotations
 
 import csv
+import functools
+import hashlib
+import io
 import math
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -103,14 +107,41 @@ class SpanError(ValueError):
 
 def read_csv(path: Path) -> Traces:
     """A CSV result or reference: a header row, the first column the time (named ``time``,
-    any case), every other column a signal.  Quoted names and blank lines are allowed."""
+    any case), every other column a signal.  Quoted names and blank lines are allowed.
+    The same bytes at the same path are parsed once a process (a committed reference is
+    read by every validation; its parse is most of a short one): each call gets arrays of
+    its own."""
     path = Path(path)
     try:
-        # utf-8-sig: a byte-order mark (as spreadsheets write one) is not part of the first name
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = [row for row in csv.reader(f) if "".join(row).strip()]     # blank rows left out
+        content = path.read_bytes()
     except OSError as error:
         raise TraceFileError(f"{path}: {error.strerror}") from None
+    key = (path, hashlib.blake2b(content, digest_size=16).digest())
+    with _parsed_lock:
+        parsed = _parsed.pop(key, None)
+    if parsed is None:
+        parsed = _parse_csv(path, content)
+    if len(content) <= _PARSED_LARGEST:
+        with _parsed_lock:
+            _parsed[key] = parsed                   # the most recent last
+            while len(_parsed) > _PARSED_KEPT:
+                _parsed.pop(next(iter(_parsed)))
+    return Traces(parsed.times.copy(), {n: v.copy() for n, v in parsed.signals.items()})
+
+
+#: the CSV files parsed last, by path and digest of their bytes: at most ``_PARSED_KEPT``, each
+#: of at most ``_PARSED_LARGEST`` bytes (a committed reference is a few MB)
+_parsed: dict[tuple[Path, bytes], Traces] = {}
+_parsed_lock = threading.Lock()
+_PARSED_KEPT = 6
+_PARSED_LARGEST = 16 << 20
+
+
+def _parse_csv(path: Path, content: bytes) -> Traces:
+    try:
+        # utf-8-sig: a byte-order mark (as spreadsheets write one) is not part of the first name
+        text = content.decode("utf-8-sig")
+        rows = [row for row in csv.reader(io.StringIO(text, newline="")) if "".join(row).strip()]  # blank rows out
     except UnicodeDecodeError as error:
         raise TraceFileError(f"{path}: not a text file in UTF-8 (byte {error.start}: {error.reason}); expected a "
                              "CSV table") from None
@@ -430,16 +461,28 @@ def generate_scene(scene: scenes.Scene, until: float | None = None) -> Reference
 
 
 def scene_names() -> list[str]:
-    """The scenes that have a reference: those declaring the ``reference`` feature."""
+    """The scenes that have a reference: those declaring the ``reference`` feature (worked
+    out once for the same scene files: every validation asks)."""
+    files = sorted(SCENES.glob("*.toml"))
+    digest = hashlib.blake2b(digest_size=16)
+    for path in files:
+        content = path.read_bytes()
+        digest.update(f"\0{path.name}\0{len(content)}\0".encode())
+        digest.update(content)
+    return list(_scene_names(tuple(files), digest.digest()))
+
+
+@functools.lru_cache(maxsize=2)
+def _scene_names(files: tuple[Path, ...], digest: bytes) -> tuple[str, ...]:
     names = []
-    for path in sorted(SCENES.glob("*.toml")):
+    for path in files:
         try:
             spec = scenes.load(path)
         except scenes.SceneError:
             continue
         if "reference" in spec.features:
             names.append(path.stem)
-    return names
+    return tuple(names)
 
 
 def all_names() -> list[str]:

@@ -11,27 +11,30 @@ import numpy as np
 from harness.formats.reference_traces import ReferenceTraces, Result, Traces, write_csv
 
 def write_validation(out: Path, findings, bands: dict, result: Result, reference: ReferenceTraces,
-                     write_result: bool = True) -> list[Path]:
+                     write_result: bool = True, plots: bool = True) -> list[Path]:
     """``validation.json``, the result as ``<NAME>_out.csv`` (cross-check naming; unless
-    ``write_result`` is false) and one plot per failing signal with its band, in ``out``."""
+    ``write_result`` is false) and one plot per failing signal with its band (unless ``plots``
+    is false), in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     for stale in out.glob("*.png"):
         stale.unlink()
     if findings.KIND == "lever":                    # the engineer's verdict (harness.judges.verdict)
-        return write_verdict(out, findings, result, reference, write_result)
+        return write_verdict(out, findings, result, reference, write_result, plots)
     written = _write_result_and_json(out, findings, result, reference, write_result)
-    if len(result.times):
+    if plots and len(result.times):
         for signal in findings.signals:
             if not signal.passed:
                 written.append(plot_signal(out, reference, result, signal, bands[signal.name], findings.tolerance))
     return written
 
 
-def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces, write_result: bool = True) -> list[Path]:
+def write_verdict(out: Path, verdict, result: Result, reference: ReferenceTraces, write_result: bool = True,
+                  plots: bool = True) -> list[Path]:
     """``write_validation`` for the engineer's verdict: ``validation.json`` (every check, the
-    tolerances and their sources, the power), the result, and a plot per failing signal."""
+    tolerances and their sources, the power), the result, and a plot per failing signal
+    (unless ``plots`` is false)."""
     written = _write_result_and_json(out, verdict, result, reference, write_result)
-    if len(result.times):
+    if plots and len(result.times):
         written += [plot_verdict_signal(out, reference, result, s, verdict) for s in verdict.signals if not s.passed]
     return written
 

@@ -79,7 +79,7 @@ def test_the_kavz685_scene_in_ecos_passes_lever_validate_at_its_stated_step(fmi,
         names = list(spec.record)
         csv_path = hosts.write_result_csv(tmp_path / f"ecos-{verdict}.csv", times, traces, names)
         outcome = lever("validate", "--result", str(csv_path), "kavz685", "--out", str(tmp_path / verdict),
-                        "--window", f"0:{spec.experiment.stop:g}")
+                        "--window", f"0:{spec.experiment.stop:g}", "--no-plots")
         assert f"kavz685: {verdict}" in outcome.output, outcome.output
         if verdict == "FAIL":
             assert "coupling.tau2: amplitude" in outcome.output and "engine.a: amplitude" in outcome.output, outcome.output

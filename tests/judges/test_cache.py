@@ -145,7 +145,7 @@ def test_the_cache_is_where_lever_cache_dir_says_else_the_users_cache_of_this_ve
     if sys.platform.startswith("linux"):
         assert cache.folder() == tmp_path / "xdg" / "lever-cosim" / paths.version()
     assert not cache.folder().is_relative_to(REPO)
-    with pytest.raises(ValueError, match="one of references, do-nothing-twins"):
+    with pytest.raises(ValueError, match="one of references, do-nothing-twins, unit-factors"):
         cache.part("results")
 
 

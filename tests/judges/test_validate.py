@@ -251,19 +251,23 @@ def test_an_fmu_file_validates_stand_alone_as_its_models_name_does(lever, fmu_di
     """``lever validate build/fmus3/Model.fmu`` runs that file (here the FMI 3.0 edition) as
     ``lever validate Model`` runs the built FMI 2.0 one, judged by the model's reference: the
     same verdict and figures (the editions' outputs are bit-identical), passing or failing;
-    the FMI 2.0 file likewise."""
+    the FMI 2.0 file likewise.  A plot per failing signal, none with ``--no-plots``."""
     from harness.paths import fmi3_dir
 
     by_name = lever("validate", model, *assignments, "--out", tmp_path / "name")
     expected = _figures(tmp_path / "name")
+    failed = [name for name, figures in expected[1].items() if not figures["passed"]]
+    assert bool(failed) == bool(assignments)
+    assert sorted(p.name for p in (tmp_path / "name").glob("*.png")) == sorted(f"{name}.png" for name in failed)
     for edition, folder in (("fmi2", fmu_dir), ("fmi3", fmi3_dir(fmu_dir))):
         path = folder / f"{model}.fmu"
-        done = lever("validate", path, *assignments, "--out", tmp_path / edition)
+        done = lever("validate", path, *assignments, "--no-plots", "--out", tmp_path / edition)
         assert done.exit_code == by_name.exit_code == (1 if assignments else 0), done.output
         assert f"{path} (FMI {edition[-1]}.0)" in done.output
         assert f"{path}: {'FAIL' if assignments else 'PASS'}" in done.output
         assert _figures(tmp_path / edition) == expected
         assert (tmp_path / edition / f"{model}_out.csv").exists()
+        assert not list((tmp_path / edition).glob("*.png"))
 
 
 def test_an_fmu_file_that_cannot_be_validated_stand_alone_is_bad_input(lever, fmu_dir, tmp_path):
@@ -376,7 +380,7 @@ def test_external_csv_of_a_scene_passes_and_a_lagging_one_fails(lever, kavz685_r
         traces[name] = np.concatenate([np.full(10, traces[name][0]), traces[name][:-10]])
     bad = tmp_path / "lagging_tool.csv"
     reference_traces.write_csv(bad, reference_traces.Traces(kavz685_run.times, traces))
-    result = lever("validate", "--result", str(bad), "kavz685", "--out", str(tmp_path / "bad"))
+    result = lever("validate", "--result", str(bad), "kavz685", "--no-plots", "--out", str(tmp_path / "bad"))
     assert result.exit_code == 1
     assert "FAIL (coupling.tau1: " in result.output and "; coupling.tau2: " in result.output
 
