@@ -235,7 +235,7 @@ def markdown(result: dict, rows: list[dict]) -> str:
             if r.get("split_unreliable"):
                 parts = f"unreliable: {r['split_unreliable']} | | | "
             elif r.get("unreliable"):
-                parts = "unreliable: its run time is (above) | | | "
+                parts = "unreliable: its run time is unreliable (above) | | | "
             else:
                 parts = " | ".join(f"{r[f'{part}_s']:.3f} s ({100 * r[f'{part}_s'] / wall:.0f} %)"
                                    for part in ("crossing", "slave", "master"))
@@ -319,7 +319,7 @@ def summary_lines(result: dict) -> list[str]:
                              f"cost nothing would take {b['bound_without_master']:.2f}x the floor")
     for case in result["cases"]:
         if case.split and case_problems(case):
-            lines.append(f"  {case.label:34s} split unreliable: its run time is ({'; '.join(case_problems(case))})")
+            lines.append(f"  {case.label:34s} split unreliable: its run time is unreliable ({'; '.join(case_problems(case))})")
         elif case.split_unreliable:
             lines.append(f"  {case.label:34s} split unreliable: {case.split_unreliable}")
         elif case.split:
