@@ -9,6 +9,7 @@ from harness.engine import masters
 from harness.judges import metrics
 from harness.judges import monolithic
 from harness.engine import run
+from harness.engine.interface import CallCounts
 from harness.description import scene
 
 # 0.4 s: the start-up from 39 rad/s, where the errors are made (the observed orders are
@@ -118,8 +119,11 @@ def test_a_refused_dostep_in_a_step_plan_is_named_as_component_do_step_names_it(
     from harness.engine.system import StepCall, System
     failures = []
 
-    class Refusing:
-        steps, time = 0, 0.0
+    class Refusing(CallCounts):
+        time = 0.0
+
+        def __init__(self):
+            self._start_counts()
 
         def fail(self, call, status):
             failures.append((call, status))
