@@ -22,6 +22,7 @@ from __future__ import annotations
 import bisect
 import hashlib
 import linecache
+from collections import Counter
 from typing import Callable
 
 from harness.engine.component import step_call
@@ -39,12 +40,11 @@ class CallTally:
     def __init__(self, calls, lines):
         self.runs = 0
         self.calls, self.lines = tuple(calls), tuple(lines)
-        for component in dict.fromkeys(component for component, _ in self.calls):
-            made: dict[str, int] = {}
-            for each, kind in self.calls:
-                if each is component:
-                    made[kind] = made.get(kind, 0) + 1
-            component.tallies.append((self, made))
+        made: dict[object, Counter] = {}
+        for component, kind in self.calls:
+            made.setdefault(component, Counter())[kind] += 1
+        for component, kinds in made.items():
+            component.tallies.append((self, kinds))
 
     def stopped(self, traceback):
         """Count the calls of a run that stopped at ``traceback``'s line of the function: those
@@ -108,7 +108,10 @@ class Source:
             return lines or ["    pass"], []
         first, end = self._call_lines[0], self._after_calls
         inside = lines[first:end]
-        if not all(line.startswith("    ") and not line.startswith("     ") for line in (lines[first], *lines[end:end + 1])) \
+
+        def top_level(line):
+            return line.startswith("    ") and not line.startswith("     ")
+        if not all(map(top_level, (lines[first], *lines[end:end + 1]))) \
                 or any(line.strip().startswith("return") for line in inside):
             raise ValueError(f"{self.title}: the calls must make one block of the body's top level")
         body = [*lines[:first], "    try:", *("    " + line for line in inside),

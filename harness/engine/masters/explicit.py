@@ -474,8 +474,8 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         source.line("history.append((t, start))")
         # ``_send_ahead`` at the step's end, ``_derivatives``' test of the last weights unrolled
         source.line("t_end = t + h")
-        source.line("scale = t_end - history[-1][0]")
         source.line(", ".join(f"(t{j}, past{j})" for j in range(points)) + ", = history")
+        source.line(f"scale = t_end - t{points - 1}")        # the newest point's time: t
         source.line(f"last = {master}._last_derivatives")
         source.line("weights = None")
         source.line("if last is not None:")
@@ -501,12 +501,6 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         """A step of this family, whatever the history (a start-up, inputs not sent ahead, a
         restored state); with ``reads_recorded`` it reads the recorded outputs after it too,
         as ``Master.step`` does otherwise."""
-        self._general_step_impl(t, h)
-        if self.reads_recorded and self.system.has_dependent_outputs:
-            self.system.refresh_dependent(send=self._inputs_unsent)
-            self._inputs_unsent = False
-
-    def _general_step_impl(self, t, h):
         start = self.snapshot()
         history = self.history
         # While the history is too short for the full degree and the stateful components
@@ -527,6 +521,9 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         history.append((t, start))
         if self.sends_ahead and (len(history) >= self.degree or not self._can_roll_back):   # not starting
             self._send_ahead(t + h)
+        if self.reads_recorded and self.system.has_dependent_outputs:
+            self.system.refresh_dependent(send=self._inputs_unsent)
+            self._inputs_unsent = False
 
     def _start_step(self, t, h, points):
         """A start-up step of the master's order although the history is short: step
