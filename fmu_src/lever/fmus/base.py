@@ -31,7 +31,7 @@ def _nan_values(self, vrs):
     return [math.nan] * len(vrs)
 
 
-def _reader_of(names: list[str]):
+def _reader_of(names):
     """A getter of the attributes ``names`` of a slave, as a tuple (attrgetter's own for two
     or more; it gives one attribute alone, and nothing for none)."""
     if len(names) > 1:

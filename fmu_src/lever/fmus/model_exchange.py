@@ -15,13 +15,12 @@ model at the current point and the FMI calls.
 from __future__ import annotations
 
 import math
-from operator import attrgetter
 from typing import Callable, NamedTuple, Sequence
 
 from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
 
 from ..physics.parameters import ParameterError
-from .base import _LIVE, LeverSlave, _nan_values
+from .base import _LIVE, LeverSlave, _nan_values, _reader_of
 from .guard import guarded
 from .me_channel import CHANNEL, DERIVATIVES, INFO_FIELDS, KIND_SHIFT, NativeEntryChannel
 from .me_description import LIVE_EVENT_INDICATORS, ModelExchangeDescription
@@ -44,15 +43,6 @@ class _Layout(NamedTuple):
     outputs: tuple | None      #: the physics' outputs (None: ``_me_output_values`` is a subclass's)
     read_x: Callable           #: the physics' states of the slave, in the physics' order (a sequence)
     read_u: Callable           #: the physics' inputs of the slave (a tuple)
-
-
-def _reader(names: Sequence[str]) -> Callable:
-    """A function of an object returning the tuple of its attributes ``names``, read in C
-    (``attrgetter`` returns a bare value for one name: wrapped to a tuple)."""
-    if len(names) == 1:
-        one = attrgetter(names[0])
-        return lambda obj: (one(obj),)
-    return attrgetter(*names) if names else (lambda obj: ())
 
 
 class StateVariable(NamedTuple):
@@ -215,14 +205,14 @@ class ModelExchangeSlave(NativeEntryChannel, PartialDerivatives, ModelExchangeDe
         if cls._x is ModelExchangeSlave._x:
             # The states and inputs are kept as floats (``_set_x``, ``set_real``, the point
             # block), so they are read as they are: in one C call at every right-hand side.
-            read_x = _reader([self.ME_STATES[k].attribute for k in positions])
+            read_x = _reader_of([self.ME_STATES[k].attribute for k in positions])
         else:
             def read_x(slave):
                 x = slave._x()
                 return [x[k] for k in positions]
         padding = [0.0] * (len(self.ME_STATES) - len(positions)) if positions == tuple(range(len(positions))) else None
         return _Layout(positions, padding, tuple(model.OUTPUTS) if cls._me_output_values is
-                       ModelExchangeSlave._me_output_values else None, read_x, _reader(model.INPUTS))
+                       ModelExchangeSlave._me_output_values else None, read_x, _reader_of(model.INPUTS))
 
     def _x_physics(self) -> list:
         return list(self._me_layout.read_x(self))
