@@ -243,7 +243,7 @@ class Guard:
         straight-line tests (``harness.engine.straight_line``), the loop ``interpret`` walks."""
         source = Source("guard", "t, step_index")
         for values, i, low, high, k in checks:
-            value = f"{source.name(values, 'outputs')}[{i}]"
+            value = f"{source.elements(values, 'outputs')}[{i}]"
             low, high = source.name(low, "low"), source.name(high, "high")
             component, _, variable, _ = self._bounds[k]
             source.line(f"if not {low} <= {value} <= {high}:", f"{component}.{variable}")

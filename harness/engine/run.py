@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import re
 import time as clock
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from harness.engine.component import FmuCallError
 from harness.engine.guard import Diverged, Guard
 from harness.engine import interrupt
 from harness.engine.interrupt import Interrupted
+from harness.engine.straight_line import elements_of
 from harness.paths import FMUS
 from harness.engine.system import System
 
@@ -61,8 +63,9 @@ class RunResult:
 
 class Recorder:
     """Preallocated rows of the recorded variables, filled from the system's buffers:
-    one numpy copy per component buffer and step, checked for non-finite values in
-    blocks (a non-finite row is found and reported with its time)."""
+    one copy of the system's output block a step (through memoryviews: a slice copied in
+    C, without numpy's indexing), checked for non-finite values in blocks (a non-finite
+    row is found and reported with its time)."""
 
     CHECK_EVERY = 256
 
@@ -81,15 +84,25 @@ class Recorder:
             for var, i in ((v, system.index[(comp, v)]) for v in system.exposed[comp]):
                 self._columns[f"{comp}.{var}"] = offset + i
             offset += len(values)
-        self._block = np.ctypeslib.as_array(system.output_block) if offset else np.empty(0)
+        self._block = elements_of(system.output_block) if offset else memoryview(array("d"))
+        self._width = offset
         missing = [n for n in names if n not in self._columns]
         if missing:
             raise KeyError(f"not exposed by the system: {', '.join(missing)}")
         self._selected = [self._columns[n] for n in names]      # the recorded names' columns
-        self.times = np.empty(n_rows)
-        self.rows = np.empty((n_rows, offset))
         self.count = 0
         self._checked = 0
+        self._allocate(n_rows)
+
+    def _allocate(self, n_rows: int, kept: int = 0):
+        """Rows for ``n_rows`` steps, the first ``kept`` of the present ones copied over; the
+        flat views ``record`` writes through."""
+        times, rows = np.empty(n_rows), np.empty((n_rows, self._width))
+        if kept:
+            times[:kept], rows[:kept] = self.times[:kept], self.rows[:kept]
+        self.times, self.rows = times, rows
+        self._time_items = memoryview(times)
+        self._row_items = memoryview(rows.reshape(-1))
 
     def record(self, t: float):
         count = self.count
@@ -97,11 +110,11 @@ class Recorder:
             if self.stream is not None:
                 self._hand_on()
             else:                               # a variable-step run: grow
-                self.times = np.concatenate([self.times, np.empty(len(self.times))])
-                self.rows = np.concatenate([self.rows, np.empty(self.rows.shape)])
+                self._allocate(2 * count, count)
             count = self.count
-        self.rows[count] = self._block
-        self.times[count] = t
+        width = self._width
+        self._row_items[count * width:(count + 1) * width] = self._block
+        self._time_items[count] = t
         self.count = count = count + 1
         if count - self._checked >= self.CHECK_EVERY:
             self.check()

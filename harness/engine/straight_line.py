@@ -7,6 +7,11 @@ over records, attribute reads) costs more Python than the calls themselves.  As
 of one function, every call, handle, buffer and index bound once, and compiles it; it
 does what the interpreting loops do, in their order, call for call.
 
+Values are read and written in the body through memoryviews of the ctypes buffers
+(``Source.elements``), the buffers themselves passed to the calls: an item of a
+memoryview is a double read or written in C, an item of a ctypes array goes through its
+type's conversion functions, about a third more and more code touched on every step.
+
 The source is registered with ``linecache`` under the function's file name
 (``<harness TITLE DIGEST>``), so a traceback or a debugger shows the line that failed; a
 function's ``source`` attribute holds it too.
@@ -20,6 +25,7 @@ made before the line it stopped on and the one on it.
 from __future__ import annotations
 
 import bisect
+import ctypes
 import hashlib
 import linecache
 from collections import Counter
@@ -29,6 +35,17 @@ from harness.engine.component import step_call
 
 #: the function maker compiled from each distinct source
 _makers: dict[str, Callable] = {}
+
+
+def elements_of(values):
+    """A memoryview of the ctypes array of doubles ``values``, item for item (a view
+    sharing its memory, which it keeps alive); any other sequence (a stand-in's list) as
+    it is."""
+    if not isinstance(values, ctypes.Array):
+        return values
+    if values._type_ is not ctypes.c_double:
+        raise TypeError(f"{type(values).__name__}: an array of doubles expected")
+    return memoryview(values).cast("B").cast("d")
 
 
 class CallTally:
@@ -64,6 +81,7 @@ class Source:
         self.lines: list[str] = []
         self.bound: dict[str, object] = {}
         self._names: dict[int, str] = {}
+        self._views: dict[int, str] = {}
         self._counts: dict[str, int] = {}
         # the FMI calls (``call``): (component, kind) and the index of each one's line;
         # the index after the last one's checks
@@ -81,6 +99,15 @@ class Source:
         name = self._names[id(obj)] = f"{kind}{number}"
         self.bound[name] = obj
         return name
+
+    def elements(self, values, kind: str) -> str:
+        """The name in the body of a memoryview of the ctypes array ``values`` (doubles):
+        its items are the array's, read and written in C.  One view each array, kept with
+        the function, the array kept alive by it."""
+        known = self._views.get(id(values))
+        if known is None:
+            known = self._views[id(values)] = self.name(elements_of(values), kind)
+        return known
 
     def line(self, text: str, note: str | None = None):
         """Add ``text`` to the body; ``note`` after it as a comment (a scene's names go here:
@@ -169,19 +196,19 @@ def add_steps(source: Source, calls) -> None:
 def add_visits(source: Source, visits) -> None:
     """``System.propagate_with`` over the ``Visit`` records ``visits``, in the body."""
     for visit in visits:
-        values = source.name(visit.values, "outputs") if visit.values is not None else None
         if visit.get_real is not None:
             c = source.name(visit.component, "component")
             get_real = source.name(visit.get_real, "get_real")
             args = ", ".join([source.name(visit.handle, "handle"), source.name(visit.vrs, "vrs"),
-                              source.name(visit.n, "count"), values])
+                              source.name(visit.n, "count"), source.name(visit.values, "outputs")])
             source.call(visit.component, "get", f"status = {get_real}({args})",
                         f"fmi2GetReal of {visit.component.name}: {len(visit.vrs)} outputs")
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2GetReal', status)")
             source.calls_checked()
         for copy in visit.copies:
-            target = source.name(copy.values, "inputs")
+            target = source.elements(copy.values, "input_items")
+            values = source.elements(visit.values, "output_items")
             for k, i in copy.pairs:
                 source.line(f"{target}[{k}] = {values}[{i}]")
         for send in visit.sends:

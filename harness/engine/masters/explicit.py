@@ -328,7 +328,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         source.line(", ".join(f"past{j}" for j in range(points)) + ", = pasts")
         ends = []
         for k, i, values, n, ramped, higher in (self._rest_inputs if rest_only else self._held_inputs):
-            held = source.name(values, "held")
+            held = source.elements(values, "held")
             for j in range(points):
                 source.line(f"u{j} = past{j}[{k}][{i}]")
             mean = "0.0" + "".join(f" + m{j} * u{j}" for j in range(points))
@@ -384,7 +384,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         """The lines of ``_ahead_writer``'s writes and sends, in ``source`` (past values
         ``past0`` ..., weights ``f0`` ... and ``s0`` ..., ``scale`` and ``squared`` bound)."""
         for k, i, values, now, n, higher in self._ahead_inputs:
-            held, live = source.name(values, "held"), source.name(now, "live")
+            held, live = source.elements(values, "held"), source.elements(now, "live")
             source.line(f"u = {live}[{i}]")
             source.line(f"{held}[{i}] = u")
             source.line(f"{held}[{n + i}] = (0.0 + " + "".join(f"f{j} * past{j}[{k}][{i}] + " for j in range(points))
@@ -466,7 +466,7 @@ class ExtrapolatingJacobiMaster(JacobiMaster):
         source.line(f"    return {general}(t, h)")
         # the snapshot (``snapshot_of``): each input buffer's values as a list
         source.line("start = [" + ", ".join(
-            "[" + ", ".join(f"{source.name(values, 'live')}[{i}]" for i in range(len(values))) + "]"
+            "[" + ", ".join(f"{source.elements(values, 'live')}[{i}]" for i in range(len(values))) + "]"
             for values in self._live) + "]")
         source.line(f"{master}._ahead_after = None")
         add_steps(source, self._steps)
@@ -620,9 +620,9 @@ class MidpointPredictionMaster(JacobiMaster):
             source.line("f3 = dt * dt * dt / 6.0")
         for target_values, k, values, indices in self._taylor:
             # a shaft's angle (phi, w, a) and speed (w, a): the value's factor 1.0 left out, as exact
-            terms = [f"{source.name(values, 'outputs')}[{i}]" if j == 0 else
-                     f"{factors[j]} * {source.name(values, 'outputs')}[{i}]" for j, i in enumerate(indices)]
-            source.line(f"{source.name(target_values, 'inputs')}[{k}] = 0.0 + " + " + ".join(terms))
+            terms = [f"{source.elements(values, 'outputs')}[{i}]" if j == 0 else
+                     f"{factors[j]} * {source.elements(values, 'outputs')}[{i}]" for j, i in enumerate(indices)]
+            source.line(f"{source.elements(target_values, 'inputs')}[{k}] = 0.0 + " + " + ".join(terms))
         add_visits(source, self._predicted_plan)
         return source.function()
 
