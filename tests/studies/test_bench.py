@@ -86,7 +86,7 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir, monkeyp
     # under load either can be anything; a floor above the step is flagged, no overhead shown
     # beside a run time that is no result)
     # Two floors: the one-step FMU-call floor times the steps, and the replay of the run's
-    # own calls (one run: its run time over its replay)
+    # own calls (one run: the run side by side with its replay, over the replay)
     for r in jacobi + [r for r in rows if r["engine"] == "jacobi-quadratic"]:
         assert float(r["floor_s"]) > 0.0 and float(r["own_calls_floor_s"]) > 0.0 and not r["own_calls_note"], r
         if r["unreliable"]:
@@ -95,7 +95,7 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir, monkeyp
         assert float(r["overhead_above_call_floor"]) == pytest.approx(
             float(r["wall_median_s"]) / float(r["floor_s"]) - 1.0, rel=1e-9), r
         assert float(r["overhead_above_own_calls"]) == pytest.approx(
-            float(r["wall_median_s"]) / float(r["own_calls_floor_s"]) - 1.0, rel=1e-9), r
+            float(r["own_calls_run_s"]) / float(r["own_calls_floor_s"]) - 1.0, rel=1e-9), r
         assert r["overhead_above_own_calls_min"] == r["overhead_above_own_calls_max"] == r["overhead_above_own_calls"]
     # an adaptive master's run has no replayed floor (its steps are its own)
     assert [r["own_calls_floor_s"] for r in rows if r["engine"] == "adaptive"] == [""]
@@ -151,9 +151,10 @@ def test_small_bench_writes_its_table_plot_and_claims(tmp_path, fmu_dir, monkeyp
     # the report names the floor each overhead is against
     own = claims["overhead_above_own_calls"]
     if own:
-        assert "above the floor of each run's own FMI calls (each run over a replay" in \
+        assert "above the floor of each run's own FMI calls (a run over a replay" in \
             (tmp_path / "bench.md").read_text()
-        assert any(line.startswith("  above the floor of its own FMI calls (the run's calls replayed alone): ")
+        assert any(line.startswith("  above the floor of its own FMI calls (the run's calls replayed alone, in "
+                                   "turns of 25 steps with the run): ")
                    for line in bench.summary_lines(result))
     # the FMI 2.0 and FMI 3.0 editions, side by side under the baseline at the scene's step
     editions = json.loads((tmp_path / "bench.json").read_text())["fmi_editions"]
@@ -454,8 +455,9 @@ def test_a_long_bench_is_estimated_from_each_masters_timed_runs(monkeypatch):
     prices = 4 * timing.PRICE_STEPS * floor
     # jacobi 10000 steps: 10.2 s x 3; 5000: 5.2 s x 3; quadratic 30.2 s > the limit: once; the
     # peer as the baseline (jacobi) at 1 ms: 10.2 s x 3; each master's case records its calls
-    # in one run more and replays them before each run (about a run's time), the peer not
-    expected = (3 * (2 * 10.2 + extra) + 10.2 + 3 * (2 * 5.2 + extra) + 5.2 + (2 * 30.2 + extra) + 30.2
+    # in one run more and before each run runs once more side by side with their replay
+    # (about two runs' time), the peer not
+    expected = (3 * (3 * 10.2 + extra) + 10.2 + 3 * (3 * 5.2 + extra) + 5.2 + (3 * 30.2 + extra) + 30.2
                 + 3 * (10.2 + extra) + 4 * prices)
     assert timing.estimated_seconds(spec, p, 3, None, floor) == pytest.approx(expected, rel=1e-9)
     # a short benchmark is not timed at all

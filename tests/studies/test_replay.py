@@ -103,6 +103,7 @@ def test_a_replay_that_is_not_the_runs_is_refused(fmu_dir):
     # in the benchmark: the floor is not measured, and says why
     floor = replay.OwnCallsFloor.__new__(replay.OwnCallsFloor)
     floor.recording, floor.problem = recording, None
+    floor.master, floor.step, floor.options, floor.fmu_dir = "jacobi", 1e-3, None, fmu_dir
     assert floor() is None and "not the run's" in floor.problem and floor.summary()["problem"] == floor.problem
 
 
@@ -119,9 +120,13 @@ def test_a_long_run_is_recorded_for_a_span_of_whole_steps_and_scaled(fmu_dir, mo
         r.check()           # where the span ended in the run
     finally:
         r.free()
-    monkeypatch.setattr(replay, "replayed", lambda recording: 1.0)
     floor = replay.OwnCallsFloor(spec, "jacobi", 1e-3, fmu_dir=fmu_dir, limit=10 * per_step + 1)
-    assert floor() == pytest.approx(whole.steps / 11)
+    # a clock that moves by 1 s each time it is read: the span's one turn (11 steps, fewer
+    # than a turn's) is 1 s of run and 1 s of replay, scaled to the run's 30 steps
+    ticks = iter(range(1000))
+    made = replay.SideBySide
+    monkeypatch.setattr(replay, "SideBySide", lambda r: made(r, timer=lambda: float(next(ticks))))
+    assert floor() == (pytest.approx(whole.steps / 11), pytest.approx(whole.steps / 11))
     assert floor.summary() == {"calls": 11 * per_step, "state_calls": 0, "steps": whole.steps, "span_steps": 11,
                                "problem": None}
 
@@ -129,37 +134,80 @@ def test_a_long_run_is_recorded_for_a_span_of_whole_steps_and_scaled(fmu_dir, mo
 def test_a_run_is_not_faster_than_the_replay_of_its_own_calls(fmu_dir):
     """The replay makes the run's calls and nothing else, so a run over its replay is at
     least about 1: below would be a replay that makes more than the run (its set-up timed,
-    a second scene's calls).  Interleaved, the median of five pairs."""
+    a second scene's calls).  Side by side, the median of five runs."""
     spec = scene.load("kavz685").with_overrides(["experiment.stop=0.3"])
-    recording = replay.record(spec, "jacobi-quadratic", 1e-3, fmu_dir=fmu_dir)
-    ratios = []
-    for _ in range(5):
-        seconds = replay.replayed(recording)
-        ratios.append(simulate(spec, "jacobi-quadratic", 1e-3, fmu_dir).wall_time / seconds)
+    floor = replay.OwnCallsFloor(spec, "jacobi-quadratic", 1e-3, fmu_dir=fmu_dir)
+    ratios = [run / replayed for run, replayed in (floor() for _ in range(5))]
     assert stats.median(ratios) > 0.95, ratios
 
 
+def test_the_turns_replay_every_recorded_call_once_in_order(fmu_dir):
+    """``SideBySide``'s turns split the replay's loop at the run's step boundaries: every
+    call once, in the order made, the last turn shorter where the steps do not divide."""
+    spec = _scene()          # 30 steps: turns after steps 25 and 30
+    recording = replay.record(spec, "jacobi-midpoint", 1e-3, fmu_dir=fmu_dir)
+    r = replay.Replay(recording)
+    try:
+        turns = replay.SideBySide(r)
+        assert list(turns.turns) == [25, 30]
+        assert [call for calls in turns.turns.values() for call in calls] == r.loop
+        per_step = len(r.loop) // recording.steps
+        assert [len(calls) for calls in turns.turns.values()] == [25 * per_step, 5 * per_step]
+        assert [len(calls) for calls in replay.SideBySide(r, chunk=7).turns.values()] == \
+            [7 * per_step] * 4 + [2 * per_step]
+    finally:
+        r.free()
+
+
+def test_a_slower_harness_shows_in_the_run_side_by_side(fmu_dir, monkeypatch):
+    """The run's turns hold what the master does beyond its calls and the replay's turns the
+    calls alone: a master made to spend one step's calls' time again in Python doubles the
+    run against its replay, and the replay's time stays what it was."""
+    import time
+
+    spec = scene.load("kavz685").with_overrides(["experiment.stop=0.2"])
+    floor = replay.OwnCallsFloor(spec, "jacobi", 1e-3, fmu_dir=fmu_dir)
+    plain = [floor() for _ in range(3)]
+    per_step = stats.median(replayed for _, replayed in plain) / floor.recording.steps
+    from harness.engine.masters.explicit import JacobiMaster
+    made = JacobiMaster._step_impl
+
+    def slower(self, t, h):
+        made(self, t, h)
+        until = time.perf_counter() + per_step
+        while time.perf_counter() < until:
+            pass
+    monkeypatch.setattr(JacobiMaster, "_step_impl", slower)
+    slowed = [floor() for _ in range(3)]
+    ratio = stats.median(run / replayed for run, replayed in plain)
+    slowed_ratio = stats.median(run / replayed for run, replayed in slowed)
+    assert 0.9 < ratio < 1.6, plain
+    assert slowed_ratio - ratio > 0.7, (plain, slowed)
+    assert 0.6 < stats.median(replayed for _, replayed in slowed) / (per_step * floor.recording.steps) < 1.6
+
+
 def test_runs_faster_than_their_own_replay_are_no_result():
-    """The overhead is each run over the replay timed just before it; a run below its replay
-    (which makes the same calls and nothing else) says the machine changed between the two."""
+    """The overhead is each run over its replay, the two side by side (the case's timed runs
+    give its run time, not this figure); a run below its replay (which makes the same calls
+    and nothing else) says the machine changed between the turns."""
     from harness.studies import bench
     from harness.studies.bench.schedule import Case
 
-    case = Case("jacobi-quadratic", "master", 5e-3, wall_times=[1.2, 1.1, 1.5], steps=2000, asked=3,
-                own_calls_times=[1.0, 1.0, 1.0], load=[1.0, 1.0], errors={"tau_rms": 1e-3})
+    case = Case("jacobi-quadratic", "master", 5e-3, wall_times=[1.3, 1.0, 1.4], steps=2000, asked=3,
+                own_calls_pairs=[[1.2, 1.0], [1.1, 1.0], [1.5, 1.0]], load=[1.0, 1.0], errors={"tau_rms": 1e-3})
     found = bench.overhead_above_own_calls(case)
     assert found == {"median": pytest.approx(0.2), "min": pytest.approx(0.1), "max": pytest.approx(0.5), "n": 3}
     assert bench.case_problems(case) == []
     row = bench.table_row(case)
     assert row["overhead_above_own_calls"] == pytest.approx(0.2) and row["own_calls_floor_s"] == 1.0
-    case.own_calls_times = [1.3, 1.2, 1.2]              # ratios 0.92, 0.92, 1.25
-    assert bench.case_problems(case) == ["the runs took 8 % less than the replay of their own calls timed just "
-                                         "before each (the same calls and nothing else)"]
+    case.own_calls_pairs = [[1.2, 1.3], [1.1, 1.2], [1.5, 1.2]]     # ratios 0.92, 0.92, 1.25
+    assert bench.case_problems(case) == ["the runs took 8 % less than the replay of their own calls timed side "
+                                         "by side (the same calls and nothing else)"]
     row = bench.table_row(case)
     assert row["overhead_above_own_calls"] is None and "the replay of their own calls" in row["unreliable"]
     # as quoted, to the percent: 0 % is no contradiction
-    case.own_calls_times = [1.2 / 0.996, 1.1 / 0.996, 1.5 / 0.996]
+    case.own_calls_pairs = [[1.2, 1.2 / 0.996], [1.1, 1.1 / 0.996], [1.5, 1.5 / 0.996]]
     assert bench.case_problems(case) == [] and bench.table_row(case)["overhead_above_own_calls"] < 0.0
     # a run without a replay for every run has no figure
-    case.own_calls_times = [1.0, 1.0]
+    case.own_calls_pairs = [[1.2, 1.0], [1.1, 1.0]]
     assert bench.overhead_above_own_calls(case) is None and bench.case_problems(case) == []

@@ -285,21 +285,23 @@ def overhead_above_floor(case: Case) -> float | None:
 
 
 def overhead_above_own_calls(case: Case) -> dict | None:
-    """A master's run time above the floor of its own FMI calls (``replay``): each run over
-    the replay timed just before it, less 1 - ``median``, ``min``, ``max`` over the runs and
-    their number ``n``; None where not every run had its replay (not a fixed-step
-    co-simulation master, a replay that failed or differed from the run)."""
-    if not (case.wall_times and case.own_calls_times and len(case.own_calls_times) == len(case.wall_times)):
+    """A master's run time above the floor of its own FMI calls (``replay``), from the runs
+    side by side with the replay (``replay.SideBySide``): each such run over its replay,
+    less 1 - ``median``, ``min``, ``max`` over them and their number ``n``; None where not
+    every run had its pair (not a fixed-step co-simulation master, a replay that failed or
+    differed from the run)."""
+    pairs = case.own_calls_pairs
+    if not (case.wall_times and pairs and len(pairs) == len(case.wall_times)):
         return None
-    r = trust.paired_ratio(case.wall_times, case.own_calls_times)
+    r = trust.paired_ratio([run for run, _ in pairs], [replayed for _, replayed in pairs])
     return {"median": r["median"] - 1.0, "min": r["min"] - 1.0, "max": r["max"] - 1.0, "n": r["n"]}
 
 
 def case_problems(case: Case) -> list[str]:
     """What makes a case's run time no result: fewer runs than asked (a failed case made
     its one run), a call floor above the step it bounds, runs faster than the replay of
-    their own calls (which makes the same calls and nothing else: the machine changed
-    between the two)."""
+    their own calls side by side (which makes the same calls and nothing else: the machine
+    changed between the turns, or the replay is not the run's)."""
     problems = []
     if not case.failure and case.asked:
         problems.append(trust.runs_problem(len(case.wall_times), case.asked, max(case.wall_times, default=None)))
@@ -308,5 +310,5 @@ def case_problems(case: Case) -> list[str]:
     own = overhead_above_own_calls(case)
     if own is not None and own["median"] <= -0.005:         # below 0 % as the figure is quoted
         problems.append(f"the runs took {-100 * own['median']:.0f} % less than the replay of their own calls "
-                        "timed just before each (the same calls and nothing else)")
+                        "timed side by side (the same calls and nothing else)")
     return [p for p in problems if p]

@@ -20,7 +20,14 @@ This floor is the master's own calls instead:
   run; a state the run saved is saved in the replay at the same call, and each later
   call that named it in the run names the replay's own;
 * ``Replay.check`` reads every real variable again after the timed calls: bit for bit
-  what the run left, or the replay was not the run's (``ReplayDiverged``).
+  what the run left, or the replay was not the run's (``ReplayDiverged``);
+* ``SideBySide`` times a run and the replay of its calls in turns: the run steps
+  ``CHUNK_STEPS`` steps, then the replay makes the calls of those steps on its own FMUs,
+  and so on, each turn timed.  This machine's speed changes over tenths of a second and
+  more (a neighbour's load), by up to twice; two whole runs timed one after the other saw
+  different machines, a turn of a few milliseconds and the next the same one.  Timed
+  whole, one after the other, a run over its replay spread from -30 % to +95 % on this
+  machine; in turns, the same repeats lay within a few per cent of each other.
 
 A long run is recorded for its first ``MAX_CALLS`` calls at most, in whole steps
 (``Recording.span_steps`` of ``Recording.steps``): the floor of such a run is that span's
@@ -49,6 +56,11 @@ MAX_CALLS = 500_000
 #: the types of the variables the check reads (FMI 2.0, FMI 3.0)
 REAL_TYPES = ("Real", "Float64")
 
+#: steps of a run timed in one turn of ``SideBySide`` before the replay makes their calls
+#: (a few milliseconds of work: the machine does not change within it, and the run's
+#: caches, cold after the replay's turn, are warm again within a step)
+CHUNK_STEPS = 25
+
 GET, SET, STEP, GET_STATE, SET_STATE, FREE_STATE = range(6)
 _KINDS = {"get": GET, "set": SET, "step": STEP, **dict(zip(STATE_CALLS, (GET_STATE, SET_STATE, FREE_STATE)))}
 
@@ -75,6 +87,8 @@ class Recording:
     start: int = 0
     steps: int = 0
     span_steps: int = 0
+    #: the index in ``calls`` after each recorded step's last call (the first step's first)
+    step_ends: list = field(default_factory=list)
     final: dict = field(default_factory=dict)
     calls_by_kind: dict = field(default_factory=dict)
     failure: str | None = None
@@ -162,6 +176,7 @@ class _Recorder:
         self.recording.steps = n
         if self.on[0]:
             self.recording.span_steps = n
+            self.recording.step_ends.append(len(self.calls))
             if len(self.calls) - self.recording.start >= self.limit:
                 self._end()
 
@@ -367,29 +382,91 @@ def replayed(recording: Recording) -> float:
         replay.free()
 
 
+class SideBySide:
+    """A run's observer (``simulate(observer=...)``) that times the run and the replay of
+    its own calls in turns (see the module): after every ``chunk`` steps of the run the
+    calls those steps made are made on ``replay``'s FMUs, and each turn is timed apart.
+    ``run_s`` and ``replay_s``: the seconds of the turns, over ``steps`` of the run's steps
+    (the recorded span's, where the recording ended before the run).  The run's turns hold
+    this observer's call after each step (a call and a test, a fraction of a microsecond):
+    counted against the run, never for it."""
+
+    def __init__(self, replay: Replay, chunk: int = CHUNK_STEPS, timer=clock.perf_counter):
+        recording = replay.recording
+        ends = recording.step_ends
+        if len(ends) != recording.span_steps:
+            raise ReplayDiverged("the recording has no step boundaries for its span (recorded by another version)")
+        # the step a turn ends after -> the replay's calls of its steps
+        last_steps = [*range(chunk, len(ends) + 1, chunk)] + ([len(ends)] if len(ends) % chunk else [])
+        self.turns, first = {}, 0
+        for n in last_steps:
+            end = ends[n - 1] - recording.start
+            self.turns[n] = replay.loop[first:end]
+            first = end
+        self.run_s = self.replay_s = 0.0
+        self.steps = 0
+        self._timer = timer
+        self._mark = 0.0
+
+    def started(self, t):
+        self._mark = self._timer()
+
+    def stepped(self, n, t):
+        calls = self.turns.get(n)
+        if calls is None:
+            return
+        timer = self._timer
+        ended = timer()
+        for function, a, b, c, d in calls:
+            if function(a, b, c, d) > 1:
+                raise ReplayDiverged(f"a replayed call ({getattr(function, '__name__', function)!s}) in the "
+                                     f"steps up to {n} returned an error status the run's did not")
+        replayed = timer()
+        self.run_s += ended - self._mark
+        self.replay_s += replayed - ended
+        self.steps = n
+        self._mark = timer()
+
+    def ended(self):
+        pass
+
+
 class OwnCallsFloor:
     """The floor of a master's case in the benchmark: its run recorded once (runs are
-    deterministic: every run of the case makes these calls), then ``__call__`` before each
-    run gives the seconds its calls take replayed - the whole run's (a span's replay scaled
-    by the steps, see the module) - or None once a replay failed or differed from the run,
-    ``problem`` saying why."""
+    deterministic: every run of the case makes these calls), then each ``__call__`` one
+    more run of the master with the replay of its calls side by side (``SideBySide``):
+    ``(run, replay)`` seconds, each over the recorded steps, scaled to the whole run (see
+    the module) - or None once a replay failed or differed from the run, ``problem``
+    saying why."""
 
     def __init__(self, scene, master: str, step: float, options: dict | None = None, fmu_dir: Path = FMUS,
                  limit: int = MAX_CALLS):
         self.recording = record(scene, master, step, options, fmu_dir, limit)
         self.problem = self.recording.failure
+        self.master, self.step, self.options, self.fmu_dir = master, step, options, fmu_dir
 
-    def __call__(self) -> float | None:
+    def __call__(self) -> tuple[float, float] | None:
         if self.problem:
             return None
+        r = self.recording
         try:
-            seconds = replayed(self.recording)
+            replay = Replay(r)
+            try:
+                turns = SideBySide(replay)
+                run = simulate(r.plan, self.master, self.step, self.fmu_dir, options=self.options, observer=turns)
+                interrupt.check()
+                if not run.ok or turns.steps != r.span_steps:
+                    raise ReplayDiverged(f"the run side by side with the replay did not make the recorded run's "
+                                         f"steps ({run.failure or f'{turns.steps} of {r.span_steps}'})")
+                replay.check()
+            finally:
+                replay.free()
         except ReplayDiverged as error:
             self.problem = f"the replay of the run's calls is not the run's: {error}"
-            self.recording.calls.clear()
+            r.calls.clear()
             return None
-        r = self.recording
-        return seconds * r.steps / r.span_steps
+        scale = r.steps / r.span_steps
+        return turns.run_s * scale, turns.replay_s * scale
 
     def summary(self) -> dict:
         """What the case keeps: the calls replayed, the steps they span of the run's, the

@@ -16,6 +16,7 @@ from harness.paths import RESULTS
 from harness.studies import trust
 from harness.studies.bench import editions
 from harness.studies.bench.headlines import case_noise, case_problems, overhead_above_floor, overhead_above_own_calls
+from harness.studies.bench.replay import CHUNK_STEPS
 from harness.studies.bench.schedule import Case
 
 
@@ -28,16 +29,17 @@ def progress_line(case: Case) -> str:
 
 
 #: what the two floors a master's run is measured against are, in the report's words
-OWN_CALLS_WORDS = ("each run over a replay, timed just before it, of the very FMI calls that run made, with the "
-                   "same arguments, on fresh instances of the FMUs and with nothing else: the FMUs' own cost of "
-                   "that run, an extrapolating master's extra work in the shafts and extra calls included")
+OWN_CALLS_WORDS = ("a run over a replay of the very FMI calls that run made, with the same arguments, on fresh "
+                   "instances of the FMUs and with nothing else - the FMUs' own cost of that run, an extrapolating "
+                   "master's extra work in the shafts and extra calls included - the two timed side by side in "
+                   f"turns of {CHUNK_STEPS} steps, just before each run")
 CALL_FLOOR_WORDS = ("each run over one communication step of zero-order-hold calls - each FMU stepped once, one "
                     "propagation - timed just before it, times the run's steps: a master that sends more or "
                     "makes more calls shows the FMUs' extra work there too")
 
 COLUMNS = ["engine", "kind", "step", "tolerance", "wall_median_s", "wall_min_s", "wall_max_s", "repeats", "asked",
            "load_min", "load_max", "unreliable", "steps", "rhs", "method", "fmu_calls", "rollbacks",
-           "own_calls_floor_s", "overhead_above_own_calls", "overhead_above_own_calls_min",
+           "own_calls_run_s", "own_calls_floor_s", "overhead_above_own_calls", "overhead_above_own_calls_min",
            "overhead_above_own_calls_max", "own_calls_note", "floor_s", "overhead_above_call_floor",
            "tau_rms", "tau_max", "w_rms", "w_max", "tau_rms_after_transient", "w_rms_after_transient",
            "energy_residual", "calls_per_step", "crossing_s", "slave_s", "master_s", "master_per_step_s", "split_unreliable", "failure"]
@@ -57,6 +59,14 @@ def own_calls_note(case: Case) -> str | None:
     return None
 
 
+def _own_calls_seconds(case: Case) -> dict:
+    """The medians of the runs side by side with the replay of their own calls and of the
+    replays (the floor), each over the whole run [s]: what the overhead divides."""
+    pairs = case.own_calls_pairs
+    return {"own_calls_run_s": stats.median(run for run, _ in pairs) if pairs else None,
+            "own_calls_floor_s": stats.median(replayed for _, replayed in pairs) if pairs else None}
+
+
 def table_row(case: Case) -> dict:
     """A case as a row of the benchmark's tables (CSV and report).  A case whose run time
     is no result (``case_problems``) says why in ``unreliable``; a split that cannot be
@@ -72,7 +82,7 @@ def table_row(case: Case) -> dict:
             "repeats": len(case.wall_times), "asked": case.asked or None,
             "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
             "unreliable": ("; ".join(problems) + f": {case_noise(case, problems)}") if problems else None,
-            "steps": case.steps, "rhs": case.rhs, "method": case.method, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, "own_calls_floor_s": stats.median(case.own_calls_times) if case.own_calls_times else None,
+            "steps": case.steps, "rhs": case.rhs, "method": case.method, "fmu_calls": case.fmu_calls, "rollbacks": case.rollbacks, **_own_calls_seconds(case),
             **{f"overhead_above_own_calls{suffix}": own[key] if own else None
                for suffix, key in (("", "median"), ("_min", "min"), ("_max", "max"))},
             "own_calls_note": own_calls_note(case),
@@ -327,7 +337,8 @@ def summary_lines(result: dict) -> list[str]:
                 f"{part} {100 * case.split[part] / case.wall:.0f} %" for part in ("crossing", "slave", "master"))
                 + (f" ({1e6 * case.timed['master_per_step_s']:.1f} us a step)" if case.timed else ""))
     if claims.get("overhead_above_own_calls"):
-        lines.append("  above the floor of its own FMI calls (the run's calls replayed alone): " + ", ".join(
+        lines.append(f"  above the floor of its own FMI calls (the run's calls replayed alone, in turns of "
+                     f"{CHUNK_STEPS} steps with the run): " + ", ".join(
             f"{n} {100 * v['median']:.0f} % [{100 * v['min']:.0f} to {100 * v['max']:.0f} %]"
             for n, v in claims["overhead_above_own_calls"].items()))
     if claims.get("overhead_above_call_floor"):

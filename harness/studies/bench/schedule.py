@@ -46,9 +46,10 @@ class Case:
     asked: int = 0
     #: the FMU-call floor [s a step] timed just before each run (masters): one per run
     floor_times: list = field(default_factory=list)
-    #: the floor of the run's own FMI calls [s a run]: the calls the master made, recorded
-    #: once and replayed on fresh FMUs just before each run (``replay``): one per run
-    own_calls_times: list = field(default_factory=list)
+    #: a run of the master and the floor of its own FMI calls, side by side [s, s]: the calls
+    #: the master made, recorded once and replayed on fresh FMUs in turns with one more run
+    #: (``replay.SideBySide``), timed just before each run: one pair per run
+    own_calls_pairs: list = field(default_factory=list)
     #: what was replayed (``replay.OwnCallsFloor.summary``): calls, state calls, steps of
     #: the run's recorded, and why the floor is not measured (``problem``)
     own_calls: dict | None = None

@@ -46,18 +46,18 @@ def _judge(case: Case, scene: scenes.Scene, times, traces):
 def _measure(case: Case, scene, run_once, repeats, limit_s, floor=None, own_calls=None) -> Case:
     """Run ``run_once()`` (-> RunResult) up to ``repeats`` times for the median run time;
     judge the first run (runs are deterministic), stop at a failure or a long run.
-    ``floor()`` (seconds a step of the FMU calls alone) and ``own_calls()`` (seconds of the
-    run's own calls replayed, None where not measured) are timed just before each run, so
-    that a run and the floors it is divided by saw the same machine."""
+    ``floor()`` (seconds a step of the FMU calls alone) and ``own_calls()`` (a run and its
+    own calls replayed, side by side: ``(run, replay)`` seconds, None where not measured)
+    are timed just before each run."""
     case.asked = repeats
     case.load.append(trust.load_average())
     for attempt in range(repeats):
         if floor is not None:
             case.floor_times.append(floor())
         if own_calls is not None:
-            seconds = own_calls()
-            if seconds is not None:
-                case.own_calls_times.append(seconds)
+            pair = own_calls()
+            if pair is not None:
+                case.own_calls_pairs.append(list(pair))
         result: RunResult = run_once()
         interrupt.check()          # Ctrl-C during a peer's run: the case is not measured
         case.wall_times.append(result.wall_time)
@@ -132,7 +132,8 @@ def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_ste
     timed(masters[0], CALIBRATION_STEPS[0])          # the first run pays for imports and loading the FMUs
     cost = {name: step_cost(lambda count, name=name: timed(name, count)) for name in masters}
     # a fixed-step master's case (``planned_runs`` lists them first) records its calls in
-    # one run more and replays them before each run (about a run's time, less the master's)
+    # one run more and before each run runs once more with their replay side by side
+    # (about a run's time twice, less the master's once)
     fixed = sum(len(hs) for hs in p["steps"].values())
     total = 0.0
     for k, run in enumerate(runs):
@@ -140,7 +141,7 @@ def estimated_seconds(scene, p: dict, repeats: int, fmu_dir: Path, floor_per_ste
         setup, per_step = cost[name]
         one = setup + per_step * steps[run]
         replayed = k < fixed
-        total += (one * (2 if replayed else 1) + FLOOR_STEPS * floor_per_step) \
+        total += (one * (3 if replayed else 1) + FLOOR_STEPS * floor_per_step) \
             * (1 if one > p["repeats_limit_s"] else runs_asked) \
             + 4 * PRICE_STEPS * floor_per_step \
             + (one if replayed else 0.0)            # the call prices before and after a case; the recording
@@ -176,8 +177,9 @@ TIMED_RUNS = 3
 
 def run_master(scene, name, step, tolerance, repeats, fmu_dir, limit_s, twins: Path | None = None) -> Case:
     """A master's case: its runs, each after the FMU-call floor at its step (the scene's
-    for an adaptive master) and, for a fixed-step co-simulation master, after the replay of
-    its own calls (``replay.OwnCallsFloor``: recorded in one more run), and with ``twins``
+    for an adaptive master) and, for a fixed-step co-simulation master, after one more run
+    side by side with the replay of its own calls (``replay.OwnCallsFloor``: recorded in
+    one more run), and with ``twins``
     (the do-nothing FMUs) the prices of a call into ours and into the twins just before and
     just after the runs, for its time split."""
     options, method = master_options(scene, name, tolerance)
