@@ -478,3 +478,31 @@ def test_a_price_sets_aside_the_steps_another_process_interrupted():
     loop.steps = quiet[:5] + [({"load": {"set": 4e-3, "step": 2e-6}}, {"load": {"set": 1, "step": 1}})] + quiet[5:]
     prices = loop.prices(0.1e-6)
     assert list(prices) == ["load"] and prices["load"] == pytest.approx({"set": 0.9e-6, "step": 1.9e-6})
+
+
+def test_the_rounds_run_the_headline_ratios_cases_next_to_each_other_forth_and_back(monkeypatch):
+    """The fastest master's runs either side of the target come first, the monolithic
+    solution's next, the others after; the rounds go forth and back, so the two runs a
+    headline ratio divides are neighbours in every round and neither always runs first."""
+    from harness.studies.bench import headlines, timing
+
+    spec = scene.load("kavz685")
+    p = {"target_error": 1e-3, "baseline": "jacobi"}
+
+    def case(engine, step, wall, error, kind="master"):
+        return Case(engine, kind, step, None if kind == "master" else step, wall_times=[wall],
+                    errors={"tau_rms": error})
+    cases = [case("jacobi", 1e-3, 2.0, 2e-3), case("jacobi", 5e-4, 4.0, 5e-4),
+             case("jacobi-linear", 2e-3, 1.0, 2e-3), case("jacobi-linear", 1e-3, 1.5, 8e-4),
+             case("jacobi-quadratic", 6e-3, 0.2, 1.5e-3), case("jacobi-quadratic", 5e-3, 0.3, 7e-4),
+             case("monolithic", 1e-3, 0.25, 1.1e-3, "monolithic"), case("monolithic", 1e-5, 0.6, 1e-5, "monolithic")]
+    chosen = headlines.headline_cases(spec, cases, p)
+    assert [(c.engine, c.step) for c in chosen][:4] == [("jacobi-quadratic", 5e-3), ("jacobi-quadratic", 6e-3),
+                                                       ("monolithic", 1e-5), ("monolithic", 1e-3)]
+    assert {c.engine for c in chosen[4:]} == {"jacobi", "jacobi-linear"}
+    order = []
+    monkeypatch.setattr(timing, "_rerun", lambda scene_, c, fmu_dir: order.append(c.key) or 1.0)
+    rounds = timing.measure_rounds(spec, chosen, 3, None, None)
+    keys = [c.key for c in chosen]
+    assert order == keys + keys[::-1] + keys
+    assert all(len(walls) == 3 for walls in rounds["walls"].values())

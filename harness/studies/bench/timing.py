@@ -259,16 +259,19 @@ def run_monolithic(scene, rtol, grid_step, repeats, engine: str = "monolithic") 
 
 def measure_rounds(scene: scenes.Scene, chosen: list[Case], repeats: int, fmu_dir: Path,
                    twins: Path | None) -> dict:
-    """``repeats`` rounds, each running every chosen case once in turn (A B C A B C ...)
-    and the do-nothing floor: the k-th run of each case saw the machine the k-th of the
-    others saw, so ratios are taken round by round."""
+    """``repeats`` rounds, each running every chosen case once in turn and the do-nothing
+    floor: the k-th run of each case saw the machine the k-th of the others saw, so ratios
+    are taken round by round.  The rounds go forth and back (A B C, C B A, ...): a machine
+    that slows or speeds up through a round favours no case, and cases next to each other
+    in ``chosen`` (``headlines.headline_cases`` puts the ones a ratio divides together) run
+    next to each other."""
     walls = {c.key: [] for c in chosen}
     floor_times, loads = [], []
-    for _ in range(repeats):
+    for k in range(repeats):
         loads.append(trust.load_average())
         if twins is not None:
             floor_times.append(floors.call_floor(scene, n_steps=FLOOR_STEPS * 2, fmu_dir=twins))
-        for c in chosen:
+        for c in (chosen if k % 2 == 0 else chosen[::-1]):
             walls[c.key].append(_rerun(scene, c, fmu_dir))
     loads.append(trust.load_average())
     return {"walls": walls, "hollow_floor": floor_times, "load": loads}
