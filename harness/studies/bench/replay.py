@@ -23,11 +23,11 @@ This floor is the master's own calls instead:
   what the run left, or the replay was not the run's (``ReplayDiverged``);
 * ``SideBySide`` times a run and the replay of its calls in turns: the run steps
   ``CHUNK_STEPS`` steps, then the replay makes the calls of those steps on its own FMUs,
-  and so on, each turn timed.  This machine's speed changes over tenths of a second and
-  more (a neighbour's load), by up to twice; two whole runs timed one after the other saw
-  different machines, a turn of a few milliseconds and the next the same one.  Timed
-  whole, one after the other, a run over its replay spread from -30 % to +95 % on this
-  machine; in turns, the same repeats lay within a few per cent of each other.
+  and so on, each turn timed.  A shared machine's speed changes over tenths of a second
+  and more (a neighbour's load), by up to twice: two whole runs timed one after the other
+  saw different machines, a turn of a few milliseconds and the next the same one (a run
+  over its replay timed whole spread from -30 % to +95 % on a shared two-core machine;
+  in turns, the same repeats lay within a few per cent of each other).
 
 A long run is recorded for its first ``MAX_CALLS`` calls at most, in whole steps
 (``Recording.span_steps`` of ``Recording.steps``): the floor of such a run is that span's
@@ -87,7 +87,7 @@ class Recording:
     start: int = 0
     steps: int = 0
     span_steps: int = 0
-    #: the index in ``calls`` after each recorded step's last call (the first step's first)
+    #: for each recorded step, the index in ``calls`` just after its last call
     step_ends: list = field(default_factory=list)
     final: dict = field(default_factory=dict)
     calls_by_kind: dict = field(default_factory=dict)
@@ -243,8 +243,9 @@ def _two(function, handle, pointer, _):
 
 class Replay:
     """The recorded calls on a fresh instance of the scene's FMUs (see the module): made
-    ready (instantiated, initialised, the master's set-up calls made), then ``timed()``
-    once, then ``check()``; ``free()`` in any case."""
+    ready (instantiated, initialised, the master's set-up calls made), then its loop made
+    once - whole (``timed()``) or in turns with a run (``SideBySide``) - then ``check()``;
+    ``free()`` in any case."""
 
     def __init__(self, recording: Recording):
         if recording.failure:
@@ -367,19 +368,6 @@ class Replay:
         self.held = []
         system.free()
         self.system = None
-
-
-def replayed(recording: Recording) -> float:
-    """Seconds of one replay of ``recording``'s stepping calls (``Replay.timed``), the
-    replay checked against the run afterwards (``ReplayDiverged`` if it differs)."""
-    replay = Replay(recording)
-    try:
-        seconds = replay.timed()
-        interrupt.check()
-        replay.check()
-        return seconds
-    finally:
-        replay.free()
 
 
 class SideBySide:
