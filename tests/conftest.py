@@ -90,6 +90,7 @@ SLOW = (
     "judges/test_fmu_reference_own_error.py",
     "studies/test_cvode_host_grid.py",
     "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
+    "studies/test_replay.py::test_a_slower_harness_shows_in_the_run_side_by_side",
     "description/test_plan_start_and_record.py",
     "formats/test_ssp_export_twice.py",
     "description/test_physics_checked_once.py::test_a_run_checks_each_components_parameters_once",
@@ -354,8 +355,9 @@ SERIAL = (
     "engine/test_interrupts.py::test_run_interrupted_keeps_the_computed_part",
     "engine/test_interrupts.py::test_stability_interrupted_stops_its_workers_and_resumes",
     "engine/test_interrupts.py::test_sweep_interrupted_keeps_finished_cases",
-    # a run's time over its replay's, each moved by a neighbour's load
+    # a run's time over its replay's, timed in turns: a neighbour taking a core moves each turn
     "studies/test_replay.py::test_a_run_is_not_faster_than_the_replay_of_its_own_calls",
+    "studies/test_replay.py::test_a_slower_harness_shows_in_the_run_side_by_side",
 )
 
 #: Work that several tests share through a fixture of their module (``file::fixture``) or of
