@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 import re
 import time as clock
-from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,7 +83,7 @@ class Recorder:
             for var, i in ((v, system.index[(comp, v)]) for v in system.exposed[comp]):
                 self._columns[f"{comp}.{var}"] = offset + i
             offset += len(values)
-        self._block = elements_of(system.output_block) if offset else memoryview(array("d"))
+        self._block = elements_of(system.output_block)
         self._width = offset
         missing = [n for n in names if n not in self._columns]
         if missing:

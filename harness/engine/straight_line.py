@@ -206,9 +206,9 @@ def add_visits(source: Source, visits) -> None:
             source.line("if status > 1:")
             source.line(f"    {c}.fail('fmi2GetReal', status)")
             source.calls_checked()
+        values = source.elements(visit.values, "output_items") if visit.copies else None
         for copy in visit.copies:
             target = source.elements(copy.values, "input_items")
-            values = source.elements(visit.values, "output_items")
             for k, i in copy.pairs:
                 source.line(f"{target}[{k}] = {values}[{i}]")
         for send in visit.sends:

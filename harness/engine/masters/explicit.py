@@ -11,7 +11,7 @@ from typing import Any, Callable
 from harness.description.fmu_description import time_derivatives
 from harness.engine.masters.base import Master
 from harness.engine.component import Component
-from harness.engine.straight_line import Source, add_steps, add_visits
+from harness.engine.straight_line import Source, add_steps, add_visits, elements_of
 from harness.engine.system import Inputs, System
 
 
@@ -183,15 +183,17 @@ def lagrange_weights(nodes, x: float) -> list[float]:
 
 
 def snapshot_of(buffers) -> Callable[[], list[list[float]]]:
-    """A function that copies ``buffers`` (ctypes arrays) into lists of floats, as
-    ``[values[:] for values in buffers]`` does: for one- and two-value buffers (a driveline's
-    coupling torques) without the slices and the loop, which cost most of it."""
-    if all(len(values) == 1 for values in buffers):
-        if len(buffers) == 2:
-            a, b = buffers
+    """A function that copies ``buffers`` (ctypes arrays) into lists of floats, read through
+    their memoryviews as the compiled steps read them (``straight_line.elements_of``): for
+    one- and two-value buffers (a driveline's coupling torques) without a loop, which costs
+    most of it."""
+    views = [elements_of(values) for values in buffers]
+    if all(len(values) == 1 for values in views):
+        if len(views) == 2:
+            a, b = views
             return lambda: [[a[0]], [b[0]]]
-        return lambda: [[values[0]] for values in buffers]
-    return lambda: [values[:] for values in buffers]
+        return lambda: [[values[0]] for values in views]
+    return lambda: [list(values) for values in views]
 
 
 class ExtrapolatingJacobiMaster(JacobiMaster):

@@ -66,7 +66,7 @@ def headline_cases(scene: scenes.Scene, cases: list[Case], p: dict) -> list[Case
                      and (t := time_at_error(group, target)) is not None)
     first = [reached[0][1]] if reached else []
     chosen: dict[str, Case] = {}
-    for name in [*first, *MONOLITHIC, *by_engine]:
+    for name in dict.fromkeys([*first, *MONOLITHIC, *by_engine]):
         if name in by_engine and (name in master_family.MASTERS or name in MONOLITHIC):
             for c in bracket(by_engine[name], target):
                 chosen[c.key] = c
