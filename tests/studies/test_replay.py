@@ -223,3 +223,24 @@ def test_runs_faster_than_their_own_replay_are_no_result():
     # a run without a replay for every run has no figure
     case.own_calls_pairs = [[1.2, 1.0], [1.1, 1.0]]
     assert bench.overhead_above_own_calls(case) is None and bench.case_problems(case) == []
+
+
+@pytest.mark.parametrize("name, master", [("kavz685_misalignment_ramp", "jacobi-linear"),
+                                          ("freewheel_rectifier", "jacobi"), ("kavz685", "gauss-seidel")])
+def test_a_run_side_by_side_with_its_replay_ends_where_the_run_alone_does(fmu_dir, name, master):
+    """In turns with a run, the replay still makes the run's calls and leaves every real
+    variable of each FMU as the recorded run did (``Replay.check`` inside), on scenes of
+    other shapes: four FMUs with a source, a single FMU, a master that steps in sequence."""
+    spec = scene.load(name).with_overrides(SHORT)
+    floor = replay.OwnCallsFloor(spec, master, 1e-3, fmu_dir=fmu_dir)
+    pair = floor()
+    assert floor.problem is None and pair is not None and all(seconds > 0.0 for seconds in pair)
+
+
+def test_the_pages_name_the_turns_the_bench_takes():
+    """The turns' length the docs state is the bench's own (``CHUNK_STEPS``)."""
+    from harness.paths import ROOT
+
+    for page in ("docs/masters-and-stability.md", "docs/record/decisions.md"):
+        text = " ".join((ROOT / page).read_text().split())
+        assert f"turns of {replay.CHUNK_STEPS} steps" in text, page
